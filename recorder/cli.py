@@ -1,0 +1,265 @@
+"""The ``thermcap`` command: the root group, and the recorder's own subcommands.
+
+Other packages add their subcommands through the ``thermcap.commands`` and ``thermcap.bench``
+entry-point groups (see pyproject.toml), so the recorder never imports the archive or the API.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import sys
+from importlib.metadata import entry_points
+from typing import Any
+
+import click
+
+from . import __version__
+from .exceptions import ThermcapError
+
+__all__ = ["main", "cli", "bench", "default_root", "fail"]
+
+
+def default_root() -> str:
+    return os.environ.get("THERMCAP_ROOT", "thermcap-data")
+
+
+def fail(message: str, code: int = 1) -> None:
+    click.echo(f"error: {message}", err=True)
+    sys.exit(code)
+
+
+root_option = click.option("--root", default=default_root, show_default="$THERMCAP_ROOT or ./thermcap-data",
+                           type=click.Path(file_okay=False), help="Data root (sessions live in ROOT/sessions).")
+json_option = click.option("--json", "as_json", is_flag=True, help="Print machine-readable JSON.")
+
+
+class _PluginGroup(click.Group):
+    """A group that also lists the subcommands other packages registered as entry points."""
+
+    def __init__(self, *args: Any, entry_point_group: str, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._ep_group = entry_point_group
+        self._loaded = False
+
+    def _load(self) -> None:
+        if self._loaded:
+            return
+        self._loaded = True
+        for ep in entry_points(group=self._ep_group):
+            if ep.name not in self.commands:
+                self.add_command(ep.load(), ep.name)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        self._load()
+        return super().list_commands(ctx)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        self._load()
+        return super().get_command(ctx, name)
+
+
+@click.group(cls=_PluginGroup, entry_point_group="thermcap.commands",
+             context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="thermcap")
+def cli() -> None:
+    """Record, archive and serve radiometric thermal camera data (Gray16 on MCAP)."""
+
+
+@cli.group(cls=_PluginGroup, entry_point_group="thermcap.bench")
+def bench() -> None:
+    """Benchmarks: each prints ratios against a baseline measured in the same run."""
+
+
+# -- record ---------------------------------------------------------------------------------
+@cli.command()
+@click.option("--source", default="sim", show_default=True, help="sim, raw:PATH, or raw:- for stdin.")
+@click.option("--duration", type=float, default=None, help="Seconds to record (default: until the input ends or Ctrl-C).")
+@click.option("--fps", type=float, default=60.0, show_default=True)
+@click.option("--width", type=int, default=640, show_default=True)
+@click.option("--height", type=int, default=512, show_default=True)
+@click.option("--sensor", "sensor_id", default=None, help="Sensor id used in names (default SIM640 / GRAY16).")
+@root_option
+@click.option("--session", "session_id", default=None, help="Session id (default: <UTC time>_<sensor>_<random>).")
+@click.option("--pace/--no-pace", default=None,
+              help="Release frames at --fps (default: on for sim, off for raw: as fast as they arrive).")
+@click.option("--seed", type=int, default=0, show_default=True, help="Simulator seed.")
+@click.option("--crossover", is_flag=True, help="Simulator: include a dawn/dusk thermal crossover.")
+@click.option("--cue-period", type=float, default=20.0, show_default=True, help="Simulator: seconds between radar cues (0: none).")
+@click.option("--segment-duration", type=float, default=60.0, show_default=True, help="Rotate segments after this many seconds.")
+@click.option("--segment-size", type=float, default=4096.0, show_default=True, help="Rotate segments after this many MiB.")
+@click.option("--compression", type=click.Choice(["auto", "zstd", "lz4", "none"]), default="auto", show_default=True,
+              help="Chunk compression; auto: zstd-1 up to 25 Mpixel/s, lz4 above (e.g. 1280x1024@60).")
+@click.option("--level", type=int, default=None, help="Compression level (default: zstd 1, lz4 0).")
+@click.option("--queue", "queue_frames", type=int, default=120, show_default=True, help="Capture queue capacity in frames.")
+@click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
+@json_option
+def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
+           root: str, session_id: str | None, pace: bool | None, seed: int, crossover: bool, cue_period: float,
+           segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
+           debug_writer_delay: float, as_json: bool) -> None:
+    """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
+    from .mcap_writer import Compression
+    from .recorder import Recorder
+    from .segments import SegmentPolicy, auto_compression
+    from .sources import make_source
+
+    try:
+        is_sim = source == "sim"
+        src = make_source(source, width=width, height=height, fps=fps, seed=seed, crossover=crossover,
+                          cue_period_s=cue_period, paced=(is_sim if pace is None else pace),
+                          duration_s=duration if is_sim else None, sensor_id=sensor_id)
+        if getattr(src, "file_remainder", 0):
+            click.echo(f"warning: {source[4:]} is not a whole number of {width}x{height} Gray16 frames "
+                       f"({src.file_remainder} bytes left over); the last frame will be reported as truncated",
+                       err=True)
+        if compression == "auto":
+            comp, default_level = auto_compression(width, height, fps)
+        else:
+            comp, default_level = Compression(compression), (1 if compression == "zstd" else 0)
+        policy = SegmentPolicy(max_duration_s=segment_duration or None,
+                               max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
+                               compression=comp, compression_level=default_level if level is None else level)
+        rec = Recorder(src, root, session_id=session_id, policy=policy, queue_frames=queue_frames,
+                       writer_delay_s=debug_writer_delay)
+    except ThermcapError as exc:
+        fail(str(exc))
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+    if not as_json:
+        click.echo(f"session {rec.session_id} -> {rec.session_dir}")
+    signal.signal(signal.SIGTERM, lambda *_: rec.stop())
+    progress = None if as_json or not sys.stderr.isatty() else _progress_line()
+    try:
+        result = rec.run(duration_s=None if is_sim else duration, progress=progress)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if progress is not None:
+        click.echo("", err=True)
+    if as_json:
+        click.echo(json.dumps(result.to_dict(), indent=2))
+    else:
+        for p in result.recovered:
+            click.echo(f"recovered leftover segment {p}")
+        lat = result.write_latency_ms
+        fps_eff = result.frames_written / result.wall_s if result.wall_s else 0.0
+        click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, "
+                   f"{result.frames_dropped} dropped  ({fps_eff:.1f} fps over {result.wall_s:.1f} s)")
+        if any(result.dropped.values()):
+            click.secho(f"dropped messages per topic: {result.dropped}", fg="yellow", err=True)
+        click.echo(f"segments: {len(result.segments)}  bytes: {sum(s['bytes'] for s in result.segments):,}  "
+                   f"write latency p50 {lat['p50']} ms, p99 {lat['p99']} ms")
+    if result.error:
+        fail(result.error)
+
+
+def _progress_line():
+    import time
+
+    state = {"t": time.monotonic(), "n": 0}
+
+    def show(rec: Any) -> None:
+        now = time.monotonic()
+        c = rec.counters
+        dt = now - state["t"]
+        if dt < 0.5:
+            return
+        rate = (c.frames_written - state["n"]) / dt
+        state.update(t=now, n=c.frames_written)
+        click.echo(f"\rcaptured {c.frames_captured}  written {c.frames_written}  dropped {c.frames_dropped}  "
+                   f"queue {rec.queue_depth}/{rec.queue.maxsize}  {rate:6.1f} fps ", nl=False, err=True)
+
+    return show
+
+
+# -- info / recover -------------------------------------------------------------------------
+@cli.command()
+@click.argument("path", type=click.Path())
+@json_option
+def info(path: str, as_json: bool) -> None:
+    """Describe a segment (NNNN.mcap) or a session folder: frames, time span, fps, drops, bytes."""
+    from .info import info as get_info
+
+    try:
+        data = get_info(path)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps(data, indent=2))
+        return
+    _print_info(data)
+
+
+def _print_info(d: dict[str, Any]) -> None:
+    from rich.console import Console
+    from rich.table import Table
+
+    con = Console()
+    con.print(f"[bold]{d.get('session_id') or d['path']}[/bold]  ({d['path']})")
+    if "status" in d:
+        con.print(f"status: {d['status']}   sensor: {d.get('sensor')}   segments: {len(d['segments'])}"
+                  + (f"   unfinished: {', '.join(d['active_segments'])}" if d["active_segments"] else ""))
+    con.print(f"frames: {d['frames']}   span: {d['start']} .. {d['end']} ({d['duration_s']:.3f} s)   "
+              f"effective fps: {d['effective_fps']}")
+    dropped = d.get("dropped") or {}
+    con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
+    con.print(f"bytes: {d['bytes']:,}   chunk compression: {', '.join(d['chunk_compression'])}   "
+              f"ratio: {d['compression_ratio']}")
+    t = Table("topic", "messages", "bytes (uncompressed)")
+    for topic, v in d["topics"].items():
+        t.add_row(topic, str(v["messages"]), f"{v['bytes']:,}" if v["bytes"] is not None else "?")
+    con.print(t)
+    if d.get("error"):
+        con.print(f"[red]error during recording: {d['error']}[/red]")
+
+
+@cli.command()
+@click.argument("path", type=click.Path())
+@click.option("--keep-original", is_flag=True, help="Keep the .active file after recovery.")
+@json_option
+def recover(path: str, keep_original: bool, as_json: bool) -> None:
+    """Turn interrupted segments (*.mcap.active) into valid, indexed MCAP files."""
+    from .recover import recover_path
+
+    try:
+        results = recover_path(path, keep_original=keep_original)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps([r.to_dict() for r in results], indent=2))
+        return
+    if not results:
+        click.echo(f"nothing to recover under {path}")
+    for r in results:
+        click.echo(f"{r.source} -> {r.output}: {r.frames} frames, {r.messages} messages kept, "
+                   f"{r.bytes_discarded:,} bytes of cut tail discarded ({r.stopped_because})")
+
+
+@bench.command("record")
+@click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
+@click.option("--sizes", default="640x512,1280x1024", show_default=True)
+@click.option("--soak", type=float, default=None, help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None, help="Where to write (default: a temp folder).")
+@json_option
+def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, as_json: bool) -> None:
+    """Recorder throughput vs plain zstd-to-file, or a paced soak."""
+    from .bench import bench_record as run_bench, run_soak, print_table
+
+    if soak:
+        res = run_soak(soak, workdir=workdir)
+        click.echo(json.dumps(res, indent=2) if as_json else "\n".join(f"{k}: {v}" for k, v in res.items()))
+        if res["frames_dropped"]:
+            sys.exit(1)
+        return
+    try:
+        dims = [tuple(int(v) for v in s.lower().split("x")) for s in sizes.split(",")]
+    except ValueError:
+        fail(f"--sizes must look like 640x512,1280x1024, got {sizes!r}")
+    rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json)
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+def main() -> None:
+    cli(prog_name="thermcap")

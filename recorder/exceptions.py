@@ -1,0 +1,43 @@
+"""Errors of the recorder package.
+
+ThermcapError                 root of every error thermcap raises on purpose
+ +-- SidecarError             a sidecar does not follow the ICD schema (names the field)
+ +-- SourceError              a frame source cannot deliver (names the file and the problem)
+ |    +-- TruncatedFrameError a raw stream ended inside a frame (names the byte count)
+ +-- RecordingError           the writer had to stop (disk full, unwritable folder)
+ +-- McapFileError            an MCAP file is unreadable or truncated (names the file)
+"""
+
+from __future__ import annotations
+
+
+class ThermcapError(Exception):
+    """Root of the errors thermcap raises on purpose; the CLI turns them into a message and exit 1."""
+
+
+class SidecarError(ThermcapError, ValueError):
+    def __init__(self, field: str, problem: str):
+        self.field = field
+        self.problem = problem
+        super().__init__(f"sidecar field {field!r}: {problem}")
+
+
+class SourceError(ThermcapError):
+    pass
+
+
+class TruncatedFrameError(SourceError):
+    def __init__(self, path: str, frame_index: int, got: int, expected: int):
+        self.path, self.frame_index, self.got, self.expected = path, frame_index, got, expected
+        super().__init__(
+            f"{path}: frame {frame_index} is truncated: got {got} bytes, expected {expected} "
+            f"({frame_index} complete frames before it were kept)"
+        )
+
+
+class RecordingError(ThermcapError):
+    pass
+
+
+class McapFileError(ThermcapError):
+    pass

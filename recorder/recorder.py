@@ -1,0 +1,323 @@
+"""The real-time recorder: a capture thread, a bounded queue, a writer thread.
+
+Capture never waits on compression or disk: it hands each frame to a bounded queue with
+``put_nowait``; when the queue is full the frame is dropped *and counted* per topic (stats
+channel, session summary, exit report). The writer thread builds and validates the ICD sidecar,
+encodes the image, and feeds the segment writer, whose chunks compress on a thread pool. Memory
+is bounded by the queue length plus the chunks in flight, however long the session runs.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import os
+import queue
+import secrets
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from . import __version__
+from .exceptions import RecordingError, ThermcapError
+from .icd import FORMAT_VERSION
+from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from .radiometry import LinearModel
+from .segments import SegmentPolicy, SessionWriter, write_json_atomic
+from .sidecar import SidecarEncoder
+from .sources.base import CapturedFrame, FrameSource
+from .sources.sim import iso_utc
+from .stats import LatencyHistogram, RecorderCounters
+
+__all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir", "lock_session"]
+
+_STOP = object()
+
+
+def sessions_dir(root: str | os.PathLike) -> Path:
+    return Path(root) / "sessions"
+
+
+def new_session_id(sensor_id: str, when_ns: int | None = None) -> str:
+    when_ns = time.time_ns() if when_ns is None else when_ns
+    stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(when_ns // 1_000_000_000))
+    clean = "".join(c for c in sensor_id if c.isalnum() or c == "-") or "SENSOR"
+    return f"{stamp}_{clean}_{secrets.token_hex(2)}"
+
+
+def lock_session(session_dir: Path) -> int | None:
+    """Take the session's recording lock (flock, released by the OS if we die); None if held."""
+    fd = os.open(session_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        os.close(fd)
+        return None
+    return fd
+
+
+@dataclass
+class RecordingResult:
+    session_id: str
+    session_dir: Path
+    frames_captured: int
+    frames_written: int
+    dropped: dict[str, int]
+    segments: list[dict[str, Any]]
+    wall_s: float
+    write_latency_ms: dict[str, Any]
+    error: str | None = None
+    recovered: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None
+
+    @property
+    def frames_dropped(self) -> int:
+        return self.dropped.get(TOPIC_IMAGE, 0)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"session_id": self.session_id, "session_dir": str(self.session_dir),
+                "frames_captured": self.frames_captured, "frames_written": self.frames_written,
+                "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
+                "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
+                "error": self.error, "recovered": self.recovered, "ok": self.ok}
+
+
+class Recorder:
+    """Record one session from ``source`` into ``<root>/sessions/<id>/``.
+
+    :param queue_frames: capacity of the capture -> writer queue (about 2 s at 60 fps by default;
+        640x512 frames make that 79 MB at most).
+    :param writer_delay_s: an artificial pause per frame on the writer thread, for testing the
+        drop accounting; never set it in production.
+    """
+
+    def __init__(self, source: FrameSource, root: str | os.PathLike, *, session_id: str | None = None,
+                 policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
+                 writer_delay_s: float = 0.0, recover_leftovers: bool = True) -> None:
+        self.source = source
+        self.root = Path(root)
+        self.session_id = session_id or new_session_id(source.sensor.sensor_id)
+        self.session_dir = sessions_dir(self.root) / self.session_id
+        self.policy = policy or SegmentPolicy()
+        self.queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
+        self.stats_interval_s = stats_interval_s
+        self.writer_delay_s = writer_delay_s
+        self.recover_leftovers = recover_leftovers
+        self.counters = RecorderCounters()
+        self.latency = LatencyHistogram()
+        self._interval_latency = LatencyHistogram()
+        self._stop = threading.Event()
+        self._source_error: str | None = None
+        self._writer_error: str | None = None
+        self._session: SessionWriter | None = None
+        self._last_frame_ns: int | None = None
+        self._sidecars = SidecarEncoder(source.sensor.to_sidecar(), _radiometric_block(source.model))
+
+    # -- public -----------------------------------------------------------------------------
+    def stop(self) -> None:
+        """Ask for a clean stop (Ctrl-C): capture ends, queued frames are written, segments close."""
+        self._stop.set()
+        self.source.stop()
+
+    def run(self, duration_s: float | None = None,
+            progress: Callable[["Recorder"], None] | None = None) -> RecordingResult:
+        recovered: list[str] = []
+        if self.recover_leftovers:
+            from .recover import recover_leftovers
+            recovered = [str(p) for p in recover_leftovers(self.root)]
+        try:
+            self.session_dir.mkdir(parents=True, exist_ok=False)
+        except OSError as exc:
+            raise RecordingError(f"cannot create session folder {self.session_dir}: {exc.strerror or exc}") from exc
+        lock_fd = lock_session(self.session_dir)
+        started_ns = time.time_ns()
+        meta = self._session_meta(started_ns)
+        try:
+            write_json_atomic(self.session_dir / "session.json", {**meta, "status": "recording"})
+        except OSError as exc:
+            raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
+        self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=self.source.extra_topics,
+                                      bad_pixel_map=self.source.bad_pixel_map, policy=self.policy,
+                                      on_chunk_written=self._chunk_written)
+        t0 = time.monotonic()
+        deadline = None if duration_s is None else t0 + duration_s
+        writer = threading.Thread(target=self._writer_loop, name="thermcap-writer", daemon=True)
+        capture = threading.Thread(target=self._capture_loop, args=(deadline,), name="thermcap-capture", daemon=True)
+        writer.start()
+        capture.start()
+        try:
+            while capture.is_alive() or writer.is_alive():
+                capture.join(0.25)
+                if progress is not None:
+                    progress(self)
+                if not capture.is_alive():
+                    writer.join(0.25)
+        except KeyboardInterrupt:
+            self.stop()
+            capture.join()
+            writer.join()
+        wall = time.monotonic() - t0
+        error = self._writer_error or self._source_error
+        result = RecordingResult(
+            session_id=self.session_id, session_dir=self.session_dir,
+            frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
+            dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
+            wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered)
+        summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
+                   **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
+        try:
+            write_json_atomic(self.session_dir / "session.json", summary)
+        except OSError as exc:
+            result.error = result.error or f"cannot write session summary: {exc.strerror or exc}"
+        if lock_fd is not None:
+            os.close(lock_fd)
+        return result
+
+    @property
+    def queue_depth(self) -> int:
+        return self.queue.qsize()
+
+    # -- threads ------------------------------------------------------------------------------
+    def _capture_loop(self, deadline: float | None) -> None:
+        counters = self.counters
+        try:
+            for frame in self.source.frames():
+                counters.frames_captured += 1
+                try:
+                    self.queue.put_nowait(frame)
+                except queue.Full:
+                    counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in frame.messages])
+                if self._stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
+                    break
+        except ThermcapError as exc:
+            self._source_error = str(exc)
+        except Exception as exc:  # a source bug must still end the session cleanly
+            self._source_error = f"source failed: {type(exc).__name__}: {exc}"
+        finally:
+            self.source.close()
+            self.queue.put(_STOP)  # blocks only until the writer frees a slot
+
+    def _writer_loop(self) -> None:
+        session = self._session
+        assert session is not None
+        next_stats = time.monotonic() + self.stats_interval_s
+        try:
+            while True:
+                try:
+                    item = self.queue.get(timeout=0.05)
+                except queue.Empty:
+                    session.poll()
+                    item = None
+                if item is _STOP:
+                    break
+                if item is not None:
+                    if self.writer_delay_s:
+                        time.sleep(self.writer_delay_s)
+                    self._write_frame(item)
+                if time.monotonic() >= next_stats:
+                    self._write_stats()
+                    next_stats += self.stats_interval_s
+            self._write_stats()
+            session.close()
+        except RecordingError as exc:
+            self._writer_error = str(exc)
+            self._abort(session)
+        except Exception as exc:
+            self._writer_error = f"writer failed: {type(exc).__name__}: {exc}"
+            self._abort(session)
+
+    def _abort(self, session: SessionWriter) -> None:
+        self.stop()
+        session.abandon()
+        # Let the capture thread finish its last put; what it captured is counted as dropped.
+        while True:
+            try:
+                item = self.queue.get(timeout=1.0)
+            except queue.Empty:
+                continue
+            if item is _STOP:
+                return
+            self.counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in item.messages])
+
+    def _write_frame(self, frame: CapturedFrame) -> None:
+        ts = frame.timestamp_ns
+        payload = self._sidecars.encode(self._sidecar_blocks(frame))
+        extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
+        assert self._session is not None
+        self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
+                                  token=frame.capture_mono_ns or None, sequence=frame.index)
+        self.counters.frames_written += 1
+        self._last_frame_ns = ts
+
+    def _chunk_written(self, tokens: list[Any]) -> None:
+        now = time.monotonic_ns()
+        for t in tokens:
+            s = (now - t) / 1e9
+            self.latency.add(s)
+            self._interval_latency.add(s)
+
+    def _write_stats(self) -> None:
+        c = self.counters
+        stats = {
+            "frames_captured": c.frames_captured, "frames_written": c.frames_written,
+            "dropped": {TOPIC_IMAGE: 0, TOPIC_METADATA: 0, **c.dropped},
+            "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize,
+            "write_latency_ms": {"interval": self._interval_latency.summary_ms(), "session": self.latency.summary_ms()},
+            "analysis_skipped": c.analysis_skipped,
+            "segment": self._session.segments[-1].index if self._session and self._session.segments else 0,
+        }
+        self._interval_latency = LatencyHistogram()
+        assert self._session is not None
+        # On the frames' clock (a replayed or simulated session may not be "now"), never before them.
+        log_time = self._last_frame_ns if self._last_frame_ns is not None else time.time_ns()
+        self._session.write_message(TOPIC_STATS, log_time, json.dumps(stats, separators=(",", ":")).encode())
+
+    # -- sidecar ------------------------------------------------------------------------------
+    def _sidecar_blocks(self, frame: CapturedFrame) -> dict[str, Any]:
+        """The per-frame sidecar blocks; the encoder adds the session's sensor and radiometric ones."""
+        extra = frame.sidecar
+        capture = {"timestamp": iso_utc(frame.timestamp_ns), "frame_index": frame.index}
+        capture.update(extra.get("capture", {}))
+        return {
+            "capture": capture,
+            "environment": extra.get("environment", {}),
+            "thermal_analysis": extra.get("thermal_analysis") or _NO_ANALYSIS,
+            "slew_to_cue": extra.get("slew_to_cue") or _NO_CUE,
+            "targets": extra.get("targets", []),
+        }
+
+    def _session_meta(self, started_ns: int) -> dict[str, Any]:
+        return {
+            "session_id": self.session_id,
+            "started_ns": started_ns,
+            "started": iso_utc(started_ns),
+            "sensor": {**self.source.sensor.to_sidecar(), "sensor_id": self.source.sensor.sensor_id},
+            "radiometric_model": self.source.model.to_dict(),
+            "source": self.source.describe(),
+            "software_version": __version__,
+            "format_version": FORMAT_VERSION,
+        }
+
+
+_NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
+                "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}
+_NO_CUE = {"slew_to_cue_active": False, "radar_cue_received": False, "radar_azimuth_deg": None,
+           "radar_elevation_deg": None, "radar_range_m": None, "turret_pan_deg": None, "turret_tilt_deg": None,
+           "search_pattern_active": False, "state": "idle"}
+
+
+def _radiometric_block(model: Any) -> dict[str, Any]:
+    """The ICD ``radiometric`` block: scale/offset for linear models, null for curves, plus the model."""
+    if isinstance(model, LinearModel):
+        return {"bit_depth": model.bit_depth, "scale_factor_deg_c_per_count": model.scale_c_per_count,
+                "offset_deg_c": model.offset_c, "scene_temp_min_deg_c": round(model.temp_min_c, 4),
+                "scene_temp_max_deg_c": round(model.temp_max_c, 4), "calibration_date": None,
+                "calibration_method": "factory_blackbody", "model": model.to_dict()}
+    return {"bit_depth": getattr(model, "bit_depth", 16), "scale_factor_deg_c_per_count": None, "offset_deg_c": None,
+            "scene_temp_min_deg_c": None, "scene_temp_max_deg_c": None, "calibration_date": None,
+            "calibration_method": model.kind, "model": model.to_dict()}

@@ -1,0 +1,108 @@
+"""What every frame source delivers: Gray16 frames with capture times, and what it knows besides.
+
+A source yields ``CapturedFrame`` objects from ``frames()``. It paces itself (a camera or the
+simulator at its frame rate) or not (a file read as fast as possible); the recorder never waits
+on it for anything but the next frame. A source that knows more than pixels (the simulator's
+ground truth and radar, an importer's vendor metadata) attaches it to the frame.
+"""
+
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+from ..radiometry import DEFAULT_MODEL, RadiometricModel
+
+__all__ = ["CapturedFrame", "FrameSource", "SensorInfo", "Pacer"]
+
+
+@dataclass
+class SensorInfo:
+    """The ICD ``sensor`` block; ``sensor_id`` is the short name used in ICD file names."""
+
+    model: str = "FLIR Boson 640"
+    sensor_id: str = "BOSON640"
+    type: str = "uncooled_microbolometer"
+    serial_number: str = "unknown"
+    spectral_range_um: tuple[float, float] = (8.0, 14.0)
+    width: int = 640
+    height: int = 512
+    pixel_pitch_um: float | None = 12.0
+    netd_mk: float | None = 50.0
+    frame_rate_hz: float = 60.0
+
+    def to_sidecar(self) -> dict[str, Any]:
+        out: dict[str, Any] = {
+            "model": self.model,
+            "type": self.type,
+            "serial_number": self.serial_number,
+            "spectral_range_um": list(self.spectral_range_um),
+            "resolution": {"width": self.width, "height": self.height},
+            "frame_rate_hz": self.frame_rate_hz,
+        }
+        if self.pixel_pitch_um is not None:
+            out["pixel_pitch_um"] = self.pixel_pitch_um
+        if self.netd_mk is not None:
+            out["netd_mk"] = self.netd_mk
+        return out
+
+
+@dataclass
+class CapturedFrame:
+    index: int
+    timestamp_ns: int  # capture time, Unix epoch ns (UTC)
+    pixels: np.ndarray  # (H, W) uint16, exactly as the sensor produced it
+    capture_mono_ns: int = 0  # monotonic clock at capture, for latency accounting
+    # Sidecar blocks the source knows (thermal_analysis, slew_to_cue, targets, capture extras).
+    sidecar: dict[str, Any] = field(default_factory=dict)
+    # Extra messages that belong with this frame: (topic, payload dict), e.g. radar cues.
+    messages: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+
+
+class FrameSource(ABC):
+    """A source of Gray16 frames. Subclasses set ``sensor`` and ``model`` before ``frames()``."""
+
+    name: str = "source"
+    sensor: SensorInfo
+    model: RadiometricModel = DEFAULT_MODEL
+    bad_pixel_map: np.ndarray | None = None
+    #: topics (besides image and metadata) this source may emit, with their JSON schemas
+    extra_topics: dict[str, dict[str, Any]] = {}
+
+    @abstractmethod
+    def frames(self) -> Iterator[CapturedFrame]:
+        """Yield frames as they are captured; stop at the end of the input or when ``stop()`` is called."""
+
+    def stop(self) -> None:
+        self._stopped = True
+
+    @property
+    def stopped(self) -> bool:
+        return getattr(self, "_stopped", False)
+
+    def close(self) -> None:
+        pass
+
+    def describe(self) -> dict[str, Any]:
+        return {"source": self.name}
+
+
+class Pacer:
+    """Release frame i at start + i/fps on the monotonic clock; never drifts, never sleeps when late."""
+
+    def __init__(self, fps: float, enabled: bool = True):
+        self.period_ns = int(round(1e9 / fps))
+        self.enabled = enabled
+        self.start = time.monotonic_ns()
+
+    def wait(self, index: int) -> None:
+        if not self.enabled:
+            return
+        due = self.start + index * self.period_ns
+        delay = due - time.monotonic_ns()
+        if delay > 0:
+            time.sleep(delay / 1e9)
