@@ -1,0 +1,224 @@
+"""``thermcap archive``: repack a recorded session losslessly, prove it, and record the proof.
+
+For each requested format: write into ``archive/<format>.partial/``, decode every frame back
+with the format's ordinary reader and compare its sha256 with the MCAP source's, fsync, and only
+then rename the folder to ``archive/<format>/`` and add it to the manifest. A crash leaves at
+most a ``.partial`` folder, which no reader treats as an archive and the next run replaces;
+formats already verified are skipped, so re-running finishes the job. The MCAP source is deleted
+(``--delete-source``) only when every requested format verified.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+from recorder.exceptions import ThermcapError
+from recorder.reader import count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.recorder import lock_session
+from recorder.segments import ACTIVE_SUFFIX, fsync_dir
+
+from .codecs import library_versions
+from .exceptions import ArchiveError, VerificationError
+from .formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from .manifest import archive_dir, file_sha256, frame_sha256, load_manifest, new_manifest, save_manifest, iso_now
+
+__all__ = ["archive_session", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
+
+DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
+PARTIAL_SUFFIX = ".partial"
+
+
+@dataclass
+class _Source:
+    hashes: list[str]
+    timestamps: list[int]
+    segments: list[str]
+    width: int
+    height: int
+
+
+def _scan_source(session_dir: Path) -> _Source:
+    hashes, times, segs = [], [], []
+    w = h = 0
+    for f in iter_session_frames(session_dir):
+        hashes.append(frame_sha256(f.pixels))
+        times.append(f.log_time)
+        segs.append(f.segment)
+        h, w = f.pixels.shape
+    return _Source(hashes, times, segs, w, h)
+
+
+def _fsync_tree(path: Path) -> None:
+    for p in path.rglob("*"):
+        if p.is_file():
+            fd = os.open(p, os.O_RDONLY)
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+    fsync_dir(path)
+
+
+def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, Any]],
+                      expected: list[str], *, where: str) -> tuple[list[str], float]:
+    """Decode every file with the format's reader; return (problems, decode seconds)."""
+    problems: list[str] = []
+    index = 0
+    decode_s = 0.0
+    for rec in files:
+        path = out_dir / rec["path"]
+        if not path.is_file():
+            problems.append(f"{where}/{rec['path']}: missing")
+            index += rec["frames"]
+            continue
+        if rec.get("sha256") and file_sha256(path) != rec["sha256"]:
+            problems.append(f"{where}/{rec['path']}: file sha256 differs from the manifest")
+        got = 0
+        t = time.perf_counter()
+        try:
+            for frame in fmt.read(out_dir, [rec["path"]]):
+                i = index + got
+                if i >= len(expected):
+                    problems.append(f"{where}/{rec['path']}: holds more frames than the session ({i + 1}+)")
+                    break
+                if frame_sha256(frame) != expected[i]:
+                    problems.append(f"frame {i} ({where}/{rec['path']}): sha256 differs")
+                got += 1
+        except Exception as exc:  # corrupt data may fail anywhere inside a third-party decoder
+            problems.append(f"{where}/{rec['path']}: cannot decode after {got} frames ({type(exc).__name__}: {exc})")
+        decode_s += time.perf_counter() - t
+        if got != rec["frames"] and not any(rec["path"] in p for p in problems[-1:]):
+            problems.append(f"{where}/{rec['path']}: {got} frames decoded, {rec['frames']} expected")
+        index += rec["frames"]
+    if index != len(expected):
+        problems.append(f"{where}: files hold {index} frames, the session has {len(expected)}")
+    return problems, decode_s
+
+
+def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,
+                    delete_source: bool = False, workers: int = 2, force: bool = False,
+                    on_progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
+    """Archive one session; returns the manifest. Raises VerificationError if any format fails."""
+    session_dir = Path(session_dir)
+    if not session_dir.is_dir():
+        raise ArchiveError(f"{session_dir}: no such session folder")
+    if list(session_dir.glob(f"*{ACTIVE_SUFFIX}")):
+        raise ArchiveError(f"{session_dir}: has unfinished segments (*.active); recording, or run `thermcap recover`")
+    lock_fd = lock_session(session_dir)
+    if lock_fd is None:
+        raise ArchiveError(f"{session_dir}: a recorder or another archiver holds this session")
+    try:
+        return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress)
+    finally:
+        os.close(lock_fd)
+
+
+def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int, force: bool,
+                    on_progress: Callable[[str, int, int], None] | None) -> dict[str, Any]:
+    meta = read_session_meta(session_dir)
+    session_id = meta.get("session_id", session_dir.name)
+    manifest = load_manifest(session_dir, required=False) or new_manifest(session_id, meta)
+    adir = archive_dir(session_dir)
+    adir.mkdir(exist_ok=True)
+    fmts = {fid: get_format(fid) for fid in formats}  # unknown ids fail before any work
+
+    segments = session_segments(session_dir)
+    source_gone = bool(manifest.get("source", {}).get("deleted"))
+    todo = [f for f in formats if force or not manifest["formats"].get(f, {}).get("verified")
+            or not (adir / f).is_dir()]
+    if todo and (source_gone or not segments):
+        raise ArchiveError(f"{session_dir}: the MCAP source is gone; cannot write {', '.join(todo)}")
+    if todo:
+        per_segment = count_frames(session_dir)
+        total = sum(per_segment.values())
+        if not manifest["frames"].get("sha256") or len(manifest["frames"]["sha256"]) != total:
+            if on_progress:
+                on_progress("hashing source", 0, total)
+            src = _scan_source(session_dir)
+            manifest["frames"] = {"sha256": src.hashes, "timestamps_ns": src.timestamps, "segments": src.segments}
+            manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name], "bytes": s.stat().st_size}
+                                               for s in segments],
+                                  "frames": total, "width": src.width, "height": src.height,
+                                  "raw_bytes": total * src.width * src.height * 2, "deleted": False}
+            save_manifest(session_dir, manifest)
+    expected = manifest["frames"]["sha256"]
+    failures: list[str] = []
+
+    for fid in todo:
+        fmt = fmts[fid]
+        final = adir / fid
+        partial = adir / (fid + PARTIAL_SUFFIX)
+        for stale in (partial,):
+            if stale.exists():
+                shutil.rmtree(stale)
+        partial.mkdir()
+        done = [0]
+
+        def tick(fid: str = fid) -> None:
+            done[0] += 1
+            if on_progress and done[0] % 16 == 0:
+                on_progress(f"writing {fid}", done[0], len(expected))
+
+        ctx = ArchiveContext(session_id=session_id,
+                             session_meta={**meta, "_frames_per_segment": count_frames(session_dir)},
+                             total_frames=len(expected), workers=workers, on_frame=tick)
+        t = time.perf_counter()
+        records: list[FileRecord] = fmt.write(iter_session_frames(session_dir), partial, ctx)
+        encode_s = time.perf_counter() - t
+        for rec in records:
+            p = partial / rec.path
+            rec.bytes = p.stat().st_size
+            rec.sha256 = file_sha256(p)
+        files = [rec.__dict__.copy() for rec in records]
+        if on_progress:
+            on_progress(f"verifying {fid}", 0, len(expected))
+        problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid)
+        total_bytes = sum(r.bytes for r in records)
+        raw = manifest["source"]["raw_bytes"]
+        entry = {
+            "config": fmt.get_config(), "description": fmt.description, "files": files,
+            "frames_per_file": [r.frames for r in records], "objects": len(records), "bytes": total_bytes,
+            "compression_ratio": round(raw / total_bytes, 4) if total_bytes else None,
+            "bits_per_pixel": round(total_bytes * 8 / (raw / 2), 4) if raw else None,
+            "encode_fps": round(len(expected) / encode_s, 1) if encode_s else None,
+            "decode_fps": round(len(expected) / decode_s, 1) if decode_s else None,
+            "library_versions": library_versions(), "verified": not problems, "verified_at": iso_now(),
+            "verification": (f"bit-exact: {len(expected)} frames decoded with the format's reader match the "
+                             "MCAP source's sha256") if not problems else problems[:100],
+        }
+        if problems:
+            shutil.rmtree(partial)  # a failed archive never takes the final name
+            manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
+            save_manifest(session_dir, manifest)
+            failures.append(f"{fid}: " + "; ".join(problems[:5]))
+            continue
+        _fsync_tree(partial)
+        if final.exists():  # --force: replace the old, verified copy only now that the new one verified
+            old = adir / (fid + ".old")
+            os.replace(final, old)
+            os.replace(partial, final)
+            shutil.rmtree(old)
+        else:
+            os.replace(partial, final)
+        fsync_dir(adir)
+        manifest["formats"][fid] = entry
+        save_manifest(session_dir, manifest)
+
+    if failures:
+        raise VerificationError(f"{session_dir}: archive verification failed; the source was kept", failures)
+    if delete_source:
+        not_ok = [f for f in formats if not manifest["formats"].get(f, {}).get("verified")]
+        if not_ok:
+            raise ArchiveError(f"refusing to delete the source: {', '.join(not_ok)} not verified")
+        for seg in segments:
+            seg.unlink()
+        fsync_dir(session_dir)
+        manifest["source"]["deleted"] = True
+        manifest["source"]["deleted_at"] = iso_now()
+        save_manifest(session_dir, manifest)
+    return manifest

@@ -1,0 +1,182 @@
+"""The archive's ``thermcap`` subcommands: archive, verify, audit, and ``bench archive``."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from recorder.cli import default_root, fail, json_option, root_option
+from recorder.exceptions import ThermcapError
+
+from .archiver import DEFAULT_FORMATS
+
+__all__ = ["archive", "verify", "audit", "bench_archive"]
+
+
+def _formats(value: str) -> list[str]:
+    from .formats import format_registry
+
+    out = [v.strip() for v in value.split(",") if v.strip()]
+    unknown = [v for v in out if v not in format_registry]
+    if unknown:
+        raise click.BadParameter(f"unknown format(s) {', '.join(unknown)}; known: {', '.join(sorted(format_registry))}")
+    return out
+
+
+@click.command()
+@click.argument("sessions", nargs=-1)
+@root_option
+@click.option("--all", "all_sessions", is_flag=True, help="Every finished session under ROOT not yet archived.")
+@click.option("--formats", default=",".join(DEFAULT_FORMATS), show_default=True,
+              help="Comma-separated: png16, tiff-lzw, hdf5, jxl, htj2k, jpegls.")
+@click.option("--delete-source", is_flag=True, help="Delete the MCAP segments once every format verified.")
+@click.option("--force", is_flag=True, help="Rewrite formats that are already archived.")
+@click.option("--workers", type=int, default=2, show_default=True, help="Encoder threads.")
+@json_option
+def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
+            workers: int, as_json: bool) -> None:
+    """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+
+    from recorder.reader import list_sessions, resolve_session
+
+    from .archiver import archive_session
+
+    try:
+        fmts = _formats(formats)
+        dirs = [resolve_session(s, root) for s in sessions]
+        if all_sessions:
+            dirs += [d for d in list_sessions(root) if not (d / "archive" / "manifest.json").exists()
+                     and not list(d.glob("*.active"))]
+    except (ThermcapError, click.BadParameter) as exc:
+        fail(str(exc))
+    if not dirs:
+        fail("no session given (pass SESSION paths or ids, or --all)")
+    results, failed = [], False
+    show = not as_json and sys.stderr.isatty()
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  disable=not show, transient=True) as bar:
+        for d in dirs:
+            task = bar.add_task(d.name, total=None)
+
+            def progress(what: str, done: int, total: int, task=task, name=d.name) -> None:
+                bar.update(task, description=f"{name}: {what}", completed=done, total=total)
+
+            try:
+                m = archive_session(d, fmts, delete_source=delete_source, force=force, workers=workers,
+                                    on_progress=progress)
+                results.append({"session": str(d), "ok": True, "formats": {
+                    k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
+                                          "decode_fps")} for k, v in m["formats"].items() if k in fmts},
+                    "source_deleted": m["source"].get("deleted", False)})
+            except ThermcapError as exc:
+                failed = True
+                results.append({"session": str(d), "ok": False, "error": str(exc)})
+            bar.remove_task(task)
+    if as_json:
+        click.echo(json.dumps(results, indent=2))
+    else:
+        for r in results:
+            if not r["ok"]:
+                click.echo(f"error: {r['error']}", err=True)
+                continue
+            click.echo(f"{r['session']}: archived" + (" (MCAP source deleted)" if r["source_deleted"] else ""))
+            for fid, f in r["formats"].items():
+                click.echo(f"  {fid:9} {'verified' if f['verified'] else 'FAILED':8} {f['bytes']:>14,} bytes  "
+                           f"{f['objects']:>3} objects  ratio {f['compression_ratio']}  "
+                           f"encode {f['encode_fps']} fps  decode {f['decode_fps']} fps")
+    if failed:
+        sys.exit(1)
+
+
+@click.command()
+@click.argument("sessions", nargs=-1, required=True)
+@root_option
+@click.option("--formats", default=None, help="Only these formats (default: all in the manifest).")
+@json_option
+def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: bool) -> None:
+    """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
+    from recorder.reader import resolve_session
+
+    from .verify import verify_session
+
+    out, bad = {}, False
+    for s in sessions:
+        try:
+            d = resolve_session(s, root)
+            report = verify_session(d, _formats(formats) if formats else None)
+        except (ThermcapError, click.BadParameter) as exc:
+            fail(str(exc))
+        out[str(d)] = report
+        bad |= any(not r["ok"] for r in report.values())
+    if as_json:
+        click.echo(json.dumps(out, indent=2))
+    else:
+        for d, report in out.items():
+            for fid, r in report.items():
+                click.echo(f"{d} {fid}: {'ok, ' + str(r['frames']) + ' frames bit-exact' if r['ok'] else 'FAILED'}")
+                for p in r["problems"]:
+                    click.echo(f"  {p}")
+    if bad:
+        sys.exit(1)
+
+
+@click.command()
+@click.argument("sessions", nargs=-1)
+@root_option
+@click.option("--prices", type=click.Path(dir_okay=False), default=None, help="JSON price table overriding the defaults.")
+@click.option("--project-cameras", type=int, default=None, help="Projection: number of cameras.")
+@click.option("--project-hours", type=float, default=8.0, show_default=True, help="Projection: recorded hours a day per camera.")
+@click.option("--project-days", type=int, default=365, show_default=True)
+@click.option("--project-segment-s", type=float, default=60.0, show_default=True,
+              help="Projection: segment length (one object per segment; hdf5: one per camera-day).")
+@click.option("--markdown", is_flag=True, help="Print a Markdown table.")
+@json_option
+def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_cameras: int | None,
+          project_hours: float, project_days: int, project_segment_s: float, markdown: bool, as_json: bool) -> None:
+    """Storage cost of archived sessions per format and tier, and a fleet projection."""
+    from recorder.reader import list_sessions, resolve_session
+
+    from .audit import audit_sessions, load_prices, project, render_markdown
+
+    try:
+        table = load_prices(prices)
+        dirs = [resolve_session(s, root) for s in sessions] or \
+            [d for d in list_sessions(root) if (d / "archive" / "manifest.json").exists()]
+        if not dirs:
+            fail(f"no archived sessions under {root} (run `thermcap archive` first)")
+        report = audit_sessions(dirs, table)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if project_cameras:
+        bph = {k: v["bytes_per_hour"] for k, v in report["formats"].items() if v["bytes_per_hour"]}
+        # Objects follow the segmenting, not a short sample session's object count.
+        oph = {k: (1 / project_hours if k == "hdf5" else 3600 / project_segment_s) for k in bph}
+        report["projection"] = project(bph, oph, cameras=project_cameras, hours_per_day=project_hours,
+                                       days=project_days, prices=table)
+    if as_json:
+        click.echo(json.dumps(report, indent=2))
+        return
+    click.echo(render_markdown(report))
+    if "projection" in report:
+        p = report["projection"]
+        click.echo(f"\nProjection: {p['cameras']} camera(s) x {p['hours_per_day']} h/day x {p['days']} days")
+        click.echo("| format | TiB | objects | " + " | ".join(f"{table[t]['label']} $ total (storage+PUT)" for t in table) + " |")
+        click.echo("|---|---|---|" + "---|" * len(table))
+        for fid, f in sorted(p["formats"].items(), key=lambda kv: kv[1]["bytes"]):
+            click.echo(f"| {fid} | {f['tib']} | {f['objects']:,} | " + " | ".join(
+                f"{f['cost'][t]['storage_total'] + f['cost'][t]['put_total']:,.2f}" for t in table) + " |")
+
+
+@click.command("archive")
+@click.option("--frames", "n_frames", type=int, default=60, show_default=True, help="Simulated frames per run.")
+@json_option
+def bench_archive(n_frames: int, as_json: bool) -> None:
+    """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
+    from .bench import bench_archive as run, print_table
+
+    rows = run(n_frames)
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))

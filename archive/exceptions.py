@@ -1,0 +1,35 @@
+"""Errors of the archive package.
+
+ArchiveError (a ThermcapError)   root: the CLI prints it and exits 1
+ +-- UnknownCodecError           no codec or format registered under that id
+ +-- VerificationError           an archive does not match its source or manifest (names frames and files)
+ +-- ManifestError               the manifest is missing or unreadable
+"""
+
+from __future__ import annotations
+
+from recorder.exceptions import ThermcapError
+
+
+class ArchiveError(ThermcapError):
+    pass
+
+
+class UnknownCodecError(ArchiveError, KeyError):
+    def __init__(self, codec_id: str, known: list[str]):
+        self.codec_id = codec_id
+        super().__init__(f"unknown codec or format {codec_id!r}; known: {', '.join(sorted(known))}")
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return self.args[0]
+
+
+class VerificationError(ArchiveError):
+    def __init__(self, message: str, problems: list[str] | None = None):
+        self.problems = problems or []
+        super().__init__(message + ("".join(f"\n  {p}" for p in self.problems[:50])
+                                    + (f"\n  ... and {len(self.problems) - 50} more" if len(self.problems) > 50 else "")))
+
+
+class ManifestError(ArchiveError):
+    pass

@@ -1,0 +1,16 @@
+"""The archive formats, registered by id (ids never change once files carry them)."""
+
+from .base import ArchiveContext, ArchiveFormat, FileRecord, format_registry, get_format, register_format
+from .hdf5 import Hdf5
+from .tiff_lzw import TiffLzw
+from .zipped import ZippedFrames, zipped_factory
+
+register_format("png16", zipped_factory("png16", level=1))
+register_format("tiff-lzw", TiffLzw)
+register_format("hdf5", Hdf5)
+register_format("jxl", zipped_factory("jxl", effort=2))
+register_format("htj2k", zipped_factory("htj2k"))
+register_format("jpegls", zipped_factory("jpegls"))
+
+__all__ = ["ArchiveContext", "ArchiveFormat", "FileRecord", "format_registry", "get_format", "register_format",
+           "Hdf5", "TiffLzw", "ZippedFrames"]

@@ -1,0 +1,157 @@
+"""An archive format: how a session's frames become files, and how the files give them back.
+
+``write(frames, out_dir, context)`` writes every frame (the ``SessionFrame`` stream of
+``recorder.reader``) into files under ``out_dir`` and returns one ``FileRecord`` per file;
+``read(out_dir, files)`` yields the frames back in session order using the format's ordinary
+reader (zipfile + the image codec, tifffile, h5py), which is what verification trusts.
+Per-segment formats write one file per MCAP segment, so an hour is tens of objects.
+"""
+
+from __future__ import annotations
+
+import json
+from abc import ABC, abstractmethod
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, ClassVar, Iterable, Iterator, TypeVar
+
+import numpy as np
+
+from recorder.icd import format_name
+from recorder.radiometry import LinearModel, model_from_dict
+from recorder.reader import SessionFrame
+
+from ..exceptions import UnknownCodecError
+
+__all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "format_registry", "register_format", "get_format",
+           "ordered_map", "frame_name"]
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+@dataclass
+class FileRecord:
+    path: str  # relative to the format's folder
+    frames: int
+    bytes: int = 0
+    sha256: str = ""
+
+
+@dataclass
+class ArchiveContext:
+    """What a format may need besides the frames: the session's metadata and a thread budget."""
+
+    session_id: str
+    session_meta: dict[str, Any] = field(default_factory=dict)
+    total_frames: int | None = None
+    workers: int = 2
+    on_frame: Callable[[], None] | None = None
+
+    @property
+    def sensor_id(self) -> str:
+        return (self.session_meta.get("sensor") or {}).get("sensor_id") or "SENSOR"
+
+    @property
+    def temp_range(self) -> tuple[float, float]:
+        try:
+            model = model_from_dict(self.session_meta.get("radiometric_model") or {"kind": "linear"})
+        except ValueError:
+            return (-40.0, 550.0)
+        if isinstance(model, LinearModel):
+            return (model.temp_min_c, model.temp_max_c)
+        rng = self.session_meta.get("scene_temp_range_c") or (-40.0, 550.0)
+        return (float(rng[0]), float(rng[1]))
+
+
+def frame_name(ctx: ArchiveContext, frame: SessionFrame) -> str:
+    """The ICD file name of a frame (no extension): thermal_<UTC time>_<sensor>_<range>."""
+    return format_name(frame.log_time, ctx.sensor_id, *ctx.temp_range)
+
+
+class ArchiveFormat(ABC):
+    format_id: ClassVar[str]
+    description: ClassVar[str]
+
+    @abstractmethod
+    def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]: ...
+
+    @abstractmethod
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+        """Frames in session order, decoded by the format's ordinary reader."""
+
+    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
+        """One frame by session index (random access); the default walks, formats do better."""
+        for i, frame in enumerate(self.read(out_dir, [f.path for f in files])):
+            if i == index:
+                return frame
+        raise IndexError(index)
+
+    def get_config(self) -> dict[str, Any]:
+        return {"id": self.format_id}
+
+    def __repr__(self) -> str:
+        return f"{type(self).__name__}({self.get_config()})"
+
+
+format_registry: dict[str, Callable[..., ArchiveFormat]] = {}
+
+
+def register_format(format_id: str, factory: Callable[..., ArchiveFormat]) -> None:
+    format_registry[format_id] = factory
+
+
+def get_format(config: dict[str, Any] | str) -> ArchiveFormat:
+    config = {"id": config} if isinstance(config, str) else dict(config)
+    fid = config.pop("id", None)
+    try:
+        factory = format_registry[fid]
+    except KeyError:
+        raise UnknownCodecError(str(fid), list(format_registry)) from None
+    return factory(**config)
+
+
+def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, window: int | None = None) -> Iterator[R]:
+    """``map`` on a thread pool, results in input order, at most ``window`` items in flight
+    (bounded memory however long the input). Encoders release the GIL, so this uses every core."""
+    if workers <= 1:
+        yield from map(fn, items)
+        return
+    window = window or workers * 4
+    with ThreadPoolExecutor(workers, thread_name_prefix="archive-encode") as pool:
+        pending: deque = deque()
+        for item in items:
+            pending.append(pool.submit(fn, item))
+            if len(pending) >= window:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
+
+
+def group_by_segment(frames: Iterable[SessionFrame]) -> Iterator[tuple[str, Iterator[SessionFrame]]]:
+    """Split the session's frame stream into per-segment runs without materialising them."""
+    it = iter(frames)
+    try:
+        first = next(it)
+    except StopIteration:
+        return
+    state = {"next": first}
+
+    def run(segment: str) -> Iterator[SessionFrame]:
+        while state["next"] is not None and state["next"].segment == segment:
+            yield state["next"]
+            state["next"] = next(it, None)
+
+    while state["next"] is not None:
+        seg = state["next"].segment
+        yield seg, run(seg)
+        # a consumer that stopped early: skip the rest of this segment
+        while state["next"] is not None and state["next"].segment == seg:
+            state["next"] = next(it, None)
+
+
+def sidecar_text(frame: SessionFrame) -> str:
+    return frame.sidecar.decode() if frame.sidecar else json.dumps({})
+

@@ -1,0 +1,83 @@
+"""``tiff-lzw``: one multi-page little-endian TIFF per segment, LZW with horizontal predictor.
+
+Every page carries the ICD's mandatory tags (width, length, 16 bits, photometric BlackIsZero,
+strip offsets, one sample, rows per strip, chunky, unsigned) and its frame's sidecar JSON in
+ImageDescription. tifffile omits PlanarConfiguration (284) and SampleFormat (339) for one-sample
+unsigned images and refuses to add them: their TIFF 6.0 defaults are exactly the ICD's values
+(1 = chunky, 1 = unsigned), so every reader sees the same image. Compression is LZW (5), not the ICD's 1, because this is the archive copy;
+``thermcap export --to icd`` writes uncompressed ICD files. 64-row strips let tifffile compress
+a page on both cores; tifffile, ImageJ and GDAL all read it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+import tifffile
+
+from recorder.reader import SessionFrame
+
+from ..exceptions import ArchiveError
+from .base import ArchiveContext, ArchiveFormat, FileRecord, group_by_segment, sidecar_text
+
+__all__ = ["TiffLzw"]
+
+_BIGTIFF_ABOVE = 3_500_000_000  # classic TIFF offsets are 32-bit
+
+
+class TiffLzw(ArchiveFormat):
+    format_id = "tiff-lzw"
+    description = "one multi-page LZW+predictor TIFF per segment, sidecar JSON per page"
+
+    def __init__(self, rowsperstrip: int = 64) -> None:
+        self.rowsperstrip = rowsperstrip
+
+    def get_config(self) -> dict:
+        return {"id": self.format_id, "rowsperstrip": self.rowsperstrip}
+
+    def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
+        records = []
+        frames_per_segment = ctx.session_meta.get("_frames_per_segment", {})
+        for segment, run in group_by_segment(frames):
+            rel = Path(segment).stem + ".tif"
+            n = 0
+            big = None
+            with open(out_dir / rel, "xb") as fh:
+                writer = None
+                for frame in run:
+                    if writer is None:
+                        raw = frame.pixels.nbytes * max(1, frames_per_segment.get(segment, 1))
+                        big = raw > _BIGTIFF_ABOVE
+                        writer = tifffile.TiffWriter(fh, byteorder="<", bigtiff=big)
+                    writer.write(np.asarray(frame.pixels), compression="lzw", predictor=True,
+                                 photometric="minisblack", planarconfig="contig",
+                                 rowsperstrip=self.rowsperstrip, maxworkers=ctx.workers,
+                                 description=sidecar_text(frame), metadata=None, software="thermcap")
+                    n += 1
+                    if ctx.on_frame:
+                        ctx.on_frame()
+                if writer is not None:
+                    writer.close()
+            records.append(FileRecord(rel, n))
+        return records
+
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+        for rel in files:
+            path = out_dir / rel
+            try:
+                with tifffile.TiffFile(path) as tif:
+                    for page in tif.pages:
+                        yield page.asarray()
+            except (tifffile.TiffFileError, OSError, ValueError) as exc:
+                raise ArchiveError(f"{path}: not a readable TIFF ({exc})") from exc
+
+    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
+        start = 0
+        for rec in files:
+            if index < start + rec.frames:
+                with tifffile.TiffFile(out_dir / rec.path) as tif:
+                    return tif.pages[index - start].asarray()
+            start += rec.frames
+        raise IndexError(index)

@@ -1,0 +1,94 @@
+"""Per-frame images in one uncompressed ZIP per segment: ``png16`` (and ``jxl``, ``htj2k``).
+
+Each frame is ``thermal_<time>_<sensor>_<range>.<ext>`` with its ICD ``.json`` sidecar beside
+it, so unzipping gives exactly the ICD's file pairs. The ZIP is stored (no deflate: the images
+are already compressed), so any frame is one ranged read once the central directory is known.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import numpy as np
+
+from recorder.reader import SessionFrame
+
+from ..codecs import FrameCodec, get_codec
+from ..exceptions import ArchiveError
+from .base import ArchiveContext, ArchiveFormat, FileRecord, frame_name, group_by_segment, ordered_map, sidecar_text
+
+__all__ = ["ZippedFrames"]
+
+
+class ZippedFrames(ArchiveFormat):
+    description = "one stored ZIP per segment of per-frame images + ICD JSON sidecars"
+
+    def __init__(self, codec: FrameCodec, format_id: str | None = None) -> None:
+        self.codec = codec
+        self.format_id = format_id or codec.codec_id
+
+    def get_config(self) -> dict:
+        return {"id": self.format_id, "codec": self.codec.get_config()}
+
+    def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
+        records = []
+        codec = self.codec
+
+        def encode(frame: SessionFrame) -> tuple[SessionFrame, bytes]:
+            return frame, codec.encode(np.asarray(frame.pixels))
+
+        for segment, run in group_by_segment(frames):
+            rel = Path(segment).stem + ".zip"
+            n = 0
+            with zipfile.ZipFile(out_dir / rel, "x", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                for frame, data in ordered_map(encode, run, ctx.workers):
+                    name = frame_name(ctx, frame)
+                    zf.writestr(_info(name + codec.extension, frame.log_time), data)
+                    zf.writestr(_info(name + ".json", frame.log_time), sidecar_text(frame))
+                    n += 1
+                    if ctx.on_frame:
+                        ctx.on_frame()
+            records.append(FileRecord(rel, n))
+        return records
+
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+        for rel in files:
+            path = out_dir / rel
+            try:
+                with zipfile.ZipFile(path) as zf:
+                    for info in zf.infolist():
+                        if info.filename.endswith(self.codec.extension):
+                            yield self.codec.decode(zf.read(info))
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
+
+    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
+        start = 0
+        for rec in files:
+            if index < start + rec.frames:
+                with zipfile.ZipFile(out_dir / rec.path) as zf:
+                    images = [i for i in zf.infolist() if i.filename.endswith(self.codec.extension)]
+                    return self.codec.decode(zf.read(images[index - start]))
+            start += rec.frames
+        raise IndexError(index)
+
+
+def _info(name: str, log_time: int) -> zipfile.ZipInfo:
+    import time
+
+    info = zipfile.ZipInfo(name, date_time=time.gmtime(max(log_time // 1_000_000_000, 315532800))[:6])
+    info.compress_type = zipfile.ZIP_STORED
+    info.external_attr = 0o644 << 16
+    return info
+
+
+def zipped_factory(format_id: str, **defaults):
+    """A registry factory: ``get_format({"id": "png16", "codec": {...}})`` or ``get_format("png16")``."""
+
+    def make(codec: dict | None = None, **codec_kwargs) -> ZippedFrames:
+        config = dict(codec) if codec else {"id": format_id, **defaults, **codec_kwargs}
+        return ZippedFrames(get_codec(config), format_id)
+
+    return make

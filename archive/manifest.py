@@ -1,0 +1,80 @@
+"""``sessions/<id>/archive/manifest.json``: what was archived, and the hashes that prove it.
+
+The frame hashes (sha256 of each raw frame as uint16 little-endian, row-major) come from the
+MCAP source; every format is checked against them, and ``thermcap verify`` re-checks archives
+against them later, when the MCAP may be gone. Files are listed with their own sha256 too, so a
+flipped byte is caught before any decoding.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from recorder.segments import write_json_atomic
+
+from .exceptions import ManifestError
+
+__all__ = ["MANIFEST_NAME", "manifest_path", "load_manifest", "save_manifest", "frame_sha256", "file_sha256",
+           "new_manifest", "iso_now"]
+
+MANIFEST_NAME = "manifest.json"
+MANIFEST_VERSION = 1
+
+
+def iso_now() -> str:
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def archive_dir(session_dir: Path) -> Path:
+    return Path(session_dir) / "archive"
+
+
+def manifest_path(session_dir: Path) -> Path:
+    return archive_dir(session_dir) / MANIFEST_NAME
+
+
+def frame_sha256(pixels: np.ndarray) -> str:
+    """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
+    arr = np.ascontiguousarray(pixels, dtype="<u2")
+    return hashlib.sha256(memoryview(arr).cast("B")).hexdigest()
+
+
+def file_sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while chunk := f.read(1 << 20):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def new_manifest(session_id: str, session_meta: dict[str, Any]) -> dict[str, Any]:
+    keep = ("sensor", "radiometric_model", "source", "started", "software_version", "format_version")
+    return {"manifest_version": MANIFEST_VERSION, "session_id": session_id, "created": iso_now(),
+            "session": {k: session_meta[k] for k in keep if k in session_meta}, "source": {}, "frames": {},
+            "formats": {}}
+
+
+def load_manifest(session_dir: Path, *, required: bool = True) -> dict[str, Any] | None:
+    path = manifest_path(session_dir)
+    try:
+        data = json.loads(path.read_text())
+    except FileNotFoundError:
+        if required:
+            raise ManifestError(f"{path}: no manifest; run `thermcap archive {session_dir}` first") from None
+        return None
+    except (OSError, ValueError) as exc:
+        raise ManifestError(f"{path}: unreadable manifest ({exc})") from exc
+    if not isinstance(data, dict) or data.get("manifest_version") != MANIFEST_VERSION:
+        raise ManifestError(f"{path}: not a thermcap manifest (version {data.get('manifest_version')!r})")
+    return data
+
+
+def save_manifest(session_dir: Path, manifest: dict[str, Any]) -> None:
+    manifest["updated"] = iso_now()
+    write_json_atomic(manifest_path(session_dir), manifest)

@@ -1,0 +1,34 @@
+"""``thermcap verify``: re-check archives against the manifest's hashes alone (the MCAP may be gone)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from .archiver import verify_format_dir
+from .formats import get_format
+from .manifest import archive_dir, load_manifest
+
+__all__ = ["verify_session"]
+
+
+def verify_session(session_dir: str | Path, formats: list[str] | None = None) -> dict[str, Any]:
+    """Returns {format: {"ok": bool, "problems": [...], "frames": n}}; names every bad frame and file."""
+    session_dir = Path(session_dir)
+    manifest = load_manifest(session_dir)
+    expected = manifest["frames"].get("sha256", [])
+    adir = archive_dir(session_dir)
+    report: dict[str, Any] = {}
+    for fid, entry in manifest["formats"].items():
+        if formats and fid not in formats:
+            continue
+        if not entry.get("verified"):
+            report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: never verified when archived"]}
+            continue
+        fmt = get_format(entry["config"]) if "config" in entry else get_format(fid)
+        problems, _ = verify_format_dir(fmt, adir / fid, entry["files"], expected, where=fid)
+        report[fid] = {"ok": not problems, "frames": len(expected), "problems": problems}
+    for fid in formats or []:
+        if fid not in report:
+            report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: not in the manifest"]}
+    return report
