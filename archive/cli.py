@@ -72,6 +72,7 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
                     k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
                                           "decode_fps")} for k, v in m["formats"].items() if k in fmts},
                     "source_deleted": m["source"].get("deleted", False)})
+                _run_hooks(d, root)
             except ThermcapError as exc:
                 failed = True
                 results.append({"session": str(d), "ok": False, "error": str(exc)})
@@ -90,6 +91,17 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
                            f"encode {f['encode_fps']} fps  decode {f['decode_fps']} fps")
     if failed:
         sys.exit(1)
+
+
+def _run_hooks(session_dir: Path, root: str) -> None:
+    """Tell interested packages (the API's index) that a session's archive verified."""
+    from importlib.metadata import entry_points
+
+    for ep in entry_points(group="thermcap.on_archived"):
+        try:
+            ep.load()(session_dir, Path(root))
+        except Exception as exc:  # indexing can be redone with `thermcap index`; the archive stands
+            click.echo(f"warning: {ep.name} hook failed for {session_dir}: {exc}", err=True)
 
 
 @click.command()

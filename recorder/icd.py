@@ -13,6 +13,8 @@ from dataclasses import dataclass
 from datetime import datetime, timezone
 
 __all__ = [
+    "iso_utc",
+    "parse_rfc3339",
     "FORMAT_VERSION",
     "MAX_COUNT",
     "DETECTION_THRESHOLD_K",
@@ -88,3 +90,24 @@ def parse_name(name: str) -> IcdName:
         return -int(tok[1:]) if tok[0] == "N" else int(tok[1:])
 
     return IcdName(ns, m["sensor"], unsigned(m["tmin"]), unsigned(m["tmax"]))
+
+
+def iso_utc(ns: int) -> str:
+    """RFC 3339 UTC with nanoseconds (the sidecar's capture.timestamp and the API's times)."""
+    sec, frac = divmod(int(ns), 1_000_000_000)
+    return datetime.fromtimestamp(sec, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S") + f".{frac:09d}Z"
+
+
+_RFC3339 = re.compile(r"^(\d{4}-\d\d-\d\d)[Tt ](\d\d:\d\d:\d\d)(?:\.(\d{1,9}))?(Z|z|[+-]\d\d:\d\d)$")
+
+
+def parse_rfc3339(text: str) -> int:
+    """RFC 3339 -> Unix ns, keeping every digit of the fraction (datetime stops at microseconds)."""
+    m = _RFC3339.match(text.strip())
+    if not m:
+        raise ValueError(f"{text!r} is not an RFC 3339 time like 2026-11-23T19:15:41.336745723Z")
+    base = datetime.strptime(f"{m[1]}T{m[2]}", "%Y-%m-%dT%H:%M:%S")
+    tz = m[4].upper()
+    offset = 0 if tz == "Z" else (1 if tz[0] == "+" else -1) * (int(tz[1:3]) * 3600 + int(tz[4:6]) * 60)
+    sec = int(base.replace(tzinfo=timezone.utc).timestamp()) - offset
+    return sec * 1_000_000_000 + int((m[3] or "0").ljust(9, "0"))

@@ -13,9 +13,9 @@ from typing import Any
 from mcap.reader import make_reader
 
 from .exceptions import McapFileError
+from .icd import iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_STATS
 from .segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
-from .sources.sim import iso_utc
 
 __all__ = ["segment_info", "session_info", "info"]
 

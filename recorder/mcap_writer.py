@@ -325,6 +325,29 @@ class ChunkedWriter:
         if self._on_chunk_written is not None and chunk.tokens:
             self._on_chunk_written(chunk.tokens)
 
+    def add_raw_chunk(self, record: bytes, index: ChunkIndex, message_counts: dict[int, int]) -> None:
+        """Copy a chunk record and the message indexes that follow it from another MCAP file,
+        unchanged (no decompression): ``record`` starts at the chunk's opcode and includes its
+        message index records; ``index`` is the source's ChunkIndex. Channel ids must mean the
+        same in both files (the caller checks). This is what makes exports run at disk speed."""
+        self.flush()
+        start = self._pos
+        self._write(record)
+        offsets = {cid: start + (off - index.chunk_start_offset) for cid, off in index.message_index_offsets.items()}
+        self._chunk_indexes.append(ChunkIndex(
+            message_start_time=index.message_start_time, message_end_time=index.message_end_time,
+            chunk_start_offset=start, chunk_length=index.chunk_length, message_index_offsets=offsets,
+            message_index_length=index.message_index_length, compression=index.compression,
+            compressed_size=index.compressed_size, uncompressed_size=index.uncompressed_size))
+        for cid, n in message_counts.items():
+            self._channel_counts[cid] = self._channel_counts.get(cid, 0) + n
+            self._message_count += n
+        if message_counts:
+            t0, t1 = index.message_start_time, index.message_end_time
+            self._start_time = t0 if self._start_time is None else min(self._start_time, t0)
+            self._end_time = max(self._end_time, t1)
+        self.uncompressed_bytes += index.uncompressed_size
+
     # -- summary ----------------------------------------------------------------------------
     def finish(self, *, fsync: bool = False) -> None:
         """Write the remaining chunks, the indexes and the summary, then the closing magic;

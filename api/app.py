@@ -1,0 +1,109 @@
+"""``create_app(settings)``: the FastAPI service over an indexed data root."""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from contextlib import asynccontextmanager
+from typing import Any
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.middleware.cors import CORSMiddleware
+from fastapi.responses import JSONResponse
+from prometheus_client import CollectorRegistry, Counter, Histogram
+
+from recorder import __version__
+
+from .db import make_engine, migrate
+from .frames import FrameReader
+from .index import index_root
+from .settings import Settings
+from .storage import make_store
+
+__all__ = ["create_app"]
+
+log = logging.getLogger("thermcap.api")
+
+EXPOSED = ["Accept-Ranges", "Content-Range", "Content-Length", "ETag", "Content-Type", "X-Width", "X-Height"]
+
+
+class _Rescanner(threading.Thread):
+    """Re-index the root now and then, so sessions archived while we were down, or by another
+    process, appear without a restart."""
+
+    def __init__(self, app: FastAPI, interval_s: float) -> None:
+        super().__init__(name="thermcap-rescan", daemon=True)
+        self.app, self.interval_s = app, interval_s
+        self.halt = threading.Event()
+
+    def run(self) -> None:
+        while not self.halt.wait(self.interval_s):
+            try:
+                index_root(self.app.state.engine, self.app.state.settings.root)
+            except Exception as exc:  # never take the service down over a scan
+                log.warning("background index failed: %s", exc)
+
+
+def create_app(settings: Settings | None = None, *, index_on_start: bool = True) -> FastAPI:
+    settings = settings or Settings()
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        rescan = None
+        if index_on_start:
+            index_root(app.state.engine, settings.root)
+        if settings.rescan_interval_s > 0:
+            rescan = _Rescanner(app, settings.rescan_interval_s)
+            rescan.start()
+        yield
+        if rescan:
+            rescan.halt.set()
+
+    app = FastAPI(title="thermcap", version=__version__, lifespan=lifespan,
+                  description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.")
+    app.state.settings = settings
+    app.state.engine = make_engine(settings.db_url)
+    migrate(app.state.engine)
+    app.state.store = make_store(settings)
+    app.state.frames = FrameReader(app.state.engine, app.state.store, settings.root)
+    registry = CollectorRegistry()
+    app.state.metrics_registry = registry
+    requests_total = Counter("thermcap_http_requests_total", "HTTP requests", ["route", "method", "status"],
+                             registry=registry)
+    latency = Histogram("thermcap_http_request_seconds", "HTTP request latency", ["route"], registry=registry,
+                        buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10))
+
+    app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
+                       allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
+
+    @app.middleware("http")
+    async def measure(request: Request, call_next):
+        t = time.perf_counter()
+        response = await call_next(request)
+        route = request.scope.get("route")
+        name = getattr(route, "path", "unmatched")
+        requests_total.labels(name, request.method, str(response.status_code)).inc()
+        latency.labels(name).observe(time.perf_counter() - t)
+        return response
+
+    @app.exception_handler(HTTPException)
+    async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
+        return JSONResponse({"error": exc.detail, "status": exc.status_code}, status_code=exc.status_code,
+                            headers=getattr(exc, "headers", None))
+
+    @app.exception_handler(RequestValidationError)
+    async def bad_request(_request: Request, exc: RequestValidationError) -> JSONResponse:
+        problems = [{"where": ".".join(str(x) for x in e.get("loc", ())), "problem": e.get("msg")} for e in exc.errors()]
+        return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
+
+    from .routes import archives, export, frames, meta, sessions, ui
+
+    for module in (meta, sessions, frames, archives, export, ui):
+        app.include_router(module.router)
+    return app
+
+
+def json_error(status: int, message: str, **extra: Any) -> JSONResponse:
+    return JSONResponse({"error": message, "status": status, **extra}, status_code=status)

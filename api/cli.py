@@ -1,0 +1,113 @@
+"""The API's ``thermcap`` subcommands: serve, index, upload."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from recorder.cli import default_root, fail, json_option, root_option
+from recorder.exceptions import ThermcapError
+
+__all__ = ["serve", "index", "upload", "on_archived"]
+
+
+@click.command()
+@root_option
+@click.option("-h", "--host", default="127.0.0.1", show_default=True,
+              help="Interface to bind; 0.0.0.0 exposes the service to the network (set tokens first).")
+@click.option("-p", "--port", type=int, default=8000, show_default=True, help="0 picks a free port.")
+@click.option("--workers", type=int, default=1, show_default=True)
+@click.option("--get", "get_path", default=None, help="Answer one GET request in-process, print it, exit (1 unless 200).")
+def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -> None:
+    """Serve the data root over HTTP (catalog, frames, exports, archives, browser view)."""
+    import os
+
+    from .app import create_app
+    from .settings import Settings
+
+    os.environ["THERMCAP_ROOT"] = root  # the workers build their own app from the environment
+    try:
+        settings = Settings(root=Path(root))
+    except ValueError as exc:
+        fail(str(exc))
+    if get_path:
+        from fastapi.testclient import TestClient
+
+        with TestClient(create_app(settings)) as client:
+            r = client.get(get_path)
+        click.echo(r.text)
+        sys.exit(0 if r.status_code == 200 else 1)
+    if host not in ("127.0.0.1", "localhost", "::1") and not settings.tokens:
+        click.secho(f"warning: serving on {host} with no tokens: anyone who can reach it can read every session",
+                    fg="yellow", err=True)
+    import uvicorn
+
+    if workers > 1:
+        uvicorn.run("api.app:create_app", factory=True, host=host, port=port, workers=workers, log_level="info")
+    else:
+        uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+
+
+@click.command("index")
+@click.argument("root_arg", required=False, metavar="[ROOT]")
+@root_option
+@click.option("--force", is_flag=True, help="Re-index sessions even when unchanged.")
+@json_option
+def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
+    """Index (or re-index) the sessions under ROOT for the API; idempotent."""
+    from .db import make_engine, migrate
+    from .index import index_root
+    from .settings import Settings
+
+    settings = Settings(root=Path(root_arg or root))
+    engine = make_engine(settings.db_url)
+    migrate(engine)
+    result = index_root(engine, settings.root, force=force)
+    if as_json:
+        click.echo(json.dumps(result, indent=2))
+    else:
+        click.echo(f"indexed {len(result['indexed'])}, unchanged {len(result['unchanged'])}, "
+                   f"removed {len(result['removed'])}, failed {len(result['failed'])}")
+        for name, err in result["failed"].items():
+            click.echo(f"  {name}: {err}", err=True)
+    if result["failed"]:
+        sys.exit(1)
+
+
+@click.command()
+@click.argument("sessions", nargs=-1, required=True)
+@root_option
+@json_option
+def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
+    """Copy verified archives to the configured S3 store (THERMCAP_S3_BUCKET, ...)."""
+    from recorder.reader import resolve_session
+
+    from .settings import Settings
+    from .storage import make_store, upload_archive
+
+    settings = Settings(root=Path(root))
+    if not settings.s3_bucket:
+        fail("no object store configured: set THERMCAP_S3_BUCKET (and THERMCAP_S3_ENDPOINT for SeaweedFS/MinIO)")
+    store = make_store(settings)
+    out = {}
+    for s in sessions:
+        try:
+            d = resolve_session(s, root)
+            out[str(d)] = upload_archive(store, settings.root, d)
+        except (ThermcapError, OSError, FileNotFoundError) as exc:
+            fail(f"{s}: {exc}")
+    click.echo(json.dumps(out, indent=2) if as_json else "\n".join(f"{k}: {len(v)} objects" for k, v in out.items()))
+
+
+def on_archived(session_dir: Path, root: Path) -> None:
+    """Hook run by ``thermcap archive`` once a session verified: index it right away."""
+    from .db import make_engine, migrate
+    from .index import index_session
+    from .settings import Settings
+
+    engine = make_engine(Settings(root=Path(root)).db_url)
+    migrate(engine)
+    index_session(engine, session_dir)

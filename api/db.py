@@ -1,0 +1,142 @@
+"""The index schema (SQLAlchemy Core) and the engine: SQLite in WAL mode by default, PostgreSQL
+when ``THERMCAP_DATABASE_URL`` says so. The schema is created and upgraded by Alembic
+(``api/migrations``), the same migrations on both databases."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from sqlalchemy import (
+    BigInteger,
+    Boolean,
+    Column,
+    Float,
+    ForeignKey,
+    Index,
+    Integer,
+    MetaData,
+    String,
+    Table,
+    Text,
+    create_engine,
+    event,
+)
+from sqlalchemy.engine import Engine
+
+__all__ = ["metadata", "sessions", "segments", "archives", "frames", "frame_blobs", "events", "make_engine",
+           "migrate"]
+
+metadata = MetaData()
+
+sessions = Table(
+    "sessions", metadata,
+    Column("id", String(128), primary_key=True),
+    Column("path", Text, nullable=False),
+    Column("sensor", Text),
+    Column("sensor_id", String(64)),
+    Column("width", Integer),
+    Column("height", Integer),
+    Column("fps", Float),
+    Column("start_ns", BigInteger),
+    Column("end_ns", BigInteger),
+    Column("frames", Integer, nullable=False, default=0),
+    Column("frames_dropped", Integer, nullable=False, default=0),
+    Column("radiometric_model", Text),
+    Column("status", String(32)),
+    Column("min_grade", Float),
+    Column("max_grade", Float),
+    Column("has_targets", Boolean, nullable=False, default=False),
+    Column("has_slew_to_cue", Boolean, nullable=False, default=False),
+    Column("coverage", Text),
+    Column("source_deleted", Boolean, nullable=False, default=False),
+    Column("fingerprint", Text, nullable=False),
+    Column("indexed_at", BigInteger, nullable=False),
+)
+Index("ix_sessions_start", sessions.c.start_ns)
+Index("ix_sessions_sensor", sessions.c.sensor_id)
+
+segments = Table(
+    "segments", metadata,
+    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
+    Column("name", String(64), primary_key=True),
+    Column("frames", Integer, nullable=False),
+    Column("bytes", BigInteger, nullable=False),
+)
+
+archives = Table(
+    "archives", metadata,
+    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
+    Column("format", String(32), primary_key=True),
+    Column("files", Text, nullable=False),
+    Column("bytes", BigInteger, nullable=False),
+    Column("objects", Integer, nullable=False),
+    Column("ratio", Float),
+    Column("verified", Boolean, nullable=False),
+)
+
+frames = Table(
+    "frames", metadata,
+    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
+    Column("idx", Integer, primary_key=True),
+    Column("timestamp_ns", BigInteger, nullable=False),
+    Column("segment", String(64)),
+    Column("grade", Float),
+    Column("slew_to_cue", Boolean, nullable=False, default=False),
+    Column("target_count", Integer, nullable=False, default=0),
+    Column("max_target_temp_c", Float),
+)
+Index("ix_frames_time", frames.c.session_id, frames.c.timestamp_ns)
+
+# Where each frame's image and sidecar sit inside a stored-ZIP archive: one ranged read each.
+frame_blobs = Table(
+    "frame_blobs", metadata,
+    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
+    Column("format", String(32), primary_key=True),
+    Column("idx", Integer, primary_key=True),
+    Column("file", Text, nullable=False),
+    Column("offset", BigInteger, nullable=False),
+    Column("length", BigInteger, nullable=False),
+    Column("sidecar_offset", BigInteger, nullable=False),
+    Column("sidecar_length", BigInteger, nullable=False),
+)
+
+events = Table(
+    "events", metadata,
+    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
+    Column("seq", Integer, primary_key=True),
+    Column("kind", String(32), nullable=False),
+    Column("start_ns", BigInteger, nullable=False),
+    Column("end_ns", BigInteger, nullable=False),
+    Column("detail", Text),
+)
+
+
+def make_engine(url: str) -> Engine:
+    if url.startswith("sqlite:///"):
+        Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
+        engine = create_engine(url, connect_args={"check_same_thread": False, "timeout": 30})
+
+        @event.listens_for(engine, "connect")
+        def _pragmas(dbapi_conn, _record) -> None:  # WAL: readers never block the indexer
+            cur = dbapi_conn.cursor()
+            cur.execute("PRAGMA journal_mode=WAL")
+            cur.execute("PRAGMA synchronous=NORMAL")
+            cur.execute("PRAGMA foreign_keys=ON")
+            cur.close()
+
+        return engine
+    if url.startswith("postgresql://"):
+        url = "postgresql+psycopg://" + url.removeprefix("postgresql://")
+    return create_engine(url, pool_pre_ping=True)
+
+
+def migrate(engine: Engine) -> None:
+    """Bring the schema to the newest Alembic revision (idempotent, safe on every start)."""
+    from alembic import command
+    from alembic.config import Config
+
+    cfg = Config()
+    cfg.set_main_option("script_location", str(Path(__file__).parent / "migrations"))
+    with engine.begin() as conn:
+        cfg.attributes["connection"] = conn
+        command.upgrade(cfg, "head")

@@ -1,0 +1,144 @@
+"""A valid, indexed MCAP of one time range and some topics, streamed in constant memory.
+
+From the MCAP source, chunks that lie wholly inside the range (and topic set) are copied byte
+for byte with their message indexes, no decompression; only the chunks at the range's edges
+are re-read message by message. When the source was deleted after archiving, the frames and
+sidecars come from the archive instead.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Iterator
+
+from mcap.data_stream import ReadDataStream
+from mcap.reader import make_reader
+from mcap.records import MessageIndex
+
+from recorder.mcap_writer import ChunkedWriter, Compression
+from recorder.messages import (
+    IMAGE_SCHEMA_NAME,
+    IMAGE_SCHEMA_TEXT,
+    TOPIC_IMAGE,
+    TOPIC_METADATA,
+    image_message_parts,
+)
+from recorder.reader import session_segments
+from recorder.sidecar import sidecar_schema_bytes
+
+__all__ = ["export_mcap"]
+
+_FLUSH_AT = 1 << 20
+
+
+class _Sink(io.RawIOBase):
+    def __init__(self) -> None:
+        self.parts: list[bytes] = []
+        self.size = 0
+
+    def writable(self) -> bool:
+        return True
+
+    def write(self, b) -> int:
+        data = bytes(b)
+        self.parts.append(data)
+        self.size += len(data)
+        return len(data)
+
+    def take(self) -> bytes:
+        out = b"".join(self.parts)
+        self.parts.clear()
+        self.size = 0
+        return out
+
+
+def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, topics: list[str] | None,
+                frames_from_archive=None) -> Iterator[bytes]:
+    sink = _Sink()
+    writer = ChunkedWriter(sink, compression=Compression.ZSTD, compression_level=1, workers=0)
+    writer.start(profile="ros2", library="thermcap export")
+    segs = session_segments(session_dir) if session_dir.is_dir() else []
+    if segs:
+        yield from _from_mcap(writer, sink, segs, start_ns, end_ns, topics)
+    elif frames_from_archive is not None:
+        yield from _from_archive(writer, sink, frames_from_archive, topics)
+    writer.finish()
+    yield sink.take()
+
+
+def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | None, t1: int | None,
+               topics: list[str] | None) -> Iterator[bytes]:
+    out_channels: dict[str, int] = {}
+    out_schemas: dict[str, int] = {}
+    wrote_meta = False
+    for seg in segs:
+        with open(seg, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None:
+                continue
+            # Register this segment's schemas and channels in the output (same order, same ids).
+            same_ids = True
+            for cid in sorted(summary.channels):
+                ch = summary.channels[cid]
+                if topics and ch.topic not in topics:
+                    same_ids = False
+                    continue
+                if ch.topic not in out_channels:
+                    sc = summary.schemas.get(ch.schema_id)
+                    key = sc.name if sc else ""
+                    if sc and key not in out_schemas:
+                        out_schemas[key] = writer.register_schema(sc.name, sc.encoding, sc.data)
+                    out_channels[ch.topic] = writer.register_channel(ch.topic, ch.message_encoding,
+                                                                     out_schemas.get(key, 0), ch.metadata)
+                same_ids &= out_channels[ch.topic] == cid
+            if not wrote_meta:
+                for rec in reader.iter_metadata():
+                    writer.add_metadata(rec.name, rec.metadata)
+                for att in reader.iter_attachments():
+                    writer.add_attachment(att.name, att.media_type, att.data, log_time=att.log_time,
+                                          create_time=att.create_time)
+                wrote_meta = True
+            for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
+                if (t1 is not None and ci.message_start_time >= t1) or (t0 is not None and ci.message_end_time < t0):
+                    continue
+                inside = (t0 is None or ci.message_start_time >= t0) and (t1 is None or ci.message_end_time < t1)
+                if inside and same_ids:
+                    f.seek(ci.chunk_start_offset)
+                    record = f.read(ci.chunk_length + ci.message_index_length)
+                    counts = {}
+                    for cid, off in ci.message_index_offsets.items():
+                        rel = off - ci.chunk_start_offset
+                        stream = ReadDataStream(io.BytesIO(record[rel + 9:]))
+                        counts[cid] = len(MessageIndex.read(stream).records)
+                    writer.add_raw_chunk(record, ci, counts)
+                else:
+                    for _, ch, msg in reader.iter_messages(topics=topics, start_time=max(ci.message_start_time, t0 or 0),
+                                                           end_time=min(ci.message_end_time + 1, t1) if t1 else ci.message_end_time + 1,
+                                                           log_time_order=True):
+                        writer.add_message(out_channels[ch.topic], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+                if sink.size >= _FLUSH_AT:
+                    yield sink.take()
+    writer.flush()
+
+
+def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] | None) -> Iterator[bytes]:
+    want_img = not topics or TOPIC_IMAGE in topics
+    want_meta = not topics or TOPIC_METADATA in topics
+    img = meta = None
+    if want_img:
+        img = writer.register_channel(TOPIC_IMAGE, "cdr", writer.register_schema(IMAGE_SCHEMA_NAME, "ros2msg",
+                                                                                  IMAGE_SCHEMA_TEXT.encode()))
+    if want_meta:
+        meta = writer.register_channel(TOPIC_METADATA, "json", writer.register_schema(
+            "thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes()))
+    for idx, t, pixels, sidecar in frames:
+        if img is not None:
+            writer.add_message(img, t, image_message_parts(pixels(), t), sequence=idx)
+        if meta is not None:
+            writer.add_message(meta, t, json.dumps(sidecar(), separators=(",", ":")).encode(), sequence=idx)
+        if sink.size >= _FLUSH_AT:
+            yield sink.take()
+    writer.flush()

@@ -1,0 +1,223 @@
+"""Indexing: what the service knows about each session, so catalog and search never scan files.
+
+``index_root`` walks ``ROOT/sessions``; a session is (re)indexed only when its fingerprint (the
+session summary, the manifest, the segment files) changed, inside one transaction, so indexing
+twice changes nothing and a session archived while the service was down is picked up at the
+next scan. Per-frame rows come from the sidecars (in a stored-ZIP archive when there is one,
+else the MCAP source); for zipped archives each frame's byte range is recorded, so a frame is
+one ranged read from local disk or S3.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import statistics
+import struct
+import time
+import zipfile
+from pathlib import Path
+from typing import Any, Iterator
+
+from sqlalchemy import delete, insert, select
+from sqlalchemy.engine import Engine
+
+from recorder.reader import list_sessions, read_session_meta, session_segments
+from recorder.messages import TOPIC_METADATA
+
+from . import db
+
+__all__ = ["index_root", "index_session", "fingerprint", "ZIPPED_FORMATS"]
+
+ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
+_LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
+
+
+def fingerprint(session_dir: Path) -> str:
+    h = hashlib.sha256()
+    for p in [session_dir / "session.json", session_dir / "archive" / "manifest.json", session_dir / "events.json",
+              *session_segments(session_dir)]:
+        try:
+            st = p.stat()
+        except FileNotFoundError:
+            h.update(f"{p.name}:-".encode())
+            continue
+        h.update(f"{p.name}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
+def _load_manifest(session_dir: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads((session_dir / "archive" / "manifest.json").read_text())
+    except (FileNotFoundError, ValueError):
+        return None
+
+
+def zip_entries(path: Path) -> Iterator[tuple[zipfile.ZipInfo, int]]:
+    """(entry, offset of its data) for each entry of a stored ZIP."""
+    with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
+        for info in zf.infolist():
+            f.seek(info.header_offset)
+            sig, *_rest, n, e = _LOCAL_HEADER.unpack(f.read(_LOCAL_HEADER.size))
+            if sig != b"PK\x03\x04":
+                raise ValueError(f"{path}: bad local header for {info.filename}")
+            yield info, info.header_offset + _LOCAL_HEADER.size + n + e
+
+
+def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]]) -> tuple[list[dict], list[dict]]:
+    """(sidecars, blob rows) from a zipped archive: the JSON entries are read, images only located."""
+    sidecars, blobs = [], []
+    idx = 0
+    for rec in files:
+        path = session_dir / "archive" / fmt / rec["path"]
+        entries = list(zip_entries(path))
+        with open(path, "rb") as f:
+            for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2]):
+                f.seek(js_off)
+                sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
+                blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off,
+                              "length": img.file_size, "sidecar_offset": js_off, "sidecar_length": js.file_size})
+                idx += 1
+    return sidecars, blobs
+
+
+def _sidecars_from_mcap(session_dir: Path) -> tuple[list[dict], list[str]]:
+    from mcap.reader import make_reader
+
+    out, segs = [], []
+    for seg in session_segments(session_dir):
+        with open(seg, "rb") as f:
+            for _, _, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
+                out.append(json.loads(msg.data))
+                segs.append(seg.name)
+    return out, segs
+
+
+def _coverage(times: list[int]) -> list[list[int]]:
+    """Spans with data; a gap is a step over 1.5x the median frame period (drops, pauses)."""
+    if not times:
+        return []
+    if len(times) < 3:
+        return [[times[0], times[-1]]]
+    steps = [b - a for a, b in zip(times, times[1:])]
+    limit = 1.5 * statistics.median(steps)
+    spans, start = [], times[0]
+    for a, b in zip(times, times[1:]):
+        if b - a > limit:
+            spans.append([start, a])
+            start = b
+    spans.append([start, times[-1]])
+    return spans
+
+
+def _ts(sidecar: dict[str, Any]) -> int | None:
+    stamp = (sidecar.get("capture") or {}).get("timestamp")
+    if not stamp:
+        return None
+    from datetime import datetime, timezone
+
+    main, _, frac = stamp.rstrip("Z").partition(".")
+    sec = int(datetime.strptime(main, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc).timestamp())
+    return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
+
+
+def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> bool:
+    """Index one session; returns False when it was already indexed as it is."""
+    session_dir = Path(session_dir)
+    meta = read_session_meta(session_dir)
+    sid = meta.get("session_id") or session_dir.name
+    fp = fingerprint(session_dir)
+    with engine.connect() as conn:
+        old = conn.execute(select(db.sessions.c.fingerprint).where(db.sessions.c.id == sid)).scalar()
+    if old == fp and not force:
+        return False
+    manifest = _load_manifest(session_dir)
+    verified = {f: e for f, e in (manifest or {}).get("formats", {}).items() if e.get("verified")}
+    zipped = next((f for f in ZIPPED_FORMATS if f in verified and (session_dir / "archive" / f).is_dir()), None)
+    blobs: list[dict[str, Any]] = []
+    if zipped:
+        sidecars, blobs = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
+        for other in ZIPPED_FORMATS:
+            if other != zipped and other in verified and (session_dir / "archive" / other).is_dir():
+                blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"])[1]
+        segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
+        times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
+    else:
+        sidecars, segs = _sidecars_from_mcap(session_dir)
+        times = [_ts(s) for s in sidecars]
+    frame_rows = []
+    for i, (sc, t) in enumerate(zip(sidecars, times)):
+        ta = sc.get("thermal_analysis") or {}
+        targets = sc.get("targets") or []
+        frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
+                           "grade": ta.get("thermal_contrast_grade"),
+                           "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
+                           "target_count": len(targets),
+                           "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)})
+    grades = [r["grade"] for r in frame_rows if r["grade"] is not None]
+    sensor = meta.get("sensor") or (manifest or {}).get("session", {}).get("sensor") or {}
+    model = meta.get("radiometric_model") or (manifest or {}).get("session", {}).get("radiometric_model")
+    src = (manifest or {}).get("source", {})
+    first = sidecars[0] if sidecars else {}
+    res = (first.get("sensor") or {}).get("resolution") or {}
+    valid_times = [r["timestamp_ns"] for r in frame_rows]
+    row = {
+        "id": sid, "path": str(session_dir), "sensor": sensor.get("model"), "sensor_id": sensor.get("sensor_id"),
+        "width": res.get("width") or src.get("width"), "height": res.get("height") or src.get("height"),
+        "fps": sensor.get("frame_rate_hz"), "start_ns": min(valid_times) if valid_times else None,
+        "end_ns": max(valid_times) if valid_times else None, "frames": len(frame_rows),
+        "frames_dropped": int(meta.get("frames_dropped") or 0), "radiometric_model": json.dumps(model),
+        "status": meta.get("status"), "min_grade": min(grades) if grades else None,
+        "max_grade": max(grades) if grades else None,
+        "has_targets": any(r["target_count"] for r in frame_rows),
+        "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),
+        "coverage": json.dumps(_coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
+        "fingerprint": fp, "indexed_at": time.time_ns(),
+    }
+    seg_rows = [{"session_id": sid, "name": s.name, "frames": sum(1 for x in segs if x == s.name),
+                 "bytes": s.stat().st_size} for s in session_segments(session_dir)]
+    arch_rows = [{"session_id": sid, "format": f, "files": json.dumps(e["files"]), "bytes": e["bytes"],
+                  "objects": e["objects"], "ratio": e.get("compression_ratio"), "verified": bool(e.get("verified"))}
+                 for f, e in (manifest or {}).get("formats", {}).items()]
+    event_rows = []
+    events_path = session_dir / "events.json"
+    if events_path.is_file():
+        try:
+            for i, ev in enumerate(json.loads(events_path.read_text()).get("events", [])):
+                event_rows.append({"session_id": sid, "seq": i, "kind": ev["kind"], "start_ns": ev["start_ns"],
+                                   "end_ns": ev["end_ns"], "detail": json.dumps(ev.get("detail", {}))})
+        except (ValueError, KeyError, TypeError):
+            pass
+    with engine.begin() as conn:
+        for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+            conn.execute(delete(table).where(table.c.session_id == sid))
+        conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+        conn.execute(insert(db.sessions), [row])
+        for table, rows in ((db.segments, seg_rows), (db.archives, arch_rows), (db.frames, frame_rows),
+                            (db.frame_blobs, [{"session_id": sid, **b} for b in blobs]), (db.events, event_rows)):
+            for i in range(0, len(rows), 5000):
+                conn.execute(insert(table), rows[i:i + 5000])
+    return True
+
+
+def index_root(engine: Engine, root: Path, *, force: bool = False) -> dict[str, Any]:
+    """Index every session under ROOT; drop sessions whose folder is gone. Skips unfinished ones."""
+    done, unchanged, failed = [], [], {}
+    present = set()
+    for d in list_sessions(root):
+        if list(d.glob("*.active")) or not (d / "session.json").exists() and not (d / "archive").exists():
+            continue
+        meta = read_session_meta(d)
+        present.add(meta.get("session_id") or d.name)
+        try:
+            (done if index_session(engine, d, force=force) else unchanged).append(d.name)
+        except Exception as exc:  # one broken session must not stop the others
+            failed[d.name] = f"{type(exc).__name__}: {exc}"
+    with engine.begin() as conn:
+        known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
+        gone = sorted(known - present)
+        for sid in gone:
+            for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+                conn.execute(delete(table).where(table.c.session_id == sid))
+            conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+    return {"indexed": done, "unchanged": unchanged, "removed": gone, "failed": failed}

@@ -1,0 +1,81 @@
+"""Turning counts into what people look at: temperatures, colour previews, image files."""
+
+from __future__ import annotations
+
+import io
+import json
+from functools import lru_cache
+
+import imagecodecs
+import numpy as np
+import tifffile
+
+from recorder.radiometry import RadiometricModel, model_from_dict
+
+__all__ = ["PALETTES", "palette", "preview_png", "celsius", "celsius_tiff", "png16", "tiff16", "session_model"]
+
+PALETTES = ("ironbow", "gray", "turbo")
+
+
+def _turbo(x: np.ndarray) -> np.ndarray:
+    # Google's polynomial approximation of the Turbo colour map (Apache-2.0 constants).
+    r = 0.13572138 + x * (4.61539260 + x * (-42.66032258 + x * (132.13108234 + x * (-152.94239396 + x * 59.28637943))))
+    g = 0.09140261 + x * (2.19418839 + x * (4.84296658 + x * (-14.18503333 + x * (4.27729857 + x * 2.82956604))))
+    b = 0.10667330 + x * (12.64194608 + x * (-60.58204836 + x * (110.36276771 + x * (-89.90310912 + x * 27.34824973))))
+    return np.stack([r, g, b], axis=-1)
+
+
+@lru_cache(maxsize=None)
+def palette(name: str) -> np.ndarray:
+    """A (256, 3) uint8 lookup table."""
+    x = np.linspace(0.0, 1.0, 256)
+    if name == "gray":
+        rgb = np.stack([x, x, x], axis=-1)
+    elif name == "turbo":
+        rgb = _turbo(x)
+    elif name == "ironbow":
+        keys = np.array([0.0, 0.15, 0.35, 0.55, 0.75, 0.9, 1.0])
+        cols = np.array([[0, 0, 0], [32, 0, 96], [128, 0, 160], [208, 48, 64], [240, 128, 0], [255, 208, 32],
+                         [255, 255, 240]]) / 255.0
+        rgb = np.stack([np.interp(x, keys, cols[:, i]) for i in range(3)], axis=-1)
+    else:
+        raise ValueError(f"unknown palette {name!r}; use one of {', '.join(PALETTES)}")
+    return (np.clip(rgb, 0, 1) * 255).round().astype(np.uint8)
+
+
+def session_model(model_json: str | None) -> RadiometricModel:
+    return model_from_dict(json.loads(model_json) if model_json else {"kind": "linear"})
+
+
+def celsius(frame: np.ndarray, model: RadiometricModel) -> np.ndarray:
+    return np.asarray(model.to_celsius(frame), dtype=np.float32)
+
+
+def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = "ironbow",
+                t_min: float | None = None, t_max: float | None = None) -> bytes:
+    """8-bit colour PNG; the range defaults to the frame's 0.5..99.5 percentiles in C."""
+    temps = celsius(frame, model)
+    lo = float(np.percentile(temps, 0.5)) if t_min is None else t_min
+    hi = float(np.percentile(temps, 99.5)) if t_max is None else t_max
+    if hi <= lo:
+        hi = lo + 1e-3
+    idx = np.clip((temps - lo) * (255.0 / (hi - lo)), 0, 255).astype(np.uint8)
+    return imagecodecs.png_encode(palette(palette_name)[idx], level=1)
+
+
+def png16(frame: np.ndarray) -> bytes:
+    return imagecodecs.png_encode(np.ascontiguousarray(frame, dtype=np.uint16), level=1)
+
+
+def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
+    buf = io.BytesIO()
+    tifffile.imwrite(buf, np.ascontiguousarray(frame, dtype=np.uint16), byteorder="<", photometric="minisblack",
+                     description=description, metadata=None)
+    return buf.getvalue()
+
+
+def celsius_tiff(frame: np.ndarray, model: RadiometricModel) -> bytes:
+    buf = io.BytesIO()
+    tifffile.imwrite(buf, celsius(frame, model), byteorder="<", photometric="minisblack",
+                     description=json.dumps({"units": "degC", "radiometric_model": model.to_dict()}), metadata=None)
+    return buf.getvalue()

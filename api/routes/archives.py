@@ -1,0 +1,94 @@
+"""Archive downloads: HTTP Range (206, 416), strong ETags from the manifest, 304, CORS-exposed."""
+
+from __future__ import annotations
+
+import json
+import re
+
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi.responses import RedirectResponse, StreamingResponse
+from sqlalchemy import select
+
+from .. import db
+from ..security import check_file_name, require
+from .common import session_row
+
+router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
+                   dependencies=[Depends(require("read"))])
+
+_RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
+
+
+def _archive(request: Request, session_id: str, fmt: str) -> dict:
+    session_row(request, session_id)
+    check_file_name(fmt)
+    with request.app.state.engine.connect() as conn:
+        row = conn.execute(select(db.archives).where(db.archives.c.session_id == session_id,
+                                                     db.archives.c.format == fmt)).mappings().first()
+    if row is None or not row["verified"]:
+        raise HTTPException(404, f"session {session_id} has no verified {fmt!r} archive")
+    return dict(row)
+
+
+@router.get("/{fmt}")
+def list_archive(request: Request, session_id: str, fmt: str) -> dict:
+    row = _archive(request, session_id, fmt)
+    files = json.loads(row["files"])
+    return {"format": fmt, "bytes": row["bytes"], "objects": row["objects"], "ratio": row["ratio"],
+            "files": [{**f, "url": f"/api/v1/sessions/{session_id}/archives/{fmt}/{f['path']}"} for f in files]}
+
+
+def _parse_range(header: str, size: int) -> tuple[int, int] | None:
+    """[start, end) for a single satisfiable range; None to serve it all; raises 416."""
+    m = _RANGE.match(header.strip())
+    if not m or (not m[1] and not m[2]):
+        if "," in header:
+            return None  # several ranges: RFC 9110 lets us answer with the whole file
+        raise HTTPException(416, f"unsupported Range {header!r}", headers={"Content-Range": f"bytes */{size}"})
+    if m[1]:
+        start = int(m[1])
+        end = min(int(m[2]) + 1, size) if m[2] else size
+        if m[2] and int(m[2]) < start:
+            raise HTTPException(416, "range end before start", headers={"Content-Range": f"bytes */{size}"})
+    else:
+        start, end = max(0, size - int(m[2])), size
+    if start >= size or end <= start:
+        raise HTTPException(416, f"range not satisfiable for {size} bytes", headers={"Content-Range": f"bytes */{size}"})
+    return start, end
+
+
+@router.api_route("/{fmt}/{name}", methods=["GET", "HEAD"])
+def download(request: Request, session_id: str, fmt: str, name: str, redirect: bool = False) -> Response:
+    row = _archive(request, session_id, fmt)
+    check_file_name(name)
+    entry = next((f for f in json.loads(row["files"]) if f["path"] == name), None)
+    if entry is None:  # only files the manifest lists are served: nothing else under the root is reachable
+        raise HTTPException(404, f"{fmt} archive of {session_id} has no file {name!r}")
+    store = request.app.state.store
+    key = f"sessions/{session_id}/archive/{fmt}/{name}"
+    etag = f'"{entry["sha256"]}"'
+    if redirect:
+        url = store.sign(key)
+        if url:
+            return RedirectResponse(url, status_code=307)
+    size = entry["bytes"]
+    base = {"ETag": etag, "Accept-Ranges": "bytes", "Cache-Control": "public, max-age=3600",
+            "Content-Type": "application/octet-stream"}
+    inm = request.headers.get("if-none-match")
+    if inm and (inm.strip() == "*" or etag in [t.strip() for t in inm.split(",")]):
+        return Response(status_code=304, headers=base)
+    if store.head(key) is None:
+        raise HTTPException(404, f"{key} is listed in the manifest but missing from the store")
+    rng = request.headers.get("range")
+    if_range = request.headers.get("if-range")
+    span = _parse_range(rng, size) if rng and (not if_range or if_range.strip() == etag) else None
+    start, end = span if span else (0, size)
+    headers = {**base, "Content-Length": str(end - start)}
+    status = 200
+    if span:
+        status = 206
+        headers["Content-Range"] = f"bytes {start}-{end - 1}/{size}"
+    if request.method == "HEAD" or end == start:
+        return Response(status_code=status, headers=headers)
+    return StreamingResponse(store.stream_range(key, start, end), status_code=status, headers=headers,
+                             media_type="application/octet-stream")

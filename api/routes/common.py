@@ -1,0 +1,62 @@
+"""Helpers the route modules share: the session lookup, cursors, times."""
+
+from __future__ import annotations
+
+import base64
+import json
+from typing import Any
+
+from fastapi import HTTPException, Request
+from sqlalchemy import select
+
+from recorder.icd import iso_utc, parse_rfc3339
+
+from .. import db
+from ..security import check_session_id
+
+__all__ = ["session_row", "encode_cursor", "decode_cursor", "parse_time", "iso", "page_size"]
+
+
+def session_row(request: Request, session_id: str) -> dict[str, Any]:
+    check_session_id(session_id)
+    with request.app.state.engine.connect() as conn:
+        row = conn.execute(select(db.sessions).where(db.sessions.c.id == session_id)).mappings().first()
+    if row is None:
+        raise HTTPException(404, f"no session {session_id!r}")
+    return dict(row)
+
+
+def encode_cursor(values: list[Any]) -> str:
+    return base64.urlsafe_b64encode(json.dumps(values).encode()).decode().rstrip("=")
+
+
+def decode_cursor(cursor: str | None, n: int) -> list[Any] | None:
+    if not cursor:
+        return None
+    try:
+        values = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
+        if not isinstance(values, list) or len(values) != n:
+            raise ValueError
+        return values
+    except (ValueError, TypeError):
+        raise HTTPException(400, "invalid cursor") from None
+
+
+def parse_time(value: str | None, name: str) -> int | None:
+    if value is None:
+        return None
+    try:
+        return parse_rfc3339(value)
+    except ValueError as exc:
+        raise HTTPException(400, f"{name}: {exc}") from None
+
+
+def iso(ns: int | None) -> str | None:
+    return None if ns is None else iso_utc(ns)
+
+
+def page_size(request: Request, limit: int) -> int:
+    cap = request.app.state.settings.max_page_size
+    if limit < 1:
+        raise HTTPException(400, "limit must be at least 1")
+    return min(limit, cap)

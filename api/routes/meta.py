@@ -1,0 +1,50 @@
+"""Health, readiness, Prometheus metrics, the audit, and (re)indexing on request."""
+
+from __future__ import annotations
+
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from prometheus_client import generate_latest
+from sqlalchemy import func, select
+
+from recorder.reader import list_sessions
+
+from .. import db
+from ..index import index_root
+from ..security import require
+
+router = APIRouter()
+
+
+@router.get("/healthz", tags=["meta"])
+def healthz() -> dict:
+    return {"status": "ok"}
+
+
+@router.get("/readyz", tags=["meta"])
+def readyz(request: Request) -> dict:
+    try:
+        with request.app.state.engine.connect() as conn:
+            n = conn.execute(select(func.count()).select_from(db.sessions)).scalar()
+    except Exception as exc:
+        raise HTTPException(503, f"index unreachable: {type(exc).__name__}") from None
+    return {"status": "ready", "sessions": n}
+
+
+@router.get("/metrics", tags=["meta"], dependencies=[Depends(require("read"))])
+def metrics(request: Request) -> Response:
+    return Response(generate_latest(request.app.state.metrics_registry), media_type="text/plain; version=0.0.4")
+
+
+@router.get("/api/v1/audit", tags=["meta"], dependencies=[Depends(require("read"))])
+def audit(request: Request, prices: str | None = None) -> dict:
+    from archive.audit import audit_sessions, load_prices
+
+    if prices is not None:
+        raise HTTPException(400, "custom price tables are set on the server (thermcap audit --prices), not per request")
+    dirs = [d for d in list_sessions(request.app.state.settings.root) if (d / "archive" / "manifest.json").exists()]
+    return audit_sessions(dirs, load_prices(None))
+
+
+@router.post("/api/v1/index", tags=["meta"], dependencies=[Depends(require("write"))])
+def reindex(request: Request, force: bool = False) -> dict:
+    return index_root(request.app.state.engine, request.app.state.settings.root, force=force)

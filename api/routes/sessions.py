@@ -1,0 +1,148 @@
+"""Catalog and search: sessions, their frames, events and contrast-grade timeline."""
+
+from __future__ import annotations
+
+import json
+from typing import Any, Literal
+
+from fastapi import APIRouter, Depends, Query, Request
+from sqlalchemy import and_, func, or_, select
+
+from .. import db
+from ..security import require
+from .common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
+
+router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
+
+
+def _session_summary(row: dict[str, Any]) -> dict[str, Any]:
+    return {
+        "id": row["id"], "sensor": row["sensor"], "sensor_id": row["sensor_id"], "width": row["width"],
+        "height": row["height"], "fps": row["fps"], "start": iso(row["start_ns"]), "end": iso(row["end_ns"]),
+        "start_ns": row["start_ns"], "end_ns": row["end_ns"], "frames": row["frames"],
+        "frames_dropped": row["frames_dropped"], "status": row["status"], "min_grade": row["min_grade"],
+        "max_grade": row["max_grade"], "has_targets": row["has_targets"], "has_slew_to_cue": row["has_slew_to_cue"],
+        "radiometric_model": json.loads(row["radiometric_model"]) if row["radiometric_model"] else None,
+        "source_deleted": row["source_deleted"],
+    }
+
+
+@router.get("/sessions")
+def list_sessions(request: Request, sensor: str | None = None, start: str | None = None, end: str | None = None,
+                  min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),
+                  has_targets: bool | None = None, slew_to_cue: bool | None = None,
+                  sort: Literal["start", "-start"] = "-start", limit: int = 100, cursor: str | None = None) -> dict:
+    """Sessions overlapping [start, end); ``min_grade``: some frame at least this good;
+    ``max_grade``: some frame at most this good (``max_grade=0.3`` finds thermal crossover)."""
+    n = page_size(request, limit)
+    t0, t1 = parse_time(start, "start"), parse_time(end, "end")
+    s = db.sessions.c
+    where = []
+    if sensor:
+        where.append(or_(s.sensor_id == sensor, s.sensor == sensor))
+    if t0 is not None:
+        where.append(s.end_ns >= t0)
+    if t1 is not None:
+        where.append(s.start_ns < t1)
+    if min_grade is not None:
+        where.append(s.max_grade >= min_grade)
+    if max_grade is not None:
+        where.append(s.min_grade <= max_grade)
+    if has_targets is not None:
+        where.append(s.has_targets == has_targets)
+    if slew_to_cue is not None:
+        where.append(s.has_slew_to_cue == slew_to_cue)
+    desc = sort.startswith("-")
+    after = decode_cursor(cursor, 2)
+    if after:
+        key = func.coalesce(s.start_ns, 0)
+        where.append(or_(key < after[0], and_(key == after[0], s.id < after[1])) if desc
+                     else or_(key > after[0], and_(key == after[0], s.id > after[1])))
+    order = [func.coalesce(s.start_ns, 0).desc(), s.id.desc()] if desc else [func.coalesce(s.start_ns, 0), s.id]
+    with request.app.state.engine.connect() as conn:
+        rows = conn.execute(select(db.sessions).where(*where).order_by(*order).limit(n + 1)).mappings().all()
+    items = [_session_summary(dict(r)) for r in rows[:n]]
+    nxt = encode_cursor([rows[n - 1]["start_ns"] or 0, rows[n - 1]["id"]]) if len(rows) > n else None
+    return {"items": items, "next_cursor": nxt}
+
+
+@router.get("/sessions/{session_id}")
+def get_session(request: Request, session_id: str) -> dict:
+    row = session_row(request, session_id)
+    with request.app.state.engine.connect() as conn:
+        archives = conn.execute(select(db.archives).where(db.archives.c.session_id == session_id)).mappings().all()
+        segments = conn.execute(select(db.segments).where(db.segments.c.session_id == session_id)
+                                .order_by(db.segments.c.name)).mappings().all()
+    coverage = json.loads(row["coverage"] or "[]")
+    gaps = [[a[1], b[0]] for a, b in zip(coverage, coverage[1:])]
+    return {
+        **_session_summary(row),
+        "archives": [{"format": a["format"], "bytes": a["bytes"], "objects": a["objects"], "ratio": a["ratio"],
+                      "verified": a["verified"],
+                      "files": [{"path": f["path"], "frames": f["frames"], "bytes": f["bytes"], "sha256": f["sha256"],
+                                 "url": f"/api/v1/sessions/{session_id}/archives/{a['format']}/{f['path']}"}
+                                for f in json.loads(a["files"])]} for a in archives],
+        "segments": [{"name": s["name"], "frames": s["frames"], "bytes": s["bytes"]} for s in segments],
+        "coverage": [{"start": iso(a), "end": iso(b), "start_ns": a, "end_ns": b} for a, b in coverage],
+        "gaps": [{"start": iso(a), "end": iso(b), "seconds": (b - a) / 1e9} for a, b in gaps],
+    }
+
+
+@router.get("/sessions/{session_id}/frames")
+def list_frames(request: Request, session_id: str, start: str | None = None, end: str | None = None,
+                min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),
+                slew_to_cue: bool | None = None, has_targets: bool | None = None, limit: int = 500,
+                cursor: str | None = None) -> dict:
+    session_row(request, session_id)
+    n = page_size(request, limit)
+    f = db.frames.c
+    where = [f.session_id == session_id]
+    t0, t1 = parse_time(start, "start"), parse_time(end, "end")
+    if t0 is not None:
+        where.append(f.timestamp_ns >= t0)
+    if t1 is not None:
+        where.append(f.timestamp_ns < t1)
+    if min_grade is not None:
+        where.append(f.grade >= min_grade)
+    if max_grade is not None:
+        where.append(f.grade <= max_grade)
+    if slew_to_cue is not None:
+        where.append(f.slew_to_cue == slew_to_cue)
+    if has_targets is not None:
+        where.append(f.target_count > 0 if has_targets else f.target_count == 0)
+    after = decode_cursor(cursor, 1)
+    if after:
+        where.append(f.idx > int(after[0]))
+    with request.app.state.engine.connect() as conn:
+        rows = conn.execute(select(db.frames).where(*where).order_by(f.idx).limit(n + 1)).mappings().all()
+    items = [{"index": r["idx"], "timestamp": iso(r["timestamp_ns"]), "timestamp_ns": r["timestamp_ns"],
+              "segment": r["segment"], "thermal_contrast_grade": r["grade"], "slew_to_cue_active": r["slew_to_cue"],
+              "target_count": r["target_count"], "max_target_temp_c": r["max_target_temp_c"]} for r in rows[:n]]
+    return {"items": items, "next_cursor": encode_cursor([rows[n - 1]["idx"]]) if len(rows) > n else None}
+
+
+@router.get("/sessions/{session_id}/timeline")
+def timeline(request: Request, session_id: str, bins: int = Query(400, ge=1, le=4000)) -> dict:
+    """The contrast grade over the session in ``bins`` buckets (min, mean, max): for the browser view."""
+    row = session_row(request, session_id)
+    n = max(1, row["frames"])
+    f = db.frames.c
+    with request.app.state.engine.connect() as conn:
+        rows = conn.execute(select(func.min(f.idx), func.min(f.grade), func.avg(f.grade), func.max(f.grade),
+                                   func.max(f.target_count), func.max(func.cast(f.slew_to_cue, db.Integer)))
+                            .where(f.session_id == session_id).group_by(func.floor(f.idx * bins / n))
+                            .order_by(func.min(f.idx))).all()
+    return {"frames": row["frames"], "bins": [{"first_frame": r[0], "min": r[1], "mean": r[2], "max": r[3],
+                                               "targets": r[4], "slew_to_cue": bool(r[5])} for r in rows]}
+
+
+@router.get("/sessions/{session_id}/events")
+def session_events(request: Request, session_id: str, kind: str | None = None) -> dict:
+    session_row(request, session_id)
+    e = db.events.c
+    where = [e.session_id == session_id] + ([e.kind == kind] if kind else [])
+    with request.app.state.engine.connect() as conn:
+        rows = conn.execute(select(db.events).where(*where).order_by(e.start_ns)).mappings().all()
+    return {"items": [{"kind": r["kind"], "start": iso(r["start_ns"]), "end": iso(r["end_ns"]),
+                       "start_ns": r["start_ns"], "end_ns": r["end_ns"], "seconds": (r["end_ns"] - r["start_ns"]) / 1e9,
+                       "detail": json.loads(r["detail"] or "{}")} for r in rows]}

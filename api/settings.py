@@ -1,0 +1,73 @@
+"""Service settings, from arguments or the environment (never logged with their secrets).
+
+THERMCAP_ROOT            data root (default ./thermcap-data)
+THERMCAP_DATABASE_URL    SQLAlchemy URL; default sqlite:///<root>/index.sqlite
+THERMCAP_TOKENS          "token=read,write;other=read" (or THERMCAP_TOKENS_FILE: one "token=scopes" a line)
+THERMCAP_S3_BUCKET       serve archive blobs from this bucket instead of the local root
+THERMCAP_S3_ENDPOINT     S3-compatible endpoint (SeaweedFS, MinIO, R2); AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY
+THERMCAP_S3_REGION       default us-east-1
+THERMCAP_S3_PREFIX       key prefix inside the bucket (default: none)
+THERMCAP_CORS_ORIGINS    comma-separated origins allowed by CORS (default: * for reads, e.g. Foxglove)
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+__all__ = ["Settings"]
+
+
+def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
+    tokens: dict[str, frozenset[str]] = {}
+    for item in text.replace("\n", ";").split(";"):
+        item = item.strip()
+        if not item or item.startswith("#"):
+            continue
+        token, _, scopes = item.partition("=")
+        scope_set = frozenset(s.strip() for s in (scopes or "read").split(",") if s.strip())
+        unknown = scope_set - {"read", "write"}
+        if unknown or len(token.strip()) < 8:
+            raise ValueError("tokens must be at least 8 characters with scopes read and/or write "
+                             f"(got scopes {sorted(scope_set)})")
+        tokens[token.strip()] = scope_set
+    return tokens
+
+
+@dataclass
+class Settings:
+    root: Path = field(default_factory=lambda: Path(os.environ.get("THERMCAP_ROOT", "thermcap-data")))
+    database_url: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_DATABASE_URL"))
+    tokens: dict[str, frozenset[str]] = field(default_factory=dict)
+    s3_bucket: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_S3_BUCKET"))
+    s3_endpoint: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_S3_ENDPOINT"))
+    s3_region: str = field(default_factory=lambda: os.environ.get("THERMCAP_S3_REGION", "us-east-1"))
+    s3_prefix: str = field(default_factory=lambda: os.environ.get("THERMCAP_S3_PREFIX", ""))
+    cors_origins: list[str] = field(default_factory=lambda: [o for o in os.environ.get(
+        "THERMCAP_CORS_ORIGINS", "*").split(",") if o])
+    max_page_size: int = 1000
+    rescan_interval_s: float = 30.0
+
+    def __post_init__(self) -> None:
+        self.root = Path(self.root)
+        if not self.tokens:
+            text = os.environ.get("THERMCAP_TOKENS", "")
+            path = os.environ.get("THERMCAP_TOKENS_FILE")
+            if path:
+                text += "\n" + Path(path).read_text()
+            self.tokens = _parse_tokens(text)
+
+    @property
+    def db_url(self) -> str:
+        return self.database_url or f"sqlite:///{(self.root / 'index.sqlite').resolve()}"
+
+    def __repr__(self) -> str:  # never print tokens or credentials
+        return f"Settings(root={str(self.root)!r}, db={_redact(self.db_url)!r}, s3={self.s3_bucket!r}, tokens={len(self.tokens)})"
+
+
+def _redact(url: str) -> str:
+    if "@" in url and "://" in url:
+        scheme, rest = url.split("://", 1)
+        return f"{scheme}://***@{rest.split('@', 1)[1]}"
+    return url
