@@ -46,6 +46,33 @@ class _Rescanner(threading.Thread):
                 log.warning("background index failed: %s", exc)
 
 
+class _Metrics:
+    """Pure ASGI middleware (no per-request task, unlike @app.middleware): counts and times requests
+    by route template, so /frames/{n} is one series, not one per frame."""
+
+    def __init__(self, app, *, requests_total: Counter, latency: Histogram) -> None:
+        self.app, self.requests_total, self.latency = app, requests_total, latency
+
+    async def __call__(self, scope, receive, send) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        t = time.perf_counter()
+        status = [500]
+
+        async def send_wrapper(message) -> None:
+            if message["type"] == "http.response.start":
+                status[0] = message["status"]
+            await send(message)
+
+        try:
+            await self.app(scope, receive, send_wrapper)
+        finally:
+            name = getattr(scope.get("route"), "path", "unmatched")
+            self.requests_total.labels(name, scope["method"], str(status[0])).inc()
+            self.latency.labels(name).observe(time.perf_counter() - t)
+
+
 def create_app(settings: Settings | None = None, *, index_on_start: bool = True) -> FastAPI:
     settings = settings or Settings()
 
@@ -78,15 +105,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
                        allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
 
-    @app.middleware("http")
-    async def measure(request: Request, call_next):
-        t = time.perf_counter()
-        response = await call_next(request)
-        route = request.scope.get("route")
-        name = getattr(route, "path", "unmatched")
-        requests_total.labels(name, request.method, str(response.status_code)).inc()
-        latency.labels(name).observe(time.perf_counter() - t)
-        return response
+    app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
 
     @app.exception_handler(HTTPException)
     async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:

@@ -111,3 +111,16 @@ def on_archived(session_dir: Path, root: Path) -> None:
     engine = make_engine(Settings(root=Path(root)).db_url)
     migrate(engine)
     index_session(engine, session_dir)
+
+
+@click.command("api")
+@click.option("--frames", type=int, default=300, show_default=True, help="Frames in the benchmark session.")
+@click.option("--requests", "n_requests", type=int, default=400, show_default=True)
+@click.option("--clients", type=int, default=4, show_default=True)
+@json_option
+def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> None:
+    """Frames/s and p50/p99 over real HTTP with concurrent clients; export MB/s; beside disk reads."""
+    from .bench import bench_api, print_table
+
+    rows = bench_api(frames, n_requests, clients)
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))

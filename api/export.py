@@ -30,7 +30,7 @@ from recorder.sidecar import sidecar_schema_bytes
 
 __all__ = ["export_mcap"]
 
-_FLUSH_AT = 1 << 20
+_FLUSH_AT = 4 << 20
 
 
 class _Sink(io.RawIOBase):

@@ -98,7 +98,10 @@ def postgres_url(tmp_path_factory):
     initdb, pg_ctl = _pg_bin("initdb"), _pg_bin("pg_ctl")
     if not initdb or not pg_ctl:
         pytest.skip("PostgreSQL is not installed (apt-get install postgresql; .ci/run does this)")
-    base = tmp_path_factory.mktemp("pg")
+    import tempfile
+
+    # Not under pytest's tmp folder: that is private to root, and postgres must reach its data.
+    base = Path(tempfile.mkdtemp(prefix="thermcap-pg-"))
     data, sock = base / "data", base / "sock"
     sock.mkdir()
     prefix: list[str] = []
@@ -116,6 +119,7 @@ def postgres_url(tmp_path_factory):
         yield f"postgresql://postgres@127.0.0.1:{port}/postgres"
     finally:
         subprocess.run(prefix + [pg_ctl, "-D", str(data), "-m", "immediate", "stop"], capture_output=True)
+        _shutil.rmtree(base, ignore_errors=True)
 
 
 @pytest.fixture(scope="session")
