@@ -36,6 +36,7 @@ _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
 def fingerprint(session_dir: Path) -> str:
     h = hashlib.sha256()
     for p in [session_dir / "session.json", session_dir / "archive" / "manifest.json", session_dir / "events.json",
+              session_dir / "analysis.jsonl",
               *session_segments(session_dir)]:
         try:
             st = p.stat()
@@ -145,12 +146,22 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     else:
         sidecars, segs = _sidecars_from_mcap(session_dir)
         times = [_ts(s) for s in sidecars]
+    analysed = session_dir / "analysis.jsonl"
+    if analysed.is_file():  # `thermcap analyze` results take precedence over the recorded sidecars
+        by_index = {}
+        with open(analysed) as f:
+            for line in f:
+                row = json.loads(line)
+                by_index[row["index"]] = row
+        sidecars = [{**sc, **{k: by_index[i][k] for k in ("thermal_analysis", "targets")}} if i in by_index else sc
+                    for i, sc in enumerate(sidecars)]
     frame_rows = []
     for i, (sc, t) in enumerate(zip(sidecars, times)):
         ta = sc.get("thermal_analysis") or {}
         targets = sc.get("targets") or []
         frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
-                           "grade": ta.get("thermal_contrast_grade"),
+                           # an unanalysed frame has no grade (its sidecar's 0.0 is a placeholder)
+                           "grade": None if ta.get("source") in ("skipped", "none") else ta.get("thermal_contrast_grade"),
                            "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
                            "target_count": len(targets),
                            "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)})

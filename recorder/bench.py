@@ -62,8 +62,9 @@ def _baseline(frames: list[CapturedFrame], n: int, path: Path, level: int) -> fl
 
 def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: str | None = None,
                  progress: bool = True, fps: float = 60.0,
-                 compressions: tuple[str, ...] = ("auto", "zstd", "lz4")) -> list[dict[str, Any]]:
-    """One row per frame size and compression ("auto" is what ``thermcap record`` uses)."""
+                 compressions: tuple[str, ...] = ("auto", "auto+analysis", "lz4")) -> list[dict[str, Any]]:
+    """One row per frame size and mode: "auto" is ``thermcap record``'s compression with analysis off,
+    "auto+analysis" the same with the detector running beside it (at the camera's 60 fps)."""
     rows = []
     base = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="thermcap-bench-"))
     base.mkdir(parents=True, exist_ok=True)
@@ -71,7 +72,8 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
         for (width, height), name in [(wh, c) for wh in sizes for c in compressions]:
             sim = SimSource(width=width, height=height, frames=60, paced=False, seed=1)
             rendered = list(sim.frames())
-            if name == "auto":
+            analysis = name.endswith("+analysis")
+            if name.startswith("auto"):
                 comp, level = auto_compression(width, height, fps)
             else:
                 comp, level = Compression(name), (1 if name == "zstd" else 0)
@@ -80,7 +82,8 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             baseline_fps = _baseline(rendered, n_frames, base / f"baseline-{width}.zst", 1)
             root = base / f"root-{width}-{name}"
             rec = Recorder(MemorySource(sim, rendered, n_frames), root, queue_frames=max(120, n_frames),
-                           policy=SegmentPolicy(compression=comp, compression_level=level), recover_leftovers=False)
+                           policy=SegmentPolicy(compression=comp, compression_level=level), recover_leftovers=False,
+                           analysis=analysis, analysis_max_fps=fps)
             t = time.perf_counter()
             res = rec.run()
             dt = time.perf_counter() - t
@@ -139,11 +142,11 @@ def _rss_mb() -> float:
 
 
 def print_table(rows: list[dict[str, Any]]) -> str:
-    head = (f"{'size':>10} {'mode':>5} {'chunks':>7} {'fps':>7} {'MB/s':>7} {'x real':>7} {'base fps':>9} "
+    head = (f"{'size':>10} {'mode':>13} {'chunks':>7} {'fps':>7} {'MB/s':>7} {'x real':>7} {'base fps':>9} "
             f"{'x base':>7} {'ratio':>6}")
     lines = [head, "(base = each frame zstd-1 compressed and appended to a file, one thread, same run)"]
     for r in rows:
-        lines.append(f"{r['width']:>5}x{r['height']:<4} {r['mode']:>5} {r['compression']:>7} {r['fps']:>7} "
+        lines.append(f"{r['width']:>5}x{r['height']:<4} {r['mode']:>13} {r['compression']:>7} {r['fps']:>7} "
                      f"{r['mb_per_s']:>7} {r['x_realtime']:>7} {r['baseline_fps']:>9} {r['x_baseline']:>7} "
                      f"{r['ratio']:>6}")
     return "\n".join(lines)

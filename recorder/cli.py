@@ -93,12 +93,14 @@ def bench() -> None:
               help="Chunk compression; auto: zstd-1 up to 25 Mpixel/s, lz4 above (e.g. 1280x1024@60).")
 @click.option("--level", type=int, default=None, help="Compression level (default: zstd 1, lz4 0).")
 @click.option("--queue", "queue_frames", type=int, default=120, show_default=True, help="Capture queue capacity in frames.")
+@click.option("--analysis/--no-analysis", default=True, show_default=True,
+              help="Run the hot-spot detector beside recording (fills sidecar targets and contrast grade).")
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
 def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
            root: str, session_id: str | None, pace: bool | None, seed: int, crossover: bool, cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
-           debug_writer_delay: float, as_json: bool) -> None:
+           analysis: bool, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
     from .mcap_writer import Compression
     from .recorder import Recorder
@@ -122,7 +124,7 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
                                max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
                                compression=comp, compression_level=default_level if level is None else level)
         rec = Recorder(src, root, session_id=session_id, policy=policy, queue_frames=queue_frames,
-                       writer_delay_s=debug_writer_delay)
+                       writer_delay_s=debug_writer_delay, analysis=analysis)
     except ThermcapError as exc:
         fail(str(exc))
     except (ValueError, OSError) as exc:
@@ -151,6 +153,9 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
             click.secho(f"dropped messages per topic: {result.dropped}", fg="yellow", err=True)
         click.echo(f"segments: {len(result.segments)}  bytes: {sum(s['bytes'] for s in result.segments):,}  "
                    f"write latency p50 {lat['p50']} ms, p99 {lat['p99']} ms")
+        if analysis:
+            click.echo(f"analysis: {result.frames_written - result.analysis_skipped} frames analysed, "
+                       f"{result.analysis_skipped} skipped; {result.events} events")
     if result.error:
         fail(result.error)
 
@@ -237,6 +242,37 @@ def recover(path: str, keep_original: bool, as_json: bool) -> None:
                    f"{r.bytes_discarded:,} bytes of cut tail discarded ({r.stopped_because})")
 
 
+@cli.command()
+@click.argument("sessions", nargs=-1, required=True)
+@root_option
+@click.option("--threshold", type=float, default=5.0, show_default=True, help="K above the local background.")
+@click.option("--min-area", type=int, default=4, show_default=True, help="Smallest target, in pixels.")
+@click.option("--min-crossover", type=float, default=1.0, show_default=True,
+              help="Seconds of grade < 0.3 that make a thermal_crossover event.")
+@json_option
+def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: int, min_crossover: float,
+            as_json: bool) -> None:
+    """(Re)run hot-spot detection on sessions: analysis.jsonl and events.json beside the segments."""
+    from .analyze import analyze_session
+    from .reader import resolve_session
+
+    results = []
+    for s in sessions:
+        try:
+            results.append(analyze_session(resolve_session(s, root), threshold_k=threshold, min_area=min_area,
+                                           min_crossover_s=min_crossover))
+        except ThermcapError as exc:
+            fail(str(exc))
+    if as_json:
+        click.echo(json.dumps(results, indent=2))
+        return
+    for r in results:
+        kinds: dict[str, int] = {}
+        for e in r["events"]:
+            kinds[e["kind"]] = kinds.get(e["kind"], 0) + 1
+        click.echo(f"{r['session']}: {r['frames']} frames, {r['detections']} detections, events {kinds or 'none'}")
+
+
 @bench.command("record")
 @click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
 @click.option("--sizes", default="640x512,1280x1024", show_default=True)
@@ -259,6 +295,17 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
         fail(f"--sizes must look like 640x512,1280x1024, got {sizes!r}")
     rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+@bench.command("analysis")
+@click.option("--frames", "n_frames", type=int, default=12, show_default=True, help="Frames per scene.")
+@json_option
+def bench_analysis_cmd(n_frames: int, as_json: bool) -> None:
+    """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
+    from .bench_analysis import bench_analysis, print_table
+
+    res = bench_analysis(n_frames)
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
 
 
 def main() -> None:

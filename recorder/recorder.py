@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import fcntl
 import json
+from concurrent.futures import Future, TimeoutError as FutureTimeout
 import os
 import queue
 import secrets
@@ -24,6 +25,7 @@ from . import __version__
 from .exceptions import RecordingError, ThermcapError
 from .icd import FORMAT_VERSION, iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from .analysis import EventBuilder, HotSpotDetector
 from .radiometry import LinearModel
 from .segments import SegmentPolicy, SessionWriter, write_json_atomic
 from .sidecar import SidecarEncoder
@@ -69,6 +71,8 @@ class RecordingResult:
     write_latency_ms: dict[str, Any]
     error: str | None = None
     recovered: list[str] = field(default_factory=list)
+    analysis_skipped: int = 0
+    events: int = 0
 
     @property
     def ok(self) -> bool:
@@ -83,7 +87,8 @@ class RecordingResult:
                 "frames_captured": self.frames_captured, "frames_written": self.frames_written,
                 "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
                 "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
-                "error": self.error, "recovered": self.recovered, "ok": self.ok}
+                "error": self.error, "recovered": self.recovered, "ok": self.ok,
+                "analysis_skipped": self.analysis_skipped, "events": self.events}
 
 
 class Recorder:
@@ -97,7 +102,8 @@ class Recorder:
 
     def __init__(self, source: FrameSource, root: str | os.PathLike, *, session_id: str | None = None,
                  policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
-                 writer_delay_s: float = 0.0, recover_leftovers: bool = True) -> None:
+                 writer_delay_s: float = 0.0, recover_leftovers: bool = True, analysis: bool = True,
+                 analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None) -> None:
         self.source = source
         self.root = Path(root)
         self.session_id = session_id or new_session_id(source.sensor.sensor_id)
@@ -116,6 +122,15 @@ class Recorder:
         self._session: SessionWriter | None = None
         self._last_frame_ns: int | None = None
         self._sidecars = SidecarEncoder(source.sensor.to_sidecar(), _radiometric_block(source.model))
+        self._events = EventBuilder()
+        # Analysis beside recording: its own thread and bounded queue; when it falls behind, frames
+        # go unanalysed (sidecar source "skipped", counted), capture never waits for it. It runs at
+        # most at the source's frame rate so an as-fast-as-possible import does not starve writing.
+        self._aq: queue.Queue | None = queue.Queue(maxsize=max(1, analysis_queue)) if analysis else None
+        self._detector = HotSpotDetector(source.model, bad_pixel_map=source.bad_pixel_map) if analysis else None
+        self.analysis_wait_s = analysis_wait_s
+        self._analysis_period_ns = int(1e9 / (analysis_max_fps or source.sensor.frame_rate_hz or 60.0))
+        self._next_analysis_ns = 0
 
     # -- public -----------------------------------------------------------------------------
     def stop(self) -> None:
@@ -145,6 +160,10 @@ class Recorder:
                                       on_chunk_written=self._chunk_written)
         t0 = time.monotonic()
         deadline = None if duration_s is None else t0 + duration_s
+        analyst = None
+        if self._aq is not None:
+            analyst = threading.Thread(target=self._analysis_loop, name="thermcap-analysis", daemon=True)
+            analyst.start()
         writer = threading.Thread(target=self._writer_loop, name="thermcap-writer", daemon=True)
         capture = threading.Thread(target=self._capture_loop, args=(deadline,), name="thermcap-capture", daemon=True)
         writer.start()
@@ -160,13 +179,21 @@ class Recorder:
             self.stop()
             capture.join()
             writer.join()
+        if analyst is not None:
+            analyst.join()
         wall = time.monotonic() - t0
         error = self._writer_error or self._source_error
+        events = self._events.finish()
+        try:
+            write_json_atomic(self.session_dir / "events.json", {"session_id": self.session_id, "events": events})
+        except OSError:
+            pass  # a full disk: the events can be rebuilt with `thermcap analyze`
         result = RecordingResult(
             session_id=self.session_id, session_dir=self.session_dir,
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
-            wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered)
+            wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
+            analysis_skipped=self.counters.analysis_skipped, events=len(events))
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
         try:
@@ -187,6 +214,8 @@ class Recorder:
         try:
             for frame in self.source.frames():
                 counters.frames_captured += 1
+                if self._aq is not None:
+                    self._offer_analysis(frame)
                 try:
                     self.queue.put_nowait(frame)
                 except queue.Full:
@@ -200,6 +229,33 @@ class Recorder:
         finally:
             self.source.close()
             self.queue.put(_STOP)  # blocks only until the writer frees a slot
+            if self._aq is not None:
+                self._aq.put(_STOP)
+
+    def _offer_analysis(self, frame: CapturedFrame) -> None:
+        fut: Future = Future()
+        frame.analysis = fut
+        now = time.monotonic_ns()
+        if now < self._next_analysis_ns:
+            fut.set_result(None)
+            return
+        try:
+            self._aq.put_nowait((frame.pixels, fut))
+            self._next_analysis_ns = max(self._next_analysis_ns + self._analysis_period_ns, now - self._analysis_period_ns)
+        except queue.Full:
+            fut.set_result(None)
+
+    def _analysis_loop(self) -> None:
+        assert self._aq is not None and self._detector is not None
+        while True:
+            item = self._aq.get()
+            if item is _STOP:
+                return
+            pixels, fut = item
+            try:
+                fut.set_result(self._detector.detect(pixels))
+            except Exception:  # a detector failure must not stop recording: the frame says skipped
+                fut.set_result(None)
 
     def _writer_loop(self) -> None:
         session = self._session
@@ -245,7 +301,9 @@ class Recorder:
 
     def _write_frame(self, frame: CapturedFrame) -> None:
         ts = frame.timestamp_ns
-        payload = self._sidecars.encode(self._sidecar_blocks(frame))
+        blocks = self._sidecar_blocks(frame)
+        payload = self._sidecars.encode(blocks)
+        self._events.add(ts, blocks)
         extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
         assert self._session is not None
         self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
@@ -282,12 +340,23 @@ class Recorder:
         extra = frame.sidecar
         capture = {"timestamp": iso_utc(frame.timestamp_ns), "frame_index": frame.index}
         capture.update(extra.get("capture", {}))
+        analysis, targets = extra.get("thermal_analysis") or _NO_ANALYSIS, extra.get("targets", [])
+        if frame.analysis is not None:
+            try:
+                result = frame.analysis.result(timeout=self.analysis_wait_s)
+            except FutureTimeout:
+                result = None
+            if result is None:
+                self.counters.analysis_skipped += 1
+                analysis, targets = _SKIPPED, []
+            else:
+                analysis, targets = result[1], [d.to_sidecar() for d in result[0]]
         return {
             "capture": capture,
             "environment": extra.get("environment", {}),
-            "thermal_analysis": extra.get("thermal_analysis") or _NO_ANALYSIS,
+            "thermal_analysis": analysis,
             "slew_to_cue": extra.get("slew_to_cue") or _NO_CUE,
-            "targets": extra.get("targets", []),
+            "targets": targets,
         }
 
     def _session_meta(self, started_ns: int) -> dict[str, Any]:
@@ -305,6 +374,7 @@ class Recorder:
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
                 "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}
+_SKIPPED = {**_NO_ANALYSIS, "source": "skipped"}
 _NO_CUE = {"slew_to_cue_active": False, "radar_cue_received": False, "radar_azimuth_deg": None,
            "radar_elevation_deg": None, "radar_range_m": None, "turret_pan_deg": None, "turret_tilt_deg": None,
            "search_pattern_active": False, "state": "idle"}

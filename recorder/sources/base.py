@@ -61,6 +61,8 @@ class CapturedFrame:
     sidecar: dict[str, Any] = field(default_factory=dict)
     # Extra messages that belong with this frame: (topic, payload dict), e.g. radar cues.
     messages: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
+    # Set by the recorder: a Future with the detector's result, or None when analysis is off.
+    analysis: Any = None
 
 
 class FrameSource(ABC):

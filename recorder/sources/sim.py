@@ -42,6 +42,8 @@ class SimTarget:
     pos: tuple[float, float]  # initial top-left as a fraction of (W, H)
     vel: tuple[float, float]  # px/s at 640 wide
     region: str  # "sky" or "ground": where it bounces
+    delta_k: float | None = None  # if set: this many K above its local background, not temp_c
+    scale_size: bool = True  # sizes scale with the frame width (off: exact pixel sizes)
 
 
 DEFAULT_TARGETS = (
@@ -242,7 +244,7 @@ class SimSource(FrameSource):
         return float(np.clip((d - hw / 3) / (hw * 2 / 3), 0.0, 1.0))
 
     def _target_box(self, tgt: SimTarget, t: float) -> tuple[int, int, int, int]:
-        s = self._scale
+        s = self._scale if tgt.scale_size else 1.0
         tw, th = max(2, int(round(tgt.size[0] * s))), max(2, int(round(tgt.size[1] * s)))
         if tgt.region == "sky":
             y_lo, y_hi = 0, self._horizon - th - 2
@@ -269,12 +271,14 @@ class SimSource(FrameSource):
         for tgt in self.targets:
             x, y, tw, th = self._target_box(tgt, t)
             local_bg = float(self._background_c[y:y + th, x:x + tw].mean())
-            temp = local_bg + (tgt.temp_c - local_bg) * f
+            full = tgt.temp_c if tgt.delta_k is None else local_bg + tgt.delta_k
+            temp = local_bg + (full - local_bg) * f
             yy, xx = np.ogrid[:th, :tw]
             ell = ((yy - (th - 1) / 2) / (th / 2)) ** 2 + ((xx - (tw - 1) / 2) / (tw / 2)) ** 2 <= 1.0
-            # A hot core: the centre 2 K above the rim at full contrast.
+            # A hot core: the centre 2 K above the rim at full contrast (never below the background).
             core = 1.0 - np.clip(((yy - (th - 1) / 2) / (th / 2)) ** 2 + ((xx - (tw - 1) / 2) / (tw / 2)) ** 2, 0, 1)
-            temps = (temp - 1.0 * f + 2.0 * f * core).astype(np.float32)
+            hot = max(0.0, min(1.0, (temp - local_bg) / 2.0))
+            temps = (temp - hot * f + 2.0 * hot * f * core).astype(np.float32)
             region = counts_f[y:y + th, x:x + tw]
             region[ell] = ((temps - model.offset_c) / model.scale_c_per_count)[ell]
             truths.append({"target": tgt, "box": (x, y, tw, th), "mask": ell, "temp_c": temp})

@@ -20,13 +20,13 @@ T0 = 1_800_000_000_000_000_000
 def make_root(root: Path) -> Path:
     pol = SegmentPolicy(max_duration_s=0.5)
     Recorder(SimSource(width=W, height=H, frames=60, paced=False, seed=1, start_time_ns=T0, first_cue_s=0.1), root,
-             session_id="s-archived", policy=pol).run()
+             session_id="s-archived", policy=pol, analysis=False).run()
     archive_session(root / "sessions" / "s-archived", ["png16", "hdf5", "jxl"])
     Recorder(SimSource(width=W, height=H, frames=120, paced=False, seed=2, crossover=True, cue_period_s=0,
-                       start_time_ns=T0 + 10**12), root, session_id="s-crossover", policy=pol).run()
+                       start_time_ns=T0 + 10**12), root, session_id="s-crossover", policy=pol, analysis=False).run()
     archive_session(root / "sessions" / "s-crossover", ["png16"])
     Recorder(SimSource(width=W, height=H, frames=30, paced=False, seed=3, start_time_ns=T0 + 2 * 10**12, first_cue_s=0.1,
-                       sensor_id="OTHERCAM"), root, session_id="s-mcap-only", policy=pol).run()
+                       sensor_id="OTHERCAM"), root, session_id="s-mcap-only", policy=pol, analysis=False).run()
     return root
 
 
