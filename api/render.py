@@ -53,8 +53,14 @@ def celsius(frame: np.ndarray, model: RadiometricModel) -> np.ndarray:
 
 def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = "ironbow",
                 t_min: float | None = None, t_max: float | None = None) -> bytes:
-    """8-bit colour PNG; the range defaults to the frame's 0.5..99.5 percentiles in C."""
-    temps = celsius(frame, model)
+    """8-bit colour PNG; the range defaults to the frame's 0.5..99.5 percentiles in C. Where the
+    model cannot give temperatures (DJI layouts that need DJI's SDK) the counts are stretched."""
+    from recorder.radiometry import TemperatureUnavailable
+
+    try:
+        temps = celsius(frame, model)
+    except TemperatureUnavailable:
+        temps, t_min, t_max = frame.astype(np.float32), None, None
     lo = float(np.percentile(temps, 0.5)) if t_min is None else t_min
     hi = float(np.percentile(temps, 99.5)) if t_max is None else t_max
     if hi <= lo:

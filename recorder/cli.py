@@ -273,6 +273,42 @@ def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: in
         click.echo(f"{r['session']}: {r['frames']} frames, {r['detections']} detections, events {kinds or 'none'}")
 
 
+@cli.command("import")
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
+@root_option
+@click.option("--session", "session_name", default=None, help="Session id (suffixed -1, -2 ... when files need several).")
+@click.option("--session-per-file", is_flag=True, help="One session per file.")
+@click.option("--analysis/--no-analysis", default=True, show_default=True, help="Run the hot-spot detector on the frames.")
+@json_option
+def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
+               as_json: bool) -> None:
+    """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
+    from rich.progress import Progress
+
+    from .importers.session import import_paths
+
+    show = not as_json and sys.stderr.isatty()
+    with Progress(disable=not show, transient=True) as bar:
+        task = bar.add_task("importing", total=None)
+        report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
+                              analysis=analysis, on_file=lambda p: bar.advance(task))
+    if as_json:
+        click.echo(json.dumps({"files": report.files, "failed": report.failed,
+                               "sessions": [r.to_dict() for r in report.sessions]}, indent=2))
+    else:
+        for f in report.files:
+            c = f["celsius"]
+            temp = (f"{c['min']:.2f}..{c['max']:.2f} C (mean {c['mean']:.2f})" + (" approximate" if c.get("approximate") else "")
+                    if c else "temperature needs the vendor SDK")
+            click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} -> {f.get('session_id')}")
+        for r in report.sessions:
+            click.echo(f"session {r.session_id}: {r.frames_written} frames")
+        for f in report.failed:
+            click.echo(f"error: {f['error']}", err=True)
+    if report.failed or any(not r.ok for r in report.sessions):
+        sys.exit(1)
+
+
 @bench.command("record")
 @click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
 @click.option("--sizes", default="640x512,1280x1024", show_default=True)

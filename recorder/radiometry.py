@@ -18,6 +18,11 @@ from .icd import BIT_DEPTH, MAX_COUNT
 __all__ = [
     "RadiometricModel",
     "LinearModel",
+    "FlirPlanckModel",
+    "TerraRefPlanckModel",
+    "ScaledKelvinModel",
+    "DjiModel",
+    "TemperatureUnavailable",
     "register_model",
     "model_from_dict",
     "DEFAULT_MODEL",
@@ -51,7 +56,7 @@ def model_from_dict(data: dict[str, Any]) -> RadiometricModel:
         cls = _MODELS[kind]
     except KeyError:
         raise ValueError(f"unknown radiometric model kind {kind!r}; known: {sorted(_MODELS)}") from None
-    params = {k: v for k, v in data.items() if k != "kind"}
+    params = {k: v for k, v in data.items() if k not in ("kind", "temperature")}
     known = {f.name for f in fields(cls)}
     unknown = set(params) - known
     if unknown:
@@ -112,3 +117,174 @@ class LinearModel:
 
 DEFAULT_MODEL = LinearModel()
 assert DEFAULT_MODEL.max_count == MAX_COUNT
+
+
+def _planck_raw(r1: float, r2: float, b: float, f: float, o: float, temp_c: float) -> float:
+    """Raw counts a blackbody at ``temp_c`` would give (FLIR's Planck curve)."""
+    return r1 / (r2 * (np.exp(b / (temp_c + 273.15)) - f)) - o
+
+
+@register_model
+@dataclass(frozen=True)
+class FlirPlanckModel:
+    """FLIR's Planck model with emissivity, reflected and atmospheric temperature, atmospheric
+    transmission from distance and humidity, and an IR window: Thermimage's ``raw2temp``, with the
+    file's own CameraInfo constants (formats.md 3.3)."""
+
+    kind: ClassVar[str] = "flir_planck"
+    planck_r1: float
+    planck_b: float
+    planck_f: float
+    planck_o: float
+    planck_r2: float
+    emissivity: float = 1.0
+    object_distance_m: float = 1.0
+    reflected_temp_c: float = 20.0
+    atmospheric_temp_c: float = 20.0
+    ir_window_temp_c: float = 20.0
+    ir_window_transmission: float = 1.0
+    relative_humidity_pct: float = 50.0
+    alpha1: float = 0.006569
+    alpha2: float = 0.01262
+    beta1: float = -0.002276
+    beta2: float = -0.00667
+    trans_x: float = 1.9
+    bit_depth: int = 16
+
+    def transmission(self) -> float:
+        ta = self.atmospheric_temp_c
+        h2o = (self.relative_humidity_pct / 100) * np.exp(1.5587 + 0.06939 * ta - 0.00027816 * ta**2
+                                                           + 0.00000068455 * ta**3)
+        d = np.sqrt(self.object_distance_m / 2)
+        return float(self.trans_x * np.exp(-d * (self.alpha1 + self.beta1 * np.sqrt(h2o)))
+                     + (1 - self.trans_x) * np.exp(-d * (self.alpha2 + self.beta2 * np.sqrt(h2o))))
+
+    def to_celsius(self, raw: np.ndarray) -> np.ndarray:
+        e, irt = self.emissivity, self.ir_window_transmission
+        tau = self.transmission()
+        p = lambda t: _planck_raw(self.planck_r1, self.planck_r2, self.planck_b, self.planck_f, self.planck_o, t)  # noqa: E731
+        raw_refl = p(self.reflected_temp_c)
+        raw_atm = p(self.atmospheric_temp_c)
+        raw_win = p(self.ir_window_temp_c)
+        offset = ((1 - e) / e * raw_refl + (1 - tau) / e / tau * raw_atm + (1 - irt) / e / tau / irt * raw_win
+                  + (1 - tau) / e / tau / irt / tau * raw_atm)
+        raw_obj = np.asarray(raw, dtype=np.float64) / e / tau / irt / tau - offset
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.planck_b / np.log(self.planck_r1 / (self.planck_r2 * (raw_obj + self.planck_o)) + self.planck_f) - 273.15
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, **asdict(self)}
+
+
+@register_model
+@dataclass(frozen=True)
+class TerraRefPlanckModel:
+    """TERRA-REF gantry FLIR A615 (``FlirRawToTemperature``): Planck with R, B, F, J0, J1.
+
+    ``variant="pipeline"`` (the default) reproduces the TERRA-REF pipeline exactly, including its
+    forward-model step (``raw*E*tau + ...`` where a physical inversion divides), because that is
+    what every published TERRA-REF temperature product used; ``"physical"`` inverts the
+    measurement equation properly (about +0.6 C on the sample). ``"plain"`` is E = tau = 1."""
+
+    kind: ClassVar[str] = "terraref_planck"
+    r: float
+    b: float
+    f: float
+    j0: float
+    j1: float
+    alpha1: float = 0.006569
+    alpha2: float = 0.01262
+    beta1: float = -0.002276
+    beta2: float = -0.00667
+    x: float = 1.9
+    humidity: float = 0.1
+    atm_temp_c: float = 22.0
+    distance_m: float = 2.5
+    emissivity: float = 0.98
+    variant: str = "pipeline"
+    bit_depth: int = 16
+
+    def __post_init__(self) -> None:
+        if self.variant not in ("pipeline", "physical", "plain"):
+            raise ValueError(f"variant must be pipeline, physical or plain, got {self.variant!r}")
+
+    def _p(self, t_k: float) -> float:
+        return self.r * self.j1 / (np.exp(self.b / t_k) - self.f) + self.j0
+
+    def to_celsius(self, raw: np.ndarray) -> np.ndarray:
+        raw = np.asarray(raw, dtype=np.float64)
+        if self.variant == "plain":
+            corr = raw
+        else:
+            t, h = self.atm_temp_c, self.humidity
+            h2o = h * np.exp(1.56 + 0.0694 * t - 0.000278 * t**2 + 0.000000685 * t**3)
+            d = np.sqrt(self.distance_m / 2)
+            tau = (self.x * np.exp(-d * (self.alpha1 + self.beta1 * np.sqrt(h2o)))
+                   + (1 - self.x) * np.exp(-d * (self.alpha2 + self.beta2 * np.sqrt(h2o))))
+            p_atm = self._p(t + 273.15)
+            e = self.emissivity
+            if self.variant == "pipeline":  # as implemented in FlirRawToTemperature.m / Get_FLIR.py
+                corr = raw * e * tau + (1 - tau) * p_atm + (1 - e) * tau * p_atm
+            else:
+                corr = (raw - (1 - tau) * p_atm - (1 - e) * tau * p_atm) / (e * tau)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.b / np.log(self.r / (corr - self.j0) * self.j1 + self.f) - 273.15
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, **asdict(self)}
+
+
+@register_model
+@dataclass(frozen=True)
+class ScaledKelvinModel:
+    """Counts are kelvin times ``counts_per_kelvin`` (TERRA-REF calibrated data: 0.1 K, 10 per K;
+    FLIR/flirpy radiometric TIFF: 0.04 K, 25 per K)."""
+
+    kind: ClassVar[str] = "scaled_kelvin"
+    counts_per_kelvin: float = 10.0
+    bit_depth: int = 16
+
+    def to_celsius(self, raw: np.ndarray) -> np.ndarray:
+        return np.asarray(raw, dtype=np.float64) / self.counts_per_kelvin - 273.15
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"kind": self.kind, **asdict(self)}
+
+
+class TemperatureUnavailable(ValueError):
+    """The counts are kept bit-exact, but no honest temperature can be computed here."""
+
+
+@register_model
+@dataclass(frozen=True)
+class DjiModel:
+    """DJI R-JPEG layouts. For ``iirp`` the counts are 14-bit x 4 and ``(raw >> 2) / 16 - 273.15``
+    is the *uncorrected* blackbody temperature (no emissivity, reflection or atmosphere): labelled
+    ``approximate``, off from DJI's SDK by up to several degrees. ``dirp``, ``girp`` and ``hirp``
+    need tables inside DJI's Thermal SDK: ``to_celsius`` refuses rather than print a wrong number."""
+
+    kind: ClassVar[str] = "dji"
+    layout: str = "iirp"
+    emissivity: float | None = None
+    distance_m: float | None = None
+    humidity_pct: float | None = None
+    reflection_c: float | None = None
+    ambient_c: float | None = None
+    bit_depth: int = 16
+
+    @property
+    def approximate(self) -> bool:
+        return self.layout == "iirp"
+
+    def to_celsius(self, raw: np.ndarray) -> np.ndarray:
+        if self.layout != "iirp":
+            raise TemperatureUnavailable(
+                f"DJI {self.layout} data: temperature needs the DJI Thermal SDK (its calibration blobs are kept "
+                "with the session); thermcap does not guess")
+        return (np.asarray(raw).astype(np.uint16) >> 2) * 0.0625 - 273.15
+
+    def to_dict(self) -> dict[str, Any]:
+        out = {"kind": self.kind, **asdict(self)}
+        out["temperature"] = ("approximate: uncorrected blackbody (raw>>2)/16-273.15, no emissivity/reflection/"
+                              "atmosphere correction" if self.layout == "iirp" else "requires the DJI Thermal SDK")
+        return out

@@ -307,7 +307,8 @@ class Recorder:
         extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
         assert self._session is not None
         self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
-                                  token=frame.capture_mono_ns or None, sequence=frame.index)
+                                  token=frame.capture_mono_ns or None, sequence=frame.index,
+                                  attachments=frame.attachments)
         self.counters.frames_written += 1
         self._last_frame_ns = ts
 

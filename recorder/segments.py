@@ -240,9 +240,15 @@ class SessionWriter:
 
     # -- writing -------------------------------------------------------------------------------
     def write_frame(self, log_time: int, image_parts: list[Any], sidecar_json: bytes,
-                    extra: list[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0) -> None:
+                    extra: list[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
+                    attachments: list[tuple[str, str, bytes]] = ()) -> None:
         size = sum(memoryview(p).nbytes for p in image_parts) + len(sidecar_json)
         self._maybe_rotate(log_time, size)
+        for name, media_type, data in attachments:
+            try:
+                self._writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
+            except OSError as exc:
+                raise RecordingError(f"writing {self._path(self.segments[-1], True)} failed: {exc.strerror or exc}") from exc
         self._add(TOPIC_IMAGE, log_time, image_parts, token=token, sequence=sequence)
         self._add(TOPIC_METADATA, log_time, sidecar_json, sequence=sequence)
         for topic, payload in extra:

@@ -7,6 +7,8 @@ from typing import Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
+from recorder.radiometry import TemperatureUnavailable
+
 from ..frames import FrameNotFound
 from ..render import PALETTES, celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 from ..security import require
@@ -48,7 +50,10 @@ def get_frame(request: Request, session_id: str, n: int,
         return Response(tiff16(frame), media_type="image/tiff", headers=dims)
     model = session_model(row["radiometric_model"])
     if format == "celsius-tiff":
-        return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)
+        try:
+            return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)
+        except TemperatureUnavailable as exc:
+            raise HTTPException(409, str(exc)) from None
     if min is not None and max is not None and max <= min:
         raise HTTPException(400, "max must be greater than min")
     return Response(preview_png(frame, model, palette, min, max), media_type="image/png", headers=dims)
@@ -77,7 +82,11 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     if x >= w or y >= h:
         raise HTTPException(400, f"pixel ({x}, {y}) is outside the {w}x{h} frame")
     model = session_model(row["radiometric_model"])
-    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4),
+    try:
+        value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
+    except TemperatureUnavailable as exc:
+        raise HTTPException(409, str(exc)) from None
+    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "approximate": getattr(model, "approximate", False),
             "model": json.loads(row["radiometric_model"] or "null")}
 
 

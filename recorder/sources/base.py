@@ -63,6 +63,8 @@ class CapturedFrame:
     messages: list[tuple[str, dict[str, Any]]] = field(default_factory=list)
     # Set by the recorder: a Future with the detector's result, or None when analysis is off.
     analysis: Any = None
+    # Files to keep with the frame as MCAP attachments: (name, media type, bytes), e.g. DJI calibration.
+    attachments: list[tuple[str, str, bytes]] = field(default_factory=list)
 
 
 class FrameSource(ABC):

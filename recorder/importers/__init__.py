@@ -1,0 +1,74 @@
+"""Importers: real thermal files into frames with their radiometric models, by content.
+
+``read_file(path)`` detects the format from the bytes (never the extension alone), and returns
+the frames or raises ImportError_ naming the file and the problem. Formats: FLIR radiometric
+JPEG / FFF / SEQ / CSQ, DJI R-JPEG (iirp, dirp, girp, hirp), TERRA-REF ``_ir.bin``, ICD TIFF
+and raw Gray16 with their JSON sidecars.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .base import ImportedFrame, ImportError_
+from .dji import is_dji, read_dji
+from .flir import flir_jpeg_payload, read_fff_file, read_flir_jpeg
+from .icd_files import read_icd_raw, read_icd_tiff, sidecar_for
+from .jpeg import app_segments
+from .terraref import metadata_for, read_terraref
+
+__all__ = ["ImportedFrame", "ImportError_", "read_file", "detect", "MAX_FILE_BYTES"]
+
+MAX_FILE_BYTES = 4 * 1024**3
+
+
+def detect(path: str, data: bytes) -> str:
+    if data[:2] == b"\xff\xd8":
+        segments = app_segments(path, data)
+        if any(m == 0xE1 and p[:5] == b"FLIR\x00" for m, p in segments):
+            return "flir-rjpeg"
+        if is_dji(segments):
+            return "dji-rjpeg"
+        raise ImportError_(f"{path}: a JPEG with no thermal data (neither FLIR nor DJI radiometric)")
+    if data[:4] in (b"FFF\x00", b"AFF\x00"):
+        return "flir-fff"
+    if data[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
+        return "tiff"
+    if metadata_for(path) is not None:
+        return "terraref-bin"
+    if sidecar_for(path) is not None and Path(path).suffix.lower() in (".raw", ".gray16", ".bin"):
+        return "icd-raw"
+    if data[:8] == b"\x89PNG\r\n\x1a\n":
+        raise ImportError_(f"{path}: a PNG image; thermcap imports radiometric files (FLIR, DJI, TERRA-REF, ICD)")
+    raise ImportError_(f"{path}: unrecognised file (not a FLIR/DJI radiometric JPEG, FFF/SEQ/CSQ, TIFF, "
+                       "TERRA-REF _ir.bin or ICD raw with a .json sidecar)")
+
+
+def read_file(path: str | Path) -> list[ImportedFrame]:
+    path = str(path)
+    try:
+        size = Path(path).stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ImportError_(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} an importer reads")
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ImportError_(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if not data:
+        raise ImportError_(f"{path}: empty file")
+    kind = detect(path, data)
+    try:
+        if kind == "flir-rjpeg":
+            return read_flir_jpeg(path, data)
+        if kind == "dji-rjpeg":
+            return read_dji(path, data)
+        if kind == "flir-fff":
+            return read_fff_file(path, data)
+        if kind == "tiff":
+            return read_icd_tiff(path, data)
+        if kind == "terraref-bin":
+            return read_terraref(path, data)
+        return read_icd_raw(path, data)
+    except ImportError_:
+        raise
+    except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
+        raise ImportError_(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None

@@ -1,0 +1,177 @@
+"""FLIR radiometric JPEG (APP1 ``FLIR`` chunks), FFF, SEQ and CSQ (formats.md 3)."""
+
+from __future__ import annotations
+
+import struct
+from typing import Iterator
+
+import imagecodecs
+import numpy as np
+
+from ..radiometry import FlirPlanckModel
+from .base import ImportedFrame, ImportError_, read_exact
+from .jpeg import app_segments
+
+__all__ = ["read_flir_jpeg", "read_fff_file", "parse_fff", "iter_fff_records", "flir_jpeg_payload"]
+
+RAW, CAMERA_INFO = 0x01, 0x20
+
+
+def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
+    """The FFF inside a FLIR JPEG (APP1 chunks 'FLIR\\0', 0x01, index, last), or None."""
+    chunks: dict[int, bytes] = {}
+    last = None
+    for marker, payload in app_segments(path, data):
+        if marker == 0xE1 and payload[:5] == b"FLIR\x00" and len(payload) >= 8:
+            chunks[payload[6]] = payload[8:]
+            last = payload[7]
+    if not chunks:
+        return None
+    missing = [i for i in range(last + 1) if i not in chunks] if last is not None else []
+    if missing:
+        raise ImportError_(f"{path}: FLIR APP1 chunks {missing} of 0..{last} are missing (truncated file?)")
+    return b"".join(chunks[i] for i in range(last + 1))
+
+
+def _byteorder(path: str, fff: bytes) -> str:
+    if fff[:4] not in (b"FFF\x00", b"AFF\x00"):
+        raise ImportError_(f"{path}: not a FLIR FFF record (magic {fff[:4]!r})")
+    for order in (">", "<"):
+        (version,) = struct.unpack(order + "I", read_exact(path, fff, 0x14, 4, "FFF header"))
+        if 100 <= version < 200:
+            return order
+    raise ImportError_(f"{path}: FFF header version not in 100..199 in either byte order")
+
+
+def parse_fff(path: str, fff: bytes) -> dict[int, tuple[int, bytes]]:
+    """{record type: (subtype, bytes)} of one FFF image."""
+    order = _byteorder(path, fff)
+    dir_off, count = struct.unpack(order + "II", read_exact(path, fff, 0x18, 8, "FFF header"))
+    if count > 10_000:
+        raise ImportError_(f"{path}: FFF directory claims {count} entries")
+    records = {}
+    for i in range(count):
+        e = read_exact(path, fff, dir_off + 32 * i, 32, "FFF directory")
+        rtype, sub, _ver, _idx, off, length = struct.unpack(order + "HHIIII", e[:20])
+        if rtype == 0:
+            continue
+        records.setdefault(rtype, (sub, read_exact(path, fff, off, length, f"FFF record 0x{rtype:02X}")))
+    return records
+
+
+def _rec_order(rec: bytes, default: str) -> str:
+    (marker,) = struct.unpack(default + "H", rec[:2])
+    return default if marker < 0x100 else ("<" if default == ">" else ">")
+
+
+def _raw_frame(path: str, sub: int, rec: bytes, order: str) -> np.ndarray:
+    o = _rec_order(rec, order)
+    if len(rec) < 0x20:
+        raise ImportError_(f"{path}: FLIR raw record too short ({len(rec)} bytes)")
+    _, w, h = struct.unpack(o + "HHH", rec[:6])
+    body = rec[0x20:]
+    if w == 0 or h == 0 or w * h > 50_000_000:
+        raise ImportError_(f"{path}: FLIR raw record has an impossible size {w}x{h}")
+    if sub in (1, 2):
+        if len(body) < w * h * 2:
+            raise ImportError_(f"{path}: FLIR raw data truncated: {len(body)} bytes for {w}x{h}x2")
+        return np.frombuffer(body[: w * h * 2], dtype=">u2" if sub == 1 else "<u2").reshape(h, w).astype("<u2")
+    try:
+        if sub == 3:
+            img = imagecodecs.png_decode(body)
+            img = img.astype(np.uint16)
+            img = ((img >> 8) | ((img & 0xFF) << 8)).astype(np.uint16)  # FLIR PNGs are byte-swapped
+        elif sub == 4:
+            img = imagecodecs.jpegls_decode(body).astype(np.uint16)
+        else:
+            raise ImportError_(f"{path}: unknown FLIR raw data subtype {sub}")
+    except ImportError_:
+        raise
+    except Exception as exc:
+        raise ImportError_(f"{path}: FLIR raw image does not decode ({type(exc).__name__}: {exc})") from exc
+    if img.shape != (h, w):
+        raise ImportError_(f"{path}: FLIR raw image is {img.shape[1]}x{img.shape[0]}, header says {w}x{h}")
+    return img
+
+
+def _f(rec: bytes, o: str, off: int) -> float:
+    return struct.unpack(o + "f", rec[off:off + 4])[0]
+
+
+def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, dict]:
+    if len(rec) < 0x310:
+        raise ImportError_(f"{path}: FLIR CameraInfo record too short ({len(rec)} bytes)")
+    o = _rec_order(rec, order)
+    k = 273.15
+    rh = _f(rec, o, 0x3C)
+    model = FlirPlanckModel(
+        planck_r1=_f(rec, o, 0x58), planck_b=_f(rec, o, 0x5C), planck_f=_f(rec, o, 0x60),
+        planck_o=float(struct.unpack(o + "i", rec[0x308:0x30C])[0]), planck_r2=_f(rec, o, 0x30C),
+        emissivity=_f(rec, o, 0x20), object_distance_m=_f(rec, o, 0x24), reflected_temp_c=_f(rec, o, 0x28) - k,
+        atmospheric_temp_c=_f(rec, o, 0x2C) - k, ir_window_temp_c=_f(rec, o, 0x30) - k,
+        ir_window_transmission=_f(rec, o, 0x34), relative_humidity_pct=rh * 100 if rh <= 2 else rh,
+        alpha1=_f(rec, o, 0x70), alpha2=_f(rec, o, 0x74), beta1=_f(rec, o, 0x78), beta2=_f(rec, o, 0x7C),
+        trans_x=_f(rec, o, 0x80))
+    text = lambda a, b: rec[a:b].split(b"\x00")[0].decode("latin-1").strip()  # noqa: E731
+    meta = {"camera_model": text(0xD4, 0xF4), "part_number": text(0xF4, 0x104), "serial": text(0x104, 0x114),
+            "lens_model": text(0x170, 0x180)}
+    if model.emissivity <= 0 or model.planck_r1 == 0:
+        raise ImportError_(f"{path}: FLIR CameraInfo has no usable Planck constants")
+    return model, meta
+
+
+def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedFrame:
+    order = _byteorder(path, fff)
+    records = parse_fff(path, fff)
+    if RAW not in records:
+        raise ImportError_(f"{path}: FLIR file has no raw thermal data record")
+    if CAMERA_INFO not in records:
+        raise ImportError_(f"{path}: FLIR file has no CameraInfo record (no Planck constants)")
+    sub, raw = records[RAW]
+    pixels = _raw_frame(path, sub, raw, order)
+    model, meta = _camera_info(path, records[CAMERA_INFO][1], order)
+    creator = fff[4:20].split(b"\x00")[0].decode("latin-1")
+    meta.update(creator=creator, byte_order="big" if order == ">" else "little", raw_subtype=sub)
+    return ImportedFrame(path=path, format=fmt, layout={1: "raw-be", 2: "raw-le", 3: "png", 4: "jpeg-ls"}.get(sub),
+                         pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model,
+                         sensor_model=meta["camera_model"] or creator or "FLIR", sensor_id="FLIR",
+                         vendor_metadata=meta, frame_index=index, blobs={"flir_camera_info.bin": records[CAMERA_INFO][1]})
+
+
+def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
+    fff = flir_jpeg_payload(path, data)
+    if fff is None:
+        raise ImportError_(f"{path}: a JPEG with no FLIR thermal data")
+    return [frame_from_fff(path, fff, "flir-rjpeg")]
+
+
+def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:
+    """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
+    largest record end); 'FFF\\0' inside pixel data is never mistaken for a header."""
+    pos = 0
+    while pos + 0x40 <= len(data):
+        chunk = data[pos:]
+        order = _byteorder(path, chunk)
+        dir_off, count = struct.unpack(order + "II", chunk[0x18:0x20])
+        end = dir_off + 32 * count
+        for i in range(count):
+            e = read_exact(path, chunk, dir_off + 32 * i, 32, "FFF directory")
+            rtype, _s, _v, _i, off, length = struct.unpack(order + "HHIIII", e[:20])
+            if rtype:
+                end = max(end, off + length)
+        if end > len(chunk):
+            raise ImportError_(f"{path}: image at byte {pos} is cut (needs {end} bytes, {len(chunk)} left)")
+        yield chunk[:end]
+        pos += end
+        while pos < len(data) and data[pos:pos + 4] not in (b"FFF\x00", b"AFF\x00"):
+            # padding between images; stop at the next real header
+            nxt = data.find(b"FFF\x00", pos)
+            pos = len(data) if nxt < 0 else nxt
+
+
+def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:
+    frames = [frame_from_fff(path, rec, "flir-fff", i) for i, rec in enumerate(iter_fff_records(path, data))]
+    if len(frames) > 1:
+        for f in frames:
+            f.format = "flir-seq" if f.layout != "jpeg-ls" else "flir-csq"
+    return frames
