@@ -309,6 +309,34 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
         sys.exit(1)
 
 
+@cli.command("export")
+@click.argument("session")
+@root_option
+@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd"]), required=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None, help="Folder (default: SESSION/export/KIND).")
+@click.option("--summary", type=click.Choice(["csv", "json"]), default=None,
+              help="Also write per-frame surface_temperature statistics.")
+@click.option("--palette", default="ironbow", type=click.Choice(["ironbow", "gray", "turbo"]), show_default=True)
+@json_option
+def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
+               as_json: bool) -> None:
+    """Export frames as temperature TIFFs, heatmap PNGs or ICD TIFF+JSON pairs (and a summary)."""
+    from .export import export_session
+    from .reader import resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette)
+    except ThermcapError as exc:
+        fail(str(exc))
+    click.echo(json.dumps(res, indent=2) if as_json else
+               f"{res['files']} files in {res['out']}" + (f"; summary {res['summary']}" if res["summary"] else ""))
+    for r in res["refused"][:5]:
+        click.echo(f"warning: {r}", err=True)
+    if res["refused"]:
+        sys.exit(1)
+
+
 @bench.command("record")
 @click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
 @click.option("--sizes", default="640x512,1280x1024", show_default=True)
@@ -335,13 +363,25 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
 
 @bench.command("analysis")
 @click.option("--frames", "n_frames", type=int, default=12, show_default=True, help="Frames per scene.")
+@click.option("--samples", type=click.Path(file_okay=False), default=None,
+              help="Also run on real files here (e.g. ../shared/samples) and count hot spots per image.")
+@click.option("--overlays", type=click.Path(file_okay=False), default=None, help="Write overlay PNGs of those here.")
 @json_option
-def bench_analysis_cmd(n_frames: int, as_json: bool) -> None:
+def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, as_json: bool) -> None:
     """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
-    from .bench_analysis import bench_analysis, print_table
+    from .bench_analysis import bench_analysis, print_table, sample_report
 
     res = bench_analysis(n_frames)
-    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+    if samples:
+        res["samples"] = sample_report(samples, overlays)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(print_table(res))
+    for r in res.get("samples", []):
+        click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
+                   + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px" if r["hot_spots"] is not None
+                      else r["note"]))
 
 
 def main() -> None:

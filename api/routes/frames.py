@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from recorder.radiometry import TemperatureUnavailable
 
 from ..frames import FrameNotFound
-from ..render import PALETTES, celsius, celsius_tiff, png16, preview_png, session_model, tiff16
+from recorder.render import PALETTES, celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 from ..security import require
 from .common import session_row
 

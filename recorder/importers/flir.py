@@ -139,10 +139,21 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
+    from .exif import exif_fields, exif_time_ns, xmp_fields
+
     fff = flir_jpeg_payload(path, data)
     if fff is None:
         raise ImportError_(f"{path}: a JPEG with no FLIR thermal data")
-    return [frame_from_fff(path, fff, "flir-rjpeg")]
+    frame = frame_from_fff(path, fff, "flir-rjpeg")
+    app1 = [p for m, p in app_segments(path, data) if m == 0xE1]
+    exif = exif_fields(app1)
+    frame.timestamp_ns = exif_time_ns(exif.get("DateTimeOriginal") or exif.get("DateTime"))
+    frame.vendor_metadata.update(exif_make=exif.get("Make"), exif_model=exif.get("Model"),
+                                 exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
+    xmp = xmp_fields(app1)
+    if xmp:
+        frame.vendor_metadata["xmp_drone_dji"] = xmp
+    return [frame]
 
 
 def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:

@@ -1,0 +1,149 @@
+"""``thermcap export``: a session's frames as files for the people downstream.
+
+``celsius-tiff`` / ``kelvin-tiff``: float32 temperature TIFFs through the session's model (the
+source position, where one was recorded, in the TIFF's ImageDescription JSON); ``heatmap-png``:
+8-bit colour PNGs on one fixed temperature range for the whole session, so colours compare
+across frames; ``icd``: the ICD's own pairs, an uncompressed 16-bit TIFF with every mandatory
+tag and its JSON sidecar. ``summary`` writes per-frame ``surface_temperature`` statistics (CF
+standard name; cell_methods min, max, mean and percentiles) as CSV or JSON.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import imagecodecs
+import numpy as np
+import tifffile
+
+from .exceptions import ThermcapError
+from .icd import format_name
+from .radiometry import LinearModel, TemperatureUnavailable, model_from_dict
+from .reader import iter_session_frames, read_session_meta
+from .render import palette
+
+__all__ = ["export_session", "EXPORT_KINDS"]
+
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd")
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
+    """Per log time: the position an importer recorded (DJI XMP GPS, TERRA-REF gantry)."""
+    from mcap.reader import make_reader
+
+    out: dict[int, dict[str, Any]] = {}
+    for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+        with open(seg, "rb") as f:
+            for _, _, msg in make_reader(f).iter_messages(topics=["/import/source"]):
+                vendor = json.loads(msg.data).get("vendor", {})
+                xmp = vendor.get("xmp_drone_dji") or {}
+                if xmp.get("GpsLatitude") or xmp.get("GpsLongitude"):
+                    out[msg.log_time] = {"crs": "EPSG:4326", "latitude": xmp.get("GpsLatitude"),
+                                         "longitude": xmp.get("GpsLongitude") or xmp.get("GpsLongtitude"),
+                                         "absolute_altitude_m": xmp.get("AbsoluteAltitude"),
+                                         "relative_altitude_m": xmp.get("RelativeAltitude"),
+                                         "gimbal_yaw_deg": xmp.get("GimbalYawDegree")}
+                elif vendor.get("position_m"):
+                    out[msg.log_time] = {"crs": "TERRA-REF gantry (m)", **vendor["position_m"]}
+    return out
+
+
+def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
+                   palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None) -> dict[str, Any]:
+    if kind not in EXPORT_KINDS:
+        raise ThermcapError(f"unknown export {kind!r}; use one of {', '.join(EXPORT_KINDS)}")
+    session_dir, out = Path(session_dir), Path(out_dir)
+    meta = read_session_meta(session_dir)
+    model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
+    sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
+    t_range = (model.temp_min_c, model.temp_max_c) if isinstance(model, LinearModel) else (-40.0, 550.0)
+    out.mkdir(parents=True, exist_ok=True)
+    positions = _positions(session_dir)
+    frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
+    lo = hi = None
+    if frames is not None:  # one colour scale for the whole session
+        temps_all = [np.asarray(model.to_celsius(f.pixels)) for f in frames] if _has_temps(model) else []
+        if temps_all:
+            lo = float(min(np.percentile(t, 0.5) for t in temps_all))
+            hi = float(max(np.percentile(t, 99.5) for t in temps_all))
+    written, stats, refused = [], [], []
+    for f in frames if frames is not None else iter_session_frames(session_dir):
+        name = format_name(f.log_time, sensor_id, *t_range)
+        try:
+            temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32) if kind != "icd" or summary else None
+        except TemperatureUnavailable as exc:
+            if kind != "icd":
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            temps = None
+        desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
+                "position": positions.get(f.log_time)}
+        if kind in ("celsius-tiff", "kelvin-tiff"):
+            data = temps if kind == "celsius-tiff" else temps + np.float32(273.15)
+            path = out / f"{name}.{'celsius' if kind == 'celsius-tiff' else 'kelvin'}.tiff"
+            tifffile.imwrite(path, data, photometric="minisblack", byteorder="<", metadata=None,
+                             description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}))
+        elif kind == "heatmap-png":
+            a, b = (lo, hi) if lo is not None else (float(f.pixels.min()), float(f.pixels.max()) + 1)
+            src = temps if temps is not None else f.pixels.astype(np.float32)
+            idx = np.clip((src - a) * (255.0 / max(b - a, 1e-6)), 0, 255).astype(np.uint8)
+            path = out / f"{name}.png"
+            path.write_bytes(imagecodecs.png_encode(palette(palette_name)[idx]))
+        else:
+            path = out / f"{name}.tiff"
+            tifffile.imwrite(path, np.ascontiguousarray(f.pixels, dtype=np.uint16), photometric="minisblack",
+                             byteorder="<", compression=None, metadata=None, rowsperstrip=f.pixels.shape[0])
+            (out / f"{name}.json").write_bytes(f.sidecar or b"{}")
+        written.append(path.name)
+        if temps is not None and summary:
+            pct = np.percentile(temps, PERCENTILES)
+            stats.append({"frame_index": f.index, "time": desc.get("time") or _iso(f.log_time), "file": path.name,
+                          "surface_temperature_mean": round(float(temps.mean()), 4),
+                          "surface_temperature_min": round(float(temps.min()), 4),
+                          "surface_temperature_max": round(float(temps.max()), 4),
+                          **{f"surface_temperature_p{p}": round(float(v), 4) for p, v in zip(PERCENTILES, pct)},
+                          "units": "degC"})
+        if on_frame:
+            on_frame(len(written))
+    if summary:
+        _write_summary(out, summary, stats, meta)
+    return {"out": str(out), "kind": kind, "files": len(written), "refused": refused,
+            "summary": (str(out / f"summary.{summary}") if summary else None)}
+
+
+def _has_temps(model) -> bool:
+    try:
+        model.to_celsius(np.zeros((1, 1), np.uint16))
+        return True
+    except TemperatureUnavailable:
+        return False
+
+
+def _iso(ns: int) -> str:
+    from .icd import iso_utc
+
+    return iso_utc(ns)
+
+
+def _write_summary(out: Path, fmt: str, stats: list[dict[str, Any]], meta: dict[str, Any]) -> None:
+    path = out / f"summary.{fmt}"
+    tmp = path.with_name(path.name + ".tmp")
+    if fmt == "json":
+        doc = {"standard_name": "surface_temperature", "units": "degC",
+               "cell_methods": "area: mean area: minimum area: maximum area: percentile",
+               "session_id": meta.get("session_id"), "radiometric_model": meta.get("radiometric_model"), "frames": stats}
+        tmp.write_text(json.dumps(doc, indent=1))
+    elif fmt == "csv":
+        with open(tmp, "w", newline="") as f:
+            if stats:
+                w = csv.DictWriter(f, fieldnames=list(stats[0]))
+                w.writeheader()
+                w.writerows(stats)
+    else:
+        raise ThermcapError(f"--summary must be csv or json, got {fmt!r}")
+    os.replace(tmp, path)

@@ -1,0 +1,72 @@
+"""Exports: temperature TIFFs, heatmaps, ICD pairs and the surface_temperature summary."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import imagecodecs
+import numpy as np
+import pytest
+import tifffile
+
+from recorder.export import export_session
+from recorder.reader import iter_session_frames
+from recorder.recorder import Recorder
+from recorder.sources.sim import SimSource
+from recorder.sidecar import validate_sidecar
+from tests.conftest import run_cli
+
+
+@pytest.fixture(scope="module")
+def session(tmp_path_factory):
+    root = tmp_path_factory.mktemp("exp")
+    Recorder(SimSource(width=96, height=64, frames=5, paced=False, start_time_ns=1_800_000_000_000_000_000), root,
+             session_id="e", analysis=False).run()
+    return root / "sessions" / "e"
+
+
+def test_celsius_and_kelvin_tiffs_follow_the_model(session, tmp_path):
+    frames = list(iter_session_frames(session))
+    export_session(session, "celsius-tiff", tmp_path / "c", summary="csv")
+    export_session(session, "kelvin-tiff", tmp_path / "k")
+    c = sorted((tmp_path / "c").glob("*.tiff"))
+    k = sorted((tmp_path / "k").glob("*.tiff"))
+    assert len(c) == len(k) == 5
+    assert c[0].name.startswith("thermal_20270115T080000.000000000Z_SIM640_N40_P550")
+    tc, tk = tifffile.imread(c[2]), tifffile.imread(k[2])
+    assert tc.dtype == np.float32 and np.allclose(tc, frames[2].pixels * 0.036 - 40, atol=1e-4)
+    assert np.allclose(tk, tc + 273.15, atol=1e-3)
+    rows = list(csv.DictReader(open(tmp_path / "c" / "summary.csv")))
+    assert len(rows) == 5 and float(rows[2]["surface_temperature_max"]) == pytest.approx(float(tc.max()), abs=1e-3)
+    assert float(rows[2]["surface_temperature_p50"]) == pytest.approx(float(np.percentile(tc, 50)), abs=1e-3)
+
+
+def test_icd_pairs_are_uncompressed_with_sidecars(session, tmp_path):
+    frames = list(iter_session_frames(session))
+    export_session(session, "icd", tmp_path / "i", summary="json")
+    tiffs = sorted((tmp_path / "i").glob("*.tiff"))
+    with tifffile.TiffFile(tiffs[1]) as t:
+        page = t.pages[0]
+        assert page.compression == 1 and t.byteorder == "<" and page.rowsperstrip == 64
+        assert np.array_equal(page.asarray(), frames[1].pixels)
+    validate_sidecar(json.loads(tiffs[1].with_suffix(".json").read_text()))
+    summary = json.loads((tmp_path / "i" / "summary.json").read_text())
+    assert summary["standard_name"] == "surface_temperature" and len(summary["frames"]) == 5
+
+
+def test_heatmaps_share_one_scale(session, tmp_path):
+    export_session(session, "heatmap-png", tmp_path / "h", palette_name="turbo")
+    pngs = sorted((tmp_path / "h").glob("*.png"))
+    img = imagecodecs.png_decode(pngs[0].read_bytes())
+    assert img.dtype == np.uint8 and img.shape == (64, 96, 3)
+
+
+def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
+    root = tmp_path / "r"
+    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t", "--no-analysis")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("export", "h20t", "--root", str(root), "--to", "celsius-tiff")
+    assert r.returncode == 1 and "DJI Thermal SDK" in r.stderr
+    r = run_cli("export", "h20t", "--root", str(root), "--to", "icd")
+    assert r.returncode == 0, r.stderr
