@@ -124,3 +124,70 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 
     rows = bench_api(frames, n_requests, clients)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+@click.command()
+@root_option
+@click.option("--formats", default="png16,tiff-lzw,hdf5,jxl", show_default=True)
+@click.option("--once", is_flag=True, help="One pass over the root, then exit.")
+@click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
+@click.option("--delete-source", is_flag=True, help="Delete the MCAP once archives verified (and uploaded, with a store).")
+@click.option("--lease-ttl", type=float, default=600.0, show_default=True)
+@json_option
+def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, lease_ttl: float,
+           as_json: bool) -> None:
+    """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
+    from .db import make_engine, migrate
+    from .settings import Settings
+    from .storage import make_store
+    from .worker import Worker
+
+    settings = Settings(root=Path(root))
+    engine = make_engine(settings.db_url)
+    migrate(engine)
+    store = make_store(settings) if settings.s3_bucket else None
+    w = Worker(settings.root, engine, formats=[f for f in formats.split(",") if f], store=store,
+               delete_source=delete_source, lease_ttl_s=lease_ttl, log=(lambda m: None) if as_json else click.echo)
+    if once:
+        res = w.run_once()
+        if as_json:
+            click.echo(json.dumps(res, indent=2))
+        sys.exit(1 if res["failed"] else 0)
+    w.run_forever(interval)
+
+
+@click.command()
+@root_option
+@click.option("--keep-days", type=float, default=None, help="Delete sessions older than this.")
+@click.option("--max-bytes", type=str, default=None, help="Keep the root under this size (e.g. 500G, 2T).")
+@click.option("--require-upload/--no-require-upload", default=None,
+              help="Only delete sessions already uploaded (default: on when a store is configured).")
+@click.option("--dry-run", is_flag=True, help="Print what would be deleted and the bytes freed.")
+@json_option
+def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
+       as_json: bool) -> None:
+    """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
+    from .settings import Settings
+    from .worker import gc_sessions
+
+    if keep_days is None and max_bytes is None:
+        fail("give --keep-days and/or --max-bytes")
+    settings = Settings(root=Path(root))
+    limit = None
+    if max_bytes:
+        units = {"K": 1e3, "M": 1e6, "G": 1e9, "T": 1e12}
+        try:
+            limit = int(float(max_bytes[:-1]) * units[max_bytes[-1].upper()]) if max_bytes[-1].upper() in units \
+                else int(max_bytes)
+        except ValueError:
+            fail(f"--max-bytes: {max_bytes!r} is not a size like 500G")
+    req = bool(settings.s3_bucket) if require_upload is None else require_upload
+    res = gc_sessions(settings.root, keep_days=keep_days, max_bytes=limit, require_upload=req, dry_run=dry_run)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    verb = "would delete" if dry_run else "deleted"
+    for d in res["deleted"]:
+        click.echo(f"{verb} {d}")
+    click.echo(f"{verb} {len(res['deleted'])} sessions, {res['bytes_freed']:,} bytes; {res['bytes_remaining']:,} remain; "
+               f"{len(res['kept_unverified'])} kept (not verified/uploaded)")

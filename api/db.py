@@ -23,7 +23,7 @@ from sqlalchemy import (
 )
 from sqlalchemy.engine import Engine
 
-__all__ = ["metadata", "sessions", "segments", "archives", "frames", "frame_blobs", "events", "make_engine",
+__all__ = ["metadata", "sessions", "segments", "archives", "frames", "frame_blobs", "events", "leases", "make_engine",
            "migrate"]
 
 metadata = MetaData()
@@ -111,6 +111,16 @@ events = Table(
 )
 
 
+# Who is archiving which session: several workers on one root or bucket never archive the same
+# session twice. A lease expires, so a worker that died does not hold a session forever.
+leases = Table(
+    "leases", metadata,
+    Column("session_id", String(128), primary_key=True),
+    Column("owner", String(128), nullable=False),
+    Column("expires_ns", BigInteger, nullable=False),
+)
+
+
 def make_engine(url: str) -> Engine:
     if url.startswith("sqlite:///"):
         Path(url.removeprefix("sqlite:///")).parent.mkdir(parents=True, exist_ok=True)
@@ -135,8 +145,13 @@ def migrate(engine: Engine) -> None:
     from alembic import command
     from alembic.config import Config
 
+    from sqlalchemy import text
+
     cfg = Config()
     cfg.set_main_option("script_location", str(Path(__file__).parent / "migrations"))
     with engine.begin() as conn:
+        if conn.dialect.name == "postgresql":
+            # Workers and API replicas start together: one migrates, the others wait, then see head.
+            conn.execute(text("SELECT pg_advisory_xact_lock(7428001)"))
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, "head")

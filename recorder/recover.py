@@ -45,6 +45,7 @@ class RecoveryResult:
     chunks: int = 0
     bytes_kept: int = 0
     bytes_discarded: int = 0
+    damaged_chunks: int = 0
     stopped_because: str = ""
     topics: dict[str, int] = field(default_factory=dict)
 
@@ -80,14 +81,18 @@ def _parse(opcode: int, body: bytes):
 
 
 def _is_complete(path: Path) -> bool:
+    """Finished and intact: closing magic, a summary, and every message readable (checksums
+    included). A finished file with a damaged chunk is not renamed as it is: it is rewritten."""
     try:
         with open(path, "rb") as f:
             f.seek(-8, os.SEEK_END)
             if f.read(8) != MCAP_MAGIC:
                 return False
             f.seek(0)
-            make_reader(f).get_summary()
-        return True
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            n = sum(1 for _ in reader.iter_messages(log_time_order=False))
+        return summary is not None and summary.statistics is not None and n == summary.statistics.message_count
     except Exception:
         return False
 
@@ -192,7 +197,14 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
                         result.chunks += 1
                 except McapFileError:
                     raise
-                except Exception as exc:  # a damaged record: everything from here on is unreliable
+                except Exception as exc:
+                    if opcode == Opcode.CHUNK:
+                        # The record's framing held, only its content is damaged (checksum, codec):
+                        # lose this chunk, keep reading the ones after it.
+                        result.damaged_chunks += 1
+                        result.stopped_because = f"skipped a damaged chunk at byte {offset}: {exc}"
+                        last_good = offset + 9 + len(body)
+                        continue
                     result.stopped_because = f"damaged {Opcode(opcode).name.lower()} record at byte {offset}: {exc}"
                     break
                 last_good = offset + 9 + len(body)

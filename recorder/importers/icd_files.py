@@ -73,6 +73,9 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
                 raise ImportError_(f"{path}: not a single-channel 16-bit TIFF ({page.dtype}, {page.samplesperpixel} samples)")
             pixels = page.asarray()
             software = (page.software or "")
+            if pixels.ndim != 2 or pixels.shape != (page.imagelength, page.imagewidth) or pixels.size == 0:
+                raise ImportError_(f"{path}: TIFF image data is damaged (decoded {pixels.shape}, "
+                                   f"header says {page.imagewidth}x{page.imagelength})")
     except ImportError_:
         raise
     except Exception as exc:

@@ -1,0 +1,193 @@
+"""``thermcap worker``: archive, verify, upload and index finished sessions as they appear.
+
+A session is finished when it has a summary and no ``.active`` segment and nobody holds its
+recording lock. Workers coordinate through leases in the index (SQLite or PostgreSQL): a worker
+archives a session only while it holds the lease, so several workers on one root or one bucket
+never archive the same session twice; a lease expires, so a dead worker's session is picked up
+again. Uploads use create-only writes: an object that is already there with the same content is
+left alone, one with different content is an error, never an overwrite.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import time
+import uuid
+from pathlib import Path
+from typing import Any, Callable
+
+from sqlalchemy import delete, insert, update
+from sqlalchemy.engine import Engine
+from sqlalchemy.exc import IntegrityError
+
+from archive.archiver import archive_session
+from archive.manifest import file_sha256, load_manifest, save_manifest, iso_now
+from recorder.exceptions import ThermcapError
+from recorder.reader import list_sessions, read_session_meta
+from recorder.recorder import lock_session
+
+from . import db
+from .index import index_session
+from .storage import BlobStore
+
+__all__ = ["Worker", "acquire_lease", "release_lease", "finished_sessions"]
+
+
+def acquire_lease(engine: Engine, session_id: str, owner: str, ttl_s: float) -> bool:
+    now = time.time_ns()
+    expires = now + int(ttl_s * 1e9)
+    with engine.begin() as conn:
+        try:
+            conn.execute(insert(db.leases).values(session_id=session_id, owner=owner, expires_ns=expires))
+            return True
+        except IntegrityError:
+            pass
+    with engine.begin() as conn:
+        res = conn.execute(update(db.leases).where(db.leases.c.session_id == session_id,
+                                                   (db.leases.c.expires_ns < now) | (db.leases.c.owner == owner))
+                           .values(owner=owner, expires_ns=expires))
+        return res.rowcount == 1
+
+
+def release_lease(engine: Engine, session_id: str, owner: str) -> None:
+    with engine.begin() as conn:
+        conn.execute(delete(db.leases).where(db.leases.c.session_id == session_id, db.leases.c.owner == owner))
+
+
+def finished_sessions(root: Path) -> list[Path]:
+    out = []
+    for d in list_sessions(root):
+        meta = read_session_meta(d)
+        if meta.get("status") not in ("complete", "recovered", "failed") or list(d.glob("*.active")):
+            continue
+        fd = lock_session(d)
+        if fd is None:
+            continue  # still being recorded (or archived on this host)
+        os.close(fd)
+        out.append(d)
+    return out
+
+
+def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
+    try:
+        m = load_manifest(d, required=False)
+    except ThermcapError:
+        return True
+    if m is None or any(not m["formats"].get(f, {}).get("verified") for f in formats):
+        return True
+    return store is not None and not m.get("upload", {}).get("complete")
+
+
+def upload_create_only(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
+    """Upload verified archive files that are not there yet; same bytes already there is fine."""
+    from obstore.exceptions import AlreadyExistsError
+
+    manifest = load_manifest(session_dir)
+    keys = []
+    for fmt, entry in manifest["formats"].items():
+        if not entry.get("verified"):
+            continue
+        for rec in entry["files"]:
+            path = session_dir / "archive" / fmt / rec["path"]
+            key = path.resolve().relative_to(root.resolve()).as_posix()
+            head = store.head(key)
+            if head is None:
+                try:
+                    import obstore
+
+                    with open(path, "rb") as f:
+                        obstore.put(store.store, store._key(key), f, mode="create")
+                except AlreadyExistsError:
+                    head = store.head(key)
+            if head is not None and head["size"] != rec["bytes"]:
+                raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
+                                    f"expected {rec['bytes']}); refusing to overwrite")
+            keys.append(key)
+    manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
+    save_manifest(session_dir, manifest)
+    mkey = (session_dir / "archive" / "manifest.json").resolve().relative_to(root.resolve()).as_posix()
+    store.put_file(mkey, session_dir / "archive" / "manifest.json")
+    return keys
+
+
+class Worker:
+    def __init__(self, root: Path, engine: Engine, *, formats: list[str], store: BlobStore | None = None,
+                 delete_source: bool = False, lease_ttl_s: float = 600.0, owner: str | None = None,
+                 log: Callable[[str], None] = print) -> None:
+        self.root, self.engine, self.formats, self.store = Path(root), engine, formats, store
+        self.delete_source, self.lease_ttl_s = delete_source, lease_ttl_s
+        self.owner = owner or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}"
+        self.log = log
+
+    def run_once(self) -> dict[str, Any]:
+        done, skipped, failed = [], [], {}
+        for d in finished_sessions(self.root):
+            if not _needs_work(d, self.formats, self.store):
+                continue
+            sid = read_session_meta(d).get("session_id", d.name)
+            if not acquire_lease(self.engine, sid, self.owner, self.lease_ttl_s):
+                skipped.append(sid)
+                continue
+            try:
+                archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
+                if self.store is not None:
+                    upload_create_only(self.store, self.root, d)
+                    if self.delete_source:
+                        archive_session(d, self.formats, delete_source=True)
+                index_session(self.engine, d)
+                done.append(sid)
+                self.log(f"archived {sid}")
+            except ThermcapError as exc:
+                failed[sid] = str(exc)
+                self.log(f"error: {sid}: {exc}")
+            finally:
+                release_lease(self.engine, sid, self.owner)
+        return {"archived": done, "leased_elsewhere": skipped, "failed": failed}
+
+    def run_forever(self, interval_s: float = 5.0) -> None:
+        while True:
+            self.run_once()
+            time.sleep(interval_s)
+
+
+def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,
+                dry_run: bool) -> dict[str, Any]:
+    """FIFO retention: oldest first, by age and/or total size, only sessions whose archives verified
+    (and were uploaded when ``require_upload``). Returns what was (or would be) deleted."""
+    import shutil
+
+    rows = []
+    for d in list_sessions(root):
+        meta = read_session_meta(d)
+        size = sum(p.stat().st_size for p in d.rglob("*") if p.is_file())
+        try:
+            m = load_manifest(d, required=False)
+        except ThermcapError:
+            m = None
+        ok = bool(m and m["formats"] and all(e.get("verified") for e in m["formats"].values()))
+        uploaded = bool(m and m.get("upload", {}).get("complete"))
+        rows.append({"session": d, "started_ns": meta.get("started_ns") or 0, "bytes": size,
+                     "eligible": ok and (uploaded or not require_upload) and not list(d.glob("*.active")),
+                     "why_kept": None if ok else "archive not verified"})
+    rows.sort(key=lambda r: r["started_ns"])
+    total = sum(r["bytes"] for r in rows)
+    now = time.time_ns()
+    victims = []
+    for r in rows:
+        too_old = keep_days is not None and r["started_ns"] < now - keep_days * 86400e9
+        too_big = max_bytes is not None and total > max_bytes
+        if not (too_old or too_big):
+            continue
+        if not r["eligible"]:
+            continue
+        victims.append(r)
+        total -= r["bytes"]
+    freed = sum(v["bytes"] for v in victims)
+    if not dry_run:
+        for v in victims:
+            shutil.rmtree(v["session"])
+    return {"dry_run": dry_run, "deleted": [str(v["session"]) for v in victims], "bytes_freed": freed,
+            "bytes_remaining": total,
+            "kept_unverified": [str(r["session"]) for r in rows if not r["eligible"]]}

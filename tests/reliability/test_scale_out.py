@@ -1,0 +1,59 @@
+"""The compose topology without Docker: PostgreSQL and SeaweedFS as local processes on 127.0.0.1,
+recorder -> archiver workers -> API, end to end."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import httpx
+import numpy as np
+
+from recorder.reader import iter_session_frames
+from tests.conftest import ApiServer, run_cli
+
+
+def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweedfs, tmp_path):
+    root = tmp_path / "data"
+    env = {"THERMCAP_DATABASE_URL": postgres_url, "THERMCAP_S3_BUCKET": seaweedfs["bucket"],
+           "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"], "THERMCAP_S3_PREFIX": f"e2e-{tmp_path.name}",
+           "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
+           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    for i in range(3):
+        r = run_cli("record", "--duration", "0.5", "--width", "160", "--height", "128", "--root", str(root),
+                    "--session", f"s{i}", "--no-pace", "--no-analysis", env=env)
+        assert r.returncode == 0, r.stderr
+    expected = {f"s{i}": [f.pixels.copy() for f in iter_session_frames(root / "sessions" / f"s{i}")] for i in range(3)}
+    # Two workers at once on one root and one bucket: every session archived exactly once.
+    procs = [subprocess.Popen([sys.executable, "-m", "recorder", "worker", "--root", str(root), "--once", "--json",
+                               "--formats", "png16,hdf5"], env={**__import__("os").environ, **env},
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
+    results = []
+    for p in procs:
+        out, err = p.communicate(timeout=300)
+        assert p.returncode == 0, err
+        results.append(json.loads(out))
+    archived = results[0]["archived"] + results[1]["archived"]
+    assert sorted(archived) == ["s0", "s1", "s2"], results
+    for i in range(3):
+        m = json.loads((root / "sessions" / f"s{i}" / "archive" / "manifest.json").read_text())
+        assert m["upload"]["complete"] and all(e["verified"] for e in m["formats"].values())
+    again = run_cli("worker", "--root", str(root), "--once", "--json", "--formats", "png16,hdf5", env=env)
+    assert json.loads(again.stdout)["archived"] == []  # nothing left to do
+    server = ApiServer(root, env=env)
+    try:
+        with httpx.Client(base_url=server.url, timeout=30) as c:
+            items = c.get("/api/v1/sessions").json()["items"]
+            assert sorted(s["id"] for s in items) == ["s0", "s1", "s2"]
+            for sid, frames in expected.items():
+                raw = c.get(f"/api/v1/sessions/{sid}/frames/7", params={"format": "raw"}).content
+                assert np.array_equal(np.frombuffer(raw, "<u2").reshape(frames[7].shape), frames[7])
+            f = c.get("/api/v1/sessions/s1").json()["archives"]
+            png = next(a for a in f if a["format"] == "png16")["files"][0]
+            body = c.get(png["url"]).content
+            assert hashlib.sha256(body).hexdigest() == png["sha256"]
+    finally:
+        server.stop()
