@@ -73,11 +73,18 @@ def make_store(settings: Settings) -> BlobStore:
 
 
 def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
-    """Copy a session's verified archive files (and manifest) to the store; returns the keys."""
-    import json
+    """Upload a session's verified archive files with create-only writes, then its manifest.
 
-    manifest_path = session_dir / "archive" / "manifest.json"
-    manifest = json.loads(manifest_path.read_text())
+    An object already there with the same size is taken as uploaded (a rerun after a crash); one
+    with another size is an error, never an overwrite. The manifest records the upload, so
+    ``--delete-source`` and ``gc`` know the data is safe elsewhere. Returns the keys.
+    """
+    from obstore.exceptions import AlreadyExistsError
+
+    from archive.manifest import iso_now, load_manifest, save_manifest
+    from recorder.exceptions import ThermcapError
+
+    manifest = load_manifest(session_dir)
     keys = []
     for fmt, entry in manifest["formats"].items():
         if not entry.get("verified"):
@@ -85,9 +92,19 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         for rec in entry["files"]:
             path = session_dir / "archive" / fmt / rec["path"]
             key = path.resolve().relative_to(root.resolve()).as_posix()
-            store.put_file(key, path)
+            head = store.head(key)
+            if head is None:
+                try:
+                    with open(path, "rb") as f:
+                        obstore.put(store.store, store._key(key), f, mode="create")
+                except AlreadyExistsError:
+                    head = store.head(key)
+            if head is not None and head["size"] != rec["bytes"]:
+                raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
+                                    f"expected {rec['bytes']}); refusing to overwrite")
             keys.append(key)
-    key = manifest_path.resolve().relative_to(root.resolve()).as_posix()
-    store.put_file(key, manifest_path)
-    keys.append(key)
+    manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
+    save_manifest(session_dir, manifest)
+    manifest_path = session_dir / "archive" / "manifest.json"
+    store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)
     return keys

@@ -10,7 +10,6 @@ left alone, one with different content is an error, never an overwrite.
 
 from __future__ import annotations
 
-import json
 import os
 import socket
 import time
@@ -23,14 +22,14 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.exc import IntegrityError
 
 from archive.archiver import archive_session
-from archive.manifest import file_sha256, load_manifest, save_manifest, iso_now
+from archive.manifest import load_manifest
 from recorder.exceptions import ThermcapError
 from recorder.reader import list_sessions, read_session_meta
 from recorder.recorder import lock_session
 
 from . import db
 from .index import index_session
-from .storage import BlobStore
+from .storage import BlobStore, upload_archive
 
 __all__ = ["Worker", "acquire_lease", "release_lease", "finished_sessions"]
 
@@ -80,38 +79,6 @@ def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
     return store is not None and not m.get("upload", {}).get("complete")
 
 
-def upload_create_only(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
-    """Upload verified archive files that are not there yet; same bytes already there is fine."""
-    from obstore.exceptions import AlreadyExistsError
-
-    manifest = load_manifest(session_dir)
-    keys = []
-    for fmt, entry in manifest["formats"].items():
-        if not entry.get("verified"):
-            continue
-        for rec in entry["files"]:
-            path = session_dir / "archive" / fmt / rec["path"]
-            key = path.resolve().relative_to(root.resolve()).as_posix()
-            head = store.head(key)
-            if head is None:
-                try:
-                    import obstore
-
-                    with open(path, "rb") as f:
-                        obstore.put(store.store, store._key(key), f, mode="create")
-                except AlreadyExistsError:
-                    head = store.head(key)
-            if head is not None and head["size"] != rec["bytes"]:
-                raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
-                                    f"expected {rec['bytes']}); refusing to overwrite")
-            keys.append(key)
-    manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
-    save_manifest(session_dir, manifest)
-    mkey = (session_dir / "archive" / "manifest.json").resolve().relative_to(root.resolve()).as_posix()
-    store.put_file(mkey, session_dir / "archive" / "manifest.json")
-    return keys
-
-
 class Worker:
     def __init__(self, root: Path, engine: Engine, *, formats: list[str], store: BlobStore | None = None,
                  delete_source: bool = False, lease_ttl_s: float = 600.0, owner: str | None = None,
@@ -133,7 +100,7 @@ class Worker:
             try:
                 archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
                 if self.store is not None:
-                    upload_create_only(self.store, self.root, d)
+                    upload_archive(self.store, self.root, d)
                     if self.delete_source:
                         archive_session(d, self.formats, delete_source=True)
                 index_session(self.engine, d)

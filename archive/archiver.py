@@ -17,7 +17,6 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from recorder.exceptions import ThermcapError
 from recorder.reader import count_frames, iter_session_frames, read_session_meta, session_segments
 from recorder.recorder import lock_session
 from recorder.segments import ACTIVE_SUFFIX, fsync_dir

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from recorder.cli import default_root, fail, json_option, root_option
+from recorder.cli import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
 from .archiver import DEFAULT_FORMATS

@@ -9,7 +9,6 @@ a file. Ratios against it, not absolute timings, are what to compare across mach
 
 from __future__ import annotations
 
-import json
 import os
 import shutil
 import tempfile
@@ -113,10 +112,13 @@ def run_soak(seconds: float, *, workdir: str | None = None, width: int = 640, he
     import resource
 
     base = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="thermcap-soak-"))
-    rss: list[float] = []
+    rss: list[tuple[float, float]] = []
+    t0 = time.monotonic()
 
     def sample(_rec: Any) -> None:
-        rss.append(_rss_mb())
+        now = time.monotonic() - t0
+        if not rss or now - rss[-1][0] >= 10.0:
+            rss.append((now, _rss_mb()))
 
     try:
         sim = SimSource(width=width, height=height, fps=fps, duration_s=seconds, paced=True, seed=2)
@@ -126,8 +128,11 @@ def run_soak(seconds: float, *, workdir: str | None = None, width: int = 640, he
             "frames_captured": res.frames_captured, "frames_written": res.frames_written,
             "frames_dropped": res.frames_dropped, "write_latency_p50_ms": res.write_latency_ms["p50"],
             "write_latency_p99_ms": res.write_latency_ms["p99"], "write_latency_max_ms": res.write_latency_ms["max"],
-            "rss_start_mb": round(rss[min(4, len(rss) - 1)], 1) if rss else None,
-            "rss_end_mb": round(rss[-1], 1) if rss else None,
+            "rss_start_mb": round(rss[0][1], 1) if rss else None,
+            "rss_end_mb": round(rss[-1][1], 1) if rss else None,
+            # After the first minute (allocator arenas, caches and the first segment warmed up):
+            "rss_growth_after_60s_mb": round(rss[-1][1] - next((m for t, m in rss if t >= 60), rss[-1][1]), 1) if rss else None,
+            "rss_mb_every_10s": [round(m, 1) for _, m in rss],
             "rss_peak_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "segments": len(res.segments), "ok": res.ok,
         }

@@ -36,6 +36,16 @@ import time as _time
 import urllib.request as _urlreq
 
 
+def wait_for(pred, timeout: float = 60.0, step: float = 0.02) -> bool:
+    """Poll ``pred`` until it is true or ``timeout`` passes; returns whether it became true."""
+    end = _time.monotonic() + timeout
+    while _time.monotonic() < end:
+        if pred():
+            return True
+        _time.sleep(step)
+    return False
+
+
 def free_port() -> int:
     with _socket.socket() as s:
         s.bind(("127.0.0.1", 0))

@@ -12,7 +12,7 @@ from pathlib import Path
 
 from .base import ImportedFrame, ImportError_
 from .dji import is_dji, read_dji
-from .flir import flir_jpeg_payload, read_fff_file, read_flir_jpeg
+from .flir import read_fff_file, read_flir_jpeg
 from .icd_files import read_icd_raw, read_icd_tiff, sidecar_for
 from .jpeg import app_segments
 from .terraref import metadata_for, read_terraref

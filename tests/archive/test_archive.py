@@ -262,3 +262,25 @@ def test_audit_reports_costs_and_recommends_the_smallest_verified(archived, tmp_
         fmts["png16"]["bytes"] / 1024**3, rel=1e-3)
     md = run_cli("audit", str(archived), "--markdown").stdout
     assert "| png16 |" in md and "recommended format" in md
+
+
+@pytest.mark.parametrize("width,height", [(1280, 1024), (97, 61)])
+def test_every_format_round_trips_large_and_odd_frames(tmp_path, width, height):
+    Recorder(SimSource(width=width, height=height, frames=4, paced=False, seed=9), tmp_path, session_id="big",
+             analysis=False).run()
+    m = archive_session(tmp_path / "sessions" / "big", ALL)
+    assert all(m["formats"][f]["verified"] for f in ALL)
+
+
+def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path):
+    from recorder.importers.session import import_paths
+
+    picks = [str(samples / "flir" / "FLIR_E40.jpg"), str(samples / "dji" / "DJI_H20T.jpg"),
+             str(next((samples / "terraref").glob("*_ir.bin"))), str(samples / "flir" / "example_radiometric.tiff")]
+    report = import_paths(picks, tmp_path, analysis=False)
+    assert not report.failed and len(report.sessions) == 4
+    for res in report.sessions:
+        m = archive_session(res.session_dir, ALL)
+        assert all(m["formats"][f]["verified"] for f in ALL), res.session_id
+        ref = {f["raw_sha256"] for f in report.files if f.get("session_id") == res.session_id}
+        assert set(m["frames"]["sha256"]) == ref

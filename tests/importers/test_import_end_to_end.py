@@ -6,7 +6,6 @@ import io
 import json
 
 import httpx
-import numpy as np
 import tifffile
 from mcap.reader import make_reader
 

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recorder.importers import ImportError_, read_file
+from recorder.importers import read_file
 from recorder.importers.jpeg import app_segments, concat_app
 from recorder.radiometry import TemperatureUnavailable, TerraRefPlanckModel
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -16,7 +15,7 @@ from mcap.reader import make_reader
 
 from recorder.messages import decode_image
 from recorder.recover import recover_segment
-from tests.conftest import run_cli
+from tests.conftest import run_cli, wait_for
 
 W, H = 96, 80
 
@@ -75,13 +74,6 @@ def test_unknown_source_is_a_usage_error(tmp_path):
     assert r.returncode == 1 and "unknown source 'camera9'" in r.stderr
 
 
-def _wait_for(pred, timeout=60.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.05)
-    return False
 
 
 def test_kill_9_then_recover_loses_at_most_the_open_chunk(tmp_path):
@@ -91,8 +83,8 @@ def test_kill_9_then_recover_loses_at_most_the_open_chunk(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     session = root / "sessions" / "k"
     try:
-        assert _wait_for(lambda: len(list(session.glob("*.mcap"))) >= 2), "no closed segments appeared"
-        assert _wait_for(lambda: any(p.stat().st_size > 200_000 for p in session.glob("*.active")))
+        assert wait_for(lambda: len(list(session.glob("*.mcap"))) >= 2), "no closed segments appeared"
+        assert wait_for(lambda: any(p.stat().st_size > 200_000 for p in session.glob("*.active")))
         time.sleep(0.4)
     finally:
         proc.send_signal(signal.SIGKILL)
@@ -132,7 +124,7 @@ def test_recorder_recovers_leftovers_when_it_starts(tmp_path):
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     active = root / "sessions" / "old" / "0000.mcap.active"
     try:
-        assert _wait_for(lambda: active.exists() and active.stat().st_size > 100_000)
+        assert wait_for(lambda: active.exists() and active.stat().st_size > 100_000)
     finally:
         proc.kill()
         proc.wait()

@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from recorder.exceptions import McapFileError, ThermcapError, TruncatedFrameError
+from recorder.exceptions import McapFileError, TruncatedFrameError
 from recorder.importers import ImportError_, read_file
 from recorder.recover import recover_segment
 from recorder.recorder import Recorder

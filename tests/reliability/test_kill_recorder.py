@@ -20,18 +20,11 @@ from mcap.reader import make_reader
 
 from recorder.messages import decode_image
 from recorder.sources.sim import SimSource
-from tests.conftest import run_cli
+from tests.conftest import run_cli, wait_for
 
 W, H, FPS = 320, 256, 60
 
 
-def _wait(pred, timeout=60.0):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if pred():
-            return True
-        time.sleep(0.02)
-    return False
 
 
 def test_kill_9_at_random_moments(tmp_path):
@@ -44,7 +37,7 @@ def test_kill_9_at_random_moments(tmp_path):
                                  "--height", str(H), "--segment-duration", "1", "--seed", str(k), "--root", str(root),
                                  "--session", "s", "--no-analysis"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         session = root / "sessions" / "s"
-        assert _wait(lambda: any(session.glob("*.mcap.active")))
+        assert wait_for(lambda: any(session.glob("*.mcap.active")))
         time.sleep(rng.uniform(0.3, 3.5))
         proc.send_signal(signal.SIGKILL)
         proc.wait()
