@@ -44,8 +44,9 @@ class FrameReader:
         by_fmt = {r["format"]: dict(r) for r in rows}
         if prefer in by_fmt:
             return by_fmt[prefer]
-        # For pixels, the archive that decodes fastest: HTJ2K 2.5 ms, PNG 5 ms, JPEG-LS 6, JPEG XL 6.
-        return next((by_fmt[f] for f in ("htj2k", "png16", "jpegls", "jxl") if f in by_fmt), next(iter(by_fmt.values())))
+        # For pixels: PNG (libpng, 4-5 ms) first; HTJ2K decodes faster but only one at a time
+        # (see archive.codecs.Htj2k), which serialises concurrent requests.
+        return next((by_fmt[f] for f in ("png16", "htj2k", "jpegls", "jxl") if f in by_fmt), next(iter(by_fmt.values())))
 
     def _key(self, session_id: str, blob: dict[str, Any]) -> str:
         return f"sessions/{session_id}/archive/{blob['format']}/{blob['file']}"

@@ -116,7 +116,8 @@ def bench_archive(n_frames: int = 60) -> list[dict[str, Any]]:
     for set_name, frames in _frame_sets(n_frames).items():
         reps = max(1, 24 // len(frames))
         cands: list[tuple[str, str, Any]] = [
-            ("png16 (libpng L1)", "thermcap", get_codec({"id": "png16", "level": 1})),
+            ("png16 (Up + libdeflate L4)", "thermcap", get_codec({"id": "png16"})),
+            ("png16 (libpng L1)", "candidate", get_codec({"id": "png16", "level": 1, "writer": "libpng"})),
             ("jxl effort 1", "candidate", get_codec({"id": "jxl", "effort": 1})),
             ("jxl effort 2", "thermcap", get_codec({"id": "jxl", "effort": 2})),
             ("jxl effort 3", "candidate", get_codec({"id": "jxl", "effort": 3})),
@@ -135,7 +136,7 @@ def bench_archive(n_frames: int = 60) -> list[dict[str, Any]]:
         results["tifffile LZW default (baseline)"] = ("baseline", *_pair(*_tiff(False), frames, reps))
         results["h5py gzip 4 (baseline, 1 thread)"] = ("baseline", *_hdf5(frames, reps, compression="gzip",
                                                                           compression_opts=4))
-        png_ratio = results["png16 (libpng L1)"][1]
+        png_ratio = results["png16 (Up + libdeflate L4)"][1]
         for name, (kind, ratio, enc, dec) in results.items():
             rows.append({"frames": set_name, "codec": name, "kind": kind, "ratio": round(ratio, 3),
                          "x_png16": round(ratio / png_ratio, 3), "encode_fps": round(enc, 1),

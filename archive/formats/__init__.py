@@ -5,7 +5,7 @@ from .hdf5 import Hdf5
 from .tiff_lzw import TiffLzw
 from .zipped import ZippedFrames, zipped_factory
 
-register_format("png16", zipped_factory("png16", level=1))
+register_format("png16", zipped_factory("png16"))
 register_format("tiff-lzw", TiffLzw)
 register_format("hdf5", Hdf5)
 register_format("jxl", zipped_factory("jxl", effort=2))
