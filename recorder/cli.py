@@ -181,20 +181,21 @@ def _progress_line():
 
 # -- info / recover -------------------------------------------------------------------------
 @cli.command()
-@click.argument("path", type=click.Path())
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
 @json_option
-def info(path: str, as_json: bool) -> None:
-    """Describe a segment (NNNN.mcap) or a session folder: frames, time span, fps, drops, bytes."""
+def info(paths: tuple[str, ...], as_json: bool) -> None:
+    """Describe segments (NNNN.mcap) or session folders: frames, time span, fps, drops, bytes."""
     from .info import info as get_info
 
     try:
-        data = get_info(path)
+        data = [get_info(p) for p in paths]
     except ThermcapError as exc:
         fail(str(exc))
     if as_json:
-        click.echo(json.dumps(data, indent=2))
+        click.echo(json.dumps(data[0] if len(data) == 1 else data, indent=2))
         return
-    _print_info(data)
+    for d in data:
+        _print_info(d)
 
 
 def _print_info(d: dict[str, Any]) -> None:
