@@ -79,24 +79,35 @@ class HotSpotDetector:
     max_targets: int = 64
     _tracks: list[tuple[str, list[int]]] = field(default_factory=list, repr=False)
     _bad_coords: np.ndarray | None = field(default=None, repr=False)
-    _local_mean: np.ndarray | None = field(default=None, repr=False)
     _next_id: int = field(default=1, repr=False)
 
-    def background(self, temps: np.ndarray) -> np.ndarray:
-        """A local background (C) under anything smaller than ``max_size`` pixels: a grey opening
-        (min then max filter) at quarter resolution. An opening keeps edges such as the horizon,
-        where a smoothed or block background would leave a band of false targets."""
-        f = 4
+    _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _coarse assume 4)
+
+    def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quarter-resolution (opened background, local mean, cell maximum) of ``temps``.
+
+        The background is a grey opening (min then max filter) wider than any target
+        (``max_size``): it removes warm objects but keeps edges such as the horizon, where a
+        smoothed or block background would leave a band of false targets."""
+        f = self._F
         h, w = temps.shape
         ph, pw = -(-h // f) * f, -(-w // f) * f
         padded = np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
-        small = padded.reshape(ph // f, f, pw, 1)[:, :, :, 0].mean(axis=1)
-        small = small.reshape(ph // f, pw // f, f).mean(axis=2)
+        # Strided element-wise ops: numpy's reductions over a 4-long inner axis are 10x slower.
+        cols = [padded[:, j::f] for j in range(f)]
+        csum, cmx = cols[0] + cols[1] + cols[2] + cols[3], np.maximum(np.maximum(cols[0], cols[1]), np.maximum(cols[2], cols[3]))
+        mean = (csum[0::f] + csum[1::f] + csum[2::f] + csum[3::f]) * np.float32(1.0 / (f * f))
+        cmax = np.maximum(np.maximum(cmx[0::f], cmx[1::f]), np.maximum(cmx[2::f], cmx[3::f]))
         k = self.max_size // f + 1
-        opened = ndimage.maximum_filter(ndimage.minimum_filter(small, size=k, mode="nearest"), size=k, mode="nearest")
-        # Kept for the cheap pre-test in detect(): the local mean at quarter resolution.
-        self._local_mean = ndimage.uniform_filter(small, size=2 * k - 1, mode="nearest")
-        return np.repeat(np.repeat(opened, f, axis=0), f, axis=1)[:h, :w]
+        opened = ndimage.maximum_filter(ndimage.minimum_filter(mean, size=k, mode="nearest"), size=k, mode="nearest")
+        local_mean = ndimage.uniform_filter(mean, size=2 * k - 1, mode="nearest")
+        return opened, local_mean, cmax
+
+    def background(self, temps: np.ndarray) -> np.ndarray:
+        """The local background (C) at full resolution."""
+        opened = self._coarse(temps)[0]
+        h, w = temps.shape
+        return np.repeat(np.repeat(opened, self._F, axis=0), self._F, axis=1)[:h, :w]
 
     def _fix_bad_pixels(self, temps: np.ndarray) -> np.ndarray:
         if self.bad_pixel_map is None or self.bad_pixel_map.shape != temps.shape or not self.bad_pixel_map.any():
@@ -112,37 +123,58 @@ class HotSpotDetector:
         return out
 
     def detect(self, raw: np.ndarray) -> tuple[list[Detection], dict[str, Any]]:
-        """Targets in one frame, and the sidecar's ``thermal_analysis`` block."""
+        """Targets in one frame, and the sidecar's ``thermal_analysis`` block.
+
+        Coarse to fine: cells whose maximum stands ``threshold_k`` above the background are found
+        at quarter resolution, and only those regions are labelled at full resolution, so a frame
+        with few warm spots costs little more than the background estimate."""
         temps = self._fix_bad_pixels(_celsius32(self.model, raw))
-        tophat = temps - self.background(temps)
-        cand = tophat >= self.threshold_k
-        labels, n = ndimage.label(cand)
+        f = self._F
+        h, w = temps.shape
+        opened, local_mean, cmax = self._coarse(temps)
+        cells = (cmax - opened) >= self.threshold_k
         dets: list[Detection] = []
         per_target = []
-        if n:
-            h, w = temps.shape
-            slices = ndimage.find_objects(labels)
-            areas = np.bincount(labels.ravel(), minlength=n + 1)
-            big = np.nonzero(areas[1:] >= self.min_area)[0] + 1
-            for i in big[np.argsort(-areas[big], kind="stable")]:
+        if cells.any():
+            bg = np.repeat(np.repeat(opened, f, axis=0), f, axis=1)[:h, :w]
+            regions, nreg = ndimage.label(cells, structure=np.ones((3, 3), bool))
+            # Regions whose warmest cell does not stand out from the local mean are texture:
+            # dropped here, at quarter resolution, before any full-resolution work.
+            rmax = ndimage.maximum(cmax, regions, np.arange(1, nreg + 1))
+            found = []
+            for rsl, top in zip(ndimage.find_objects(regions), np.atleast_1d(rmax)):
+                cy = min((rsl[0].start + rsl[0].stop) // 2, local_mean.shape[0] - 1)
+                cx = min((rsl[1].start + rsl[1].stop) // 2, local_mean.shape[1] - 1)
+                if top - local_mean[cy, cx] < 0.8 * self.threshold_k:
+                    continue
+                ry0, ry1 = rsl[0].start * f, min(h, rsl[0].stop * f)
+                rx0, rx1 = rsl[1].start * f, min(w, rsl[1].stop * f)
+                cand = (temps[ry0:ry1, rx0:rx1] - bg[ry0:ry1, rx0:rx1]) >= self.threshold_k
+                labels, n = ndimage.label(cand)
+                if not n:
+                    continue
+                areas = np.bincount(labels.ravel(), minlength=n + 1)
+                for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+                    if areas[i] >= self.min_area:
+                        found.append((int(areas[i]), sl[0].start + ry0, sl[0].stop + ry0, sl[1].start + rx0,
+                                      sl[1].stop + rx0, labels[sl] == i))
+            found.sort(key=lambda c: -c[0])
+            for _area, y0, y1, x0, x1, own in found:
                 if len(dets) >= self.max_targets:
                     break
-                sl = slices[i - 1]
-                cy, cx = (sl[0].start + sl[0].stop) // 8, (sl[1].start + sl[1].stop) // 8
                 # Cheapest test: the peak against the local mean around it (texture bumps fail here).
-                local = self._local_mean[min(cy, self._local_mean.shape[0] - 1), min(cx, self._local_mean.shape[1] - 1)]
-                if float(temps[sl].max()) - local < 0.8 * self.threshold_k:
+                local = local_mean[min((y0 + y1) // (2 * f), local_mean.shape[0] - 1),
+                                   min((x0 + x1) // (2 * f), local_mean.shape[1] - 1)]
+                peak = float(temps[y0:y1, x0:x1][own].max())
+                if peak - local < 0.8 * self.threshold_k:
                     continue
-                y0, y1, x0, x1 = sl[0].start, sl[0].stop, sl[1].start, sl[1].stop
                 r = self.ring_px
                 Y0, Y1, X0, X1 = max(0, y0 - r), min(h, y1 + r), max(0, x0 - r), min(w, x1 + r)
                 crop = temps[Y0:Y1, X0:X1]
-                lab = labels[Y0:Y1, X0:X1]
-                tmask = lab == i
-                peak = float(crop[tmask].max())
-                # Cheap test first, on the rectangular ring outside the component's box: a target
-                # stands above the ring around it, not just above the opening's floor; smooth
-                # texture and slopes do not.
+                tmask = np.zeros(crop.shape, bool)
+                tmask[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0] = own
+                # Next, the rectangular ring outside the component's box: a target stands above
+                # the ring around it, not just above the opening's floor; texture and slopes do not.
                 rect = np.ones(crop.shape, bool)
                 rect[max(0, y0 - 1 - Y0):y1 + 1 - Y0, max(0, x0 - 1 - X0):x1 + 1 - X0] = False
                 if not rect.any():
@@ -151,7 +183,8 @@ class HotSpotDetector:
                 excess = peak - float(np.median(ring))
                 if excess < self.threshold_k or excess < self.min_sigma * (float(np.std(ring)) + 1e-3):
                     continue
-                bmask = ~ndimage.binary_dilation(lab > 0, iterations=2)
+                warm = (crop - bg[Y0:Y1, X0:X1]) >= self.threshold_k  # this and any neighbouring target
+                bmask = ~ndimage.binary_dilation(warm | tmask, iterations=2)
                 if not bmask.any():
                     continue
                 m = contrast_metrics(crop, tmask, bmask)
