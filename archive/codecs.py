@@ -166,14 +166,20 @@ def register_codec(cls: type[FrameCodec], codec_id: str | None = None) -> type[F
     return cls
 
 
-def get_codec(config: dict[str, Any] | str) -> FrameCodec:
+def build_from_config(registry: dict[str, Any], config: dict[str, Any] | str) -> Any:
+    """``registry[config["id"]](**rest)``; a bare string is an id with default settings. Shared by
+    the codec and the format registries."""
     config = {"id": config} if isinstance(config, str) else dict(config)
-    codec_id = config.pop("id", None)
+    key = config.pop("id", None)
     try:
-        cls = codec_registry[codec_id]
+        factory = registry[key]
     except KeyError:
-        raise UnknownCodecError(str(codec_id), list(codec_registry)) from None
-    return cls(**config)
+        raise UnknownCodecError(str(key), list(registry)) from None
+    return factory(**config)
+
+
+def get_codec(config: dict[str, Any] | str) -> FrameCodec:
+    return build_from_config(codec_registry, config)
 
 
 for _cls in (Png16, JpegXl, Htj2k, JpegLs):

@@ -23,7 +23,7 @@ from recorder.icd import format_name
 from recorder.radiometry import LinearModel, model_from_dict
 from recorder.reader import SessionFrame
 
-from ..exceptions import UnknownCodecError
+from ..codecs import build_from_config
 
 __all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "format_registry", "register_format", "get_format",
            "ordered_map", "frame_name"]
@@ -104,13 +104,7 @@ def register_format(format_id: str, factory: Callable[..., ArchiveFormat]) -> No
 
 
 def get_format(config: dict[str, Any] | str) -> ArchiveFormat:
-    config = {"id": config} if isinstance(config, str) else dict(config)
-    fid = config.pop("id", None)
-    try:
-        factory = format_registry[fid]
-    except KeyError:
-        raise UnknownCodecError(str(fid), list(format_registry)) from None
-    return factory(**config)
+    return build_from_config(format_registry, config)
 
 
 def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, window: int | None = None) -> Iterator[R]:
