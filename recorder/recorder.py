@@ -98,12 +98,15 @@ class Recorder:
         640x512 frames make that 79 MB at most).
     :param writer_delay_s: an artificial pause per frame on the writer thread, for testing the
         drop accounting; never set it in production.
+    :param wait_when_full: for sources that are not real time (file imports): capture waits for
+        the writer instead of dropping, since nothing is lost by waiting.
     """
 
     def __init__(self, source: FrameSource, root: str | os.PathLike, *, session_id: str | None = None,
                  policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
                  writer_delay_s: float = 0.0, recover_leftovers: bool = True, analysis: bool = True,
-                 analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None) -> None:
+                 analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None,
+                 wait_when_full: bool = False) -> None:
         self.source = source
         self.root = Path(root)
         self.session_id = session_id or new_session_id(source.sensor.sensor_id)
@@ -113,6 +116,7 @@ class Recorder:
         self.stats_interval_s = stats_interval_s
         self.writer_delay_s = writer_delay_s
         self.recover_leftovers = recover_leftovers
+        self.wait_when_full = wait_when_full
         self.counters = RecorderCounters()
         self.latency = LatencyHistogram()
         self._interval_latency = LatencyHistogram()
@@ -217,7 +221,7 @@ class Recorder:
                 if self._aq is not None:
                     self._offer_analysis(frame)
                 try:
-                    self.queue.put_nowait(frame)
+                    self.queue.put(frame) if self.wait_when_full else self.queue.put_nowait(frame)
                 except queue.Full:
                     counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in frame.messages])
                 if self._stop.is_set() or (deadline is not None and time.monotonic() >= deadline):

@@ -145,9 +145,7 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
         sid = session if session and len(groups) == 1 else (f"{session}-{n + 1}" if session else
                                                             new_session_id(first.sensor_id))
         rec = Recorder(_ImportSource(items, first), root, session_id=sid, analysis=analysis,
-                       analysis_max_fps=1e6, queue_frames=8, recover_leftovers=False)
-        # Imports are not real time: the capture side may wait for the writer instead of dropping.
-        rec.queue.put_nowait = rec.queue.put  # type: ignore[method-assign]
+                       analysis_max_fps=1e6, queue_frames=8, recover_leftovers=False, wait_when_full=True)
         result = rec.run()
         sessions.append(result)
         for fsum in files:
