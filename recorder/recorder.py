@@ -239,6 +239,9 @@ class Recorder:
     def _offer_analysis(self, frame: CapturedFrame) -> None:
         fut: Future = Future()
         frame.analysis = fut
+        if self.wait_when_full:  # not real time: every frame is analysed
+            self._aq.put((frame.pixels, fut))
+            return
         now = time.monotonic_ns()
         if now < self._next_analysis_ns:
             fut.set_result(None)
@@ -348,7 +351,7 @@ class Recorder:
         analysis, targets = extra.get("thermal_analysis") or _NO_ANALYSIS, extra.get("targets", [])
         if frame.analysis is not None:
             try:
-                result = frame.analysis.result(timeout=self.analysis_wait_s)
+                result = frame.analysis.result(timeout=None if self.wait_when_full else self.analysis_wait_s)
             except FutureTimeout:
                 result = None
             if result is None:
