@@ -8,6 +8,8 @@ MCAP source on local disk (the chunk holding the frame's log time).
 from __future__ import annotations
 
 import json
+import threading
+from collections import OrderedDict
 from pathlib import Path
 from typing import Any
 
@@ -30,10 +32,15 @@ class FrameNotFound(LookupError):
 
 
 class FrameReader:
-    def __init__(self, engine: Engine, store: BlobStore, root: Path) -> None:
+    def __init__(self, engine: Engine, store: BlobStore, root: Path, cache_frames: int = 32) -> None:
         self.engine = engine
         self.store = store
         self.root = root
+        # Recently decoded frames (a recorded frame never changes): the browser's temperature
+        # readout and a scrubber going back and forth hit the same few frames again and again.
+        self._cache: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
+        self._cache_size = cache_frames
+        self._lock = threading.Lock()
 
     def _blob(self, session_id: str, idx: int, prefer: str | None = None) -> dict[str, Any] | None:
         with self.engine.connect() as conn:
@@ -67,6 +74,20 @@ class FrameReader:
         return self.store.get_range(self._key(session_id, blob), blob["offset"], blob["offset"] + blob["length"])
 
     def pixels(self, session_id: str, idx: int) -> np.ndarray:
+        key = (session_id, idx)
+        with self._lock:
+            if key in self._cache:
+                self._cache.move_to_end(key)
+                return self._cache[key]
+        frame = self._decode(session_id, idx)
+        frame.setflags(write=False)
+        with self._lock:
+            self._cache[key] = frame
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return frame
+
+    def _decode(self, session_id: str, idx: int) -> np.ndarray:
         row = self._frame_row(session_id, idx)
         blob = self._blob(session_id, idx)
         if blob is not None:
