@@ -6,7 +6,6 @@ import logging
 import threading
 import time
 from contextlib import asynccontextmanager
-from typing import Any
 
 from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
@@ -123,6 +122,3 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
         app.include_router(module.router)
     return app
 
-
-def json_error(status: int, message: str, **extra: Any) -> JSONResponse:
-    return JSONResponse({"error": message, "status": status, **extra}, status_code=status)

@@ -9,7 +9,6 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from .icd import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
 
@@ -118,7 +117,3 @@ def correct_bad_pixels(frame: np.ndarray, bad_pixel_map: np.ndarray) -> np.ndarr
                 break
     return out
 
-
-def dilate(mask: np.ndarray, pixels: int) -> np.ndarray:
-    """Grow a boolean mask by ``pixels`` (square structuring element)."""
-    return ndimage.binary_dilation(mask, structure=np.ones((3, 3), bool), iterations=pixels)
