@@ -49,7 +49,8 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
     r = run_cli("worker", "--root", str(root), "--once", "--formats", "png16,tiff-lzw,jxl", "--delete-source",
                 "--json", env=env)
     assert r.returncode == 0, r.stderr
-    assert json.loads(r.stdout)["archived"] == ["a"]
+    # "a" unless a killed run had already finished everything before its kill landed
+    assert json.loads(r.stdout)["archived"] in (["a"], [])
     m = json.loads((session / "archive" / "manifest.json").read_text())
     assert m["upload"]["complete"] and m["source"]["deleted"]
     assert not list(session.glob("*.mcap")) and not list((session / "archive").glob("*.partial"))
