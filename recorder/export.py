@@ -87,7 +87,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             data = temps if kind == "celsius-tiff" else temps + np.float32(273.15)
             path = out / f"{name}.{'celsius' if kind == 'celsius-tiff' else 'kelvin'}.tiff"
             tifffile.imwrite(path, data, photometric="minisblack", byteorder="<", metadata=None,
-                             description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}))
+                             description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}),
+                             extratags=geotiff_tags(positions.get(f.log_time), data.shape))
         elif kind == "heatmap-png":
             a, b = (lo, hi) if lo is not None else (float(f.pixels.min()), float(f.pixels.max()) + 1)
             src = temps if temps is not None else f.pixels.astype(np.float32)
@@ -114,6 +115,29 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         _write_summary(out, summary, stats, meta)
     return {"out": str(out), "kind": kind, "files": len(written), "refused": refused,
             "summary": (str(out / f"summary.{summary}") if summary else None)}
+
+
+def geotiff_tags(position: dict[str, Any] | None, shape: tuple[int, int]) -> list[tuple]:
+    """GeoTIFF tags for a frame taken at a known WGS 84 position: one tie point, the image centre
+    at the camera's longitude, latitude and altitude (EPSG:4326), which GDAL reads as a GCP. No
+    pixel scale is written: a footprint would need the lens's field of view and the view angle,
+    which the files do not carry reliably, and a wrong scale would be worse than none."""
+    if not position or position.get("crs") != "EPSG:4326":
+        return []
+    try:
+        lat, lon = float(position["latitude"]), float(position["longitude"])
+    except (TypeError, ValueError, KeyError):
+        return []
+    try:
+        alt = float(position.get("absolute_altitude_m") or 0.0)
+    except ValueError:
+        alt = 0.0
+    h, w = shape
+    tiepoint = (w / 2.0, h / 2.0, 0.0, lon, lat, alt)
+    # GeoKeyDirectory: version 1.1.0, 3 keys: GTModelType=Geographic(2), GTRasterType=PixelIsArea(1),
+    # GeographicType=WGS 84 (4326).
+    keys = (1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326)
+    return [(33922, "d", 6, tiepoint, True), (34735, "H", len(keys), keys, True)]
 
 
 def _has_temps(model) -> bool:

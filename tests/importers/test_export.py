@@ -70,3 +70,33 @@ def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
     assert r.returncode == 1 and "DJI Thermal SDK" in r.stderr
     r = run_cli("export", "h20t", "--root", str(root), "--to", "icd")
     assert r.returncode == 0, r.stderr
+
+
+def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, tmp_path):
+    import tifffile
+
+    root = tmp_path / "r"
+    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), str(samples / "dji" / "M2EA_DJI_0001_R.JPG"),
+                "--root", str(root), "--no-analysis", "--json")
+    assert r.returncode == 0, r.stderr
+    files = {f["path"].rsplit("/", 1)[-1]: f for f in json.loads(r.stdout)["files"]}
+    # H20T keeps its drone-dji XMP (formats.md): it has a position, but needs DJI's SDK for temperatures,
+    # so check the tags through the helper with its recorded position, and M2EA (no XMP) gets none.
+    from recorder.export import _positions, geotiff_tags
+
+    h20t = root / "sessions" / files["DJI_H20T.jpg"]["session_id"]
+    (pos,) = _positions(h20t).values()
+    tags = geotiff_tags(pos, (512, 640))
+    assert tags and tags[0][0] == 33922 and tags[0][3][:2] == (320.0, 256.0)
+    assert abs(tags[0][3][4] - float(pos["latitude"])) < 1e-9 and 4326 in tags[1][3]
+    out = tmp_path / "geo.tiff"
+    tifffile.imwrite(out, np.zeros((512, 640), np.float32), extratags=tags, metadata=None)
+    with tifffile.TiffFile(out) as t:
+        geo = t.pages[0].geotiff_tags
+        assert geo["GeographicTypeGeoKey"] == 4326 and geo["ModelTiepoint"][4] == pytest.approx(float(pos["latitude"]))
+    m2ea = root / "sessions" / files["M2EA_DJI_0001_R.JPG"]["session_id"]
+    assert _positions(m2ea) == {}
+    res = export_session(m2ea, "celsius-tiff", tmp_path / "m")
+    with tifffile.TiffFile(next((tmp_path / "m").glob("*.tiff"))) as t:
+        assert 33922 not in {tag.code for tag in t.pages[0].tags}
+    assert res["files"] == 1
