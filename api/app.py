@@ -16,7 +16,9 @@ from prometheus_client import CollectorRegistry, Counter, Histogram
 from recorder import __version__
 
 from .db import make_engine, migrate
-from .frames import FrameReader
+from recorder.radiometry import TemperatureUnavailable
+
+from .frames import FrameNotFound, FrameReader
 from .index import index_root
 from .settings import Settings
 from .storage import make_store
@@ -110,6 +112,15 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
         return JSONResponse({"error": exc.detail, "status": exc.status_code}, status_code=exc.status_code,
                             headers=getattr(exc, "headers", None))
+
+    @app.exception_handler(FrameNotFound)
+    async def frame_not_found(_request: Request, exc: FrameNotFound) -> JSONResponse:
+        return JSONResponse({"error": str(exc), "status": 404}, status_code=404)
+
+    @app.exception_handler(TemperatureUnavailable)
+    async def no_temperature(_request: Request, exc: TemperatureUnavailable) -> JSONResponse:
+        # The counts are served; temperatures for this model need a vendor SDK (a conflict, not an error)
+        return JSONResponse({"error": str(exc), "status": 409}, status_code=409)
 
     @app.exception_handler(RequestValidationError)
     async def bad_request(_request: Request, exc: RequestValidationError) -> JSONResponse:

@@ -7,10 +7,8 @@ from typing import Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from recorder.radiometry import TemperatureUnavailable
+from recorder.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 
-from ..frames import FrameNotFound
-from recorder.render import PALETTES, celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 from ..security import require
 from .common import session_row
 
@@ -33,14 +31,11 @@ def get_frame(request: Request, session_id: str, n: int,
     row = session_row(request, session_id)
     _check_index(row, n)
     reader = request.app.state.frames
-    try:
-        if format == "png16":
-            stored = reader.encoded(session_id, n, "png16")
-            body = stored if stored is not None else png16(reader.pixels(session_id, n))
-            return Response(body, media_type="image/png", headers=_CACHE)
-        frame = reader.pixels(session_id, n)
-    except FrameNotFound as exc:
-        raise HTTPException(404, str(exc)) from None
+    if format == "png16":
+        stored = reader.encoded(session_id, n, "png16")
+        body = stored if stored is not None else png16(reader.pixels(session_id, n))
+        return Response(body, media_type="image/png", headers=_CACHE)
+    frame = reader.pixels(session_id, n)
     h, w = frame.shape
     dims = {"X-Width": str(w), "X-Height": str(h), **_CACHE}
     if format == "raw":
@@ -50,10 +45,7 @@ def get_frame(request: Request, session_id: str, n: int,
         return Response(tiff16(frame), media_type="image/tiff", headers=dims)
     model = session_model(row["radiometric_model"])
     if format == "celsius-tiff":
-        try:
-            return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)
-        except TemperatureUnavailable as exc:
-            raise HTTPException(409, str(exc)) from None
+        return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)
     if min is not None and max is not None and max <= min:
         raise HTTPException(400, "max must be greater than min")
     return Response(preview_png(frame, model, palette, min, max), media_type="image/png", headers=dims)
@@ -63,10 +55,7 @@ def get_frame(request: Request, session_id: str, n: int,
 def get_frame_metadata(request: Request, session_id: str, n: int) -> dict:
     row = session_row(request, session_id)
     _check_index(row, n)
-    try:
-        return request.app.state.frames.sidecar(session_id, n)
-    except FrameNotFound as exc:
-        raise HTTPException(404, str(exc)) from None
+    return request.app.state.frames.sidecar(session_id, n)
 
 
 @router.get("/{n}/temperature")
@@ -74,20 +63,12 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     """Temperature (C) of one pixel through the session's radiometric model."""
     row = session_row(request, session_id)
     _check_index(row, n)
-    try:
-        frame = request.app.state.frames.pixels(session_id, n)
-    except FrameNotFound as exc:
-        raise HTTPException(404, str(exc)) from None
+    frame = request.app.state.frames.pixels(session_id, n)
     h, w = frame.shape
     if x >= w or y >= h:
         raise HTTPException(400, f"pixel ({x}, {y}) is outside the {w}x{h} frame")
     model = session_model(row["radiometric_model"])
-    try:
-        value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
-    except TemperatureUnavailable as exc:
-        raise HTTPException(409, str(exc)) from None
+    value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
     return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "approximate": getattr(model, "approximate", False),
             "model": json.loads(row["radiometric_model"] or "null")}
 
-
-assert set(PALETTES) == {"ironbow", "gray", "turbo"}
