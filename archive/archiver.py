@@ -132,8 +132,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             or not (adir / f).is_dir()]
     if todo and (source_gone or not segments):
         raise ArchiveError(f"{session_dir}: the MCAP source is gone; cannot write {', '.join(todo)}")
+    per_segment = count_frames(session_dir) if todo else {}
     if todo:
-        per_segment = count_frames(session_dir)
         total = sum(per_segment.values())
         if not manifest["frames"].get("sha256") or len(manifest["frames"]["sha256"]) != total:
             if on_progress:
@@ -152,9 +152,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         fmt = fmts[fid]
         final = adir / fid
         partial = adir / (fid + PARTIAL_SUFFIX)
-        for stale in (partial,):
-            if stale.exists():
-                shutil.rmtree(stale)
+        if partial.exists():  # left by a crashed run; never taken for an archive
+            shutil.rmtree(partial)
         partial.mkdir()
         done = [0]
 
@@ -163,9 +162,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             if on_progress and done[0] % 16 == 0:
                 on_progress(f"writing {fid}", done[0], len(expected))
 
-        ctx = ArchiveContext(session_id=session_id,
-                             session_meta={**meta, "_frames_per_segment": count_frames(session_dir)},
-                             total_frames=len(expected), workers=workers, on_frame=tick)
+        ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=len(expected),
+                             frames_per_segment=per_segment, workers=workers, on_frame=tick)
         t = time.perf_counter()
         records: list[FileRecord] = fmt.write(iter_session_frames(session_dir), partial, ctx)
         encode_s = time.perf_counter() - t

@@ -47,6 +47,7 @@ class ArchiveContext:
     session_id: str
     session_meta: dict[str, Any] = field(default_factory=dict)
     total_frames: int | None = None
+    frames_per_segment: dict[str, int] = field(default_factory=dict)
     workers: int = 2
     on_frame: Callable[[], None] | None = None
 

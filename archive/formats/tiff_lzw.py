@@ -39,7 +39,6 @@ class TiffLzw(ArchiveFormat):
 
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
         records = []
-        frames_per_segment = ctx.session_meta.get("_frames_per_segment", {})
         for segment, run in group_by_segment(frames):
             rel = Path(segment).stem + ".tif"
             n = 0
@@ -48,7 +47,7 @@ class TiffLzw(ArchiveFormat):
                 writer = None
                 for frame in run:
                     if writer is None:
-                        raw = frame.pixels.nbytes * max(1, frames_per_segment.get(segment, 1))
+                        raw = frame.pixels.nbytes * max(1, ctx.frames_per_segment.get(segment, 1))
                         big = raw > _BIGTIFF_ABOVE
                         writer = tifffile.TiffWriter(fh, byteorder="<", bigtiff=big)
                     writer.write(np.asarray(frame.pixels), compression="lzw", predictor=True,
