@@ -65,8 +65,10 @@ def zip_entries(path: Path) -> Iterator[tuple[zipfile.ZipInfo, int]]:
             yield info, info.header_offset + _LOCAL_HEADER.size + n + e
 
 
-def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]]) -> tuple[list[dict], list[dict]]:
-    """(sidecars, blob rows) from a zipped archive: the JSON entries are read, images only located."""
+def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]], *,
+                       read_sidecars: bool = True) -> tuple[list[dict], list[dict]]:
+    """(sidecars, blob rows) from a zipped archive: the JSON entries are read (unless another archive
+    already gave them), the images only located."""
     sidecars, blobs = [], []
     idx = 0
     for rec in files:
@@ -74,8 +76,9 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]])
         entries = list(zip_entries(path))
         with open(path, "rb") as f:
             for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2]):
-                f.seek(js_off)
-                sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
+                if read_sidecars:
+                    f.seek(js_off)
+                    sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
                 blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off,
                               "length": img.file_size, "sidecar_offset": js_off, "sidecar_length": js.file_size})
                 idx += 1
@@ -140,7 +143,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         sidecars, blobs = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
         for other in ZIPPED_FORMATS:
             if other != zipped and other in verified and (session_dir / "archive" / other).is_dir():
-                blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"])[1]
+                blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"], read_sidecars=False)[1]
         segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
         times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
     else:
