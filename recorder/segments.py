@@ -17,10 +17,11 @@ import os
 import socket
 import threading
 import time
+from contextlib import contextmanager
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -245,10 +246,8 @@ class SessionWriter:
         size = sum(memoryview(p).nbytes for p in image_parts) + len(sidecar_json)
         self._maybe_rotate(log_time, size)
         for name, media_type, data in attachments:
-            try:
+            with self._writing():
                 self._writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
-            except OSError as exc:
-                raise RecordingError(f"writing {self._path(self.segments[-1], True)} failed: {exc.strerror or exc}") from exc
         self._add(TOPIC_IMAGE, log_time, image_parts, token=token, sequence=sequence)
         self._add(TOPIC_METADATA, log_time, sidecar_json, sequence=sequence)
         for topic, payload in extra:
@@ -263,10 +262,8 @@ class SessionWriter:
     def _add(self, topic: str, log_time: int, data: Any, token: Any = None, sequence: int = 0) -> None:
         assert self._writer is not None
         info = self.segments[-1]
-        try:
+        with self._writing():
             self._writer.add_message(self._channels[topic], log_time, data, sequence=sequence, token=token)
-        except OSError as exc:
-            raise RecordingError(f"writing {self._path(info, True)} failed: {exc.strerror or exc}") from exc
         n = sum(memoryview(p).nbytes for p in data) if isinstance(data, list) else len(data)
         info.messages += 1
         info.topic_bytes[topic] = info.topic_bytes.get(topic, 0) + n
@@ -274,13 +271,19 @@ class SessionWriter:
         info.start_ns = log_time if info.start_ns is None else min(info.start_ns, log_time)
         info.end_ns = log_time if info.end_ns is None else max(info.end_ns, log_time)
 
+    @contextmanager
+    def _writing(self) -> Iterator[None]:
+        """Turn an OSError (disk full, I/O error) on the open segment into a RecordingError naming it."""
+        try:
+            yield
+        except OSError as exc:
+            raise RecordingError(f"writing {self._path(self.segments[-1], True)} failed: "
+                                 f"{exc.strerror or exc}") from exc
+
     def poll(self) -> None:
         if self._writer is not None:
-            try:
+            with self._writing():
                 self._writer.poll()
-            except OSError as exc:
-                raise RecordingError(f"writing {self._path(self.segments[-1], True)} failed: "
-                                     f"{exc.strerror or exc}") from exc
         if self._syncer and self._syncer.error is not None:
             err, self._syncer.error = self._syncer.error, None
             raise RecordingError(f"fsync of {self.dir} failed: {err.strerror or err}")
