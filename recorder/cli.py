@@ -280,27 +280,37 @@ def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: in
 @click.option("--session", "session_name", default=None, help="Session id (suffixed -1, -2 ... when files need several).")
 @click.option("--session-per-file", is_flag=True, help="One session per file.")
 @click.option("--analysis/--no-analysis", default=True, show_default=True, help="Run the hot-spot detector on the frames.")
+@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+              help="DJI temperatures by DJI's own code: auto = dji-thermal-cli if on PATH; off; or the path to "
+                   "libdirp (.so/.dll) or a dji-thermal-cli executable. Without one, DJI dirp/girp/hirp frames "
+                   "import with no temperature and iirp with an approximate one.")
 @json_option
 def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
-               as_json: bool) -> None:
+               dji_sdk: str, as_json: bool) -> None:
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
     from rich.progress import Progress
 
+    from .importers.dji_sdk import find_backend
     from .importers.session import import_paths
+
+    backend = find_backend(dji_sdk)
+    if backend is not None and not as_json:
+        click.echo(f"DJI temperatures by {backend.name}", err=True)
 
     show = not as_json and sys.stderr.isatty()
     with Progress(disable=not show, transient=True) as bar:
         task = bar.add_task("importing", total=None)
         report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
-                              analysis=analysis, on_file=lambda p: bar.advance(task))
+                              analysis=analysis, dji_sdk=backend, on_file=lambda p: bar.advance(task))
     if as_json:
         click.echo(json.dumps({"files": report.files, "failed": report.failed,
+                               "dji_sdk": backend.name if backend else None,
                                "sessions": [r.to_dict() for r in report.sessions]}, indent=2))
     else:
         for f in report.files:
             c = f["celsius"]
             temp = (f"{c['min']:.2f}..{c['max']:.2f} C (mean {c['mean']:.2f})" + (" approximate" if c.get("approximate") else "")
-                    if c else "temperature needs the vendor SDK")
+                    if c else f"no temperature: {f.get('dji_sdk_error') or f.get('celsius_unavailable')}")
             click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} -> {f.get('session_id')}")
         for r in report.sessions:
             click.echo(f"session {r.session_id}: {r.frames_written} frames")

@@ -397,4 +397,5 @@ def _radiometric_block(model: Any) -> dict[str, Any]:
                 "calibration_method": "factory_blackbody", "model": model.to_dict()}
     return {"bit_depth": getattr(model, "bit_depth", 16), "scale_factor_deg_c_per_count": None, "offset_deg_c": None,
             "scene_temp_min_deg_c": None, "scene_temp_max_deg_c": None, "calibration_date": None,
-            "calibration_method": model.kind, "model": model.to_dict()}
+            "calibration_method": model.kind,
+            "model": model.summary() if hasattr(model, "summary") else model.to_dict()}

@@ -4,7 +4,9 @@ Two passes: the first reads every file, detects its format by content and checks
 or unsupported file is reported with its reason and left out, so nothing half-read is ever
 written); the second records the good frames, ordered by capture time, as ordinary sessions.
 Files with different frame sizes or radiometric models go to separate sessions (one model per
-session is what lets the API compute temperatures); ``session_per_file`` splits further. Vendor
+session is what lets the API compute temperatures); ``session_per_file`` splits further. DJI
+frames measured by an SDK backend (``dji_sdk.py``) carry per-count tables, and frames whose tables
+agree share a session and one merged table. Vendor
 metadata travels on ``/import/source`` (one message per frame) and calibration blobs as MCAP
 attachments, bit-exact.
 """
@@ -21,14 +23,16 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..radiometry import TemperatureUnavailable
+from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable
 from ..recorder import Recorder, RecordingResult, new_session_id
 from ..sources.base import CapturedFrame, FrameSource, SensorInfo
 from . import ImportedFrame, ImportError_, read_file
+from .dji_sdk import DjiBackend
 
 __all__ = ["import_paths", "ImportReport"]
 
 TOPIC_IMPORT = "/import/source"
+SDK_BATCH = 32  # files measured per SDK call: amortises its start-up, bounds the frames held
 _IMPORT_SCHEMA = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "thermcap.ImportSource",
                   "type": "object", "properties": {"path": {"type": "string"}, "format": {"type": "string"},
                                                    "layout": {"type": ["string", "null"]}, "vendor": {"type": "object"}},
@@ -70,7 +74,7 @@ def _summary(f: ImportedFrame) -> dict[str, Any]:
     out = {"path": f.path, "format": f.format, "layout": f.layout, "frame_index": f.frame_index,
            "width": int(f.pixels.shape[1]), "height": int(f.pixels.shape[0]),
            "raw_sha256": hashlib.sha256(np.ascontiguousarray(f.pixels, dtype="<u2").tobytes()).hexdigest(),
-           "celsius": celsius, "model": f.model.to_dict()}
+           "celsius": celsius, "model": _model_json(f.model)}
     if celsius is None:
         out["celsius_unavailable"] = reason
     return out
@@ -82,9 +86,9 @@ class _ImportSource(FrameSource):
     name = "import"
     extra_topics = {TOPIC_IMPORT: _IMPORT_SCHEMA}
 
-    def __init__(self, items: list[tuple[str, int, int]], first: ImportedFrame) -> None:
+    def __init__(self, items: list[tuple[str, int, int]], first: ImportedFrame, model: RadiometricModel) -> None:
         self.items = items  # (path, frame index within file, timestamp ns)
-        self.model = first.model
+        self.model = model
         h, w = first.pixels.shape
         self.sensor = SensorInfo(model=first.sensor_model or first.format, sensor_id=first.sensor_id, width=w, height=h,
                                  frame_rate_hz=1.0, pixel_pitch_um=None, netd_mk=None, serial_number="unknown",
@@ -112,10 +116,82 @@ def _jsonable(obj: Any) -> Any:
     return json.loads(json.dumps(obj, default=str))
 
 
+def _model_json(model: Any) -> dict[str, Any]:
+    return model.summary() if hasattr(model, "summary") else model.to_dict()
+
+
+@dataclass
+class _Entry:
+    path: str
+    frame_index: int
+    timestamp_ns: int
+    frame: ImportedFrame
+
+
+def _measure_with_sdk(entries: list[_Entry], backend: DjiBackend | None) -> dict[str, str]:
+    """Replace the DJI frames' models by tables the vendor SDK measured; returns per-path reasons
+    where it could not (the frame keeps its own, honest model: approximate or none)."""
+    dji = [e for e in entries if e.frame.format == "dji-rjpeg"]
+    if backend is None or not dji:
+        return {}
+    measured = backend.measure(sorted({e.path for e in dji}))
+    problems = {}
+    for e in dji:
+        temp = measured.get(e.path, "not measured")
+        try:
+            if isinstance(temp, str):
+                raise TemperatureUnavailable(temp)
+            if temp.shape != e.frame.pixels.shape:
+                raise TemperatureUnavailable(f"{backend.name} measured {temp.shape[1]}x{temp.shape[0]}, the stored "
+                                             f"frame is {e.frame.pixels.shape[1]}x{e.frame.pixels.shape[0]}")
+            e.frame.model = LookupTableModel.from_measurement(e.frame.pixels, temp, source=backend.name,
+                                                              derived_from=e.frame.model.to_dict())
+        except TemperatureUnavailable as exc:
+            problems[e.path] = str(exc)
+    return problems
+
+
+def _split_tables(members: list[_Entry]) -> list[tuple[Any, list[_Entry]]]:
+    """One session per model. Frames whose SDK tables agree on every shared count share a session
+    and its merged table (a survey flight from one camera); a disagreement starts another."""
+    if not isinstance(members[0].frame.model, LookupTableModel):
+        return [(members[0].frame.model, members)]
+    parts: list[tuple[LookupTableModel, list[_Entry]]] = []
+    for e in members:
+        for i, (table, group) in enumerate(parts):
+            merged = table.merged(e.frame.model)
+            if merged is not None:
+                parts[i] = (merged, group + [e])
+                break
+        else:
+            parts.append((e.frame.model, [e]))
+    return parts
+
+
 def import_paths(paths: list[str], root: str | Path, *, session: str | None = None, session_per_file: bool = False,
-                 analysis: bool = True, on_file: Callable[[str], None] | None = None) -> ImportReport:
+                 analysis: bool = True, dji_sdk: DjiBackend | None = None,
+                 on_file: Callable[[str], None] | None = None) -> ImportReport:
+    """Import ``paths``; ``dji_sdk`` (see :func:`recorder.importers.dji_sdk.find_backend`) measures
+    DJI temperatures with DJI's own code, in batches of ``SDK_BATCH`` files to bound memory."""
     files, failed = [], []
-    groups: dict[str, list[tuple[str, int, int, ImportedFrame]]] = {}
+    groups: dict[str, list[_Entry]] = {}
+    waiting: list[_Entry] = []
+
+    def settle(batch: list[_Entry]) -> None:
+        problems = _measure_with_sdk(batch, dji_sdk)
+        for e in batch:
+            f = e.frame
+            model_key = ({"kind": f.model.kind, "source": f.model.source, "derived_from": f.model.derived_from}
+                         if isinstance(f.model, LookupTableModel) else f.model.to_dict())
+            key = e.path if session_per_file else json.dumps([f.pixels.shape, model_key, f.sensor_id], sort_keys=True)
+            groups.setdefault(key, []).append(e)
+            summary = _summary(f)
+            if e.path in problems:
+                summary["dji_sdk_error"] = problems[e.path]
+            files.append(summary)
+            f.pixels = f.pixels[:1, :1]  # keep only the description until the recording pass
+        batch.clear()
+
     for path in _walk(paths):
         try:
             frames = read_file(path)
@@ -125,30 +201,31 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
                 on_file(path)
             continue
         mtime = int(os.stat(path).st_mtime * 1e9)
-        for f in frames:
-            key = path if session_per_file else json.dumps([f.pixels.shape, f.model.to_dict(), f.sensor_id], sort_keys=True)
-            ts = f.timestamp_ns if f.timestamp_ns is not None else mtime
-            groups.setdefault(key, []).append((path, f.frame_index, ts, f))
-            files.append(_summary(f))
-            f.pixels = f.pixels[:1, :1]  # keep only the description until the recording pass
+        waiting.extend(_Entry(path, f.frame_index, f.timestamp_ns if f.timestamp_ns is not None else mtime, f)
+                       for f in frames)
+        if len(waiting) >= SDK_BATCH or dji_sdk is None:
+            settle(waiting)
         if on_file:
             on_file(path)
+    settle(waiting)
+    parts = [part for members in groups.values() for part in _split_tables(members)]
     sessions = []
-    for n, (key, members) in enumerate(groups.items()):
-        members.sort(key=lambda m: (m[2], m[0], m[1]))  # capture time, then name
+    for n, (model, members) in enumerate(parts):
+        members.sort(key=lambda m: (m.timestamp_ns, m.path, m.frame_index))  # capture time, then name
         items, last = [], None
-        for path, k, ts, _f in members:
-            ts = ts if last is None or ts > last else last + 1  # strictly increasing log times
-            items.append((path, k, ts))
+        for e in members:
+            ts = e.timestamp_ns if last is None or e.timestamp_ns > last else last + 1  # strictly increasing log times
+            items.append((e.path, e.frame_index, ts))
             last = ts
-        first = read_file(members[0][0])[members[0][1]]
-        sid = session if session and len(groups) == 1 else (f"{session}-{n + 1}" if session else
-                                                            new_session_id(first.sensor_id))
-        rec = Recorder(_ImportSource(items, first), root, session_id=sid, analysis=analysis,
+        first = read_file(members[0].path)[members[0].frame_index]
+        sid = session if session and len(parts) == 1 else (f"{session}-{n + 1}" if session else
+                                                           new_session_id(first.sensor_id))
+        rec = Recorder(_ImportSource(items, first, model), root, session_id=sid, analysis=analysis,
                        analysis_max_fps=1e6, queue_frames=8, recover_leftovers=False, wait_when_full=True)
         result = rec.run()
         sessions.append(result)
+        paths_in = {p for p, _, _ in items}
         for fsum in files:
-            if any(fsum["path"] == p for p, _, _ in items):
+            if fsum["path"] in paths_in:
                 fsum["session_id"] = result.session_id
     return ImportReport(files=files, sessions=sessions, failed=failed)

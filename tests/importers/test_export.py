@@ -64,7 +64,8 @@ def test_heatmaps_share_one_scale(session, tmp_path):
 
 def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
     root = tmp_path / "r"
-    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t", "--no-analysis")
+    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t", "--no-analysis",
+                "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     r = run_cli("export", "h20t", "--root", str(root), "--to", "celsius-tiff")
     assert r.returncode == 1 and "DJI Thermal SDK" in r.stderr
@@ -77,7 +78,7 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
 
     root = tmp_path / "r"
     r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), str(samples / "dji" / "M2EA_DJI_0001_R.JPG"),
-                "--root", str(root), "--no-analysis", "--json")
+                "--root", str(root), "--no-analysis", "--json", "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     files = {f["path"].rsplit("/", 1)[-1]: f for f in json.loads(r.stdout)["files"]}
     # H20T keeps its drone-dji XMP (formats.md): it has a position, but needs DJI's SDK for temperatures,

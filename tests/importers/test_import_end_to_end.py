@@ -15,7 +15,7 @@ from tests.conftest import ApiServer, run_cli
 
 def test_samples_import_archive_and_serve(samples, tmp_path):
     root = tmp_path / "root"
-    r = run_cli("import", str(samples), "--root", str(root), "--json", "--no-analysis")
+    r = run_cli("import", str(samples), "--root", str(root), "--json", "--no-analysis", "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     ref_flir = json.loads((samples / "flir" / "reference.json").read_text())
