@@ -14,7 +14,7 @@ import numpy as np
 
 from ..radiometry import DjiModel
 from .base import ImportedFrame, ImportError_
-from .exif import exif_fields, exif_time_ns, xmp_fields
+from .exif import capture_time, exif_fields, xmp_fields
 from .jpeg import app_segments, concat_app
 
 __all__ = ["read_dji", "dji_layout", "is_dji"]
@@ -115,19 +115,10 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
             blobs["dji_app2_plug.bin"] = plug
     params = _params(layout, model, app4)
     xmp = xmp_fields(app1)
-    ts = None
-    if xmp.get("UTCAtExposure"):
-        from ..icd import parse_rfc3339
-
-        try:
-            stamp = xmp["UTCAtExposure"].replace(" ", "T")
-            ts = parse_rfc3339(stamp if stamp.endswith("Z") else stamp + "Z")
-        except ValueError:
-            ts = None
-    ts = ts or exif_time_ns(exif.get("DateTimeOriginal") or exif.get("DateTime"))
+    ts, time_basis = capture_time(exif, xmp)
     meta = {"exif_make": exif.get("Make"), "exif_model": model, "layout": layout, "embedded_params": params,
             "signed_int16": layout == "girp" or xt_s, "xmp_drone_dji": xmp,
-            "exif_time": exif.get("DateTimeOriginal") or exif.get("DateTime")}
+            "exif_time": exif.get("DateTimeOriginal") or exif.get("DateTime"), "time_basis": time_basis}
     return [ImportedFrame(path=path, format="dji-rjpeg", layout=layout, pixels=pixels,
                           model=DjiModel(layout=layout, **{k: (None if v is None else round(float(v), 6))
                                                            for k, v in params.items()}),

@@ -6,13 +6,16 @@ import re
 import struct
 from datetime import datetime, timezone
 
-__all__ = ["exif_fields", "xmp_fields", "exif_time_ns"]
+__all__ = ["exif_fields", "xmp_fields", "exif_time_ns", "capture_time"]
 
-_TAGS = {0x010F: "Make", 0x0110: "Model", 0x0132: "DateTime", 0x9003: "DateTimeOriginal", 0x8769: "ExifIFD"}
+_TAGS = {0x010F: "Make", 0x0110: "Model", 0x0132: "DateTime", 0x9003: "DateTimeOriginal", 0x8769: "ExifIFD",
+         0x8825: "GPSIFD", 0x9010: "OffsetTime", 0x9011: "OffsetTimeOriginal", 0x9291: "SubSecTimeOriginal"}
+_GPS_TAGS = {0x0007: "GPSTimeStamp", 0x001D: "GPSDateStamp"}
 
 
 def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
-    """Make, Model, DateTime(Original) from an APP1 'Exif\\0\\0' payload; {} if absent or broken."""
+    """Make, Model, DateTime(Original), its offset and sub-seconds, and the GPS date and time from an
+    APP1 'Exif\\0\\0' payload; {} if absent or broken."""
     for p in app1_payloads:
         if not p.startswith(b"Exif\x00\x00"):
             continue
@@ -21,23 +24,27 @@ def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
             order = {b"II": "<", b"MM": ">"}[t[:2]]
             out: dict[str, object] = {}
 
-            def walk(offset: int, depth: int = 0) -> None:
+            def walk(offset: int, tags: dict[int, str], depth: int = 0) -> None:
                 (n,) = struct.unpack(order + "H", t[offset:offset + 2])
                 for i in range(min(n, 512)):
                     e = t[offset + 2 + 12 * i: offset + 14 + 12 * i]
                     tag, typ, count = struct.unpack(order + "HHI", e[:8])
-                    name = _TAGS.get(tag)
+                    name = tags.get(tag)
                     if name is None:
                         continue
-                    if name == "ExifIFD" and depth == 0:
-                        walk(struct.unpack(order + "I", e[8:12])[0], 1)
+                    if name in ("ExifIFD", "GPSIFD") and depth == 0:
+                        walk(struct.unpack(order + "I", e[8:12])[0], _GPS_TAGS if name == "GPSIFD" else _TAGS, 1)
                     elif typ == 2:  # ASCII
                         off = struct.unpack(order + "I", e[8:12])[0] if count > 4 else None
                         raw = e[8:8 + count] if off is None else t[off:off + count]
                         out[name] = raw.split(b"\x00")[0].decode("latin-1").strip()
+                    elif typ == 5 and count == 3:  # RATIONAL x3: GPS hours, minutes, seconds
+                        (off,) = struct.unpack(order + "I", e[8:12])
+                        v = struct.unpack(order + "6I", t[off:off + 24])
+                        out[name] = tuple(a / b if b else 0.0 for a, b in zip(v[::2], v[1::2]))
 
             (ifd0,) = struct.unpack(order + "I", t[4:8])
-            walk(ifd0)
+            walk(ifd0, _TAGS)
             return out
         except (KeyError, struct.error, IndexError):
             return {}
@@ -64,3 +71,42 @@ def exif_time_ns(value: str | None) -> int | None:
     except ValueError:
         return None
     return int(dt.timestamp()) * 1_000_000_000
+
+
+def capture_time(exif: dict[str, object], xmp: dict[str, str] | None = None) -> tuple[int | None, str]:
+    """The best capture time a JPEG states, as UTC ns, and what it rests on.
+
+    In order: DJI's XMP ``UTCAtExposure``; EXIF DateTimeOriginal with its OffsetTimeOriginal; the
+    EXIF GPS date and time (UTC by definition); last, DateTimeOriginal alone, which is the camera's
+    local time in an unknown zone, taken as UTC and said so (frames of one camera still order
+    correctly)."""
+    from ..icd import parse_rfc3339
+
+    stamp = (xmp or {}).get("UTCAtExposure")
+    if stamp:
+        try:
+            stamp = stamp.strip().replace(" ", "T")
+            if stamp[4:5] == ":" and stamp[7:8] == ":":  # DJI writes EXIF-style "2023:04:18 07:46:52.442"
+                stamp = f"{stamp[:4]}-{stamp[5:7]}-{stamp[8:]}"
+            return parse_rfc3339(stamp if stamp.endswith("Z") else stamp + "Z"), "utc: drone-dji UTCAtExposure"
+        except ValueError:
+            pass
+    local = str(exif.get("DateTimeOriginal") or exif.get("DateTime") or "")
+    base = exif_time_ns(local)
+    if base is not None:
+        sub = str(exif.get("SubSecTimeOriginal") or "")
+        if sub.isdigit():
+            base += int(sub.ljust(9, "0")[:9])
+        offset = str(exif.get("OffsetTimeOriginal") or exif.get("OffsetTime") or "")
+        m = re.fullmatch(r"([+-])(\d\d):(\d\d)", offset)
+        if m:
+            minutes = (int(m[2]) * 60 + int(m[3])) * (1 if m[1] == "+" else -1)
+            return base - minutes * 60_000_000_000, f"exif: local time with offset {offset}"
+    date, hms = exif.get("GPSDateStamp"), exif.get("GPSTimeStamp")
+    if isinstance(date, str) and isinstance(hms, tuple) and len(hms) == 3:
+        day = exif_time_ns(date[:10] + " 00:00:00")
+        if day is not None:
+            return day + int(round((hms[0] * 3600 + hms[1] * 60 + hms[2]) * 1e9)), "utc: exif GPS date and time"
+    if base is not None:
+        return base, "camera local time, zone unknown (taken as UTC)"
+    return None, "none stated (file modification time used)"

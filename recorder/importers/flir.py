@@ -139,7 +139,7 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
-    from .exif import exif_fields, exif_time_ns, xmp_fields
+    from .exif import capture_time, exif_fields, xmp_fields
 
     fff = flir_jpeg_payload(path, data)
     if fff is None:
@@ -147,10 +147,10 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
     frame = frame_from_fff(path, fff, "flir-rjpeg")
     app1 = [p for m, p in app_segments(path, data) if m == 0xE1]
     exif = exif_fields(app1)
-    frame.timestamp_ns = exif_time_ns(exif.get("DateTimeOriginal") or exif.get("DateTime"))
-    frame.vendor_metadata.update(exif_make=exif.get("Make"), exif_model=exif.get("Model"),
-                                 exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
     xmp = xmp_fields(app1)
+    frame.timestamp_ns, time_basis = capture_time(exif, xmp)
+    frame.vendor_metadata.update(exif_make=exif.get("Make"), exif_model=exif.get("Model"),
+                                 exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"), time_basis=time_basis)
     if xmp:
         frame.vendor_metadata["xmp_drone_dji"] = xmp
     return [frame]
