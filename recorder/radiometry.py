@@ -8,6 +8,7 @@ further kinds (FLIR Planck, DJI) with ``register_model``.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 from dataclasses import asdict, dataclass, fields
@@ -359,10 +360,13 @@ class LookupTableModel:
         return LookupTableModel(tuple(counts), tuple(table[c] for c in counts), self.source, self.derived_from,
                                 self.bit_depth)
 
+    @functools.cached_property
+    def _arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.asarray(self.counts, dtype=np.int64), np.asarray(self.celsius, dtype=np.float64)
+
     def to_celsius(self, raw: np.ndarray) -> np.ndarray:
         raw = np.asarray(raw)
-        keys = np.asarray(self.counts, dtype=np.int64)
-        values = np.asarray(self.celsius, dtype=np.float64)
+        keys, values = self._arrays
         idx = np.clip(np.searchsorted(keys, raw.astype(np.int64)), 0, len(keys) - 1)
         missing = keys[idx] != raw
         if np.any(missing):

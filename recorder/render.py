@@ -43,7 +43,9 @@ def palette(name: str) -> np.ndarray:
     return (np.clip(rgb, 0, 1) * 255).round().astype(np.uint8)
 
 
+@lru_cache(maxsize=64)
 def session_model(model_json: str | None) -> RadiometricModel:
+    """Models are immutable, so one parse per distinct JSON (a DJI lookup table is thousands of entries)."""
     return model_from_dict(json.loads(model_json) if model_json else {"kind": "linear"})
 
 

@@ -70,5 +70,5 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     model = session_model(row["radiometric_model"])
     value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
     return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "approximate": getattr(model, "approximate", False),
-            "model": json.loads(row["radiometric_model"] or "null")}
+            "model": model.summary() if hasattr(model, "summary") else model.to_dict()}
 

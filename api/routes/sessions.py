@@ -8,6 +8,8 @@ from typing import Any, Literal
 from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy import and_, func, or_, select
 
+from recorder.radiometry import model_from_dict
+
 from .. import db
 from ..security import require
 from .common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
@@ -15,14 +17,22 @@ from .common import decode_cursor, encode_cursor, iso, page_size, parse_time, se
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 
 
-def _session_summary(row: dict[str, Any]) -> dict[str, Any]:
+def _model(text: str | None, full: bool) -> dict[str, Any] | None:
+    """A session's model; listings show a lookup table (thousands of entries) by its identity only."""
+    model = json.loads(text) if text else None
+    if not full and model and model.get("kind") == "lookup_table":
+        return model_from_dict(model).summary()
+    return model
+
+
+def _session_summary(row: dict[str, Any], full_model: bool = False) -> dict[str, Any]:
     return {
         "id": row["id"], "sensor": row["sensor"], "sensor_id": row["sensor_id"], "width": row["width"],
         "height": row["height"], "fps": row["fps"], "start": iso(row["start_ns"]), "end": iso(row["end_ns"]),
         "start_ns": row["start_ns"], "end_ns": row["end_ns"], "frames": row["frames"],
         "frames_dropped": row["frames_dropped"], "status": row["status"], "min_grade": row["min_grade"],
         "max_grade": row["max_grade"], "has_targets": row["has_targets"], "has_slew_to_cue": row["has_slew_to_cue"],
-        "radiometric_model": json.loads(row["radiometric_model"]) if row["radiometric_model"] else None,
+        "radiometric_model": _model(row["radiometric_model"], full_model),
         "source_deleted": row["source_deleted"],
     }
 
@@ -76,7 +86,7 @@ def get_session(request: Request, session_id: str) -> dict:
     coverage = json.loads(row["coverage"] or "[]")
     gaps = [[a[1], b[0]] for a, b in zip(coverage, coverage[1:])]
     return {
-        **_session_summary(row),
+        **_session_summary(row, full_model=True),
         "archives": [{"format": a["format"], "bytes": a["bytes"], "objects": a["objects"], "ratio": a["ratio"],
                       "verified": a["verified"],
                       "files": [{"path": f["path"], "frames": f["frames"], "bytes": f["bytes"], "sha256": f["sha256"],

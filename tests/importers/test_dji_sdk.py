@@ -222,3 +222,24 @@ def test_h20t_exports_sdk_temperatures_as_a_geotiff(samples, tmp_path):
         assert t.pages[0].geotiff_tags["GeographicTypeGeoKey"] == 4326  # the drone-dji XMP position
     for y, x, v in ref["pixels_row_col_C"]:
         assert abs(float(img[y, x]) - v) < 0.1
+
+
+def test_api_lists_a_table_by_identity_and_serves_it_whole_on_the_session(samples, fake_libdirp, tmp_path):
+    root = tmp_path / "r"
+    r = run_cli("import", str(samples / "dji" / "M30T_DJI_0003_R.JPG"), "--root", str(root), "--session", "girp",
+                "--no-analysis", "--dji-sdk", str(fake_libdirp))
+    assert r.returncode == 0, r.stderr
+    assert run_cli("archive", "--all", "--root", str(root), "--formats", "png16").returncode == 0
+    server = ApiServer(root)
+    try:
+        with httpx.Client(base_url=server.url, timeout=30) as c:
+            (item,) = c.get("/api/v1/sessions").json()["items"]
+            listed = item["radiometric_model"]
+            assert listed["kind"] == "lookup_table" and "counts" not in listed and listed["entries"] > 100
+            assert listed["derived_from"]["layout"] == "girp"
+            full = c.get("/api/v1/sessions/girp").json()["radiometric_model"]
+            assert len(full["counts"]) == listed["entries"] and set(full["celsius"]) == {21.5}
+            px = c.get("/api/v1/sessions/girp/frames/0/temperature", params={"x": 5, "y": 7}).json()
+            assert px["celsius"] == 21.5 and px["model"]["table_sha256"] == listed["table_sha256"]
+    finally:
+        server.stop()
