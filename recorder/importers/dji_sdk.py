@@ -100,7 +100,8 @@ class LibDirp:
 
     def __init__(self, path: str) -> None:
         try:
-            lib = ctypes.CDLL(os.path.abspath(path))
+            self.folder = os.path.dirname(os.path.abspath(path))
+            lib = ctypes.CDLL(os.path.abspath(path), mode=ctypes.RTLD_GLOBAL)  # its plugins link against it
             self._create = lib.dirp_create_from_rjpeg
             self._resolution = lib.dirp_get_rjpeg_resolution
             self._measure = lib.dirp_measure_ex
@@ -125,8 +126,7 @@ class LibDirp:
                 version = f" API 0x{v.api:x}"
         self.name = f"DJI libdirp{version} ({os.path.basename(path)}), dirp_measure_ex at the embedded parameters"
 
-    def _measure_one(self, path: str) -> np.ndarray | str:
-        data = Path(path).read_bytes()
+    def _measure_one(self, data: bytes) -> np.ndarray | str:
         handle = ctypes.c_void_p()
         rc = self._create(data, len(data), ctypes.byref(handle))
         if rc != 0:
@@ -145,7 +145,20 @@ class LibDirp:
             self._destroy(handle)
 
     def measure(self, paths: list[str]) -> dict[str, np.ndarray | str]:
-        return {p: self._measure_one(p) for p in paths}
+        # DJI's SDK finds libv_list.ini and its plugins from the working directory on some
+        # platforms: run inside the library's folder (import reads files single-threaded here).
+        contents: dict[str, bytes | str] = {}
+        for p in paths:
+            try:
+                contents[p] = Path(p).read_bytes()
+            except OSError as exc:
+                contents[p] = f"cannot read it again for the SDK ({exc.strerror or exc})"
+        cwd = os.getcwd()
+        os.chdir(self.folder)
+        try:
+            return {p: data if isinstance(data, str) else self._measure_one(data) for p, data in contents.items()}
+        finally:
+            os.chdir(cwd)
 
 
 def find_backend(spec: str | None = "auto") -> DjiBackend | None:
