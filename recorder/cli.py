@@ -284,9 +284,12 @@ def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: in
               help="DJI temperatures by DJI's own code: auto = dji-thermal-cli if on PATH; off; or the path to "
                    "libdirp (.so/.dll) or a dji-thermal-cli executable. Without one, DJI dirp/girp/hirp frames "
                    "import with no temperature and iirp with an approximate one.")
+@click.option("--terraref-variant", type=click.Choice(["pipeline", "physical", "plain"]), default="pipeline",
+              show_default=True, help="TERRA-REF Planck form for uncalibrated _ir.bin: pipeline = what every published "
+                                      "TERRA-REF product used; physical = the measurement equation inverted properly.")
 @json_option
 def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
-               dji_sdk: str, as_json: bool) -> None:
+               dji_sdk: str, terraref_variant: str, as_json: bool) -> None:
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
     from rich.progress import Progress
 
@@ -301,7 +304,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
     with Progress(disable=not show, transient=True) as bar:
         task = bar.add_task("importing", total=None)
         report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
-                              analysis=analysis, dji_sdk=backend, on_file=lambda p: bar.advance(task))
+                              analysis=analysis, dji_sdk=backend,
+                              terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task))
     if as_json:
         click.echo(json.dumps({"files": report.files, "failed": report.failed,
                                "dji_sdk": backend.name if backend else None,

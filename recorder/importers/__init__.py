@@ -44,7 +44,9 @@ def detect(path: str, data: bytes) -> str:
                        "TERRA-REF _ir.bin or ICD raw with a .json sidecar)")
 
 
-def read_file(path: str | Path) -> list[ImportedFrame]:
+def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[ImportedFrame]:
+    """``terraref_variant``: which TERRA-REF Planck form uncalibrated gantry files get (see
+    :class:`~recorder.radiometry.TerraRefPlanckModel`)."""
     path = str(path)
     try:
         size = Path(path).stat().st_size
@@ -66,7 +68,7 @@ def read_file(path: str | Path) -> list[ImportedFrame]:
         if kind == "tiff":
             return read_icd_tiff(path, data)
         if kind == "terraref-bin":
-            return read_terraref(path, data)
+            return read_terraref(path, data, variant=terraref_variant)
         return read_icd_raw(path, data)
     except ImportError_:
         raise

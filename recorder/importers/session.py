@@ -169,7 +169,7 @@ def _split_tables(members: list[_Entry]) -> list[tuple[Any, list[_Entry]]]:
 
 
 def import_paths(paths: list[str], root: str | Path, *, session: str | None = None, session_per_file: bool = False,
-                 analysis: bool = True, dji_sdk: DjiBackend | None = None,
+                 analysis: bool = True, dji_sdk: DjiBackend | None = None, terraref_variant: str = "pipeline",
                  on_file: Callable[[str], None] | None = None) -> ImportReport:
     """Import ``paths``; ``dji_sdk`` (see :func:`recorder.importers.dji_sdk.find_backend`) measures
     DJI temperatures with DJI's own code, in batches of ``SDK_BATCH`` files to bound memory."""
@@ -194,7 +194,7 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
 
     for path in _walk(paths):
         try:
-            frames = read_file(path)
+            frames = read_file(path, terraref_variant=terraref_variant)
         except ImportError_ as exc:
             failed.append({"path": path, "error": str(exc)})
             if on_file:

@@ -101,3 +101,19 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
     with tifffile.TiffFile(next((tmp_path / "m").glob("*.tiff"))) as t:
         assert 33922 not in {tag.code for tag in t.pages[0].tags}
     assert res["files"] == 1
+
+
+@pytest.mark.parametrize("variant,key", [
+    ("pipeline", "terraref_Get_FLIR_2017_as_implemented (T=22C,D=2.5m,E=0.98,H=0.1; forward-model bug kept)"),
+    ("physical", "physically_inverted_same_constants (T=22C,D=2.5,E=0.98,H=0.1)"),
+    ("plain", "plain_planck_E1_tau1: B/ln(R*J1/(raw-J0)+F)-273.15"),
+])
+def test_import_cli_offers_each_terraref_variant(samples, tmp_path, variant, key):
+    ref = json.loads((samples / "terraref" / "reference_temperatures_derived.json").read_text())[key]
+    r = run_cli("import", str(samples / "terraref"), "--root", str(tmp_path / "r"), "--json", "--no-analysis",
+                "--terraref-variant", variant)
+    assert r.returncode == 0, r.stderr
+    (f,) = json.loads(r.stdout)["files"]
+    assert f["model"]["variant"] == variant
+    for k in ("min", "max", "mean"):
+        assert abs(f["celsius"][k] - ref[k]) < 0.01, (variant, k, f["celsius"][k], ref[k])
