@@ -241,5 +241,12 @@ def test_api_lists_a_table_by_identity_and_serves_it_whole_on_the_session(sample
             assert len(full["counts"]) == listed["entries"] and set(full["celsius"]) == {21.5}
             px = c.get("/api/v1/sessions/girp/frames/0/temperature", params={"x": 5, "y": 7}).json()
             assert px["celsius"] == 21.5 and px["model"]["table_sha256"] == listed["table_sha256"]
+        chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+        if chromium:  # the browser view names the table instead of printing it
+            from tests.api.test_schema_and_browser import CHROMIUM_FLAGS
+
+            dom = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom",
+                                  f"{server.url}/ui/sessions/girp"], capture_output=True, text=True, timeout=120).stdout
+            assert 'data-ready="1"' in dom and f"lookup table, {listed['entries']} counts" in dom, dom[-1500:]
     finally:
         server.stop()
