@@ -376,6 +376,23 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
 
 
+@bench.command("import")
+@click.option("--frames", "n_frames", type=int, default=300, show_default=True, help="Simulated ICD TIFF files.")
+@click.option("--samples", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Also real files here (e.g. ../shared/samples), each copied --copies times, one row per format.")
+@click.option("--copies", type=int, default=8, show_default=True)
+@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+              help="Also time DJI files with this SDK backend.")
+@json_option
+def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: str, as_json: bool) -> None:
+    """Import throughput per format vs reading + hashing the same files."""
+    from .bench_import import bench_import, print_table
+    from .importers.dji_sdk import find_backend
+
+    rows = bench_import(frames=n_frames, samples=samples, copies=copies, dji_sdk=find_backend(dji_sdk))
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
 @bench.command("analysis")
 @click.option("--frames", "n_frames", type=int, default=12, show_default=True, help="Frames per scene.")
 @click.option("--samples", type=click.Path(file_okay=False), default=None,

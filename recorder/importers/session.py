@@ -32,7 +32,7 @@ from .dji_sdk import DjiBackend
 __all__ = ["import_paths", "ImportReport"]
 
 TOPIC_IMPORT = "/import/source"
-SDK_BATCH = 32  # files measured per SDK call: amortises its start-up, bounds the frames held
+SDK_BATCH = 96  # files measured per SDK call: amortises its start-up, bounds the frames held
 _IMPORT_SCHEMA = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "thermcap.ImportSource",
                   "type": "object", "properties": {"path": {"type": "string"}, "format": {"type": "string"},
                                                    "layout": {"type": ["string", "null"]}, "vendor": {"type": "object"}},
