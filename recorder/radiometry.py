@@ -284,7 +284,8 @@ class DjiModel:
         if self.layout != "iirp":
             raise TemperatureUnavailable(
                 f"DJI {self.layout} data: temperature needs the DJI Thermal SDK (its calibration blobs are kept "
-                "with the session); thermcap does not guess")
+                "with the session); thermcap does not guess. Import with --dji-sdk (dji-thermal-cli or libdirp) "
+                "to have DJI's code measure it")
         return (np.asarray(raw).astype(np.uint16) >> 2) * 0.0625 - 273.15
 
     def to_dict(self) -> dict[str, Any]:
