@@ -86,10 +86,12 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 
     manifest = load_manifest(session_dir)
     keys = []
-    for fmt, entry in manifest["formats"].items():
-        if not entry.get("verified"):
-            continue
-        for rec in entry["files"]:
+    extras = manifest.get("extras") or {}
+    groups = [(fmt, entry["files"]) for fmt, entry in manifest["formats"].items() if entry.get("verified")]
+    if extras.get("verified"):  # attachments and vendor metadata travel with the frames
+        groups.append(("", [{"path": extras["path"], "bytes": extras["bytes"]}]))
+    for fmt, files in groups:
+        for rec in files:
             path = session_dir / "archive" / fmt / rec["path"]
             key = path.resolve().relative_to(root.resolve()).as_posix()
             head = store.head(key)

@@ -24,6 +24,7 @@ from recorder.segments import ACTIVE_SUFFIX, fsync_dir
 from .codecs import library_versions
 from .exceptions import ArchiveError, VerificationError
 from .formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from .extras import EXTRAS_NAME, write_extras
 from .manifest import archive_dir, file_sha256, frame_sha256, load_manifest, new_manifest, save_manifest, iso_now
 
 __all__ = ["archive_session", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
@@ -206,10 +207,20 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         manifest["formats"][fid] = entry
         save_manifest(session_dir, manifest)
 
+    if segments and not source_gone and (force or todo or not manifest.get("extras", {}).get("verified")
+                                         or not (adir / EXTRAS_NAME).is_file()):
+        if on_progress:
+            on_progress("keeping extras (attachments, metadata, other topics)", 0, 1)
+        manifest["extras"] = write_extras(session_dir, adir)
+        save_manifest(session_dir, manifest)
+        if not manifest["extras"]["verified"]:
+            failures.append(f"extras: {manifest['extras']['verification']}")
     if failures:
         raise VerificationError(f"{session_dir}: archive verification failed; the source was kept", failures)
     if delete_source:
         not_ok = [f for f in formats if not manifest["formats"].get(f, {}).get("verified")]
+        if not manifest.get("extras", {}).get("verified"):
+            not_ok.append("extras.mcap")
         if not_ok:
             raise ArchiveError(f"refusing to delete the source: {', '.join(not_ok)} not verified")
         for seg in segments:

@@ -129,7 +129,8 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
     else:
         for d, report in out.items():
             for fid, r in report.items():
-                click.echo(f"{d} {fid}: {'ok, ' + str(r['frames']) + ' frames bit-exact' if r['ok'] else 'FAILED'}")
+                what = "attachments, metadata and other topics intact" if fid == "extras" else f"{r['frames']} frames bit-exact"
+                click.echo(f"{d} {fid}: {'ok, ' + what if r['ok'] else 'FAILED'}")
                 for p in r["problems"]:
                     click.echo(f"  {p}")
     if bad:

@@ -7,7 +7,7 @@ from typing import Any
 
 from .archiver import verify_format_dir
 from .formats import get_format
-from .manifest import archive_dir, load_manifest
+from .manifest import file_sha256, archive_dir, load_manifest
 
 __all__ = ["verify_session"]
 
@@ -28,7 +28,29 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
         fmt = get_format(entry["config"]) if "config" in entry else get_format(fid)
         problems, _ = verify_format_dir(fmt, adir / fid, entry["files"], expected, where=fid)
         report[fid] = {"ok": not problems, "frames": len(expected), "problems": problems}
+    extras = manifest.get("extras")
+    if extras and not formats:
+        report["extras"] = _verify_extras(adir, extras)
     for fid in formats or []:
         if fid not in report:
             report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: not in the manifest"]}
     return report
+
+
+def _verify_extras(adir: Path, entry: dict[str, Any]) -> dict[str, Any]:
+    """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
+    from .extras import summarize_mcap
+
+    path = adir / entry["path"]
+    if not entry.get("verified"):
+        return {"ok": False, "frames": 0, "problems": ["extras: never verified when archived"]}
+    if not path.is_file():
+        return {"ok": False, "frames": 0, "problems": [f"extras: {path} is missing"]}
+    problems = []
+    if file_sha256(path) != entry["sha256"]:
+        problems.append(f"extras: {path} sha256 differs from the manifest")
+    else:
+        got = summarize_mcap([path])
+        if got["topics"] != entry["topics"] or got["attachments"] != entry["attachments"]:
+            problems.append(f"extras: {path} content differs from what the manifest recorded")
+    return {"ok": not problems, "frames": 0, "problems": problems}

@@ -164,7 +164,8 @@ def test_verify_after_delete_source_uses_manifest_alone(session):
     assert not list(session.glob("*.mcap"))
     assert load_manifest(session)["source"]["deleted"] is True
     report = verify_session(session)
-    assert all(r["ok"] and r["frames"] == 48 for r in report.values())
+    assert all(r["ok"] for r in report.values()) and set(report) == {"png16", "hdf5", "extras"}
+    assert report["png16"]["frames"] == report["hdf5"]["frames"] == 48
 
 
 class _Broken(ZippedFrames):
@@ -284,3 +285,30 @@ def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path)
         assert all(m["formats"][f]["verified"] for f in ALL), res.session_id
         ref = {f["raw_sha256"] for f in report.files if f.get("session_id") == res.session_id}
         assert set(m["frames"]["sha256"]) == ref
+
+
+def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(session):
+    from mcap.reader import make_reader
+
+    from archive.extras import summarize_mcap
+    from recorder.reader import session_segments
+
+    before = summarize_mcap(session_segments(session))
+    assert before["attachments"] and "/recorder/stats" in before["topics"]
+    archive_session(session, ["png16"], delete_source=True)
+    extras = session / "archive" / "extras.mcap"
+    entry = load_manifest(session)["extras"]
+    assert entry["verified"] and entry["attachments"] == before["attachments"] and entry["topics"] == before["topics"]
+    with open(extras, "rb") as f:
+        reader = make_reader(f)
+        assert "/thermal/image" not in {c.topic for c in reader.get_summary().channels.values()}
+        names = [r.name for r in reader.iter_metadata()]
+    from recorder.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
+
+    assert names.count(SESSION_METADATA) == 4 and names.count(SEGMENT_STATS_METADATA) == 4  # each segment's own
+    assert verify_session(session)["extras"]["ok"]
+    data = bytearray(extras.read_bytes())  # damage it: verify names it
+    data[len(data) // 2] ^= 0xFF
+    extras.write_bytes(bytes(data))
+    r = verify_session(session)["extras"]
+    assert not r["ok"] and "sha256 differs" in r["problems"][0]

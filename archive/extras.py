@@ -1,0 +1,106 @@
+"""Everything in a session besides its pixels, kept with the archive: ``extras.mcap``.
+
+The archive formats hold the frames (and their sidecars); a session holds more that must outlive
+``--delete-source``: the importers' ``/import/source`` messages (vendor metadata, positions), the
+radar cues and recorder stats, the MCAP metadata records, and the attachments, among them the DJI
+and FLIR calibration blobs that vendor software needs to compute temperatures years later. All of
+it goes into one small MCAP (every channel but ``/thermal/image``), re-read and compared with the
+source before it counts.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+from mcap.writer import CompressionType, Writer
+
+from recorder.messages import TOPIC_IMAGE
+from recorder.reader import session_segments
+
+__all__ = ["EXTRAS_NAME", "write_extras", "summarize_mcap"]
+
+EXTRAS_NAME = "extras.mcap"
+
+
+def summarize_mcap(paths: list[Path], skip_topic: str = TOPIC_IMAGE) -> dict[str, Any]:
+    """Message counts and a digest per topic, attachments by sha256, metadata records: what
+    ``write_extras`` must carry over and what its check compares."""
+    topics: dict[str, Any] = {}
+    attachments, metadata = [], []
+    for path in paths:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            for _, channel, msg in reader.iter_messages():
+                if channel.topic == skip_topic:
+                    continue
+                t = topics.setdefault(channel.topic, {"messages": 0, "digest": hashlib.sha256()})
+                t["messages"] += 1
+                t["digest"].update(msg.log_time.to_bytes(8, "little") + msg.data)
+        with open(path, "rb") as f:
+            for att in make_reader(f).iter_attachments():
+                attachments.append({"name": att.name, "bytes": len(att.data),
+                                    "sha256": hashlib.sha256(att.data).hexdigest()})
+        with open(path, "rb") as f:
+            for rec in make_reader(f).iter_metadata():
+                metadata.append({"name": rec.name, "metadata": dict(rec.metadata)})
+    return {"topics": {k: {"messages": v["messages"], "sha256": v["digest"].hexdigest()} for k, v in topics.items()},
+            "attachments": attachments, "metadata": metadata}
+
+
+def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
+    """Write ``extras.mcap`` beside the formats (``.partial`` first, renamed once it re-reads
+    identical to the source); returns its manifest entry."""
+    segments = session_segments(session_dir)
+    final = archive_folder / EXTRAS_NAME
+    partial = archive_folder / (EXTRAS_NAME + ".partial")
+    expected = summarize_mcap(segments)
+    channels: dict[tuple, int] = {}
+    schemas: dict[tuple, int] = {}
+    with open(partial, "wb") as out:
+        writer = Writer(out, compression=CompressionType.ZSTD)
+        writer.start(profile="", library="thermcap-archive")
+        seen_meta: set[tuple] = set()
+        for seg in segments:
+            with open(seg, "rb") as f:
+                reader = make_reader(f)
+                for schema, channel, msg in reader.iter_messages():
+                    if channel.topic == TOPIC_IMAGE:
+                        continue
+                    skey = (schema.name, schema.encoding, schema.data) if schema else None
+                    if skey is not None and skey not in schemas:
+                        schemas[skey] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                    ckey = (channel.topic, channel.message_encoding, skey)
+                    if ckey not in channels:
+                        channels[ckey] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                                 schemas.get(skey, 0), dict(channel.metadata))
+                    writer.add_message(channels[ckey], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+            with open(seg, "rb") as f:
+                for att in make_reader(f).iter_attachments():
+                    writer.add_attachment(att.create_time, att.log_time, att.name, att.media_type, att.data)
+            with open(seg, "rb") as f:
+                for rec in make_reader(f).iter_metadata():
+                    key = (rec.name, tuple(sorted(rec.metadata.items())))
+                    if key not in seen_meta:  # each segment repeats the session's record
+                        seen_meta.add(key)
+                        writer.add_metadata(rec.name, dict(rec.metadata))
+        writer.finish()
+        out.flush()
+        os.fsync(out.fileno())
+    got = summarize_mcap([partial])
+    want_meta = {(m["name"], tuple(sorted(m["metadata"].items()))) for m in expected["metadata"]}
+    got_meta = {(m["name"], tuple(sorted(m["metadata"].items()))) for m in got["metadata"]}
+    verified = got["topics"] == expected["topics"] and got["attachments"] == expected["attachments"] \
+        and got_meta == want_meta
+    if not verified:
+        partial.unlink()
+        return {"path": EXTRAS_NAME, "verified": False,
+                "verification": "extras.mcap did not re-read identical to the source; the source was kept"}
+    os.replace(partial, final)
+    data = final.read_bytes()
+    return {"path": EXTRAS_NAME, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(), "verified": True,
+            "topics": got["topics"], "attachments": got["attachments"],
+            "verification": "every non-image message, attachment and metadata record re-read identical to the source"}
