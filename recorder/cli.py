@@ -327,7 +327,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @cli.command("export")
 @click.argument("session")
 @root_option
-@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd"]), required=True)
+@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg"]), required=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None, help="Folder (default: SESSION/export/KIND).")
 @click.option("--summary", type=click.Choice(["csv", "json"]), default=None,
               help="Also write per-frame surface_temperature statistics.")
@@ -335,7 +335,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                as_json: bool) -> None:
-    """Export frames as temperature TIFFs, heatmap PNGs or ICD TIFF+JSON pairs (and a summary)."""
+    """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from .export import export_session
     from .reader import resolve_session
 

@@ -4,7 +4,8 @@
 source position, where one was recorded, in the TIFF's ImageDescription JSON); ``heatmap-png``:
 8-bit colour PNGs on one fixed temperature range for the whole session, so colours compare
 across frames; ``icd``: the ICD's own pairs, an uncompressed 16-bit TIFF with every mandatory
-tag and its JSON sidecar. ``summary`` writes per-frame ``surface_temperature`` statistics (CF
+tag and its JSON sidecar; ``dji-rjpeg``: R-JPEGs rebuilt from imported DJI frames and their kept APP
+segments, which DJI's own tools measure as they did the originals. ``summary`` writes per-frame ``surface_temperature`` statistics (CF
 standard name; cell_methods min, max, mean and percentiles) as CSV or JSON.
 """
 
@@ -28,7 +29,7 @@ from .render import palette
 
 __all__ = ["export_session", "EXPORT_KINDS"]
 
-EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd")
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg")
 PERCENTILES = (5, 25, 50, 75, 95)
 
 
@@ -53,6 +54,21 @@ def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
     return out
 
 
+def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
+    """Per log time: the source file's name and its kept DJI APP segments (importers/dji.py)."""
+    from mcap.reader import make_reader
+
+    from .importers.dji import SEGMENTS_BLOB
+
+    out: dict[int, tuple[str, bytes]] = {}
+    for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+        with open(seg, "rb") as f:
+            for att in make_reader(f).iter_attachments():
+                if att.name.endswith("/" + SEGMENTS_BLOB):
+                    out[att.log_time] = (att.name[: -len(SEGMENTS_BLOB) - 1], att.data)
+    return out
+
+
 def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
                    palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None) -> dict[str, Any]:
     if kind not in EXPORT_KINDS:
@@ -63,6 +79,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
     t_range = (model.temp_min_c, model.temp_max_c) if isinstance(model, LinearModel) else (-40.0, 550.0)
     out.mkdir(parents=True, exist_ok=True)
+    if kind == "dji-rjpeg":
+        return _export_dji(session_dir, out, on_frame)
     positions = _positions(session_dir)
     frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
     lo = hi = None
@@ -115,6 +133,31 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         _write_summary(out, summary, stats, meta)
     return {"out": str(out), "kind": kind, "files": len(written), "refused": refused,
             "summary": (str(out / f"summary.{summary}") if summary else None)}
+
+
+def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+    """R-JPEGs rebuilt from the archive for DJI's own tools (see ``importers.dji.rebuild_rjpeg``)."""
+    from .importers.dji import rebuild_rjpeg
+
+    kept = _dji_segments(session_dir)
+    written, refused = [], []
+    for f in iter_session_frames(session_dir):
+        if f.log_time not in kept:
+            refused.append(f"frame {f.index}: not imported from a DJI R-JPEG (no DJI segments kept)")
+            continue
+        name, blob = kept[f.log_time]
+        path = out / name
+        if path.name in written or not name or "/" in name or name.startswith("."):
+            path = out / f"frame{f.index:06d}_{Path(name).name or 'dji'}.jpg"
+        try:
+            path.write_bytes(rebuild_rjpeg(f.pixels, blob))
+        except ValueError as exc:
+            refused.append(f"frame {f.index}: {exc}")
+            continue
+        written.append(path.name)
+        if on_frame:
+            on_frame(len(written))
+    return {"out": str(out), "kind": "dji-rjpeg", "files": len(written), "refused": refused, "summary": None}
 
 
 def geotiff_tags(position: dict[str, Any] | None, shape: tuple[int, int]) -> list[tuple]:
