@@ -7,6 +7,7 @@ MCAP source on local disk (the chunk holding the frame's log time).
 
 from __future__ import annotations
 
+import io
 import json
 import threading
 from collections import OrderedDict
@@ -15,6 +16,8 @@ from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
+from mcap.records import Attachment
+from mcap.stream_reader import StreamReader
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
@@ -29,6 +32,36 @@ __all__ = ["FrameNotFound", "FrameReader"]
 
 class FrameNotFound(LookupError):
     pass
+
+
+class _BlobFile(io.RawIOBase):
+    """A stored blob as a seekable file (ranged reads), so mcap's seeking reader can fetch one
+    attachment from ``extras.mcap`` on S3 without downloading the whole file."""
+
+    def __init__(self, store: BlobStore, key: str, size: int) -> None:
+        self.store, self.key, self.size, self.pos = store, key, size, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        self.pos = {io.SEEK_SET: 0, io.SEEK_CUR: self.pos, io.SEEK_END: self.size}[whence] + offset
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def readinto(self, buffer: Any) -> int:
+        end = min(self.size, self.pos + len(buffer))
+        if end <= self.pos:
+            return 0
+        data = self.store.get_range(self.key, self.pos, end)
+        buffer[:len(data)] = data
+        self.pos += len(data)
+        return len(data)
 
 
 class FrameReader:
@@ -103,6 +136,28 @@ class FrameReader:
                                         blob["sidecar_offset"] + blob["sidecar_length"])
             return json.loads(data or b"{}")
         return self._from_mcap(session_id, row, TOPIC_METADATA)
+
+    def attachment(self, session_id: str, idx: int, suffix: str) -> tuple[str, bytes]:
+        """The attachment recorded with frame ``idx`` whose name ends in ``/suffix`` (an importer's
+        kept blob), from the MCAP source or, once that is deleted, the archive's extras.mcap."""
+        row = self._frame_row(session_id, idx)
+        seg = self.root / "sessions" / session_id / (row["segment"] or "")
+        extras = f"sessions/{session_id}/archive/extras.mcap"
+        if row["segment"] and seg.is_file():
+            f: Any = open(seg, "rb")
+        elif (head := self.store.head(extras)) is not None:
+            f = io.BufferedReader(_BlobFile(self.store, extras, head["size"]), buffer_size=256 * 1024)
+        else:
+            raise FrameNotFound(f"frame {idx} of {session_id}: neither the MCAP source nor extras.mcap is there")
+        with f:
+            summary = make_reader(f).get_summary()
+            for ai in summary.attachment_indexes if summary else []:
+                if ai.log_time == row["timestamp_ns"] and ai.name.endswith("/" + suffix):
+                    f.seek(ai.offset)
+                    record = next(StreamReader(f, skip_magic=True).records)
+                    if isinstance(record, Attachment):
+                        return ai.name[: -len(suffix) - 1], record.data
+        raise FrameNotFound(f"frame {idx} of {session_id} has no {suffix} (not imported from such a file)")
 
     def _from_mcap(self, session_id: str, row: dict[str, Any], topic: str) -> Any:
         seg = self.root / "sessions" / session_id / (row["segment"] or "")

@@ -1,12 +1,14 @@
-"""One frame: raw counts, PNG16, TIFF, temperatures, colour preview, sidecar."""
+"""One frame: raw counts, PNG16, TIFF, temperatures, colour preview, rebuilt DJI R-JPEG, sidecar."""
 
 from __future__ import annotations
 
 import json
 from typing import Literal
+from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
+from recorder.importers.dji import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 
 from ..security import require
@@ -25,7 +27,7 @@ def _check_index(row: dict, n: int) -> None:
 
 @router.get("/{n}", responses={200: {"content": {"image/png": {}, "image/tiff": {}, "application/octet-stream": {}}}})
 def get_frame(request: Request, session_id: str, n: int,
-              format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview"] = "png16",
+              format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",
               min: float | None = Query(None, ge=-273.15, le=5000), max: float | None = Query(None, ge=-273.15, le=5000)) -> Response:
     row = session_row(request, session_id)
@@ -43,6 +45,15 @@ def get_frame(request: Request, session_id: str, n: int,
                         headers={**dims, "X-Dtype": "uint16le"})
     if format == "tiff":
         return Response(tiff16(frame), media_type="image/tiff", headers=dims)
+    if format == "dji-rjpeg":  # for DJI's own tools: the R-JPEG rebuilt from the archive
+        name, segments = reader.attachment(session_id, n, SEGMENTS_BLOB)
+        disposition = f'attachment; filename="{quote(name or "frame.jpg")}"'
+        try:
+            body = rebuild_rjpeg(frame, segments)
+        except ValueError as exc:
+            raise HTTPException(409, f"frame {n}: {exc}") from None
+        return Response(body, media_type="image/jpeg",
+                        headers={**dims, "Content-Disposition": disposition})
     model = session_model(row["radiometric_model"])
     if format == "celsius-tiff":
         return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)

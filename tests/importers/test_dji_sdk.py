@@ -288,3 +288,32 @@ def test_dji_tools_measure_rebuilt_rjpegs_exactly_as_the_originals(samples, tmp_
     rebuilt = measure([str(p) for p in sorted(out.iterdir())])
     for p in sorted(out.iterdir()):
         assert np.array_equal(rebuilt[str(p)], originals[str(samples / "dji" / p.name)]), p.name
+
+
+def test_api_serves_the_rebuilt_rjpeg_after_the_mcap_source_is_deleted(samples, tmp_path):
+    from recorder.importers import read_file
+
+    files, rebuilt = _import_and_rebuild(samples, tmp_path)
+    root = tmp_path / "r"
+    r = run_cli("import", str(samples / "flir" / "FLIR_E40.jpg"), "--root", str(root), "--session", "flir",
+                "--no-analysis")
+    assert r.returncode == 0, r.stderr
+    r = run_cli("archive", "--all", "--root", str(root), "--formats", "png16", "--delete-source")
+    assert r.returncode == 0, r.stderr
+    assert not list(root.glob("sessions/*/*.mcap"))  # only the archive and its extras.mcap remain
+    server = ApiServer(root)
+    try:
+        with httpx.Client(base_url=server.url, timeout=30) as c:
+            for name, f in files.items():
+                resp = c.get(f"/api/v1/sessions/{f['session_id']}/frames/0", params={"format": "dji-rjpeg"})
+                assert resp.status_code == 200 and name in resp.headers["content-disposition"]
+                assert resp.content == (rebuilt / name).read_bytes()  # the same file export wrote
+                out = tmp_path / name
+                out.write_bytes(resp.content)
+                (again,) = read_file(out)
+                (orig,) = read_file(samples / "dji" / name)
+                assert np.array_equal(again.pixels, orig.pixels) and again.blobs == orig.blobs
+            r = c.get("/api/v1/sessions/flir/frames/0", params={"format": "dji-rjpeg"})
+            assert r.status_code == 404 and "dji_rjpeg_segments.bin" in r.json()["error"]
+    finally:
+        server.stop()
