@@ -8,16 +8,18 @@ and raw Gray16 with their JSON sidecars.
 
 from __future__ import annotations
 
+import mmap
 from pathlib import Path
+from typing import Iterator
 
 from .base import ImportedFrame, ImportError_
 from .dji import is_dji, read_dji
-from .flir import read_fff_file, read_flir_jpeg
+from .flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from .icd_files import read_icd_raw, read_icd_tiff, sidecar_for
 from .jpeg import app_segments
 from .terraref import metadata_for, read_terraref
 
-__all__ = ["ImportedFrame", "ImportError_", "read_file", "detect", "MAX_FILE_BYTES"]
+__all__ = ["ImportedFrame", "ImportError_", "read_file", "iter_file", "detect", "MAX_FILE_BYTES"]
 
 MAX_FILE_BYTES = 4 * 1024**3
 
@@ -74,3 +76,27 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
         raise
     except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
         raise ImportError_(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None
+
+
+def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Iterator[ImportedFrame]:
+    """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are memory-mapped and decoded
+    image by image, so an hours-long SEQ costs one frame of memory, not the file; the other
+    formats hold one frame a file anyway. A corrupt image mid-file raises ImportError_ there
+    (the frames before it were already yielded: callers that must not half-import keep track)."""
+    path = str(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+            if head not in (b"FFF\x00", b"AFF\x00"):
+                fh.close()
+                yield from read_file(path, terraref_variant=terraref_variant)
+                return
+            with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
+                try:
+                    yield from iter_fff_file(path, data)
+                except ImportError_:
+                    raise
+                except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
+                    raise ImportError_(f"{path}: corrupt flir-fff file ({type(exc).__name__}: {exc})") from None
+    except OSError as exc:
+        raise ImportError_(f"{path}: cannot read ({exc.strerror or exc})") from None

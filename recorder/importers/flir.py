@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import mmap
 import struct
 from typing import Iterator
 
@@ -158,31 +159,56 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
 
 def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
-    largest record end); 'FFF\\0' inside pixel data is never mistaken for a header."""
-    pos = 0
-    while pos + 0x40 <= len(data):
-        chunk = data[pos:]
-        order = _byteorder(path, chunk)
-        dir_off, count = struct.unpack(order + "II", chunk[0x18:0x20])
+    largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
+    image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file)."""
+    pos, n = 0, len(data)
+    done = 0  # bytes of an mmap already handed back to the kernel
+    while pos + 0x40 <= n:
+        if isinstance(data, mmap.mmap) and pos - done >= 64 << 20:  # keep RSS to the image at hand
+            upto = pos // mmap.PAGESIZE * mmap.PAGESIZE
+            data.madvise(mmap.MADV_DONTNEED, done, upto - done)
+            done = upto
+        order = _byteorder(path, data[pos:pos + 0x40])
+        dir_off, count = struct.unpack(order + "II", data[pos + 0x18:pos + 0x20])
         end = dir_off + 32 * count
+        if pos + end > n:
+            raise ImportError_(f"{path}: image at byte {pos} is cut (its directory needs {end} bytes, {n - pos} left)")
         for i in range(count):
-            e = read_exact(path, chunk, dir_off + 32 * i, 32, "FFF directory")
-            rtype, _s, _v, _i, off, length = struct.unpack(order + "HHIIII", e[:20])
+            rtype, _s, _v, _i, off, length = struct.unpack(order + "HHIIII", data[pos + dir_off + 32 * i:
+                                                                                    pos + dir_off + 32 * i + 20])
             if rtype:
                 end = max(end, off + length)
-        if end > len(chunk):
-            raise ImportError_(f"{path}: image at byte {pos} is cut (needs {end} bytes, {len(chunk)} left)")
-        yield chunk[:end]
+        if pos + end > n:
+            raise ImportError_(f"{path}: image at byte {pos} is cut (needs {end} bytes, {n - pos} left)")
+        yield bytes(data[pos:pos + end])
         pos += end
-        while pos < len(data) and data[pos:pos + 4] not in (b"FFF\x00", b"AFF\x00"):
+        while pos < n and data[pos:pos + 4] not in (b"FFF\x00", b"AFF\x00"):
             # padding between images; stop at the next real header
             nxt = data.find(b"FFF\x00", pos)
-            pos = len(data) if nxt < 0 else nxt
+            pos = n if nxt < 0 else nxt
 
 
 def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:
-    frames = [frame_from_fff(path, rec, "flir-fff", i) for i, rec in enumerate(iter_fff_records(path, data))]
-    if len(frames) > 1:
-        for f in frames:
-            f.format = "flir-seq" if f.layout != "jpeg-ls" else "flir-csq"
-    return frames
+    return list(iter_fff_file(path, data))
+
+
+def iter_fff_file(path: str, data: bytes) -> Iterator[ImportedFrame]:
+    """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be an mmap): a long SEQ never
+    sits decoded in memory. A file with a second image is a SEQ (CSQ when JPEG-LS coded)."""
+    records = iter_fff_records(path, data)
+    first = next(records, None)
+    if first is None:
+        raise ImportError_(f"{path}: no FFF image in the file")
+    second = next(records, None)
+    multi = second is not None
+
+    def named(frame: ImportedFrame) -> ImportedFrame:
+        if multi:
+            frame.format = "flir-seq" if frame.layout != "jpeg-ls" else "flir-csq"
+        return frame
+
+    yield named(frame_from_fff(path, first, "flir-fff", 0))
+    if second is not None:
+        yield named(frame_from_fff(path, second, "flir-fff", 1))
+        for i, rec in enumerate(records, start=2):
+            yield named(frame_from_fff(path, rec, "flir-fff", i))

@@ -26,7 +26,7 @@ import numpy as np
 from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable
 from ..recorder import Recorder, RecordingResult, new_session_id
 from ..sources.base import CapturedFrame, FrameSource, SensorInfo
-from . import ImportedFrame, ImportError_, read_file
+from . import ImportedFrame, ImportError_, iter_file
 from .dji_sdk import DjiBackend
 
 __all__ = ["import_paths", "ImportReport"]
@@ -89,6 +89,7 @@ class _ImportSource(FrameSource):
     def __init__(self, items: list[tuple[str, int, int]], first: ImportedFrame, model: RadiometricModel) -> None:
         self.items = items  # (path, frame index within file, timestamp ns)
         self.model = model
+        self._frames = _FrameCursor()
         h, w = first.pixels.shape
         self.sensor = SensorInfo(model=first.sensor_model or first.format, sensor_id=first.sensor_id, width=w, height=h,
                                  frame_rate_hz=1.0, pixel_pitch_um=None, netd_mk=None, serial_number="unknown",
@@ -98,11 +99,8 @@ class _ImportSource(FrameSource):
         return {"source": "import", "files": len({p for p, _, _ in self.items})}
 
     def frames(self) -> Iterator[CapturedFrame]:
-        cache: tuple[str, list[ImportedFrame]] | None = None
         for i, (path, k, ts) in enumerate(self.items):
-            if cache is None or cache[0] != path:
-                cache = (path, read_file(path))
-            f = cache[1][k]
+            f = self._frames.frame(path, k)
             yield CapturedFrame(
                 index=i, timestamp_ns=ts, pixels=f.pixels, capture_mono_ns=time.monotonic_ns(),
                 sidecar={"capture": {"source_file": os.path.basename(path)}},
@@ -110,6 +108,27 @@ class _ImportSource(FrameSource):
                                           "vendor": _jsonable(f.vendor_metadata)})],
                 attachments=[(f"{os.path.basename(path)}/{name}", "application/octet-stream", blob)
                              for name, blob in f.blobs.items()])
+
+
+class _FrameCursor:
+    """Frame ``k`` of a file, reading forward through it: frames of a SEQ come in order, so a long
+    file is decoded once, one frame at a time (a step back starts the file again)."""
+
+    def __init__(self) -> None:
+        self.path: str | None = None
+        self.frames: Iterator[ImportedFrame] = iter(())
+        self.next_k = 0
+
+    def frame(self, path: str, k: int) -> ImportedFrame:
+        if path != self.path or k < self.next_k:
+            self.path, self.frames, self.next_k = path, iter_file(path), 0
+        while True:
+            f = next(self.frames, None)
+            if f is None:
+                raise ImportError_(f"{path}: has no frame {k} any more (changed since it was checked)")
+            self.next_k += 1
+            if self.next_k > k:
+                return f
 
 
 def _jsonable(obj: Any) -> Any:
@@ -189,25 +208,33 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
             if e.path in problems:
                 summary["dji_sdk_error"] = problems[e.path]
             files.append(summary)
-            f.pixels = f.pixels[:1, :1]  # keep only the description until the recording pass
+            # keep only the description until the recording pass re-reads the file
+            f.pixels, f.blobs, f.vendor_metadata = f.pixels[:1, :1].copy(), {}, {}  # a view would pin the frame
         batch.clear()
 
     for path in _walk(paths):
         try:
-            frames = read_file(path, terraref_variant=terraref_variant)
-        except ImportError_ as exc:
-            failed.append({"path": path, "error": str(exc)})
-            if on_file:
-                on_file(path)
-            continue
-        mtime = int(os.stat(path).st_mtime * 1e9)
-        waiting.extend(_Entry(path, f.frame_index, f.timestamp_ns if f.timestamp_ns is not None else mtime, f)
-                       for f in frames)
-        if len(waiting) >= SDK_BATCH or dji_sdk is None:
-            settle(waiting)
+            mtime = int(os.stat(path).st_mtime * 1e9)
+            for f in iter_file(path, terraref_variant=terraref_variant):
+                e = _Entry(path, f.frame_index, f.timestamp_ns if f.timestamp_ns is not None else mtime, f)
+                if dji_sdk is not None and f.format == "dji-rjpeg":
+                    waiting.append(e)  # measured in batches: the SDK's start-up is paid once per batch
+                    if len(waiting) >= SDK_BATCH:
+                        settle(waiting)
+                else:
+                    settle([e])
+        except (ImportError_, OSError) as exc:
+            # nothing of a file that failed part-way is recorded: take back what it gave
+            waiting[:] = [e for e in waiting if e.path != path]
+            for members in groups.values():
+                members[:] = [e for e in members if e.path != path]
+            files[:] = [fs for fs in files if fs["path"] != path]
+            reason = str(exc) if isinstance(exc, ImportError_) else f"{path}: cannot read ({exc.strerror or exc})"
+            failed.append({"path": path, "error": reason})
         if on_file:
             on_file(path)
     settle(waiting)
+    groups = {k: v for k, v in groups.items() if v}
     parts = [part for members in groups.values() for part in _split_tables(members)]
     sessions = []
     for n, (model, members) in enumerate(parts):
@@ -217,7 +244,7 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
             ts = e.timestamp_ns if last is None or e.timestamp_ns > last else last + 1  # strictly increasing log times
             items.append((e.path, e.frame_index, ts))
             last = ts
-        first = read_file(members[0].path)[members[0].frame_index]
+        first = _FrameCursor().frame(members[0].path, members[0].frame_index)
         sid = session if session and len(parts) == 1 else (f"{session}-{n + 1}" if session else
                                                            new_session_id(first.sensor_id))
         rec = Recorder(_ImportSource(items, first, model), root, session_id=sid, analysis=analysis,

@@ -106,3 +106,44 @@ def test_import_cli_keeps_going_and_reports(samples, tmp_path):
     assert [f["path"] for f in out["failed"]] == [str(bad / "cut.jpg")]
     assert len(out["files"]) == 5 and all(s["ok"] for s in out["sessions"])
     assert not list((tmp_path / "root").rglob("*.active"))
+
+
+def test_a_seq_cut_part_way_imports_nothing_of_itself(samples, tmp_path):
+    """Frames are read one at a time, but a file that fails part-way leaves no trace."""
+    one = (samples / "flir" / "frame_000000.fff").read_bytes()
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "cut.seq").write_bytes(one * 3 + one[: len(one) // 2])
+    (folder / "good.seq").write_bytes(one * 40)
+    root = tmp_path / "root"
+    r = run_cli("import", str(folder), "--root", str(root), "--json", "--no-analysis")
+    assert r.returncode == 1
+    out = json.loads(r.stdout)
+    assert [f["path"] for f in out["failed"]] == [str(folder / "cut.seq")] and "is cut" in out["failed"][0]["error"]
+    assert {f["path"] for f in out["files"]} == {str(folder / "good.seq")} and len(out["files"]) == 40
+    (s,) = out["sessions"]
+    assert s["frames_written"] == 40
+
+
+def _import_peak_rss_mb(args: list[str]) -> float:
+    """Peak RSS of one ``thermcap import`` process (a fresh parent, so the children's maximum is its)."""
+    import subprocess
+    import sys
+
+    code = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, stdout=subprocess.DEVNULL); "
+            "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
+    out = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "recorder", "import", *args],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return int(out.stdout.strip()) / 1024
+
+
+def test_a_long_seq_imports_in_bounded_memory(samples, tmp_path):
+    """Ten times the frames must not mean ten times the memory: frames are decoded one at a time
+    and nothing of a recorded frame is kept (300 frames are 200 MB of pixels)."""
+    one = (samples / "flir" / "frame_000000.fff").read_bytes()
+    (tmp_path / "short.seq").write_bytes(one * 30)
+    (tmp_path / "long.seq").write_bytes(one * 300)
+    short = _import_peak_rss_mb([str(tmp_path / "short.seq"), "--root", str(tmp_path / "a"), "--no-analysis"])
+    long = _import_peak_rss_mb([str(tmp_path / "long.seq"), "--root", str(tmp_path / "b"), "--no-analysis"])
+    assert long - short < 60, (short, long)
