@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 import os
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
@@ -26,26 +26,36 @@ __all__ = ["EXTRAS_NAME", "write_extras", "summarize_mcap"]
 EXTRAS_NAME = "extras.mcap"
 
 
-def summarize_mcap(paths: list[Path], skip_topic: str = TOPIC_IMAGE) -> dict[str, Any]:
+def _extra_records(path: Path) -> Iterator[tuple[str, Any]]:
+    """Everything of one MCAP but its image messages: ("message", (schema, channel, msg)),
+    ("attachment", attachment), ("metadata", record); one place for what "extras" means."""
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        for schema, channel, msg in reader.iter_messages():
+            if channel.topic != TOPIC_IMAGE:
+                yield "message", (schema, channel, msg)
+        for att in reader.iter_attachments():
+            yield "attachment", att
+        for rec in reader.iter_metadata():
+            yield "metadata", rec
+
+
+def summarize_mcap(paths: list[Path]) -> dict[str, Any]:
     """Message counts and a digest per topic, attachments by sha256, metadata records: what
     ``write_extras`` must carry over and what its check compares."""
     topics: dict[str, Any] = {}
     attachments, metadata = [], []
     for path in paths:
-        with open(path, "rb") as f:
-            reader = make_reader(f)
-            for _, channel, msg in reader.iter_messages():
-                if channel.topic == skip_topic:
-                    continue
+        for kind, rec in _extra_records(path):
+            if kind == "message":
+                _, channel, msg = rec
                 t = topics.setdefault(channel.topic, {"messages": 0, "digest": hashlib.sha256()})
                 t["messages"] += 1
                 t["digest"].update(msg.log_time.to_bytes(8, "little") + msg.data)
-        with open(path, "rb") as f:
-            for att in make_reader(f).iter_attachments():
-                attachments.append({"name": att.name, "bytes": len(att.data),
-                                    "sha256": hashlib.sha256(att.data).hexdigest()})
-        with open(path, "rb") as f:
-            for rec in make_reader(f).iter_metadata():
+            elif kind == "attachment":
+                digest = hashlib.sha256(rec.data).hexdigest()
+                attachments.append({"name": rec.name, "bytes": len(rec.data), "sha256": digest})
+            else:
                 metadata.append({"name": rec.name, "metadata": dict(rec.metadata)})
     return {"topics": {k: {"messages": v["messages"], "sha256": v["digest"].hexdigest()} for k, v in topics.items()},
             "attachments": attachments, "metadata": metadata}
@@ -60,16 +70,14 @@ def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
     expected = summarize_mcap(segments)
     channels: dict[tuple, int] = {}
     schemas: dict[tuple, int] = {}
+    seen_meta: set[tuple] = set()
     with open(partial, "wb") as out:
         writer = Writer(out, compression=CompressionType.ZSTD)
         writer.start(profile="", library="thermcap-archive")
-        seen_meta: set[tuple] = set()
         for seg in segments:
-            with open(seg, "rb") as f:
-                reader = make_reader(f)
-                for schema, channel, msg in reader.iter_messages():
-                    if channel.topic == TOPIC_IMAGE:
-                        continue
+            for kind, rec in _extra_records(seg):
+                if kind == "message":
+                    schema, channel, msg = rec
                     skey = (schema.name, schema.encoding, schema.data) if schema else None
                     if skey is not None and skey not in schemas:
                         schemas[skey] = writer.register_schema(schema.name, schema.encoding, schema.data)
@@ -78,15 +86,11 @@ def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
                         channels[ckey] = writer.register_channel(channel.topic, channel.message_encoding,
                                                                  schemas.get(skey, 0), dict(channel.metadata))
                     writer.add_message(channels[ckey], msg.log_time, msg.data, msg.publish_time, msg.sequence)
-            with open(seg, "rb") as f:
-                for att in make_reader(f).iter_attachments():
-                    writer.add_attachment(att.create_time, att.log_time, att.name, att.media_type, att.data)
-            with open(seg, "rb") as f:
-                for rec in make_reader(f).iter_metadata():
-                    key = (rec.name, tuple(sorted(rec.metadata.items())))
-                    if key not in seen_meta:  # each segment repeats the session's record
-                        seen_meta.add(key)
-                        writer.add_metadata(rec.name, dict(rec.metadata))
+                elif kind == "attachment":
+                    writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)
+                elif (key := (rec.name, tuple(sorted(rec.metadata.items())))) not in seen_meta:
+                    seen_meta.add(key)  # identical records (if a writer repeats one) are kept once
+                    writer.add_metadata(rec.name, dict(rec.metadata))
         writer.finish()
         out.flush()
         os.fsync(out.fileno())
