@@ -150,7 +150,9 @@ FAKE_DIRP = r"""
 typedef void *DIRP_HANDLE;
 typedef struct { int32_t width; int32_t height; } dirp_resolution_t;
 static int live = 0;
+static int32_t last_size = 0;
 int32_t dirp_create_from_rjpeg(const uint8_t *data, int32_t size, DIRP_HANDLE *ph) {
+    last_size = size;
     if (size < 4 || data[0] != 0xFF || data[1] != 0xD8) return -2;   /* DIRP_ERROR_INVALID_PARAMS-like */
     if (getenv("FAKE_DIRP_REJECT")) return -9;
     *ph = malloc(16); live++; return 0;
@@ -158,7 +160,8 @@ int32_t dirp_create_from_rjpeg(const uint8_t *data, int32_t size, DIRP_HANDLE *p
 int32_t dirp_get_rjpeg_resolution(DIRP_HANDLE h, dirp_resolution_t *r) { r->width = 640; r->height = 512; return 0; }
 int32_t dirp_measure_ex(DIRP_HANDLE h, float *t, int32_t size) {
     if (size != 640 * 512 * 4) return -3;                                /* wrong buffer size */
-    for (int i = 0; i < 640 * 512; i++) t[i] = getenv("FAKE_DIRP_NOISY") ? (float)i : 21.5f;
+    for (int i = 0; i < 640 * 512; i++)
+        t[i] = getenv("FAKE_DIRP_NOISY") ? (float)i : getenv("FAKE_DIRP_BY_SIZE") ? 20.0f + last_size % 7 : 21.5f;
     return 0;
 }
 int32_t dirp_destroy(DIRP_HANDLE h) { free(h); live--; return 0; }
@@ -317,3 +320,22 @@ def test_api_serves_the_rebuilt_rjpeg_after_the_mcap_source_is_deleted(samples, 
             assert r.status_code == 404 and "dji_rjpeg_segments.bin" in r.json()["error"]
     finally:
         server.stop()
+
+
+def test_frames_whose_sdk_tables_disagree_get_separate_sessions(samples, fake_libdirp, tmp_path):
+    """Same camera, same counts, different temperatures (here: the stand-in answers by file size):
+    one table cannot hold both, so they are two sessions, each with its own."""
+    src = tmp_path / "in"
+    src.mkdir()
+    data = (samples / "dji" / "DJI_H20T.jpg").read_bytes()
+    (src / "a.jpg").write_bytes(data)
+    (src / "b.jpg").write_bytes(data)
+    (src / "c.jpg").write_bytes(data + b"\0")  # one byte after the image: a different answer
+    r = run_cli("import", str(src), "--root", str(tmp_path / "r"), "--json", "--no-analysis", "--dji-sdk",
+                str(fake_libdirp), env={"FAKE_DIRP_BY_SIZE": "1"})
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    sids = {f["path"].rsplit("/", 1)[-1]: f["session_id"] for f in out["files"]}
+    assert sids["a.jpg"] == sids["b.jpg"] != sids["c.jpg"]
+    temps = {f["path"].rsplit("/", 1)[-1]: f["celsius"]["mean"] for f in out["files"]}
+    assert temps["a.jpg"] == temps["b.jpg"] != temps["c.jpg"]
