@@ -42,7 +42,7 @@ class _Rescanner(threading.Thread):
     def run(self) -> None:
         while not self.halt.wait(self.interval_s):
             try:
-                index_root(self.app.state.engine, self.app.state.settings.root)
+                index_root(self.app.state.engine, self.app.state.settings.root, store=self.app.state.store)
             except Exception as exc:  # never take the service down over a scan
                 log.warning("background index failed: %s", exc)
 
@@ -81,7 +81,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     async def lifespan(app: FastAPI):
         rescan = None
         if index_on_start:
-            index_root(app.state.engine, settings.root)
+            index_root(app.state.engine, settings.root, store=app.state.store)
         if settings.rescan_interval_s > 0:
             rescan = _Rescanner(app, settings.rescan_interval_s)
             rescan.start()

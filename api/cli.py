@@ -61,11 +61,12 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     from .db import make_engine, migrate
     from .index import index_root
     from .settings import Settings
+    from .storage import make_store
 
     settings = Settings(root=Path(root_arg or root))
     engine = make_engine(settings.db_url)
     migrate(engine)
-    result = index_root(engine, settings.root, force=force)
+    result = index_root(engine, settings.root, force=force, store=make_store(settings))
     if as_json:
         click.echo(json.dumps(result, indent=2))
     else:

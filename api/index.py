@@ -214,8 +214,10 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     return True
 
 
-def index_root(engine: Engine, root: Path, *, force: bool = False) -> dict[str, Any]:
-    """Index every session under ROOT; drop sessions whose folder is gone. Skips unfinished ones."""
+def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> dict[str, Any]:
+    """Index every session under ROOT; drop sessions whose folder is gone, unless ``store`` is an
+    object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
+    bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
     done, unchanged, failed = [], [], {}
     present = set()
     for d in list_sessions(root):
@@ -230,6 +232,9 @@ def index_root(engine: Engine, root: Path, *, force: bool = False) -> dict[str, 
     with engine.begin() as conn:
         known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
         gone = sorted(known - present)
+        if store is not None and store.kind != "local":
+            in_store = {sid for sid in gone if store.head(f"sessions/{sid}/archive/manifest.json") is not None}
+            gone = [sid for sid in gone if sid not in in_store]
         for sid in gone:
             for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
                 conn.execute(delete(table).where(table.c.session_id == sid))

@@ -47,4 +47,5 @@ def audit(request: Request, prices: str | None = None) -> dict:
 
 @router.post("/api/v1/index", tags=["meta"], dependencies=[Depends(require("write"))])
 def reindex(request: Request, force: bool = False) -> dict:
-    return index_root(request.app.state.engine, request.app.state.settings.root, force=force)
+    return index_root(request.app.state.engine, request.app.state.settings.root, force=force,
+                      store=request.app.state.store)

@@ -56,3 +56,35 @@ def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweed
             assert hashlib.sha256(body).hexdigest() == png["sha256"]
     finally:
         server.stop()
+
+
+def test_gc_frees_local_disk_and_the_bucket_keeps_serving_dji_frames(postgres_url, seaweedfs, tmp_path, samples):
+    """Scale-out retention: a DJI import archived and uploaded, then ``gc`` deletes the local
+    session; the catalog keeps it, and its frames and rebuilt R-JPEG come from SeaweedFS alone
+    (pixels from the png16 ZIP, DJI segments from extras.mcap, both by ranged reads)."""
+    root = tmp_path / "data"
+    env = {"THERMCAP_DATABASE_URL": postgres_url, "THERMCAP_S3_BUCKET": seaweedfs["bucket"],
+           "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"], "THERMCAP_S3_PREFIX": f"gc-{tmp_path.name}",
+           "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
+           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t",
+                "--no-analysis", "--dji-sdk", "off", env=env)
+    assert r.returncode == 0, r.stderr
+    r = run_cli("export", "h20t", "--root", str(root), "--to", "dji-rjpeg", "--out", str(tmp_path / "rebuilt"))
+    assert r.returncode == 0, r.stderr
+    rebuilt = (tmp_path / "rebuilt" / "DJI_H20T.jpg").read_bytes()
+    r = run_cli("worker", "--root", str(root), "--once", "--json", "--formats", "png16", env=env)
+    assert r.returncode == 0 and json.loads(r.stdout)["archived"] == ["h20t"], r.stderr
+    r = run_cli("gc", "--root", str(root), "--keep-days", "0", "--json", env=env)
+    assert r.returncode == 0, r.stderr
+    assert not (root / "sessions" / "h20t").exists()
+    ref = json.loads((samples / "dji" / "reference.json").read_text())["DJI_H20T.jpg"]
+    server = ApiServer(root, env=env)
+    try:
+        with httpx.Client(base_url=server.url, timeout=30) as c:
+            assert [s["id"] for s in c.get("/api/v1/sessions").json()["items"]] == ["h20t"]
+            raw = c.get("/api/v1/sessions/h20t/frames/0", params={"format": "raw"}).content
+            assert hashlib.sha256(raw).hexdigest() == ref["raw_sha256"]
+            assert c.get("/api/v1/sessions/h20t/frames/0", params={"format": "dji-rjpeg"}).content == rebuilt
+    finally:
+        server.stop()
