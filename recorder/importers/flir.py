@@ -118,6 +118,11 @@ def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, di
             "lens_model": text(0x170, 0x180)}
     if model.emissivity <= 0 or model.planck_r1 == 0:
         raise ImportError_(f"{path}: FLIR CameraInfo has no usable Planck constants")
+    if len(rec) >= 0x38E:  # DateTimeOriginal: u32 UTC seconds, u32 ms (low 16 bits), s16 minutes west of UTC
+        seconds, millis, west = struct.unpack(o + "IIh", rec[0x384:0x38E])
+        if 946684800 <= seconds < 4102444800:  # 2000..2100: anything else is an unset clock
+            meta["capture_time_ns"] = seconds * 1_000_000_000 + (millis & 0xFFFF) * 1_000_000
+            meta["capture_utc_offset_min"] = -west
     return model, meta
 
 
@@ -133,8 +138,11 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
     model, meta = _camera_info(path, records[CAMERA_INFO][1], order)
     creator = fff[4:20].split(b"\x00")[0].decode("latin-1")
     meta.update(creator=creator, byte_order="big" if order == ">" else "little", raw_subtype=sub)
+    stamp = meta.pop("capture_time_ns", None)
+    if stamp is not None:
+        meta["time_basis"] = "utc: FLIR CameraInfo DateTimeOriginal"
     return ImportedFrame(path=path, format=fmt, layout={1: "raw-be", 2: "raw-le", 3: "png", 4: "jpeg-ls"}.get(sub),
-                         pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model,
+                         pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model, timestamp_ns=stamp,
                          sensor_model=meta["camera_model"] or creator or "FLIR", sensor_id="FLIR",
                          vendor_metadata=meta, frame_index=index, blobs={"flir_camera_info.bin": records[CAMERA_INFO][1]})
 
@@ -149,9 +157,14 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
     app1 = [p for m, p in app_segments(path, data) if m == 0xE1]
     exif = exif_fields(app1)
     xmp = xmp_fields(app1)
-    frame.timestamp_ns, time_basis = capture_time(exif, xmp)
+    ts, time_basis = capture_time(exif, xmp)
+    if frame.timestamp_ns is None or time_basis.startswith("utc: drone-dji"):
+        # FLIR's own UTC time with milliseconds beats EXIF's zone-less local time; DJI's XMP UTC
+        # (a Zenmuse XT2) is as good and is the drone's clock
+        frame.timestamp_ns = ts
+        frame.vendor_metadata["time_basis"] = time_basis
     frame.vendor_metadata.update(exif_make=exif.get("Make"), exif_model=exif.get("Model"),
-                                 exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"), time_basis=time_basis)
+                                 exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
     if xmp:
         frame.vendor_metadata["xmp_drone_dji"] = xmp
     return [frame]

@@ -99,3 +99,31 @@ def test_terraref_pipeline_and_physical_variants(samples):
     plain = TerraRefPlanckModel(**params, variant="plain").to_celsius(f.pixels)
     assert abs(plain.mean() - ref["plain_planck_E1_tau1: B/ln(R*J1/(raw-J0)+F)-273.15"]["mean"]) < 0.01
     assert f.vendor_metadata["position_m"]["x"] == "5.7185"
+
+
+def _exiftool_flir_times(txt: Path) -> list[int]:
+    """exiftool's 'Date/Time Original' values that carry a zone (FLIR's own CameraInfo time), as UTC ns."""
+    from datetime import datetime
+
+    raw = txt.read_bytes()
+    text = raw.decode("utf-16") if raw[:2] in (b"\xff\xfe", b"\xfe\xff") else raw.decode("utf-8", "replace")
+    out = []
+    for line in text.splitlines():
+        key, _, value = line.partition(":")
+        value = value.strip()
+        if key.strip() == "Date/Time Original" and value[-6:-5] in "+-" and value[-3:-2] == ":":
+            dt = datetime.strptime(value, "%Y:%m:%d %H:%M:%S.%f%z")
+            out.append(int(dt.timestamp()) * 1_000_000_000 + dt.microsecond * 1000)
+    return out
+
+
+def test_flir_capture_times_agree_with_exiftool(samples):
+    """FLIR's CameraInfo time (UTC seconds, milliseconds, zone) read by us and by exiftool 12.x."""
+    checked = 0
+    for name in ("FLIR_E40.jpg", "FLIR_T640.jpg", "DJI_XT2.jpg", "frame_000000.fff"):
+        (f,) = read_file(samples / "flir" / name)
+        times = _exiftool_flir_times(samples / "flir" / (name.rsplit(".", 1)[0] + ".exiftool.txt"))
+        assert times, name
+        assert f.timestamp_ns == times[0] and f.vendor_metadata["time_basis"].startswith("utc: FLIR"), name
+        checked += 1
+    assert checked == 4
