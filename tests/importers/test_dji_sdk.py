@@ -251,6 +251,7 @@ def test_api_lists_a_table_by_identity_and_serves_it_whole_on_the_session(sample
             dom = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom",
                                   f"{server.url}/ui/sessions/girp"], capture_output=True, text=True, timeout=120).stdout
             assert 'data-ready="1"' in dom and f"lookup table, {listed['entries']} counts" in dom, dom[-1500:]
+            assert "/frames/0?format=dji-rjpeg" in dom  # a DJI session offers the rebuilt R-JPEG
     finally:
         server.stop()
 
