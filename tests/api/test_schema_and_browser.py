@@ -39,7 +39,7 @@ def test_session_page_renders_in_headless_chromium(server, tmp_path):
                              capture_output=True, text=True, timeout=120).stdout
     assert 'data-ready="1"' in dom, dom[-2000:]
     assert "frame 0 / 59" in dom and "s-archived" in dom
-    assert "/frames/0?format=celsius-tiff" in dom and "dji-rjpeg" not in dom  # per-frame downloads; not a DJI session
+    assert "/frames/0?format=celsius-tiff" in dom and "?format=dji-rjpeg" not in dom  # per-frame links; not a DJI session
     assert 'src="blob:' in dom  # the colour preview was fetched and shown
     out = tmp_path / "session.png"
     with tempfile.TemporaryDirectory() as profile:
