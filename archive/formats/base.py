@@ -83,13 +83,6 @@ class ArchiveFormat(ABC):
     def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
         """Frames in session order, decoded by the format's ordinary reader."""
 
-    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
-        """One frame by session index (random access); the default walks, formats do better."""
-        for i, frame in enumerate(self.read(out_dir, [f.path for f in files])):
-            if i == index:
-                return frame
-        raise IndexError(index)
-
     def get_config(self) -> dict[str, Any]:
         return {"id": self.format_id}
 

@@ -91,8 +91,3 @@ class Hdf5(ArchiveFormat):
                         yield d[i]
             except (OSError, KeyError) as exc:
                 raise ArchiveError(f"{path}: not a readable HDF5 archive ({exc})") from exc
-
-    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
-        with h5py.File(out_dir / files[0].path, "r") as f:
-            return f["frames"][index]
-

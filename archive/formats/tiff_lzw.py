@@ -71,12 +71,3 @@ class TiffLzw(ArchiveFormat):
                         yield page.asarray()
             except (tifffile.TiffFileError, OSError, ValueError) as exc:
                 raise ArchiveError(f"{path}: not a readable TIFF ({exc})") from exc
-
-    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
-        start = 0
-        for rec in files:
-            if index < start + rec.frames:
-                with tifffile.TiffFile(out_dir / rec.path) as tif:
-                    return tif.pages[index - start].asarray()
-            start += rec.frames
-        raise IndexError(index)

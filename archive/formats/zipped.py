@@ -64,16 +64,6 @@ class ZippedFrames(ArchiveFormat):
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
 
-    def read_frame(self, out_dir: Path, files: list[FileRecord], index: int) -> np.ndarray:
-        start = 0
-        for rec in files:
-            if index < start + rec.frames:
-                with zipfile.ZipFile(out_dir / rec.path) as zf:
-                    images = [i for i in zf.infolist() if i.filename.endswith(self.codec.extension)]
-                    return self.codec.decode(zf.read(images[index - start]))
-            start += rec.frames
-        raise IndexError(index)
-
 
 def _info(name: str, log_time: int) -> zipfile.ZipInfo:
     import time
