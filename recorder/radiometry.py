@@ -123,6 +123,15 @@ DEFAULT_MODEL = LinearModel()
 assert DEFAULT_MODEL.max_count == MAX_COUNT
 
 
+def _atmospheric_tau(distance_m: float, h2o: float, alpha1: float, alpha2: float, beta1: float, beta2: float,
+                     x: float) -> float:
+    """FLIR's two-band atmospheric transmission over ``distance_m`` for water vapour ``h2o``
+    (Thermimage's ``raw2temp``; TERRA-REF's pipeline uses the same, with its own h2o rounding)."""
+    d = np.sqrt(distance_m / 2)
+    return (x * np.exp(-d * (alpha1 + beta1 * np.sqrt(h2o)))
+            + (1 - x) * np.exp(-d * (alpha2 + beta2 * np.sqrt(h2o))))
+
+
 def _planck_raw(r1: float, r2: float, b: float, f: float, o: float, temp_c: float) -> float:
     """Raw counts a blackbody at ``temp_c`` would give (FLIR's Planck curve)."""
     return r1 / (r2 * (np.exp(b / (temp_c + 273.15)) - f)) - o
@@ -159,9 +168,8 @@ class FlirPlanckModel:
         ta = self.atmospheric_temp_c
         h2o = (self.relative_humidity_pct / 100) * np.exp(1.5587 + 0.06939 * ta - 0.00027816 * ta**2
                                                            + 0.00000068455 * ta**3)
-        d = np.sqrt(self.object_distance_m / 2)
-        return float(self.trans_x * np.exp(-d * (self.alpha1 + self.beta1 * np.sqrt(h2o)))
-                     + (1 - self.trans_x) * np.exp(-d * (self.alpha2 + self.beta2 * np.sqrt(h2o))))
+        return float(_atmospheric_tau(self.object_distance_m, h2o, self.alpha1, self.alpha2, self.beta1, self.beta2,
+                                      self.trans_x))
 
     def to_celsius(self, raw: np.ndarray) -> np.ndarray:
         e, irt = self.emissivity, self.ir_window_transmission
@@ -221,10 +229,8 @@ class TerraRefPlanckModel:
             corr = raw
         else:
             t, h = self.atm_temp_c, self.humidity
-            h2o = h * np.exp(1.56 + 0.0694 * t - 0.000278 * t**2 + 0.000000685 * t**3)
-            d = np.sqrt(self.distance_m / 2)
-            tau = (self.x * np.exp(-d * (self.alpha1 + self.beta1 * np.sqrt(h2o)))
-                   + (1 - self.x) * np.exp(-d * (self.alpha2 + self.beta2 * np.sqrt(h2o))))
+            h2o = h * np.exp(1.56 + 0.0694 * t - 0.000278 * t**2 + 0.000000685 * t**3)  # the pipeline's rounding
+            tau = _atmospheric_tau(self.distance_m, h2o, self.alpha1, self.alpha2, self.beta1, self.beta2, self.x)
             p_atm = self._p(t + 273.15)
             e = self.emissivity
             if self.variant == "pipeline":  # as implemented in FlirRawToTemperature.m / Get_FLIR.py
