@@ -29,6 +29,7 @@ __all__ = [
     "TemperatureUnavailable",
     "register_model",
     "model_from_dict",
+    "describe_model",
     "DEFAULT_MODEL",
 ]
 
@@ -66,6 +67,13 @@ def model_from_dict(data: dict[str, Any]) -> RadiometricModel:
     if unknown:
         raise ValueError(f"radiometric model {kind!r} has unknown parameters {sorted(unknown)}")
     return cls(**params)
+
+
+def describe_model(model: RadiometricModel) -> dict[str, Any]:
+    """A model as a sidecar, a listing or a per-file report shows it: whole, except a lookup table,
+    which shows its identity (source, entries, sha256) instead of thousands of entries."""
+    summary = getattr(model, "summary", None)
+    return summary() if summary is not None else model.to_dict()
 
 
 @register_model

@@ -26,7 +26,7 @@ from .exceptions import RecordingError, ThermcapError
 from .icd import FORMAT_VERSION, iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
 from .analysis import EventBuilder, HotSpotDetector
-from .radiometry import LinearModel
+from .radiometry import LinearModel, describe_model
 from .segments import SegmentPolicy, SessionWriter, write_json_atomic
 from .sidecar import SidecarEncoder
 from .sources.base import CapturedFrame, FrameSource
@@ -398,4 +398,4 @@ def _radiometric_block(model: Any) -> dict[str, Any]:
     return {"bit_depth": getattr(model, "bit_depth", 16), "scale_factor_deg_c_per_count": None, "offset_deg_c": None,
             "scene_temp_min_deg_c": None, "scene_temp_max_deg_c": None, "calibration_date": None,
             "calibration_method": model.kind,
-            "model": model.summary() if hasattr(model, "summary") else model.to_dict()}
+            "model": describe_model(model)}

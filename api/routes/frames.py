@@ -9,6 +9,7 @@ from urllib.parse import quote
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
 from recorder.importers.dji import SEGMENTS_BLOB, rebuild_rjpeg
+from recorder.radiometry import describe_model
 from recorder.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 
 from ..security import require
@@ -81,5 +82,5 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     model = session_model(row["radiometric_model"])
     value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
     return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "approximate": getattr(model, "approximate", False),
-            "model": model.summary() if hasattr(model, "summary") else model.to_dict()}
+            "model": describe_model(model)}
 

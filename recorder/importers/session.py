@@ -23,7 +23,7 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable
+from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
 from ..recorder import Recorder, RecordingResult, new_session_id
 from ..sources.base import CapturedFrame, FrameSource, SensorInfo
 from . import ImportedFrame, ImportError_, iter_file
@@ -87,7 +87,7 @@ def _summary(f: ImportedFrame) -> dict[str, Any]:
     out = {"path": f.path, "format": f.format, "layout": f.layout, "frame_index": f.frame_index,
            "width": int(f.pixels.shape[1]), "height": int(f.pixels.shape[0]),
            "raw_sha256": hashlib.sha256(np.ascontiguousarray(f.pixels, dtype="<u2").tobytes()).hexdigest(),
-           "celsius": celsius, "model": _model_json(f.model)}
+           "celsius": celsius, "model": describe_model(f.model)}
     if celsius is None:
         out["celsius_unavailable"] = reason
     return out
@@ -146,10 +146,6 @@ class _FrameCursor:
 
 def _jsonable(obj: Any) -> Any:
     return json.loads(json.dumps(obj, default=str))
-
-
-def _model_json(model: Any) -> dict[str, Any]:
-    return model.summary() if hasattr(model, "summary") else model.to_dict()
 
 
 @dataclass
