@@ -25,7 +25,7 @@ from archive.archiver import archive_session
 from archive.manifest import load_manifest
 from recorder.exceptions import ThermcapError
 from recorder.reader import list_sessions, read_session_meta
-from recorder.recorder import lock_session
+from recorder.lock import is_locked
 
 from . import db
 from .index import index_session
@@ -61,10 +61,8 @@ def finished_sessions(root: Path) -> list[Path]:
         meta = read_session_meta(d)
         if meta.get("status") not in ("complete", "recovered", "failed") or list(d.glob("*.active")):
             continue
-        fd = lock_session(d)
-        if fd is None:
+        if is_locked(d):
             continue  # still being recorded (or archived on this host)
-        os.close(fd)
         out.append(d)
     return out
 

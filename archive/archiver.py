@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from recorder.reader import count_frames, iter_session_frames, read_session_meta, session_segments
-from recorder.recorder import lock_session
+from recorder.lock import holder, lock_session
 from recorder.segments import ACTIVE_SUFFIX, fsync_dir
 
 from .codecs import library_versions
@@ -109,13 +109,13 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
         raise ArchiveError(f"{session_dir}: no such session folder")
     if list(session_dir.glob(f"*{ACTIVE_SUFFIX}")):
         raise ArchiveError(f"{session_dir}: has unfinished segments (*.active); recording, or run `thermcap recover`")
-    lock_fd = lock_session(session_dir)
-    if lock_fd is None:
-        raise ArchiveError(f"{session_dir}: a recorder or another archiver holds this session")
+    lock = lock_session(session_dir, "archiver")
+    if lock is None:
+        raise ArchiveError(f"{session_dir}: {holder(session_dir) or 'another process'} holds this session")
     try:
         return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress)
     finally:
-        os.close(lock_fd)
+        lock.release()
 
 
 def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int, force: bool,

@@ -84,6 +84,9 @@ def bench() -> None:
 @click.option("--session", "session_id", default=None, help="Session id (default: <UTC time>_<sensor>_<random>).")
 @click.option("--pace/--no-pace", default=None,
               help="Release frames at --fps (default: on for sim, off for raw: as fast as they arrive).")
+@click.option("--timestamps", type=click.Choice(["stream", "arrival"]), default="stream", show_default=True,
+              help="raw: 'stream' stamps frame i at start + i/fps (a file or a replay), 'arrival' when it "
+                   "arrives (a pipe from a live camera tool).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulator seed.")
 @click.option("--crossover", is_flag=True, help="Simulator: include a dawn/dusk thermal crossover.")
 @click.option("--cue-period", type=float, default=20.0, show_default=True, help="Simulator: seconds between radar cues (0: none).")
@@ -98,7 +101,7 @@ def bench() -> None:
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
 def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
-           root: str, session_id: str | None, pace: bool | None, seed: int, crossover: bool, cue_period: float,
+           root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool, cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
@@ -111,7 +114,8 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
         is_sim = source == "sim"
         src = make_source(source, width=width, height=height, fps=fps, seed=seed, crossover=crossover,
                           cue_period_s=cue_period, paced=(is_sim if pace is None else pace),
-                          duration_s=duration if is_sim else None, sensor_id=sensor_id)
+                          duration_s=duration if is_sim else None, sensor_id=sensor_id,
+                          timestamps=None if is_sim else timestamps)
         if getattr(src, "file_remainder", 0):
             click.echo(f"warning: {source[4:]} is not a whole number of {width}x{height} Gray16 frames "
                        f"({src.file_remainder} bytes left over); the last frame will be reported as truncated",
@@ -149,8 +153,12 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
         fps_eff = result.frames_written / result.wall_s if result.wall_s else 0.0
         click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, "
                    f"{result.frames_dropped} dropped  ({fps_eff:.1f} fps over {result.wall_s:.1f} s)")
-        if any(result.dropped.values()):
-            click.secho(f"dropped messages per topic: {result.dropped}", fg="yellow", err=True)
+        timing = result.timing
+        click.echo(f"timestamps: {timing.get('time_basis')}  declared {timing.get('declared_fps')} fps, "
+                   f"source achieved {timing.get('achieved_fps')} fps, {timing.get('frames_late', 0)} frames late")
+        for problem in result.problems:
+            if problem != result.error:
+                click.secho(f"warning: {problem}", fg="yellow", err=True)
         click.echo(f"segments: {len(result.segments)}  bytes: {sum(s['bytes'] for s in result.segments):,}  "
                    f"write latency p50 {lat['p50']} ms, p99 {lat['p99']} ms")
         if analysis:
@@ -207,8 +215,15 @@ def _print_info(d: dict[str, Any]) -> None:
     if "status" in d:
         con.print(f"status: {d['status']}   sensor: {d.get('sensor')}   segments: {len(d['segments'])}"
                   + (f"   unfinished: {', '.join(d['active_segments'])}" if d["active_segments"] else ""))
+        if d.get("hint"):
+            con.print(f"[yellow]{d['hint']}[/yellow]")
     con.print(f"frames: {d['frames']}   span: {d['start']} .. {d['end']} ({d['duration_s']:.3f} s)   "
               f"effective fps: {d['effective_fps']}")
+    if d.get("time_basis"):
+        late = d.get("frames_late") or 0
+        con.print(f"timestamps: {d['time_basis']}   declared fps: {d.get('declared_fps')}   "
+                  f"source achieved: {d.get('achieved_fps')} fps   "
+                  + (f"[yellow]{late} frames late[/yellow]" if late else "0 frames late"))
     dropped = d.get("dropped") or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
     con.print(f"bytes: {d['bytes']:,}   chunk compression: {', '.join(d['chunk_compression'])}   "
@@ -233,12 +248,17 @@ def recover(path: str, keep_original: bool, as_json: bool) -> None:
         results = recover_path(path, keep_original=keep_original)
     except ThermcapError as exc:
         fail(str(exc))
+    except OSError as exc:
+        fail(f"{exc.filename or path}: {exc.strerror or exc}")
     if as_json:
         click.echo(json.dumps([r.to_dict() for r in results], indent=2))
         return
     if not results:
         click.echo(f"nothing to recover under {path}")
     for r in results:
+        if r.skipped:
+            click.echo(f"{r.source}: {r.stopped_because}; left as it is")
+            continue
         click.echo(f"{r.source} -> {r.output}: {r.frames} frames, {r.messages} messages kept, "
                    f"{r.bytes_discarded:,} bytes of cut tail discarded ({r.stopped_because})")
 

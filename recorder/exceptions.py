@@ -6,6 +6,7 @@ ThermcapError                 root of every error thermcap raises on purpose
  |    +-- TruncatedFrameError a raw stream ended inside a frame (names the byte count)
  +-- RecordingError           the writer had to stop (disk full, unwritable folder)
  +-- McapFileError            an MCAP file is unreadable or truncated (names the file)
+ +-- SessionBusyError         another process holds the session's lock (names it)
 """
 
 from __future__ import annotations
@@ -41,3 +42,7 @@ class RecordingError(ThermcapError):
 
 class McapFileError(ThermcapError):
     pass
+
+
+class SessionBusyError(ThermcapError):
+    """Another process (a recorder, an archiver, recover, gc) holds the session's lock."""

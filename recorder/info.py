@@ -13,6 +13,7 @@ from typing import Any
 from mcap.reader import make_reader
 
 from .exceptions import McapFileError
+from .lock import session_status
 from .icd import iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_STATS
 from .segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
@@ -107,10 +108,17 @@ def session_info(path: str | Path) -> dict[str, Any]:
             agg["bytes"] = None if v["bytes"] is None or agg["bytes"] is None else agg["bytes"] + v["bytes"]
     comp = sum(s["compressed_bytes"] for s in segs)
     uncomp = sum(s["uncompressed_bytes"] for s in segs)
+    status, hint = session_status(path, meta.get("status"))
+    timing = meta.get("timing") or {}
     return {
         "path": str(path),
         "session_id": meta.get("session_id", path.name),
-        "status": meta.get("status", "unknown"),
+        "status": status,
+        "hint": hint,
+        "time_basis": timing.get("time_basis") or (meta.get("source") or {}).get("time_basis"),
+        "declared_fps": timing.get("declared_fps"),
+        "achieved_fps": timing.get("achieved_fps"),
+        "frames_late": timing.get("frames_late"),
         "sensor": meta.get("sensor", {}).get("model"),
         "radiometric_model": meta.get("radiometric_model"),
         "frames": frames,

@@ -162,6 +162,14 @@ STATS_SCHEMA: dict[str, Any] = {
         "queue_capacity": {"type": "integer"},
         "write_latency_ms": {"type": "object"},
         "analysis_skipped": {"type": "integer"},
+        "timing": {
+            "type": "object",
+            "description": "time_basis: 'capture' (the clock when each frame was taken) or 'stream' (its "
+                           "position in the input at the declared rate); achieved_fps and frames_late say "
+                           "whether the source kept its declared rate",
+            "properties": {"time_basis": {"type": "string"}, "declared_fps": {"type": "number"},
+                           "achieved_fps": {"type": ["number", "null"]}, "frames_late": {"type": "integer"}},
+        },
         "segment": {"type": "integer"},
     },
     "required": ["frames_captured", "frames_written", "dropped", "queue_depth", "write_latency_ms"],

@@ -9,12 +9,13 @@ is bounded by the queue length plus the chunks in flight, however long the sessi
 
 from __future__ import annotations
 
-import fcntl
 import json
 from concurrent.futures import Future, TimeoutError as FutureTimeout
 import os
 import queue
 import secrets
+import signal
+import sys
 import threading
 import time
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from typing import Any, Callable
 from . import __version__
 from .exceptions import RecordingError, ThermcapError
 from .icd import FORMAT_VERSION, iso_utc
+from .lock import lock_session
 from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
 from .analysis import EventBuilder, HotSpotDetector
 from .radiometry import LinearModel, describe_model
@@ -32,7 +34,7 @@ from .sidecar import SidecarEncoder
 from .sources.base import CapturedFrame, FrameSource
 from .stats import LatencyHistogram, RecorderCounters
 
-__all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir", "lock_session"]
+__all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
 _STOP = object()
 
@@ -46,17 +48,6 @@ def new_session_id(sensor_id: str, when_ns: int | None = None) -> str:
     stamp = time.strftime("%Y%m%dT%H%M%SZ", time.gmtime(when_ns // 1_000_000_000))
     clean = "".join(c for c in sensor_id if c.isalnum() or c == "-") or "SENSOR"
     return f"{stamp}_{clean}_{secrets.token_hex(2)}"
-
-
-def lock_session(session_dir: Path) -> int | None:
-    """Take the session's recording lock (flock, released by the OS if we die); None if held."""
-    fd = os.open(session_dir / ".lock", os.O_RDWR | os.O_CREAT, 0o644)
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except BlockingIOError:
-        os.close(fd)
-        return None
-    return fd
 
 
 @dataclass
@@ -73,10 +64,25 @@ class RecordingResult:
     recovered: list[str] = field(default_factory=list)
     analysis_skipped: int = 0
     events: int = 0
+    timing: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
-        return self.error is None
+        """True only when nothing went wrong and nothing was dropped or skipped."""
+        return self.error is None and not any(self.dropped.values()) and not self.analysis_skipped
+
+    @property
+    def problems(self) -> list[str]:
+        out = [self.error] if self.error else []
+        if any(self.dropped.values()):
+            out.append(f"dropped messages per topic: {self.dropped}")
+        if self.analysis_skipped:
+            out.append(f"{self.analysis_skipped} frames not analysed (the detector fell behind)")
+        late = self.timing.get("frames_late") or 0
+        if late:
+            out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "
+                       f"of the declared {self.timing.get('declared_fps')}")
+        return out
 
     @property
     def frames_dropped(self) -> int:
@@ -87,8 +93,8 @@ class RecordingResult:
                 "frames_captured": self.frames_captured, "frames_written": self.frames_written,
                 "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
                 "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
-                "error": self.error, "recovered": self.recovered, "ok": self.ok,
-                "analysis_skipped": self.analysis_skipped, "events": self.events}
+                "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
+                "analysis_skipped": self.analysis_skipped, "events": self.events, "timing": self.timing}
 
 
 class Recorder:
@@ -98,8 +104,9 @@ class Recorder:
         640x512 frames make that 79 MB at most).
     :param writer_delay_s: an artificial pause per frame on the writer thread, for testing the
         drop accounting; never set it in production.
-    :param wait_when_full: for sources that are not real time (file imports): capture waits for
-        the writer instead of dropping, since nothing is lost by waiting.
+    :param wait_when_full: capture waits for the writer instead of dropping. Always on for a
+        source that can wait (a file, a pipe, an importer: ``source.can_wait``), since nothing is
+        lost by waiting; only a live camera, which cannot be paused, ever drops (counted).
     """
 
     def __init__(self, source: FrameSource, root: str | os.PathLike, *, session_id: str | None = None,
@@ -116,13 +123,17 @@ class Recorder:
         self.stats_interval_s = stats_interval_s
         self.writer_delay_s = writer_delay_s
         self.recover_leftovers = recover_leftovers
-        self.wait_when_full = wait_when_full
+        self.wait_when_full = wait_when_full or bool(getattr(source, "can_wait", False))
         self.counters = RecorderCounters()
         self.latency = LatencyHistogram()
         self._interval_latency = LatencyHistogram()
         self._stop = threading.Event()
         self._source_error: str | None = None
         self._writer_error: str | None = None
+        self._stop_seen = False  # the writer took the capture thread's stop token
+        self._signals = 0
+        self._first_capture_mono: int | None = None
+        self._last_capture_mono: int | None = None
         self._session: SessionWriter | None = None
         self._last_frame_ns: int | None = None
         self._sidecars = SidecarEncoder(source.sensor.to_sidecar(), _radiometric_block(source.model))
@@ -152,12 +163,15 @@ class Recorder:
             self.session_dir.mkdir(parents=True, exist_ok=False)
         except OSError as exc:
             raise RecordingError(f"cannot create session folder {self.session_dir}: {exc.strerror or exc}") from exc
-        lock_fd = lock_session(self.session_dir)
+        lock = lock_session(self.session_dir, "recorder")
+        if lock is None:
+            raise RecordingError(f"{self.session_dir}: cannot take the session lock (another process holds it)")
         started_ns = time.time_ns()
         meta = self._session_meta(started_ns)
         try:
             write_json_atomic(self.session_dir / "session.json", {**meta, "status": "recording"})
         except OSError as exc:
+            lock.release()
             raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
         self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=self.source.extra_topics,
                                       bad_pixel_map=self.source.bad_pixel_map, policy=self.policy,
@@ -170,6 +184,7 @@ class Recorder:
             analyst.start()
         writer = threading.Thread(target=self._writer_loop, name="thermcap-writer", daemon=True)
         capture = threading.Thread(target=self._capture_loop, args=(deadline,), name="thermcap-capture", daemon=True)
+        previous = self._catch_signals()
         writer.start()
         capture.start()
         try:
@@ -179,12 +194,10 @@ class Recorder:
                     progress(self)
                 if not capture.is_alive():
                     writer.join(0.25)
-        except KeyboardInterrupt:
-            self.stop()
-            capture.join()
-            writer.join()
-        if analyst is not None:
-            analyst.join()
+            if analyst is not None:
+                analyst.join()
+        finally:
+            self._restore_signals(previous)
         wall = time.monotonic() - t0
         error = self._writer_error or self._source_error
         events = self._events.finish()
@@ -197,16 +210,48 @@ class Recorder:
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
             wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
-            analysis_skipped=self.counters.analysis_skipped, events=len(events))
+            analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing())
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
         try:
             write_json_atomic(self.session_dir / "session.json", summary)
         except OSError as exc:
             result.error = result.error or f"cannot write session summary: {exc.strerror or exc}"
-        if lock_fd is not None:
-            os.close(lock_fd)
+        lock.release()
         return result
+
+    def timing(self) -> dict[str, Any]:
+        """How the frames were timed and whether the source kept its rate: never hidden."""
+        declared = float(self.source.sensor.frame_rate_hz or 0.0)
+        n = self.counters.frames_captured
+        span = None
+        if self._first_capture_mono is not None and self._last_capture_mono is not None and n > 1:
+            span = (self._last_capture_mono - self._first_capture_mono) / 1e9
+        achieved = round((n - 1) / span, 3) if span else None
+        return {"time_basis": getattr(self.source, "time_basis", "capture"), "declared_fps": declared,
+                "achieved_fps": achieved, "frames_late": int(getattr(self.source, "frames_late", 0))}
+
+    # -- signals ---------------------------------------------------------------------------------
+    def _catch_signals(self) -> Any:
+        """Ctrl-C asks for a clean stop; a second one only hurries it (no more waiting for the
+        detector), so the open segment is always finished, never cut by an exception."""
+        if threading.current_thread() is not threading.main_thread():
+            return None
+
+        def on_signal(signum: int, _frame: Any) -> None:
+            self._signals += 1
+            if self._signals > 1:
+                self.analysis_wait_s = 0.0
+                print("thermcap: still finishing the open segment (nothing is lost by waiting); "
+                      "kill -9 leaves it for `thermcap recover`", file=sys.stderr, flush=True)
+            self.stop()
+
+        return signal.signal(signal.SIGINT, on_signal)
+
+    @staticmethod
+    def _restore_signals(previous: Any) -> None:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
 
     @property
     def queue_depth(self) -> int:
@@ -218,6 +263,10 @@ class Recorder:
         try:
             for frame in self.source.frames():
                 counters.frames_captured += 1
+                mono = frame.capture_mono_ns or time.monotonic_ns()
+                if self._first_capture_mono is None:
+                    self._first_capture_mono = mono
+                self._last_capture_mono = mono
                 if self._aq is not None:
                     self._offer_analysis(frame)
                 try:
@@ -276,6 +325,7 @@ class Recorder:
                     session.poll()
                     item = None
                 if item is _STOP:
+                    self._stop_seen = True
                     break
                 if item is not None:
                     if self.writer_delay_s:
@@ -296,6 +346,8 @@ class Recorder:
     def _abort(self, session: SessionWriter) -> None:
         self.stop()
         session.abandon()
+        if self._stop_seen:  # the capture thread already finished (its stop token was taken)
+            return
         # Let the capture thread finish its last put; what it captured is counted as dropped.
         while True:
             try:
@@ -334,6 +386,7 @@ class Recorder:
             "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize,
             "write_latency_ms": {"interval": self._interval_latency.summary_ms(), "session": self.latency.summary_ms()},
             "analysis_skipped": c.analysis_skipped,
+            "timing": self.timing(),
             "segment": self._session.segments[-1].index if self._session and self._session.segments else 0,
         }
         self._interval_latency = LatencyHistogram()

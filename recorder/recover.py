@@ -25,6 +25,7 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import breakup_chunk
 
 from .exceptions import McapFileError
+from .lock import holder, lock_session
 from .mcap_writer import MCAP_MAGIC, ChunkedWriter, Compression
 from .segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 
@@ -48,6 +49,7 @@ class RecoveryResult:
     damaged_chunks: int = 0
     stopped_because: str = ""
     topics: dict[str, int] = field(default_factory=dict)
+    skipped: bool = False  # a live process holds the session: nothing was touched
 
     def to_dict(self) -> dict:
         return self.__dict__.copy()
@@ -109,11 +111,15 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
     dst = Path(output)
     if dst.exists():
         raise McapFileError(f"{dst} already exists; refusing to overwrite a finished segment")
-    size = src.stat().st_size
+    before = src.stat()
+    size = before.st_size
     result = RecoveryResult(source=str(src), output=str(dst))
     if _is_complete(src):
         # finish() completed but the rename did not: the file is whole, just name it.
-        os.replace(src, dst) if not keep_original else _copy(src, dst)
+        if keep_original:
+            _copy(src, dst)
+        else:
+            _rename_no_clobber(src, dst)
         fsync_dir(dst.parent)
         with open(dst, "rb") as f:
             summary = make_reader(f).get_summary()
@@ -228,12 +234,37 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
     if count != result.messages:
         tmp.unlink()
         raise McapFileError(f"{src}: recovered file holds {count} messages, expected {result.messages}")
-    os.replace(tmp, dst)
+    if _changed(src, before):
+        tmp.unlink()
+        raise McapFileError(f"{src}: changed while it was being recovered (is a recorder writing it?); left as it was")
+    try:
+        _rename_no_clobber(tmp, dst)
+    except McapFileError:
+        tmp.unlink()
+        raise
     fsync_dir(dst.parent)
     if not keep_original:
         src.unlink()
         fsync_dir(src.parent)
     return result
+
+
+def _changed(path: Path, before: os.stat_result) -> bool:
+    try:
+        now = path.stat()
+    except FileNotFoundError:
+        return True
+    return (now.st_ino, now.st_size, now.st_mtime_ns) != (before.st_ino, before.st_size, before.st_mtime_ns)
+
+
+def _rename_no_clobber(src: Path, dst: Path) -> None:
+    """Give ``src`` the name ``dst`` only if nothing has it: link (fails if it exists), then unlink.
+    A plain rename would silently replace a segment that appeared in the meantime."""
+    try:
+        os.link(src, dst)
+    except FileExistsError:
+        raise McapFileError(f"{dst} already exists; refusing to overwrite a finished segment") from None
+    src.unlink()
 
 
 def _copy(src: Path, dst: Path) -> None:
@@ -245,16 +276,33 @@ def _copy(src: Path, dst: Path) -> None:
 
 
 def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> list[RecoveryResult]:
-    """A file, a session folder, or a data root: recover every ``.active`` segment found."""
+    """A file, a session folder, or a data root: recover every ``.active`` segment found.
+
+    Each session is recovered under its lock; a session some live process holds (a recorder
+    still writing it) is skipped and reported, never touched."""
     p = Path(path)
     if p.is_file():
-        return [recover_segment(p, keep_original=keep_original)]
-    if not p.is_dir():
+        by_session = {p.parent: [p]}
+    elif p.is_dir():
+        by_session = {}
+        for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
+            by_session.setdefault(active.parent, []).append(active)
+    else:
         raise McapFileError(f"{p}: no such file or folder")
     results = []
-    for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
-        results.append(recover_segment(active, keep_original=keep_original))
-        _mark_session(active.parent)
+    for session, actives in by_session.items():
+        lock = lock_session(session, "recover")
+        if lock is None:
+            who = holder(session) or "another process"
+            results += [RecoveryResult(source=str(a), output="", skipped=True,
+                                       stopped_because=f"skipped: {who} holds the session") for a in actives]
+            continue
+        try:
+            for active in actives:
+                results.append(recover_segment(active, keep_original=keep_original))
+            _mark_session(session)
+        finally:
+            lock.release()
     return results
 
 
@@ -264,25 +312,23 @@ def _mark_session(session_dir: Path) -> None:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError):
         return
-    if meta.get("status") == "recording":
+    if meta.get("status") in ("recording", "interrupted"):
         meta["status"] = "recovered"
         write_json_atomic(meta_path, meta)
 
 
 def recover_leftovers(root: str | os.PathLike) -> list[Path]:
     """At recorder start: recover ``.active`` segments of sessions no live recorder holds."""
-    from .recorder import lock_session, sessions_dir
-
     done: list[Path] = []
-    base = sessions_dir(root)
+    base = Path(root) / "sessions"
     if not base.is_dir():
         return done
     for session in sorted(base.iterdir()):
         actives = sorted(session.glob(f"*.mcap{ACTIVE_SUFFIX}")) if session.is_dir() else []
         if not actives:
             continue
-        fd = lock_session(session)
-        if fd is None:
+        lock = lock_session(session, "recover")
+        if lock is None:
             continue  # a recorder is still writing it
         try:
             for active in actives:
@@ -293,5 +339,5 @@ def recover_leftovers(root: str | os.PathLike) -> list[Path]:
                     continue  # left for the user, with `thermcap recover` to say why
             _mark_session(session)
         finally:
-            os.close(fd)
+            lock.release()
     return done

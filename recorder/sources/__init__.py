@@ -19,6 +19,6 @@ def make_source(spec: str, **options: Any) -> FrameSource:
                 "start_time_ns", "sensor_id"}
         return SimSource(**{k: v for k, v in options.items() if k in keep and v is not None})
     if spec.startswith("raw:"):
-        keep = {"width", "height", "fps", "paced", "sensor_id", "model", "max_frames"}
+        keep = {"width", "height", "fps", "paced", "sensor_id", "model", "max_frames", "timestamps"}
         return RawSource(spec[4:], **{k: v for k, v in options.items() if k in keep and v is not None})
     raise SourceError(f"unknown source {spec!r}: use 'sim', 'raw:PATH' or 'raw:-' for stdin")

@@ -76,6 +76,15 @@ class FrameSource(ABC):
     bad_pixel_map: np.ndarray | None = None
     #: topics (besides image and metadata) this source may emit, with their JSON schemas
     extra_topics: dict[str, dict[str, Any]] = {}
+    #: True for input that can be paused (a file, a pipe, an importer): the recorder then waits
+    #: for its writer instead of dropping. Only a live camera, which cannot wait, is dropped from.
+    can_wait: bool = False
+    #: "capture": each frame's time is when it was taken; "stream": its position in the input at
+    #: the declared rate (a file replayed faster or slower than it was recorded).
+    time_basis: str = "capture"
+    #: frames released more than one frame period after they were due (a source that cannot keep
+    #: its declared rate says so instead of stamping frames it did not deliver on time)
+    frames_late: int = 0
 
     @abstractmethod
     def frames(self) -> Iterator[CapturedFrame]:
@@ -92,21 +101,31 @@ class FrameSource(ABC):
         pass
 
     def describe(self) -> dict[str, Any]:
-        return {"source": self.name}
+        return {"source": self.name, "time_basis": self.time_basis}
 
 
 class Pacer:
-    """Release frame i at start + i/fps on the monotonic clock; never drifts, never sleeps when late."""
+    """Release frame i at start + i/fps on the monotonic clock; never drifts, never sleeps when late.
+
+    ``late`` counts frames released more than one period after they were due: a source that cannot
+    produce frames at its rate is seen, not hidden behind evenly spaced timestamps."""
 
     def __init__(self, fps: float, enabled: bool = True):
         self.period_ns = int(round(1e9 / fps))
         self.enabled = enabled
         self.start = time.monotonic_ns()
+        self.late = 0
 
-    def wait(self, index: int) -> None:
+    def wait(self, index: int) -> int:
+        """Sleep until frame ``index`` is due; returns the monotonic time it is released."""
+        now = time.monotonic_ns()
         if not self.enabled:
-            return
+            return now
         due = self.start + index * self.period_ns
-        delay = due - time.monotonic_ns()
+        delay = due - now
         if delay > 0:
             time.sleep(delay / 1e9)
+            return time.monotonic_ns()
+        if -delay > self.period_ns:
+            self.late += 1
+        return now

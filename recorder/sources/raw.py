@@ -1,11 +1,15 @@
 """Headerless Gray16 little-endian frames from a file or stdin (``raw:PATH``, ``raw:-``).
 
 This is what ``ffmpeg ... -pix_fmt gray16le -f rawvideo -`` or a camera's SDK tool writes, so a
-pipe goes straight into a recording. Frames are timestamped on arrival (wall clock, corrected
-by the monotonic clock so an NTP step mid-session cannot reorder them). With ``paced`` the
-source releases frames at the stated fps (replaying a file in real time); otherwise as fast as
-they arrive. A short final frame raises TruncatedFrameError naming the byte count; the recorder
-keeps every complete frame before it.
+pipe goes straight into a recording. A file or a pipe can wait, so the recorder never drops
+from it: it reads the next frame only when the writer has room (back-pressure).
+
+Timestamps (``timestamps``): ``stream`` (the default) stamps frame i at the first frame's
+arrival + i/fps, its position in the stream at the declared rate, however fast the file is read;
+``arrival`` stamps each frame when it arrives (wall clock, kept monotonic), for a pipe from a
+live camera tool. With ``paced`` frames are released at the stated fps (a file replayed in real
+time). A short final frame raises TruncatedFrameError naming the byte count; the recorder keeps
+every complete frame before it.
 """
 
 from __future__ import annotations
@@ -31,11 +35,15 @@ class RawSource(FrameSource):
     def __init__(self, path: str, *, width: int, height: int, fps: float = 60.0, paced: bool = False,
                  sensor_id: str = "GRAY16", sensor_model: str = "raw Gray16 stream",
                  model: RadiometricModel = DEFAULT_MODEL, max_frames: int | None = None,
-                 stream: BinaryIO | None = None) -> None:
+                 stream: BinaryIO | None = None, timestamps: str = "stream") -> None:
         if width <= 0 or height <= 0:
             raise SourceError(f"raw source {path}: width and height must be positive, got {width}x{height}")
         if fps <= 0:
             raise SourceError(f"raw source {path}: fps must be positive, got {fps}")
+        if timestamps not in ("stream", "arrival"):
+            raise SourceError(f"raw source {path}: timestamps must be 'stream' or 'arrival', got {timestamps!r}")
+        self.can_wait = True
+        self.time_basis = "capture" if timestamps == "arrival" else "stream"
         self.path = path
         self.width, self.height, self.fps = width, height, fps
         self.paced = paced
@@ -58,7 +66,8 @@ class RawSource(FrameSource):
             self.file_remainder = 0
 
     def describe(self) -> dict:
-        return {"source": "raw", "path": self.path, "width": self.width, "height": self.height, "fps": self.fps}
+        return {"source": "raw", "path": self.path, "width": self.width, "height": self.height, "fps": self.fps,
+                "time_basis": self.time_basis}
 
     def _open(self) -> BinaryIO:
         if self._stream is not None:
@@ -81,11 +90,16 @@ class RawSource(FrameSource):
                     return
                 if got < frame_bytes:
                     raise TruncatedFrameError(self.path if self.path != "-" else "<stdin>", index, got, frame_bytes)
-                pacer.wait(index)
-                mono = time.monotonic_ns()
+                mono = pacer.wait(index)
+                self.frames_late = pacer.late
+                if index == 0:
+                    wall0, mono0 = time.time_ns(), mono
+                if self.time_basis == "stream":
+                    ts = wall0 + int(round(index * 1e9 / self.fps))
+                else:
+                    ts = wall0 + (mono - mono0)
                 pixels = np.frombuffer(buf, dtype="<u2").reshape(self.height, self.width)
-                yield CapturedFrame(index=index, timestamp_ns=wall0 + (mono - mono0), pixels=pixels,
-                                    capture_mono_ns=mono)
+                yield CapturedFrame(index=index, timestamp_ns=ts, pixels=pixels, capture_mono_ns=mono)
                 index += 1
         finally:
             if stream is not sys.stdin.buffer and self._stream is None:

@@ -183,6 +183,10 @@ class SimSource(FrameSource):
             frames = int(round(duration_s * fps))
         self.n_frames = frames
         self.paced = paced
+        # Paced, it plays a live camera (stamped when each frame is released, late frames counted);
+        # unpaced, a recording read as fast as it can be written (stamped at its position).
+        self.can_wait = not paced
+        self.time_basis = "capture" if paced else "stream"
         self.seed = seed
         self.netd_mk = netd_mk
         self.targets = targets
@@ -335,8 +339,12 @@ class SimSource(FrameSource):
         stc = SlewToCue(self._rng_radar, self.cue_period_s, self.first_cue_s)
         index = 0
         while (self.n_frames is None or index < self.n_frames) and not self.stopped:
-            pacer.wait(index)
-            ts = start_ns + int(round(index * period_ns))
+            released = pacer.wait(index)
+            self.frames_late = pacer.late
+            if self.paced:  # the time the frame was actually produced, late or not
+                ts = start_ns + (released - pacer.start)
+            else:
+                ts = start_ns + int(round(index * period_ns))
             frame, gt, analysis, _ = self.render(index)
             t = index / self.fps
             drone_visible = any(g["classification"] == "drone_motor" for g in gt) and analysis["thermal_contrast_grade"] >= 0.3
@@ -346,7 +354,7 @@ class SimSource(FrameSource):
                 "frame_index": index, "targets": gt, "crossover_factor": round(self.crossover_factor(t), 4),
                 "slew_state": stc_block["state"]}))
             yield CapturedFrame(
-                index=index, timestamp_ns=ts, pixels=frame, capture_mono_ns=time.monotonic_ns(),
+                index=index, timestamp_ns=ts, pixels=frame, capture_mono_ns=released,
                 sidecar={
                     "thermal_analysis": analysis,
                     "slew_to_cue": stc_block,
