@@ -20,6 +20,7 @@ from recorder.radiometry import TemperatureUnavailable
 
 from .frames import FrameNotFound, FrameReader
 from .index import index_root
+from .security import AuthGate
 from .settings import Settings
 from .storage import make_store
 
@@ -106,6 +107,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
                        allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
 
+    app.add_middleware(AuthGate, tokens=settings.tokens)
     app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
 
     @app.exception_handler(HTTPException)

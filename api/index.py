@@ -24,6 +24,7 @@ from sqlalchemy.engine import Engine
 
 from recorder.reader import list_sessions, read_session_meta, session_segments
 from recorder.messages import TOPIC_METADATA
+from recorder.quality import graded_contrast
 
 from . import db
 
@@ -33,8 +34,12 @@ ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
 _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
 
 
+#: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
+INDEX_RULES_VERSION = 2  # 2: frames with no graded target have no grade
+
+
 def fingerprint(session_dir: Path) -> str:
-    h = hashlib.sha256()
+    h = hashlib.sha256(f"rules:{INDEX_RULES_VERSION}".encode())
     for p in [session_dir / "session.json", session_dir / "archive" / "manifest.json", session_dir / "events.json",
               session_dir / "analysis.jsonl",
               *session_segments(session_dir)]:
@@ -163,8 +168,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         ta = sc.get("thermal_analysis") or {}
         targets = sc.get("targets") or []
         frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
-                           # an unanalysed frame has no grade (its sidecar's 0.0 is a placeholder)
-                           "grade": None if ta.get("source") in ("skipped", "none") else ta.get("thermal_contrast_grade"),
+                           # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
+                           "grade": graded_contrast(ta),
                            "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
                            "target_count": len(targets),
                            "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)})

@@ -1,34 +1,95 @@
 """Bearer tokens with ``read`` and ``write`` scopes, and the checks on names from requests.
 
 With no token configured the service is open (it binds 127.0.0.1 by default). With tokens,
-every route but /healthz and /readyz needs one; comparison is constant-time over every token,
-so the time taken says nothing about how much of a guess was right.
+every route but /healthz, /readyz and the login form needs one: the JSON API, the browser pages,
+their scripts, /docs and /openapi.json alike. ``AuthGate`` checks that at the door, before any
+routing, so a route added later cannot be left open by forgetting a dependency; ``require``
+then checks the scope a route needs. Comparison is constant-time over every token, so the time
+taken says nothing about how much of a guess was right.
+
+A browser cannot add a header to a page it navigates to, so ``/login`` takes the token once in a
+POSTed form (never in a URL, which access logs keep) and sets it as an HttpOnly, SameSite=Strict
+cookie, which the pages' own requests then carry.
 """
 
 from __future__ import annotations
 
 import hmac
+import json
 import re
+from http.cookies import SimpleCookie
+from typing import Any
 
 from fastapi import HTTPException, Request
 
-__all__ = ["require", "SESSION_ID_RE", "FILE_NAME_RE", "check_session_id", "check_file_name"]
+__all__ = ["require", "SESSION_ID_RE", "FILE_NAME_RE", "check_session_id", "check_file_name", "AuthGate",
+           "PUBLIC_PATHS", "TOKEN_COOKIE", "scopes_for_token"]
+
+PUBLIC_PATHS = frozenset({"/healthz", "/readyz", "/login"})
+TOKEN_COOKIE = "thermcap_token"
 
 SESSION_ID_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 FILE_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
 
 
-def _scopes_for(request: Request) -> frozenset[str] | None:
-    tokens: dict[str, frozenset[str]] = request.app.state.settings.tokens
-    header = request.headers.get("authorization", "")
-    scheme, _, given = header.partition(" ")
-    if scheme.lower() != "bearer" or not given:
+def scopes_for_token(tokens: dict[str, frozenset[str]], given: str | None) -> frozenset[str] | None:
+    if not given:
         return None
     found: frozenset[str] | None = None
     for token, scopes in tokens.items():  # no early exit: constant time in the number of tokens
         if hmac.compare_digest(token.encode(), given.strip().encode()):
             found = scopes
     return found
+
+
+def _given_token(authorization: str, cookie_header: str) -> str | None:
+    scheme, _, given = authorization.partition(" ")
+    if scheme.lower() == "bearer" and given.strip():
+        return given.strip()
+    if cookie_header:
+        cookies: SimpleCookie = SimpleCookie()
+        try:
+            cookies.load(cookie_header)
+        except Exception:  # a malformed Cookie header is no token, not a 500
+            return None
+        if TOKEN_COOKIE in cookies:
+            return cookies[TOKEN_COOKIE].value
+    return None
+
+
+def _scopes_for(request: Request) -> frozenset[str] | None:
+    tokens: dict[str, frozenset[str]] = request.app.state.settings.tokens
+    given = _given_token(request.headers.get("authorization", ""), request.headers.get("cookie", ""))
+    return scopes_for_token(tokens, given)
+
+
+class AuthGate:
+    """Pure ASGI: with tokens configured, nothing but ``PUBLIC_PATHS`` is served without a valid one."""
+
+    def __init__(self, app: Any, *, tokens: dict[str, frozenset[str]]) -> None:
+        self.app, self.tokens = app, tokens
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http" or not self.tokens or scope.get("path") in PUBLIC_PATHS \
+                or scope.get("method") == "OPTIONS":  # CORS preflight carries no credentials
+            await self.app(scope, receive, send)
+            return
+        headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
+        given = _given_token(headers.get("authorization", ""), headers.get("cookie", ""))
+        if scopes_for_token(self.tokens, given) is not None:
+            await self.app(scope, receive, send)
+            return
+        if scope.get("method") == "GET" and "text/html" in headers.get("accept", ""):
+            await _send(send, 303, b"", [(b"location", b"/login")])
+            return
+        body = json.dumps({"error": "a valid bearer token is required", "status": 401}).encode()
+        await _send(send, 401, body, [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")])
+
+
+async def _send(send: Any, status: int, body: bytes, headers: list[tuple[bytes, bytes]]) -> None:
+    await send({"type": "http.response.start", "status": status,
+                "headers": headers + [(b"content-length", str(len(body)).encode())]})
+    await send({"type": "http.response.body", "body": body})
 
 
 def require(scope: str):

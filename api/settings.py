@@ -19,19 +19,25 @@ from pathlib import Path
 __all__ = ["Settings"]
 
 
+MIN_TOKEN_LENGTH = 8
+
+
 def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
+    """``token=scopes`` items separated by ``;`` or new lines. Each problem is named on its own,
+    by the item's position, never by the token itself (errors may be logged)."""
     tokens: dict[str, frozenset[str]] = {}
-    for item in text.replace("\n", ";").split(";"):
-        item = item.strip()
-        if not item or item.startswith("#"):
-            continue
+    items = [i.strip() for i in text.replace("\n", ";").split(";")]
+    for n, item in enumerate((i for i in items if i and not i.startswith("#")), start=1):
         token, _, scopes = item.partition("=")
+        token = token.strip()
         scope_set = frozenset(s.strip() for s in (scopes or "read").split(",") if s.strip())
         unknown = scope_set - {"read", "write"}
-        if unknown or len(token.strip()) < 8:
-            raise ValueError("tokens must be at least 8 characters with scopes read and/or write "
-                             f"(got scopes {sorted(scope_set)})")
-        tokens[token.strip()] = scope_set
+        if unknown:
+            raise ValueError(f"THERMCAP_TOKENS item {n}: unknown scope(s) {sorted(unknown)}; use read and/or write")
+        if len(token) < MIN_TOKEN_LENGTH:
+            raise ValueError(f"THERMCAP_TOKENS item {n}: the token is {len(token)} characters; use at least "
+                             f"{MIN_TOKEN_LENGTH} (for example `python -c 'import secrets; print(secrets.token_hex(16))'`)")
+        tokens[token] = scope_set
     return tokens
 
 

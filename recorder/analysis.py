@@ -22,7 +22,7 @@ import numpy as np
 from scipy import ndimage
 
 from .icd import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
-from .quality import contrast_metrics, frame_analysis
+from .quality import contrast_metrics, frame_analysis, graded_contrast
 from .radiometry import RadiometricModel
 
 __all__ = ["HotSpotDetector", "Detection", "EventBuilder", "iou"]
@@ -230,14 +230,13 @@ class EventBuilder:
     _last_t: int | None = None
 
     def add(self, t_ns: int, sidecar: dict[str, Any]) -> None:
-        grade = (sidecar.get("thermal_analysis") or {}).get("thermal_contrast_grade")
-        source = (sidecar.get("thermal_analysis") or {}).get("source")
-        if grade is not None and source not in ("skipped", "none") and grade < CROSSOVER_GRADE:
+        grade = graded_contrast(sidecar.get("thermal_analysis"))
+        if grade is not None and grade < CROSSOVER_GRADE:
             if self._low_start is None:
                 self._low_start, self._low_min = t_ns, grade
             self._low_last = t_ns
             self._low_min = min(self._low_min, grade)
-        elif grade is not None and source not in ("skipped", "none"):
+        elif grade is not None:
             self._close_low()
         stc = sidecar.get("slew_to_cue") or {}
         state = stc.get("state")

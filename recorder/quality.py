@@ -86,6 +86,19 @@ def frame_analysis(per_target: list[dict[str, Any]], *, source: str, confidence:
     }
 
 
+def graded_contrast(thermal_analysis: dict[str, Any] | None) -> float | None:
+    """The frame's contrast grade, or None when there was nothing to grade.
+
+    A sidecar always carries a number (the ICD field is required), but 0.0 on a frame that was
+    not analysed, or that had no target in view, is a placeholder, not a measurement: such a frame
+    is neither a crossover nor a good frame, and search filters must not count it as either."""
+    ta = thermal_analysis or {}
+    grade = ta.get("thermal_contrast_grade")
+    if grade is None or ta.get("source") in ("skipped", "none") or ta.get("delta_t_deg_c") is None:
+        return None
+    return float(grade)
+
+
 def netd_mk(uniform_frame: np.ndarray, scale_c_per_count: float) -> float:
     """ICD 5.2: NETD in mK from one image of a uniform (blackbody) scene.
 

@@ -16,7 +16,7 @@ from .common import session_row
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
 
-_RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
+_RANGE = re.compile(r"^bytes=(\d{0,18})-(\d{0,18})$")  # longer numbers: no file is that big (416)
 
 
 def _archive(request: Request, session_id: str, fmt: str) -> dict:

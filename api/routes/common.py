@@ -30,16 +30,20 @@ def encode_cursor(values: list[Any]) -> str:
     return base64.urlsafe_b64encode(json.dumps(values).encode()).decode().rstrip("=")
 
 
-def decode_cursor(cursor: str | None, n: int) -> list[Any] | None:
+def decode_cursor(cursor: str | None, types: tuple[type, ...]) -> list[Any] | None:
+    """A cursor this service issued: a list of values of exactly ``types`` (ints within int64).
+    Anything else, however it decodes, is a 400, never a 500 further down."""
     if not cursor:
         return None
     try:
         values = json.loads(base64.urlsafe_b64decode(cursor + "=" * (-len(cursor) % 4)))
-        if not isinstance(values, list) or len(values) != n:
-            raise ValueError
-        return values
     except (ValueError, TypeError):
         raise HTTPException(400, "invalid cursor") from None
+    ok = isinstance(values, list) and len(values) == len(types) and all(
+        type(v) is t and (t is not int or -2**63 <= v < 2**63) for v, t in zip(values, types, strict=False))
+    if not ok:
+        raise HTTPException(400, "invalid cursor")
+    return values
 
 
 def parse_time(value: str | None, name: str) -> int | None:

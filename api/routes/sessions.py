@@ -63,7 +63,7 @@ def list_sessions(request: Request, sensor: str | None = None, start: str | None
     if slew_to_cue is not None:
         where.append(s.has_slew_to_cue == slew_to_cue)
     desc = sort.startswith("-")
-    after = decode_cursor(cursor, 2)
+    after = decode_cursor(cursor, (int, str))
     if after:
         key = func.coalesce(s.start_ns, 0)
         where.append(or_(key < after[0], and_(key == after[0], s.id < after[1])) if desc
@@ -120,7 +120,7 @@ def list_frames(request: Request, session_id: str, start: str | None = None, end
         where.append(f.slew_to_cue == slew_to_cue)
     if has_targets is not None:
         where.append(f.target_count > 0 if has_targets else f.target_count == 0)
-    after = decode_cursor(cursor, 1)
+    after = decode_cursor(cursor, (int,))
     if after:
         where.append(f.idx > int(after[0]))
     with request.app.state.engine.connect() as conn:

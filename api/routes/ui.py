@@ -4,8 +4,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fastapi import APIRouter
-from fastapi.responses import HTMLResponse
+from urllib.parse import parse_qs
+
+from fastapi import APIRouter, Request
+from fastapi.responses import HTMLResponse, RedirectResponse
+
+from ..security import TOKEN_COOKIE, scopes_for_token
 
 router = APIRouter(include_in_schema=False)
 _STATIC = Path(__file__).resolve().parent.parent / "static"
@@ -27,3 +31,27 @@ def common_js():
 def session_page(session_id: str) -> HTMLResponse:
     # The id is used only by the page's script, through the API, which validates it.
     return HTMLResponse((_STATIC / "session.html").read_text())
+
+
+_LOGIN = """<!doctype html><meta charset="utf-8"><title>thermcap: sign in</title>
+<form method="post" action="/login" style="font-family:sans-serif;margin:4em auto;max-width:24em">
+<h1>thermcap</h1><p>{message}</p>
+<label>API token <input name="token" type="password" autocomplete="current-password" autofocus></label>
+<button type="submit">Sign in</button></form>"""
+
+
+@router.get("/login", response_class=HTMLResponse)
+def login_page() -> HTMLResponse:
+    return HTMLResponse(_LOGIN.format(message="This service needs a token (THERMCAP_TOKENS)."))
+
+
+@router.post("/login")
+async def login(request: Request):
+    """The token arrives in a form body, never a URL; it becomes an HttpOnly cookie."""
+    body = (await request.body())[:4096].decode("utf-8", errors="replace")
+    token = (parse_qs(body).get("token") or [""])[0]
+    if scopes_for_token(request.app.state.settings.tokens, token) is None:
+        return HTMLResponse(_LOGIN.format(message="That token is not valid."), status_code=401)
+    response = RedirectResponse("/", status_code=303)
+    response.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict", path="/")
+    return response
