@@ -8,6 +8,7 @@ sidecars come from the archive instead.
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 from pathlib import Path
@@ -15,7 +16,8 @@ from typing import Iterator
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
-from mcap.records import MessageIndex
+from mcap.records import Chunk, Message, MessageIndex
+from mcap.stream_reader import breakup_chunk
 
 from recorder.mcap_writer import ChunkedWriter, Compression
 from recorder.messages import (
@@ -70,9 +72,13 @@ def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, top
 
 def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | None, t1: int | None,
                topics: list[str] | None) -> Iterator[bytes]:
+    """Each source chunk is visited once: copied whole when it lies inside the range (and every
+    channel is wanted under the same id), else decoded on its own and filtered message by
+    message. Reading an edge chunk's *time window* through the reader instead would also return
+    the neighbouring chunks' messages at the same times, and repeat them."""
     out_channels: dict[str, int] = {}
     out_schemas: dict[str, int] = {}
-    wrote_meta = False
+    kept = _Kept(writer)
     for seg in segs:
         with open(seg, "rb") as f:
             reader = make_reader(f)
@@ -94,19 +100,17 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
                     out_channels[ch.topic] = writer.register_channel(ch.topic, ch.message_encoding,
                                                                      out_schemas.get(key, 0), ch.metadata)
                 same_ids &= out_channels[ch.topic] == cid
-            if not wrote_meta:
-                for rec in reader.iter_metadata():
-                    writer.add_metadata(rec.name, rec.metadata)
-                for att in reader.iter_attachments():
-                    writer.add_attachment(att.name, att.media_type, att.data, log_time=att.log_time,
-                                          create_time=att.create_time)
-                wrote_meta = True
+            for rec in reader.iter_metadata():
+                kept.metadata(rec.name, rec.metadata)
+            for att in reader.iter_attachments():
+                kept.attachment(att)
+            wanted = {cid: out_channels[ch.topic] for cid, ch in summary.channels.items() if ch.topic in out_channels}
             for ci in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
                 if (t1 is not None and ci.message_start_time >= t1) or (t0 is not None and ci.message_end_time < t0):
                     continue
                 inside = (t0 is None or ci.message_start_time >= t0) and (t1 is None or ci.message_end_time < t1)
+                f.seek(ci.chunk_start_offset)
                 if inside and same_ids:
-                    f.seek(ci.chunk_start_offset)
                     record = f.read(ci.chunk_length + ci.message_index_length)
                     counts = {}
                     for cid, off in ci.message_index_offsets.items():
@@ -115,13 +119,42 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
                         counts[cid] = len(MessageIndex.read(stream).records)
                     writer.add_raw_chunk(record, ci, counts)
                 else:
-                    for _, ch, msg in reader.iter_messages(topics=topics, start_time=max(ci.message_start_time, t0 or 0),
-                                                           end_time=min(ci.message_end_time + 1, t1) if t1 else ci.message_end_time + 1,
-                                                           log_time_order=True):
-                        writer.add_message(out_channels[ch.topic], msg.log_time, msg.data, msg.publish_time, msg.sequence)
+                    for msg in _chunk_messages(f.read(ci.chunk_length)):
+                        if msg.channel_id in wanted and (t0 is None or msg.log_time >= t0) \
+                                and (t1 is None or msg.log_time < t1):
+                            writer.add_message(wanted[msg.channel_id], msg.log_time, msg.data, msg.publish_time,
+                                               msg.sequence)
                 if sink.size >= _FLUSH_AT:
                     yield sink.take()
     writer.flush()
+
+
+def _chunk_messages(record: bytes) -> list[Message]:
+    """The messages of one chunk record (opcode and length included), in the order written."""
+    chunk = Chunk.read(ReadDataStream(io.BytesIO(record[9:])))
+    return [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
+
+
+class _Kept:
+    """Metadata records and attachments, each written once however many segments repeat it
+    (every segment carries the session record and the bad-pixel map so it stands alone)."""
+
+    def __init__(self, writer: ChunkedWriter) -> None:
+        self.writer = writer
+        self.seen: set[tuple] = set()
+
+    def metadata(self, name: str, metadata: dict[str, str]) -> None:
+        key = ("m", name, tuple(sorted(metadata.items())))
+        if key not in self.seen:
+            self.seen.add(key)
+            self.writer.add_metadata(name, dict(metadata))
+
+    def attachment(self, att) -> None:
+        key = ("a", att.name, hashlib.sha256(att.data).digest())
+        if key not in self.seen:
+            self.seen.add(key)
+            self.writer.add_attachment(att.name, att.media_type, att.data, log_time=att.log_time,
+                                       create_time=att.create_time)
 
 
 def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] | None) -> Iterator[bytes]:
