@@ -22,10 +22,14 @@ from recorder.lock import holder, lock_session
 from recorder.segments import ACTIVE_SUFFIX, fsync_dir
 
 from .codecs import library_versions
-from .exceptions import ArchiveError, VerificationError
+from recorder.messages import TOPIC_METADATA
+
+from .exceptions import ArchiveError, SourceDamagedError, VerificationError
+from .source_checks import channel_problems
 from .formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from .extras import EXTRAS_NAME, write_extras
-from .manifest import archive_dir, file_sha256, frame_sha256, load_manifest, new_manifest, save_manifest, iso_now
+from .manifest import (archive_dir, file_sha256, frame_sha256, iso_now, load_manifest, new_manifest, save_manifest,
+                       sidecar_sha256)
 
 __all__ = ["archive_session", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
 
@@ -36,21 +40,40 @@ PARTIAL_SUFFIX = ".partial"
 @dataclass
 class _Source:
     hashes: list[str]
+    sidecar_hashes: list[str]
     timestamps: list[int]
     segments: list[str]
     width: int
     height: int
 
 
-def _scan_source(session_dir: Path) -> _Source:
-    hashes, times, segs = [], [], []
+def _scan_source(session_dir: Path, per_segment: dict[str, int]) -> _Source:
+    """Hash every frame, sidecar and time of the source, and refuse a source that disagrees
+    with itself: a frame without its sidecar, or segments whose summaries count other frames
+    than their data holds (a damaged channel record, a flipped bit in an index). Archiving such
+    a source would prove a copy of the damage, or of nothing, as good."""
+    hashes, sidecars, times, segs = [], [], [], []
+    problems: list[str] = []
     w = h = 0
+    read: dict[str, int] = {}
     for f in iter_session_frames(session_dir):
         hashes.append(frame_sha256(f.pixels))
+        sidecars.append(sidecar_sha256(f.sidecar))
         times.append(f.log_time)
         segs.append(f.segment)
+        read[f.segment] = read.get(f.segment, 0) + 1
+        if not f.sidecar and len(problems) < 20:
+            problems.append(f"{f.segment}: frame {f.index} has no sidecar on {TOPIC_METADATA}")
         h, w = f.pixels.shape
-    return _Source(hashes, times, segs, w, h)
+    for name, n in per_segment.items():
+        if read.get(name, 0) != n:
+            problems.append(f"{name}: its summary counts {n} frames, its data holds {read.get(name, 0)}")
+    for seg in session_segments(session_dir):
+        problems += [f"{seg.name}: {p}" for p in channel_problems(seg)]
+    if problems:
+        raise SourceDamagedError(f"{session_dir}: the MCAP source disagrees with itself; nothing was archived "
+                                 f"(run `thermcap info` on the segments, and `thermcap recover` on a copy)", problems)
+    return _Source(hashes, sidecars, times, segs, w, h)
 
 
 def _fsync_tree(path: Path) -> None:
@@ -65,8 +88,11 @@ def _fsync_tree(path: Path) -> None:
 
 
 def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, Any]],
-                      expected: list[str], *, where: str) -> tuple[list[str], float]:
-    """Decode every file with the format's reader; return (problems, decode seconds)."""
+                      expected: list[str], *, where: str, sidecars: list[str] | None = None,
+                      times: list[int] | None = None) -> tuple[list[str], float]:
+    """Decode every file with the format's reader and compare each frame's pixels, sidecar and
+    time with the source's hashes; return (problems, decode seconds). ``sidecars`` and ``times``
+    are absent only in manifests written before they were recorded."""
     problems: list[str] = []
     index = 0
     decode_s = 0.0
@@ -86,8 +112,15 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, A
                 if i >= len(expected):
                     problems.append(f"{where}/{rec['path']}: holds more frames than the session ({i + 1}+)")
                     break
-                if frame_sha256(frame) != expected[i]:
+                if frame_sha256(frame.pixels) != expected[i]:
                     problems.append(f"frame {i} ({where}/{rec['path']}): sha256 differs")
+                if sidecars and sidecar_sha256(frame.sidecar) != sidecars[i]:
+                    problems.append(f"frame {i} ({where}/{rec['path']}): sidecar differs from the source's")
+                if times and frame.log_time is not None and frame.log_time != times[i]:
+                    problems.append(f"frame {i} ({where}/{rec['path']}): time {frame.log_time} differs from "
+                                    f"the source's {times[i]}")
+                elif times and frame.log_time is None:
+                    problems.append(f"frame {i} ({where}/{rec['path']}): no time stored")
                 got += 1
         except Exception as exc:  # corrupt data may fail anywhere inside a third-party decoder
             problems.append(f"{where}/{rec['path']}: cannot decode after {got} frames ({type(exc).__name__}: {exc})")
@@ -136,11 +169,13 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     per_segment = count_frames(session_dir) if todo else {}
     if todo:
         total = sum(per_segment.values())
-        if not manifest["frames"].get("sha256") or len(manifest["frames"]["sha256"]) != total:
+        if not manifest["frames"].get("sha256") or len(manifest["frames"]["sha256"]) != total \
+                or "sidecar_sha256" not in manifest["frames"]:
             if on_progress:
                 on_progress("hashing source", 0, total)
-            src = _scan_source(session_dir)
-            manifest["frames"] = {"sha256": src.hashes, "timestamps_ns": src.timestamps, "segments": src.segments}
+            src = _scan_source(session_dir, per_segment)
+            manifest["frames"] = {"sha256": src.hashes, "sidecar_sha256": src.sidecar_hashes,
+                                  "timestamps_ns": src.timestamps, "segments": src.segments}
             manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name], "bytes": s.stat().st_size}
                                                for s in segments],
                                   "frames": total, "width": src.width, "height": src.height,
@@ -175,7 +210,9 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         files = [rec.__dict__.copy() for rec in records]
         if on_progress:
             on_progress(f"verifying {fid}", 0, len(expected))
-        problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid)
+        problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid,
+                                               sidecars=manifest["frames"]["sidecar_sha256"],
+                                               times=manifest["frames"]["timestamps_ns"])
         total_bytes = sum(r.bytes for r in records)
         raw = manifest["source"]["raw_bytes"]
         entry = {
@@ -187,7 +224,7 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             "decode_fps": round(len(expected) / decode_s, 1) if decode_s else None,
             "library_versions": library_versions(), "verified": not problems, "verified_at": iso_now(),
             "verification": (f"bit-exact: {len(expected)} frames decoded with the format's reader match the "
-                             "MCAP source's sha256") if not problems else problems[:100],
+                             "MCAP source's pixels, sidecars and times (sha256)") if not problems else problems[:100],
         }
         if problems:
             shutil.rmtree(partial)  # a failed archive never takes the final name

@@ -3,6 +3,7 @@
 ArchiveError (a ThermcapError)   root: the CLI prints it and exits 1
  +-- UnknownCodecError           no codec or format registered under that id
  +-- VerificationError           an archive does not match its source or manifest (names frames and files)
+ |    +-- SourceDamagedError      the MCAP source disagrees with itself; refused before anything is written
  +-- ManifestError               the manifest is missing or unreadable
 """
 
@@ -33,3 +34,7 @@ class VerificationError(ArchiveError):
 
 class ManifestError(ArchiveError):
     pass
+
+
+class SourceDamagedError(VerificationError):
+    """The source's summary, channels or sidecars disagree with its data: nothing is archived."""

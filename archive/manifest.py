@@ -21,6 +21,7 @@ from recorder.segments import write_json_atomic
 from .exceptions import ManifestError
 
 __all__ = ["MANIFEST_NAME", "manifest_path", "load_manifest", "save_manifest", "frame_sha256", "file_sha256",
+           "sidecar_sha256",
            "new_manifest", "iso_now"]
 
 MANIFEST_NAME = "manifest.json"
@@ -43,6 +44,11 @@ def frame_sha256(pixels: np.ndarray) -> str:
     """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
     arr = np.ascontiguousarray(pixels, dtype="<u2")
     return hashlib.sha256(memoryview(arr).cast("B")).hexdigest()
+
+
+def sidecar_sha256(sidecar: bytes) -> str:
+    """The sidecar's hash: sha256 of its JSON bytes exactly as recorded."""
+    return hashlib.sha256(sidecar).hexdigest()
 
 
 def file_sha256(path: Path) -> str:

@@ -26,7 +26,9 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
             report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: never verified when archived"]}
             continue
         fmt = get_format(entry["config"]) if "config" in entry else get_format(fid)
-        problems, _ = verify_format_dir(fmt, adir / fid, entry["files"], expected, where=fid)
+        problems, _ = verify_format_dir(fmt, adir / fid, entry["files"], expected, where=fid,
+                                        sidecars=manifest["frames"].get("sidecar_sha256"),
+                                        times=manifest["frames"].get("timestamps_ns"))
         report[fid] = {"ok": not problems, "frames": len(expected), "problems": problems}
     extras = manifest.get("extras")
     if extras and not formats:

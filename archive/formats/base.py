@@ -25,8 +25,8 @@ from recorder.reader import SessionFrame
 
 from ..codecs import build_from_config
 
-__all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "format_registry", "register_format", "get_format",
-           "ordered_map", "frame_name"]
+__all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "DecodedFrame", "format_registry", "register_format",
+           "get_format", "ordered_map", "frame_name"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -38,6 +38,16 @@ class FileRecord:
     frames: int
     bytes: int = 0
     sha256: str = ""
+
+
+@dataclass
+class DecodedFrame:
+    """One frame as a format's own reader gives it back: what verification compares with the
+    source, every part of it (a frame is its counts, its sidecar and its time)."""
+
+    pixels: np.ndarray
+    sidecar: bytes
+    log_time: int | None  # None where an old archive did not store it apart from the sidecar
 
 
 @dataclass
@@ -80,8 +90,9 @@ class ArchiveFormat(ABC):
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]: ...
 
     @abstractmethod
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
-        """Frames in session order, decoded by the format's ordinary reader."""
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+        """Frames in session order, with their sidecars and times, decoded by the format's
+        ordinary reader."""
 
     def get_config(self) -> dict[str, Any]:
         return {"id": self.format_id}
@@ -141,5 +152,15 @@ def group_by_segment(frames: Iterable[SessionFrame]) -> Iterator[tuple[str, Iter
 
 
 def sidecar_text(frame: SessionFrame) -> str:
-    return frame.sidecar.decode() if frame.sidecar else json.dumps({})
+    """The sidecar exactly as recorded (the archiver refuses a source frame without one)."""
+    return frame.sidecar.decode("utf-8") if frame.sidecar else json.dumps({})
+
+
+def time_from_sidecar(sidecar: bytes) -> int | None:
+    from recorder.icd import parse_rfc3339
+
+    try:
+        return parse_rfc3339(json.loads(sidecar)["capture"]["timestamp"])
+    except (ValueError, KeyError, TypeError):
+        return None
 

@@ -18,7 +18,7 @@ import numpy as np
 from recorder.reader import SessionFrame
 
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, FileRecord
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord
 
 __all__ = ["Hdf5"]
 
@@ -81,13 +81,14 @@ class Hdf5(ArchiveFormat):
             f.attrs["format"] = "thermcap hdf5 archive 1"
         return [FileRecord(rel, n)]
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
         for rel in files:
             path = out_dir / rel
             try:
                 with h5py.File(path, "r") as f:
-                    d = f["frames"]
+                    d, times, meta = f["frames"], f["timestamps_ns"], f["metadata"]
                     for i in range(d.shape[0]):
-                        yield d[i]
+                        yield DecodedFrame(d[i], meta[i].encode("utf-8") if isinstance(meta[i], str)
+                                           else bytes(meta[i]), int(times[i]))
             except (OSError, KeyError) as exc:
                 raise ArchiveError(f"{path}: not a readable HDF5 archive ({exc})") from exc

@@ -20,11 +20,14 @@ import tifffile
 from recorder.reader import SessionFrame
 
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, FileRecord, group_by_segment, sidecar_text
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, sidecar_text, time_from_sidecar
 
 __all__ = ["TiffLzw"]
 
 _BIGTIFF_ABOVE = 3_500_000_000  # classic TIFF offsets are 32-bit
+#: A private tag (ASCII) holding the frame's log time in Unix ns, so the time survives apart from
+#: the sidecar; archives written before it fall back to the sidecar's capture.timestamp.
+LOG_TIME_TAG = 65000
 
 
 class TiffLzw(ArchiveFormat):
@@ -53,7 +56,8 @@ class TiffLzw(ArchiveFormat):
                     writer.write(np.asarray(frame.pixels), compression="lzw", predictor=True,
                                  photometric="minisblack", planarconfig="contig",
                                  rowsperstrip=self.rowsperstrip, maxworkers=ctx.workers,
-                                 description=sidecar_text(frame), metadata=None, software="thermcap")
+                                 description=sidecar_text(frame), metadata=None, software="thermcap",
+                                 extratags=[(LOG_TIME_TAG, "s", 0, str(frame.log_time), True)])
                     n += 1
                     if ctx.on_frame:
                         ctx.on_frame()
@@ -62,12 +66,16 @@ class TiffLzw(ArchiveFormat):
             records.append(FileRecord(rel, n))
         return records
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
         for rel in files:
             path = out_dir / rel
             try:
                 with tifffile.TiffFile(path) as tif:
                     for page in tif.pages:
-                        yield page.asarray()
+                        desc = page.tags.get(270)
+                        sidecar = desc.value.encode("utf-8") if desc is not None else b""
+                        stamp = page.tags.get(LOG_TIME_TAG)
+                        log_time = int(stamp.value) if stamp is not None else time_from_sidecar(sidecar)
+                        yield DecodedFrame(page.asarray(), sidecar, log_time)
             except (tifffile.TiffFileError, OSError, ValueError) as exc:
                 raise ArchiveError(f"{path}: not a readable TIFF ({exc})") from exc

@@ -17,7 +17,7 @@ from recorder.reader import SessionFrame
 
 from ..codecs import FrameCodec, get_codec
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, FileRecord, frame_name, group_by_segment, ordered_map, sidecar_text
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, group_by_segment, ordered_map, sidecar_text
 
 __all__ = ["ZippedFrames"]
 
@@ -53,16 +53,29 @@ class ZippedFrames(ArchiveFormat):
             records.append(FileRecord(rel, n))
         return records
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[np.ndarray]:
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+        ext = self.codec.extension
         for rel in files:
             path = out_dir / rel
             try:
                 with zipfile.ZipFile(path) as zf:
+                    names = set(zf.namelist())
                     for info in zf.infolist():
-                        if info.filename.endswith(self.codec.extension):
-                            yield self.codec.decode(zf.read(info))
+                        if info.filename.endswith(ext):
+                            base = info.filename[: -len(ext)]
+                            sidecar = zf.read(base + ".json") if base + ".json" in names else b""
+                            yield DecodedFrame(self.codec.decode(zf.read(info)), sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
+
+
+def _time_from_name(base: str) -> int | None:
+    from recorder.icd import parse_name
+
+    try:
+        return parse_name(base).timestamp_ns
+    except (ValueError, AttributeError):
+        return None
 
 
 def _info(name: str, log_time: int) -> zipfile.ZipInfo:
