@@ -18,7 +18,7 @@ from recorder import __version__
 from .db import make_engine, migrate
 from recorder.radiometry import TemperatureUnavailable
 
-from .frames import FrameNotFound, FrameReader
+from .frames import FrameNotFound, FrameReader, FrameUnavailable
 from .index import index_root
 from .security import AuthGate
 from .settings import Settings
@@ -101,6 +101,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.state.metrics_registry = registry
     requests_total = Counter("thermcap_http_requests_total", "HTTP requests", ["route", "method", "status"],
                              registry=registry)
+    app.state.frames.damage.counter = Counter(
+        "thermcap_damaged_copies_total", "Damaged copies of frames or files met while serving (never served)",
+        ["copy"], registry=registry)
     latency = Histogram("thermcap_http_request_seconds", "HTTP request latency", ["route"], registry=registry,
                         buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10))
 
@@ -118,6 +121,11 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     @app.exception_handler(FrameNotFound)
     async def frame_not_found(_request: Request, exc: FrameNotFound) -> JSONResponse:
         return JSONResponse({"error": str(exc), "status": 404}, status_code=404)
+
+    @app.exception_handler(FrameUnavailable)
+    async def frame_unavailable(_request: Request, exc: FrameUnavailable) -> JSONResponse:
+        # Every copy is missing or damaged: say so rather than serve bytes that are not the recording
+        return JSONResponse({"error": str(exc), "status": 503}, status_code=503)
 
     @app.exception_handler(TemperatureUnavailable)
     async def no_temperature(_request: Request, exc: TemperatureUnavailable) -> JSONResponse:

@@ -84,6 +84,9 @@ frames = Table(
     Column("slew_to_cue", Boolean, nullable=False, default=False),
     Column("target_count", Integer, nullable=False, default=0),
     Column("max_target_temp_c", Float),
+    # The manifest's hashes: every copy of the frame is checked against them before it is served.
+    Column("sha256", String(64)),
+    Column("sidecar_sha256", String(64)),
 )
 Index("ix_frames_time", frames.c.session_id, frames.c.timestamp_ns)
 
@@ -98,6 +101,7 @@ frame_blobs = Table(
     Column("length", BigInteger, nullable=False),
     Column("sidecar_offset", BigInteger, nullable=False),
     Column("sidecar_length", BigInteger, nullable=False),
+    Column("crc32", BigInteger),  # the ZIP directory's CRC-32 of the image entry: checked before bytes go out
 )
 
 events = Table(

@@ -8,11 +8,14 @@ sidecars come from the archive instead.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
+import heapq
 import io
 import json
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
+from typing import Any, Callable, Iterator
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
@@ -57,7 +60,7 @@ class _Sink(io.RawIOBase):
 
 
 def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, topics: list[str] | None,
-                frames_from_archive=None) -> Iterator[bytes]:
+                frames_from_archive=None, extras_file: Callable[[], Any] | None = None) -> Iterator[bytes]:
     sink = _Sink()
     writer = ChunkedWriter(sink, compression=Compression.ZSTD, compression_level=1, workers=0)
     writer.start(profile="ros2", library="thermcap export")
@@ -65,7 +68,7 @@ def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, top
     if segs:
         yield from _from_mcap(writer, sink, segs, start_ns, end_ns, topics)
     elif frames_from_archive is not None:
-        yield from _from_archive(writer, sink, frames_from_archive, topics)
+        yield from _from_archive(writer, sink, frames_from_archive, topics, start_ns, end_ns, extras_file)
     writer.finish()
     yield sink.take()
 
@@ -157,21 +160,77 @@ class _Kept:
                                        create_time=att.create_time)
 
 
-def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] | None) -> Iterator[bytes]:
+def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] | None, t0: int | None,
+                  t1: int | None, extras_file: Callable[[], Any] | None) -> Iterator[bytes]:
+    """Images from the archive, everything else (sidecars as recorded, stats, cues, ground truth,
+    importer metadata, attachments, metadata records) from extras.mcap, merged in time order:
+    the same messages an export of the MCAP source gave, nothing dropped."""
     want_img = not topics or TOPIC_IMAGE in topics
-    want_meta = not topics or TOPIC_METADATA in topics
-    img = meta = None
+    img = None
     if want_img:
         img = writer.register_channel(TOPIC_IMAGE, "cdr", writer.register_schema(IMAGE_SCHEMA_NAME, "ros2msg",
                                                                                   IMAGE_SCHEMA_TEXT.encode()))
-    if want_meta:
-        meta = writer.register_channel(TOPIC_METADATA, "json", writer.register_schema(
-            "thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes()))
+    f = extras_file() if extras_file is not None else None
+    with f if f is not None else contextlib.nullcontext():
+        if f is not None:
+            reader = make_reader(f)
+            kept = _Kept(writer)
+            for rec in reader.iter_metadata():
+                kept.metadata(rec.name, rec.metadata)
+            for att in reader.iter_attachments():
+                kept.attachment(att)
+            images = ((t, 0, (idx, t, pixels)) for idx, t, pixels, _ in frames) if img is not None else iter(())
+            stream = heapq.merge(images, _extras_messages(writer, reader, topics, t0, t1), key=lambda x: (x[0], x[1]))
+        else:  # an archive from before extras.mcap: the sidecars come from the frames
+            stream = _frame_messages(writer, frames, img, not topics or TOPIC_METADATA in topics)
+        for t, kind, item in stream:
+            if kind == 0:
+                idx, t, pixels = item
+                writer.add_message(img, t, image_message_parts(pixels(), t), sequence=idx)
+            else:
+                channel, msg = item
+                writer.add_message(channel, msg.log_time, msg.data, msg.publish_time, msg.sequence)
+            if sink.size >= _FLUSH_AT:
+                yield sink.take()
+    writer.flush()
+
+
+def _extras_messages(writer: ChunkedWriter, reader: Any, topics: list[str] | None, t0: int | None,
+                     t1: int | None) -> Iterator[tuple[int, int, Any]]:
+    channels: dict[int, int] = {}
+    schemas: dict[int, int] = {}
+    for schema, ch, msg in reader.iter_messages(log_time_order=True):
+        if (topics and ch.topic not in topics) or ch.topic == TOPIC_IMAGE:
+            continue
+        if (t0 is not None and msg.log_time < t0) or (t1 is not None and msg.log_time >= t1):
+            continue
+        if ch.id not in channels:
+            sid = 0
+            if schema is not None:
+                if schema.id not in schemas:
+                    schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+                sid = schemas[schema.id]
+            channels[ch.id] = writer.register_channel(ch.topic, ch.message_encoding, sid, dict(ch.metadata))
+        yield msg.log_time, 1, (channels[ch.id], msg)
+
+
+def _frame_messages(writer: ChunkedWriter, frames, img: int | None, want_meta: bool) -> Iterator[tuple[int, int, Any]]:
+    """Old archives without extras.mcap: images and sidecars both from the frames."""
+    meta = writer.register_channel(TOPIC_METADATA, "json", writer.register_schema(
+        "thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes())) if want_meta else None
     for idx, t, pixels, sidecar in frames:
         if img is not None:
-            writer.add_message(img, t, image_message_parts(pixels(), t), sequence=idx)
+            yield t, 0, (idx, t, pixels)
         if meta is not None:
-            writer.add_message(meta, t, json.dumps(sidecar(), separators=(",", ":")).encode(), sequence=idx)
-        if sink.size >= _FLUSH_AT:
-            yield sink.take()
-    writer.flush()
+            yield t, 1, (meta, _Msg(t, json.dumps(sidecar(), separators=(",", ":")).encode(), idx))
+
+
+@dataclass
+class _Msg:
+    log_time: int
+    data: bytes
+    sequence: int = 0
+    publish_time: int = 0
+
+    def __post_init__(self) -> None:
+        self.publish_time = self.publish_time or self.log_time

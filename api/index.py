@@ -22,6 +22,7 @@ from typing import Any, Iterator
 from sqlalchemy import delete, insert, select
 from sqlalchemy.engine import Engine
 
+from recorder.layout import SessionLayout
 from recorder.reader import list_sessions, read_session_meta, session_segments
 from recorder.messages import TOPIC_METADATA
 from recorder.quality import graded_contrast
@@ -84,17 +85,17 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]],
                 if read_sidecars:
                     f.seek(js_off)
                     sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
-                blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off,
+                blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off, "crc32": img.CRC,
                               "length": img.file_size, "sidecar_offset": js_off, "sidecar_length": js.file_size})
                 idx += 1
     return sidecars, blobs
 
 
-def _sidecars_from_mcap(session_dir: Path) -> tuple[list[dict], list[str]]:
+def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
     from mcap.reader import make_reader
 
     out, segs = [], []
-    for seg in session_segments(session_dir):
+    for seg in files:
         with open(seg, "rb") as f:
             for _, _, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
                 out.append(json.loads(msg.data))
@@ -141,7 +142,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     if old == fp and not force:
         return False
     manifest = _load_manifest(session_dir)
-    verified = {f: e for f, e in (manifest or {}).get("formats", {}).items() if e.get("verified")}
+    # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
+    verified = {f: e for f, e in (manifest or {}).get("formats", {}).items() if e.get("verified") and not e.get("damaged")}
     zipped = next((f for f in ZIPPED_FORMATS if f in verified and (session_dir / "archive" / f).is_dir()), None)
     blobs: list[dict[str, Any]] = []
     if zipped:
@@ -151,9 +153,19 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
                 blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"], read_sidecars=False)[1]
         segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
         times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
-    else:
-        sidecars, segs = _sidecars_from_mcap(session_dir)
+    elif session_segments(session_dir):
+        sidecars, segs = _sidecars_from_mcap(session_segments(session_dir))
         times = [_ts(s) for s in sidecars]
+    else:
+        # Source deleted and no zipped archive (hdf5, tiff-lzw ...): the sidecars live in extras.mcap
+        # exactly as recorded, and the manifest has each frame's time and segment.
+        extras = SessionLayout.of(session_dir).extras
+        sidecars, _ = _sidecars_from_mcap([extras] if extras.is_file() else [])
+        frames_meta = (manifest or {}).get("frames", {})
+        times = frames_meta.get("timestamps_ns") or [_ts(s) for s in sidecars]
+        segs = frames_meta.get("segments") or [None] * len(times)
+        if len(sidecars) != len(times):
+            sidecars = (sidecars + [{}] * len(times))[: len(times)]
     analysed = session_dir / "analysis.jsonl"
     if analysed.is_file():  # `thermcap analyze` results take precedence over the recorded sidecars
         by_index = {}
@@ -164,10 +176,14 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         sidecars = [{**sc, **{k: by_index[i][k] for k in ("thermal_analysis", "targets")}} if i in by_index else sc
                     for i, sc in enumerate(sidecars)]
     frame_rows = []
+    hashes = (manifest or {}).get("frames", {}).get("sha256") or []
+    sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
     for i, (sc, t) in enumerate(zip(sidecars, times)):
         ta = sc.get("thermal_analysis") or {}
         targets = sc.get("targets") or []
         frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
+                           "sha256": hashes[i] if i < len(hashes) else None,
+                           "sidecar_sha256": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
                            # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
                            "grade": graded_contrast(ta),
                            "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
@@ -196,7 +212,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     seg_rows = [{"session_id": sid, "name": s.name, "frames": sum(1 for x in segs if x == s.name),
                  "bytes": s.stat().st_size} for s in session_segments(session_dir)]
     arch_rows = [{"session_id": sid, "format": f, "files": json.dumps(e["files"]), "bytes": e["bytes"],
-                  "objects": e["objects"], "ratio": e.get("compression_ratio"), "verified": bool(e.get("verified"))}
+                  "objects": e["objects"], "ratio": e.get("compression_ratio"),
+                  "verified": bool(e.get("verified")) and not e.get("damaged")}
                  for f, e in (manifest or {}).get("formats", {}).items()]
     event_rows = []
     events_path = session_dir / "events.json"

@@ -17,7 +17,9 @@ from typing import Any, Callable
 from .analysis import EventBuilder, HotSpotDetector
 from .exceptions import McapFileError
 from .radiometry import model_from_dict
-from .reader import iter_session_frames, read_session_meta
+from .layout import SessionLayout
+from .lock import session_locked
+from .reader import frame_files, iter_session_frames, read_session_meta
 from .segments import write_json_atomic
 
 __all__ = ["analyze_session", "ANALYSIS_FILE", "EVENTS_FILE"]
@@ -30,10 +32,10 @@ def _bad_pixel_map(session_dir: Path):
     import numpy as np
     from mcap.reader import make_reader
 
-    segs = sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap"))
-    if not segs:
+    files = frame_files(session_dir)  # the segments, or extras.mcap once they are archived and gone
+    if not files:
         return None
-    with open(segs[0], "rb") as f:
+    with open(files[0], "rb") as f:
         for att in make_reader(f).iter_attachments():
             if att.name == "bad_pixel_map.json":
                 bpm = json.loads(att.data)
@@ -50,6 +52,22 @@ def analyze_session(session_dir: str | Path, *, threshold_k: float = 5.0, min_ar
     meta = read_session_meta(session_dir)
     if not meta and not list(session_dir.glob("*.mcap")):
         raise McapFileError(f"{session_dir}: not a thermcap session")
+    with session_locked(session_dir, "analyze"):
+        return _analyze(session_dir, meta, threshold_k, min_area, min_crossover_s, on_frame)
+
+
+def _expected_frames(session_dir: Path, meta: dict[str, Any]) -> int | None:
+    try:
+        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        return int(manifest["source"]["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    n = meta.get("frames_written")
+    return int(n) if isinstance(n, int) else None
+
+
+def _analyze(session_dir: Path, meta: dict[str, Any], threshold_k: float, min_area: int, min_crossover_s: float,
+             on_frame: Callable[[int], None] | None) -> dict[str, Any]:
     model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
     detector = HotSpotDetector(model, threshold_k=threshold_k, min_area=min_area,
                                bad_pixel_map=_bad_pixel_map(session_dir))
@@ -70,6 +88,11 @@ def analyze_session(session_dir: str | Path, *, threshold_k: float = 5.0, min_ar
                 on_frame(frames)
         out.flush()
         os.fsync(out.fileno())
+    expected = _expected_frames(session_dir, meta)
+    if expected is not None and frames != expected:
+        tmp.unlink()
+        raise McapFileError(f"{session_dir}: read {frames} frames but the session holds {expected} (is its "
+                            "source gone without a verified archive?); the previous analysis was kept")
     os.replace(tmp, session_dir / ANALYSIS_FILE)
     ev = events.finish()
     write_json_atomic(session_dir / EVENTS_FILE, {"session_id": meta.get("session_id", session_dir.name), "events": ev})

@@ -14,10 +14,13 @@ from typing import Any, Iterator
 import numpy as np
 from mcap.reader import make_reader
 
+from importlib.metadata import entry_points
+
 from .exceptions import McapFileError
+from .layout import SessionLayout
 from .messages import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
-__all__ = ["SessionFrame", "session_segments", "iter_session_frames", "read_session_meta", "count_frames",
+__all__ = ["SessionFrame", "session_segments", "iter_session_frames", "frame_files", "read_session_meta", "count_frames",
            "resolve_session", "list_sessions"]
 
 
@@ -85,11 +88,32 @@ def iter_segment_frames(path: Path, *, first_index: int = 0) -> Iterator[Session
 
 
 def iter_session_frames(session_dir: str | Path) -> Iterator[SessionFrame]:
-    index = 0
-    for seg in session_segments(session_dir):
-        for frame in iter_segment_frames(seg, first_index=index):
-            yield frame
-            index = frame.index + 1
+    """Every frame of a session, from its MCAP segments, or once they are deleted after archiving,
+    from the archive. The archive package registers that reader (entry-point group
+    ``thermcap.session_frames``), so the recorder reads archives without importing them."""
+    segments = session_segments(session_dir)
+    if segments:
+        index = 0
+        for seg in segments:
+            for frame in iter_segment_frames(seg, first_index=index):
+                yield frame
+                index = frame.index + 1
+        return
+    for ep in entry_points(group="thermcap.session_frames"):
+        frames = ep.load()(Path(session_dir))
+        if frames is not None:
+            yield from frames
+            return
+
+
+def frame_files(session_dir: str | Path) -> list[Path]:
+    """The MCAP files that hold a session's other topics and attachments: its segments, or the
+    archive's extras.mcap once they are deleted."""
+    segments = session_segments(session_dir)
+    if segments:
+        return segments
+    extras = SessionLayout.of(session_dir).extras
+    return [extras] if extras.is_file() else []
 
 
 def count_frames(session_dir: str | Path) -> dict[str, int]:

@@ -6,8 +6,13 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import StreamingResponse
 from sqlalchemy import select
 
+import io
+
+from recorder.layout import EXTRAS_MCAP
+
 from .. import db
 from ..export import export_mcap
+from ..frames import BlobFile
 from ..security import require
 from .common import parse_time, session_row
 
@@ -33,6 +38,15 @@ def export(request: Request, session_id: str, start: str | None = None, end: str
         reader = request.app.state.frames
         frames = ((i, t, (lambda i=i: reader.pixels(session_id, i)), (lambda i=i: reader.sidecar(session_id, i)))
                   for i, t in rows)
+    extras = None
+    if frames is not None:
+        store = request.app.state.store
+        key = f"sessions/{session_id}/archive/{EXTRAS_MCAP}"
+        head = store.head(key)
+        if head is not None:
+            def extras():
+                return io.BufferedReader(BlobFile(store, key, head["size"]), buffer_size=1 << 20)
     name = f"{session_id}.mcap"
-    return StreamingResponse(export_mcap(session_dir, t0, t1, topic_list, frames), media_type="application/octet-stream",
+    return StreamingResponse(export_mcap(session_dir, t0, t1, topic_list, frames, extras),
+                             media_type="application/octet-stream",
                              headers={"Content-Disposition": f'attachment; filename="{name}"'})

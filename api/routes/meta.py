@@ -16,8 +16,11 @@ router = APIRouter()
 
 
 @router.get("/healthz", tags=["meta"])
-def healthz() -> dict:
-    return {"status": "ok"}
+def healthz(request: Request) -> dict:
+    """Alive; ``degraded`` (still 200: the service serves other copies) once it met a damaged copy,
+    with what and where, so a probe or a person sees the disk needs `thermcap scrub --repair`."""
+    damage = request.app.state.frames.damage.summary()
+    return {"status": "degraded" if damage["damaged_copies_seen"] else "ok", **damage}
 
 
 @router.get("/readyz", tags=["meta"])

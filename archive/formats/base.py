@@ -26,7 +26,7 @@ from recorder.reader import SessionFrame
 from ..codecs import build_from_config
 
 __all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "DecodedFrame", "format_registry", "register_format",
-           "get_format", "ordered_map", "frame_name"]
+           "get_format", "ordered_map", "frame_name", "locate"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -94,11 +94,40 @@ class ArchiveFormat(ABC):
         """Frames in session order, with their sidecars and times, decoded by the format's
         ordinary reader."""
 
+    def read_frame(self, open_file: Callable[[str], Any], files: list[dict[str, Any]], index: int) -> DecodedFrame:
+        """Frame ``index`` of the session (pixels, sidecar, time) with as little reading as the
+        format allows. ``open_file(path)`` gives a seekable binary file for one of ``files``
+        (local, or ranged reads from an object store). Formats with random access override it;
+        this default walks the one file that holds the frame."""
+        rel, k = locate(files, index)
+        import tempfile
+
+        with open_file(rel) as src, tempfile.TemporaryDirectory() as tmp:
+            local = Path(tmp) / Path(rel).name
+            with open(local, "wb") as dst:
+                while chunk := src.read(1 << 20):
+                    dst.write(chunk)
+            for i, frame in enumerate(self.read(Path(tmp), [local.name])):
+                if i == k:
+                    return frame
+        raise IndexError(f"{rel} holds fewer than {k + 1} frames")
+
     def get_config(self) -> dict[str, Any]:
         return {"id": self.format_id}
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.get_config()})"
+
+
+def locate(files: list[dict[str, Any]], index: int) -> tuple[str, int]:
+    """(file path, position in it) of session frame ``index``, from the manifest's file list."""
+    if index < 0:
+        raise IndexError(f"no frame {index}")
+    for rec in files:
+        if index < rec["frames"]:
+            return rec["path"], index
+        index -= rec["frames"]
+    raise IndexError("frame beyond the archive's files")
 
 
 format_registry: dict[str, Callable[..., ArchiveFormat]] = {}

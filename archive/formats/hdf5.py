@@ -18,7 +18,7 @@ import numpy as np
 from recorder.reader import SessionFrame
 
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 
 __all__ = ["Hdf5"]
 
@@ -92,3 +92,16 @@ class Hdf5(ArchiveFormat):
                                            else bytes(meta[i]), int(times[i]))
             except (OSError, KeyError) as exc:
                 raise ArchiveError(f"{path}: not a readable HDF5 archive ({exc})") from exc
+
+    def read_frame(self, open_file, files: list[dict], index: int) -> DecodedFrame:
+        """One chunk of ``frames`` (one frame per chunk) and one row each of the time and the
+        sidecar: h5py reads a file object with seeks, so this is a few ranged reads."""
+        rel, k = locate(files, index)
+        with open_file(rel) as fh:
+            try:
+                with h5py.File(fh, "r") as f:
+                    meta = f["metadata"][k]
+                    return DecodedFrame(f["frames"][k], meta.encode("utf-8") if isinstance(meta, str) else bytes(meta),
+                                        int(f["timestamps_ns"][k]))
+            except (OSError, KeyError, ValueError) as exc:
+                raise ArchiveError(f"{rel}: not a readable HDF5 archive ({exc})") from exc

@@ -20,7 +20,7 @@ import tifffile
 from recorder.reader import SessionFrame
 
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, sidecar_text, time_from_sidecar
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, locate, sidecar_text, time_from_sidecar
 
 __all__ = ["TiffLzw"]
 
@@ -72,10 +72,24 @@ class TiffLzw(ArchiveFormat):
             try:
                 with tifffile.TiffFile(path) as tif:
                     for page in tif.pages:
-                        desc = page.tags.get(270)
-                        sidecar = desc.value.encode("utf-8") if desc is not None else b""
-                        stamp = page.tags.get(LOG_TIME_TAG)
-                        log_time = int(stamp.value) if stamp is not None else time_from_sidecar(sidecar)
-                        yield DecodedFrame(page.asarray(), sidecar, log_time)
+                        yield _decoded(page)
             except (tifffile.TiffFileError, OSError, ValueError) as exc:
                 raise ArchiveError(f"{path}: not a readable TIFF ({exc})") from exc
+
+    def read_frame(self, open_file, files: list[dict], index: int) -> DecodedFrame:
+        """Page k alone: tifffile follows the IFD chain and reads only that page's strips."""
+        rel, k = locate(files, index)
+        with open_file(rel) as fh:
+            try:
+                with tifffile.TiffFile(fh) as tif:
+                    return _decoded(tif.pages[k])
+            except (tifffile.TiffFileError, OSError, ValueError, IndexError) as exc:
+                raise ArchiveError(f"{rel}: cannot read page {k} ({exc})") from exc
+
+
+def _decoded(page) -> DecodedFrame:
+    desc = page.tags.get(270)
+    sidecar = desc.value.encode("utf-8") if desc is not None else b""
+    stamp = page.tags.get(LOG_TIME_TAG)
+    log_time = int(stamp.value) if stamp is not None else time_from_sidecar(sidecar)
+    return DecodedFrame(page.asarray(), sidecar, log_time)

@@ -17,7 +17,7 @@ from recorder.reader import SessionFrame
 
 from ..codecs import FrameCodec, get_codec
 from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, group_by_segment, ordered_map, sidecar_text
+from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, locate, group_by_segment, ordered_map, sidecar_text
 
 __all__ = ["ZippedFrames"]
 
@@ -67,6 +67,21 @@ class ZippedFrames(ArchiveFormat):
                             yield DecodedFrame(self.codec.decode(zf.read(info)), sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
+
+
+    def read_frame(self, open_file, files: list[dict], index: int) -> DecodedFrame:
+        rel, k = locate(files, index)
+        ext = self.codec.extension
+        with open_file(rel) as fh:
+            try:
+                with zipfile.ZipFile(fh) as zf:
+                    images = [i for i in zf.infolist() if i.filename.endswith(ext)]
+                    base = images[k].filename[: -len(ext)]
+                    names = set(zf.namelist())
+                    sidecar = zf.read(base + ".json") if base + ".json" in names else b""
+                    return DecodedFrame(self.codec.decode(zf.read(images[k])), sidecar, _time_from_name(base))
+            except (zipfile.BadZipFile, OSError, IndexError) as exc:
+                raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
 
 
 def _time_from_name(base: str) -> int | None:

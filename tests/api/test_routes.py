@@ -31,7 +31,9 @@ def source(data_root):
 
 
 def test_health_and_ready(client):
-    assert client.get("/healthz").json() == {"status": "ok"}
+    health = client.get("/healthz").json()
+    assert health["status"] == "ok"
+    assert health["damaged_copies_seen"] == 0
     assert client.get("/readyz").json()["sessions"] == 3
 
 

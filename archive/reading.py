@@ -1,0 +1,59 @@
+"""A session's frames read back from its archive, once the MCAP source is deleted.
+
+Every archive format is a full source: ``archived_frames`` gives the same ``SessionFrame``
+stream (counts, sidecar exactly as recorded, time, segment name) as the MCAP reader did, from
+the first verified format on disk, so ``analyze``, exports and re-archiving work after
+``--delete-source``. Registered for ``recorder.reader`` through the ``thermcap.session_frames``
+entry point.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Iterator
+
+from recorder.layout import SessionLayout
+from recorder.reader import SessionFrame
+
+from .exceptions import ManifestError
+from .formats import get_format
+from .manifest import load_manifest
+
+__all__ = ["archived_frames", "verified_formats", "READ_PREFERENCE"]
+
+#: Fastest full-session readers first (sequential decode on one core).
+READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")
+
+
+def verified_formats(manifest: dict[str, Any], layout: SessionLayout) -> list[str]:
+    """Verified formats whose folder is on disk, in reading preference."""
+    fmts = [f for f, e in manifest.get("formats", {}).items() if e.get("verified") and e.get("files")
+            and layout.format_dir(f).is_dir()]
+    return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
+
+
+def archived_frames(session_dir: Path) -> Iterator[SessionFrame] | None:
+    """The session's frames from its archive; None when it has no verified archive on disk."""
+    layout = SessionLayout.of(session_dir)
+    try:
+        manifest = load_manifest(layout.dir, required=False)
+    except ManifestError:
+        return None
+    if manifest is None:
+        return None
+    fmts = verified_formats(manifest, layout)
+    if not fmts:
+        return None
+    return _frames(manifest, layout, fmts[0])
+
+
+def _frames(manifest: dict[str, Any], layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
+    entry = manifest["formats"][fid]
+    fmt = get_format(entry.get("config") or fid)
+    frames = manifest.get("frames", {})
+    segments = frames.get("segments") or []
+    times = frames.get("timestamps_ns") or []
+    for i, decoded in enumerate(fmt.read(layout.format_dir(fid), [r["path"] for r in entry["files"]])):
+        log_time = decoded.log_time if decoded.log_time is not None else (times[i] if i < len(times) else 0)
+        segment = segments[i] if i < len(segments) else ""
+        yield SessionFrame(i, segment, log_time, decoded.pixels, decoded.sidecar)

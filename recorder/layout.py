@@ -1,0 +1,74 @@
+"""The session folder contract: every file a session holds, named once.
+
+``ROOT/sessions/<id>/`` holds the recording and everything derived from it. The recorder, the
+archiver and the API all find files through ``SessionLayout``, never by spelling names, so the
+layout is changed (and documented, in docs/architecture.md) in one place.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["SessionLayout", "ACTIVE_SUFFIX", "PARTIAL_SUFFIX", "SESSION_JSON", "EVENTS_JSON", "ANALYSIS_JSONL",
+           "ARCHIVE_DIR", "MANIFEST_JSON", "EXTRAS_MCAP", "LOCK_FILE"]
+
+ACTIVE_SUFFIX = ".active"  # a segment being written, or left by a crash for `recover`
+PARTIAL_SUFFIX = ".partial"  # an archive format (or extras) not verified yet
+SESSION_JSON = "session.json"
+EVENTS_JSON = "events.json"
+ANALYSIS_JSONL = "analysis.jsonl"
+ARCHIVE_DIR = "archive"
+MANIFEST_JSON = "manifest.json"
+EXTRAS_MCAP = "extras.mcap"
+LOCK_FILE = ".lock"
+
+
+@dataclass(frozen=True)
+class SessionLayout:
+    """Paths inside one session folder."""
+
+    dir: Path
+
+    @classmethod
+    def of(cls, session_dir: str | os.PathLike) -> "SessionLayout":
+        return cls(Path(session_dir))
+
+    @property
+    def session_json(self) -> Path:
+        return self.dir / SESSION_JSON
+
+    @property
+    def events_json(self) -> Path:
+        return self.dir / EVENTS_JSON
+
+    @property
+    def analysis_jsonl(self) -> Path:
+        return self.dir / ANALYSIS_JSONL
+
+    @property
+    def lock(self) -> Path:
+        return self.dir / LOCK_FILE
+
+    @property
+    def archive(self) -> Path:
+        return self.dir / ARCHIVE_DIR
+
+    @property
+    def manifest(self) -> Path:
+        return self.archive / MANIFEST_JSON
+
+    @property
+    def extras(self) -> Path:
+        return self.archive / EXTRAS_MCAP
+
+    def format_dir(self, format_id: str) -> Path:
+        return self.archive / format_id
+
+    def segments(self) -> list[Path]:
+        """Finished segments, in order (``.active`` ones are not data yet)."""
+        return sorted(self.dir.glob("[0-9][0-9][0-9][0-9].mcap"))
+
+    def active_segments(self) -> list[Path]:
+        return sorted(self.dir.glob(f"[0-9][0-9][0-9][0-9].mcap{ACTIVE_SUFFIX}"))

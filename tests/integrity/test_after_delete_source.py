@@ -1,0 +1,97 @@
+"""Defect 6: sessions emptied by --delete-source. Every archive format, alone, must be a full
+source for the index, frames, analysis and export, with nothing dropped."""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+from collections import Counter
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+from mcap.reader import make_reader
+
+from api.app import create_app
+from api.export import export_mcap
+from api.settings import Settings
+from archive.archiver import archive_session
+from recorder.analyze import analyze_session
+from recorder.reader import iter_session_frames
+from recorder.recorder import Recorder
+from recorder.segments import SegmentPolicy
+from recorder.sources.sim import SimSource
+
+T0 = 1_800_000_000_000_000_000
+N = 90
+
+
+def _record(root):
+    Recorder(SimSource(width=96, height=64, frames=N, paced=False, start_time_ns=T0, crossover=True,
+                       first_cue_s=0.1, cue_period_s=0.5), root, session_id="s",
+             policy=SegmentPolicy(max_duration_s=0.5), analysis=True, stats_interval_s=0.05).run()
+    return root / "sessions" / "s"
+
+
+def _all_messages(data: bytes) -> Counter:
+    out: Counter = Counter()
+    for _, ch, msg in make_reader(io.BytesIO(data)).iter_messages(log_time_order=False):
+        out[(ch.topic, msg.log_time, hashlib.sha256(msg.data).hexdigest())] += 1
+    return out
+
+
+def _attachments(data: bytes) -> set:
+    return {(a.name, hashlib.sha256(a.data).hexdigest()) for a in make_reader(io.BytesIO(data)).iter_attachments()}
+
+
+@pytest.mark.parametrize("fmt", ["hdf5", "tiff-lzw", "png16", "jxl"])
+def test_each_format_alone_serves_indexes_analyses_and_exports_everything(tmp_path, fmt):
+    session = _record(tmp_path)
+    before = [(f.log_time, np.array(f.pixels), f.sidecar) for f in iter_session_frames(session)]
+    export_before = b"".join(export_mcap(session, None, None, None))
+    events_before = analyze_session(session)["events"]
+    assert len(before) == N
+
+    archive_session(session, [fmt], delete_source=True)
+    assert not list(session.glob("*.mcap"))
+
+    after = [(f.log_time, np.array(f.pixels), f.sidecar) for f in iter_session_frames(session)]
+    assert len(after) == N
+    for (t0, p0, s0), (t1, p1, s1) in zip(before, after, strict=True):
+        assert t0 == t1
+        assert np.array_equal(p0, p1)
+        assert s0 == s1
+
+    result = analyze_session(session)
+    assert result["frames"] == N
+    assert result["events"] == events_before
+    assert json.loads((session / "events.json").read_text())["events"] == events_before
+
+    with TestClient(create_app(Settings(root=tmp_path, tokens={}, rescan_interval_s=0))) as c:
+        row = c.get("/api/v1/sessions/s").json()
+        assert row["frames"] == N
+        for i in (0, N // 2, N - 1):
+            r = c.get(f"/api/v1/sessions/s/frames/{i}", params={"format": "raw"})
+            assert r.status_code == 200, r.text
+            assert r.content == before[i][1].astype("<u2").tobytes()
+            meta = c.get(f"/api/v1/sessions/s/frames/{i}/metadata")
+            assert meta.status_code == 200
+            assert meta.json() == json.loads(before[i][2])
+        exported = c.get("/api/v1/sessions/s/export.mcap").content
+    assert _all_messages(exported) == _all_messages(export_before)
+    assert _attachments(exported) == _attachments(export_before)
+
+
+def test_analyze_refuses_to_empty_events_when_no_frame_can_be_read(tmp_path):
+    session = _record(tmp_path)
+    analyze_session(session)
+    events = (session / "events.json").read_bytes()
+    archive_session(session, ["png16"], delete_source=True)
+    import shutil
+
+    shutil.rmtree(session / "archive" / "png16")  # the only copy is gone
+    with pytest.raises(Exception) as exc:
+        analyze_session(session)
+    assert "frames" in str(exc.value)
+    assert (session / "events.json").read_bytes() == events
