@@ -21,6 +21,7 @@ from recorder.radiometry import TemperatureUnavailable
 from .frames import FrameNotFound, FrameReader, FrameUnavailable
 from .index import index_root
 from .security import AuthGate
+from .verified_files import FileVerifier
 from .settings import Settings
 from .storage import make_store
 
@@ -97,6 +98,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     migrate(app.state.engine)
     app.state.store = make_store(settings)
     app.state.frames = FrameReader(app.state.engine, app.state.store, settings.root)
+    app.state.files = FileVerifier(app.state.store, settings.root)
     registry = CollectorRegistry()
     app.state.metrics_registry = registry
     requests_total = Counter("thermcap_http_requests_total", "HTTP requests", ["route", "method", "status"],

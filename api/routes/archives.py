@@ -10,6 +10,7 @@ from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
 from .. import db
+from ..frames import Damage
 from ..security import check_file_name, require
 from .common import session_row
 
@@ -79,6 +80,11 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
         return Response(status_code=304, headers=base)
     if store.head(key) is None:
         raise HTTPException(404, f"{key} is listed in the manifest but missing from the store")
+    problem = request.app.state.files.problem(key, entry["sha256"], size)
+    if problem is not None:  # never send damaged bytes under the manifest's ETag
+        request.app.state.frames.damage.report(Damage(session_id, -1, f"{fmt}:{name}", problem))
+        raise HTTPException(503, f"{fmt}/{name} of {session_id} is damaged ({problem}); another format may serve "
+                                 "its frames, and `thermcap scrub --repair` rebuilds it from a verified copy")
     rng = request.headers.get("range")
     if_range = request.headers.get("if-range")
     span = _parse_range(rng, size) if rng and (not if_range or if_range.strip() == etag) else None
