@@ -169,7 +169,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
        as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
     from .settings import Settings
-    from .worker import gc_sessions
+    from .retention import gc_sessions
 
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")
@@ -183,12 +183,24 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
         except ValueError:
             fail(f"--max-bytes: {max_bytes!r} is not a size like 500G")
     req = bool(settings.s3_bucket) if require_upload is None else require_upload
-    res = gc_sessions(settings.root, keep_days=keep_days, max_bytes=limit, require_upload=req, dry_run=dry_run)
+    from .storage import make_store
+
+    store = make_store(settings) if settings.s3_bucket else None
+    try:
+        res = gc_sessions(settings.root, keep_days=keep_days, max_bytes=limit, require_upload=req, dry_run=dry_run,
+                          store=store)
+    except OSError as exc:
+        fail(f"{exc.filename or settings.root}: {exc.strerror or exc}")
     if as_json:
-        click.echo(json.dumps(res, indent=2))
+        click.echo(json.dumps(res.to_dict(), indent=2))
         return
     verb = "would delete" if dry_run else "deleted"
-    for d in res["deleted"]:
-        click.echo(f"{verb} {d}")
-    click.echo(f"{verb} {len(res['deleted'])} sessions, {res['bytes_freed']:,} bytes; {res['bytes_remaining']:,} remain; "
-               f"{len(res['kept_unverified'])} kept (not verified/uploaded)")
+    for d in res.decisions:
+        if d.action == "keep":
+            click.echo(f"keep {d.session}: {d.why_kept}")
+        else:
+            what = "MCAP source" if d.action == "delete-source" else "local folder"
+            click.echo(f"{verb} {what} of {d.session} ({d.frees:,} bytes), relying on: {'; '.join(d.relies_on)}")
+    click.echo(f"{verb} {sum(x.frees for x in res.deleted):,} bytes in {len(res.deleted)} sessions; "
+               f"{res.bytes_remaining:,} bytes remain; "
+               f"{sum(1 for x in res.decisions if x.action == 'keep')} kept (nothing else covers them)")

@@ -156,6 +156,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     meta = read_session_meta(session_dir)
     session_id = meta.get("session_id", session_dir.name)
     manifest = load_manifest(session_dir, required=False) or new_manifest(session_id, meta)
+    # What the user asked for: gc and scrub count a session as covered only when all of it verified.
+    manifest["requested_formats"] = sorted(set(manifest.get("requested_formats", [])) | set(formats))
     adir = archive_dir(session_dir)
     adir.mkdir(exist_ok=True)
     fmts = {fid: get_format(fid) for fid in formats}  # unknown ids fail before any work
