@@ -327,7 +327,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
                               analysis=analysis, dji_sdk=backend,
                               terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task))
     if as_json:
-        click.echo(json.dumps({"files": report.files, "failed": report.failed,
+        click.echo(json.dumps({"files": report.files, "failed": report.failed, "truncated": report.truncated,
                                "dji_sdk": backend.name if backend else None,
                                "sessions": [r.to_dict() for r in report.sessions]}, indent=2))
     else:
@@ -340,7 +340,9 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
             click.echo(f"session {r.session_id}: {r.frames_written} frames")
         for f in report.failed:
             click.echo(f"error: {f['error']}", err=True)
-    if report.failed or any(not r.ok for r in report.sessions):
+        for f in report.truncated:
+            click.echo(f"error: {f['error']}", err=True)
+    if report.failed or report.truncated or any(not r.ok for r in report.sessions):
         sys.exit(1)
 
 

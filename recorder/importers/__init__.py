@@ -12,7 +12,7 @@ import mmap
 from pathlib import Path
 from typing import Iterator
 
-from .base import ImportedFrame, ImportError_
+from .base import ImportedFrame, ImportError_, TruncatedImageError
 from .dji import is_dji, read_dji
 from .flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from .icd_files import read_icd_raw, read_icd_tiff, sidecar_for

@@ -17,6 +17,16 @@ class ImportError_(SourceError):  # noqa: N801 - "ImportError" is a builtin
     """A file could not be imported; the message names the file and the problem."""
 
 
+class TruncatedImageError(ImportError_):
+    """A multi-image file (SEQ, CSQ) ends inside an image: the images before it are complete and
+    are imported; this one is reported by its byte count, as the raw source reports a cut frame."""
+
+    def __init__(self, path: str, image: int, at_byte: int, got: int, expected: int) -> None:
+        self.path, self.image, self.at_byte, self.got, self.expected = path, image, at_byte, got, expected
+        super().__init__(f"{path}: image {image} at byte {at_byte} is cut: {got} of its {expected} bytes are there "
+                         f"({image} complete images before it were imported)")
+
+
 @dataclass
 class ImportedFrame:
     path: str

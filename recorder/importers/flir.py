@@ -10,7 +10,7 @@ import imagecodecs
 import numpy as np
 
 from ..radiometry import FlirPlanckModel
-from .base import ImportedFrame, ImportError_, read_exact
+from .base import ImportedFrame, ImportError_, TruncatedImageError, read_exact
 from .jpeg import app_segments
 
 __all__ = ["read_flir_jpeg", "read_fff_file", "parse_fff", "iter_fff_records", "flir_jpeg_payload"]
@@ -175,6 +175,7 @@ def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
     image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file)."""
     pos, n = 0, len(data)
+    index = 0
     done = 0  # bytes of an mmap already handed back to the kernel
     while pos + 0x40 <= n:
         if isinstance(data, mmap.mmap) and pos - done >= 64 << 20:  # keep RSS to the image at hand
@@ -185,15 +186,16 @@ def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:
         dir_off, count = struct.unpack(order + "II", data[pos + 0x18:pos + 0x20])
         end = dir_off + 32 * count
         if pos + end > n:
-            raise ImportError_(f"{path}: image at byte {pos} is cut (its directory needs {end} bytes, {n - pos} left)")
+            raise TruncatedImageError(path, index, pos, n - pos, end)
         for i in range(count):
             rtype, _s, _v, _i, off, length = struct.unpack(order + "HHIIII", data[pos + dir_off + 32 * i:
                                                                                     pos + dir_off + 32 * i + 20])
             if rtype:
                 end = max(end, off + length)
         if pos + end > n:
-            raise ImportError_(f"{path}: image at byte {pos} is cut (needs {end} bytes, {n - pos} left)")
+            raise TruncatedImageError(path, index, pos, n - pos, end)
         yield bytes(data[pos:pos + end])
+        index += 1
         pos += end
         while pos < n and data[pos:pos + 4] not in (b"FFF\x00", b"AFF\x00"):
             # padding between images; stop at the next real header

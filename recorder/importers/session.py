@@ -17,7 +17,7 @@ import hashlib
 import json
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -26,7 +26,7 @@ import numpy as np
 from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
 from ..recorder import Recorder, RecordingResult, new_session_id
 from ..sources.base import CapturedFrame, FrameSource, SensorInfo
-from . import ImportedFrame, ImportError_, iter_file
+from . import ImportedFrame, ImportError_, TruncatedImageError, iter_file
 from .dji_sdk import DjiBackend
 
 __all__ = ["import_paths", "ImportReport"]
@@ -44,6 +44,8 @@ class ImportReport:
     files: list[dict[str, Any]]
     sessions: list[RecordingResult]
     failed: list[dict[str, str]]
+    #: files whose complete images were imported but whose last image is cut (named by byte count)
+    truncated: list[dict[str, Any]] = field(default_factory=list)
 
 
 def _walk(paths: list[str]) -> list[str]:
@@ -201,7 +203,7 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
                  on_file: Callable[[str], None] | None = None) -> ImportReport:
     """Import ``paths``; ``dji_sdk`` (see :func:`recorder.importers.dji_sdk.find_backend`) measures
     DJI temperatures with DJI's own code, in batches of ``SDK_BATCH`` files to bound memory."""
-    files, failed = [], []
+    files, failed, truncated = [], [], []
     groups: dict[str, list[_Entry]] = {}
     waiting: list[_Entry] = []
 
@@ -232,6 +234,12 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
                         settle(waiting)
                 else:
                     settle([e])
+        except TruncatedImageError as exc:
+            if exc.image == 0:  # not one complete image: the file failed
+                failed.append({"path": path, "error": str(exc)})
+            else:  # the complete images before the cut are kept; the cut one is reported
+                truncated.append({"path": path, "error": str(exc), "kept_images": exc.image, "at_byte": exc.at_byte,
+                                  "got_bytes": exc.got, "expected_bytes": exc.expected})
         except (ImportError_, OSError) as exc:
             # nothing of a file that failed part-way is recorded: take back what it gave
             waiting[:] = [e for e in waiting if e.path != path]
@@ -264,4 +272,4 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
         for fsum in files:
             if fsum["path"] in paths_in:
                 fsum["session_id"] = result.session_id
-    return ImportReport(files=files, sessions=sessions, failed=failed)
+    return ImportReport(files=files, sessions=sessions, failed=failed, truncated=truncated)

@@ -108,8 +108,9 @@ def test_import_cli_keeps_going_and_reports(samples, tmp_path):
     assert not list((tmp_path / "root").rglob("*.active"))
 
 
-def test_a_seq_cut_part_way_imports_nothing_of_itself(samples, tmp_path):
-    """Frames are read one at a time, but a file that fails part-way leaves no trace."""
+def test_a_seq_cut_part_way_keeps_its_complete_images_and_reports_the_cut_one(samples, tmp_path):
+    """A SEQ that ends inside an image (a copy cut short, a camera that lost power): every
+    complete image is imported, the cut one is reported by its byte count, the exit status is 1."""
     one = (samples / "flir" / "frame_000000.fff").read_bytes()
     folder = tmp_path / "in"
     folder.mkdir()
@@ -119,10 +120,14 @@ def test_a_seq_cut_part_way_imports_nothing_of_itself(samples, tmp_path):
     r = run_cli("import", str(folder), "--root", str(root), "--json", "--no-analysis")
     assert r.returncode == 1
     out = json.loads(r.stdout)
-    assert [f["path"] for f in out["failed"]] == [str(folder / "cut.seq")] and "is cut" in out["failed"][0]["error"]
-    assert {f["path"] for f in out["files"]} == {str(folder / "good.seq")} and len(out["files"]) == 40
+    assert out["failed"] == []
+    assert [f["path"] for f in out["truncated"]] == [str(folder / "cut.seq")]
+    assert out["truncated"][0]["kept_images"] == 3
+    assert out["truncated"][0]["got_bytes"] == len(one) // 2
+    assert "is cut" in out["truncated"][0]["error"]
+    assert len(out["files"]) == 43
     (s,) = out["sessions"]
-    assert s["frames_written"] == 40
+    assert s["frames_written"] == 43
 
 
 def _import_peak_rss_mb(args: list[str]) -> float:
