@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -63,10 +65,15 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     from .settings import Settings
     from .storage import make_store
 
+    from sqlalchemy.exc import SQLAlchemyError
+
     settings = Settings(root=Path(root_arg or root))
-    engine = make_engine(settings.db_url)
-    migrate(engine)
-    result = index_root(engine, settings.root, force=force, store=make_store(settings))
+    try:
+        engine = make_engine(settings.db_url)
+        migrate(engine)
+        result = index_root(engine, settings.root, force=force, store=make_store(settings))
+    except SQLAlchemyError as exc:
+        fail(index_db_problem(settings, exc))
     if as_json:
         click.echo(json.dumps(result, indent=2))
     else:
@@ -76,6 +83,20 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
             click.echo(f"  {name}: {err}", err=True)
     if result["failed"]:
         sys.exit(1)
+
+
+def index_db_problem(settings: Any, exc: Exception) -> str:
+    """One line for an index database that cannot be used, naming it (never its password)."""
+    from .settings import _redact
+
+    orig = getattr(exc, "orig", None) or exc
+    why = str(orig).splitlines()[0] if str(orig) else type(orig).__name__
+    url = settings.db_url
+    if url.startswith("sqlite:///"):
+        folder = Path(url[len("sqlite:///"):]).parent
+        if folder.exists() and not os.access(folder, os.W_OK):
+            why += f" ({folder} is read-only)"
+    return f"the index database {_redact(url)} cannot be used: {why}"
 
 
 @click.command()

@@ -147,6 +147,8 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
         raise ArchiveError(f"{session_dir}: {holder(session_dir) or 'another process'} holds this session")
     try:
         return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress)
+    except OSError as exc:  # a read-only or full disk: name the file; the source is untouched
+        raise ArchiveError(f"{exc.filename or session_dir}: {exc.strerror or exc}; nothing was deleted") from None
     finally:
         lock.release()
 

@@ -439,4 +439,11 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
 
 
 def main() -> None:
-    cli(prog_name="thermcap")
+    """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
+    (an OSError) is one line naming the file and exit 1, never a traceback."""
+    try:
+        cli(prog_name="thermcap")
+    except ThermcapError as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"{exc.filename + ': ' if exc.filename else ''}{exc.strerror or exc}")

@@ -7,6 +7,7 @@ ThermcapError                 root of every error thermcap raises on purpose
  +-- RecordingError           the writer had to stop (disk full, unwritable folder)
  +-- McapFileError            an MCAP file is unreadable or truncated (names the file)
  +-- SessionBusyError         another process holds the session's lock (names it)
+ +-- StorageError             a file or folder cannot be written (read-only, full, permissions; names it)
 """
 
 from __future__ import annotations
@@ -46,3 +47,7 @@ class McapFileError(ThermcapError):
 
 class SessionBusyError(ThermcapError):
     """Another process (a recorder, an archiver, recover, gc) holds the session's lock."""
+
+
+class StorageError(ThermcapError):
+    """A file or folder cannot be read or written (read-only disk, no space, permissions)."""

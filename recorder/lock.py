@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from .exceptions import SessionBusyError
+from .exceptions import SessionBusyError, StorageError
 
 __all__ = ["LOCK_NAME", "SessionLock", "lock_session", "holder", "session_locked", "is_locked", "session_status"]
 
@@ -54,7 +54,10 @@ def lock_session(session_dir: str | os.PathLike, role: str = "thermcap", *,
     longer. The holder's role and pid are written into the lock file for ``holder()``.
     """
     path = Path(session_dir) / LOCK_NAME
-    fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as exc:
+        raise StorageError(f"{path}: cannot take the session lock ({exc.strerror or exc})") from None
     deadline = time.monotonic() + wait_s
     while True:
         try:

@@ -120,8 +120,12 @@ def count_frames(session_dir: str | Path) -> dict[str, int]:
     """Frames per segment, from the MCAP summaries (no decompression)."""
     out = {}
     for seg in session_segments(session_dir):
-        with open(seg, "rb") as f:
-            summary = make_reader(f).get_summary()
+        try:
+            with open(seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+        except Exception as exc:  # a cut or damaged file may fail anywhere inside the reader
+            raise McapFileError(f"{seg}: no readable summary ({type(exc).__name__}: {exc}); is it cut short? "
+                                f"`thermcap recover {seg}` keeps every complete chunk") from None
         if summary is None or summary.statistics is None:
             raise McapFileError(f"{seg}: no summary; is it a finished segment?")
         ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
