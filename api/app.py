@@ -11,7 +11,7 @@ from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
-from prometheus_client import CollectorRegistry, Counter, Histogram
+from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from recorder import __version__
 
@@ -106,6 +106,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.state.frames.damage.counter = Counter(
         "thermcap_damaged_copies_total", "Damaged copies of frames or files met while serving (never served)",
         ["copy"], registry=registry)
+    app.state.archives_unverified = Gauge(
+        "thermcap_archive_copies_unverified", "Archive copies in the catalog that are not verified (failed, or "
+        "marked damaged by scrub) and so not offered", registry=registry)
     latency = Histogram("thermcap_http_request_seconds", "HTTP request latency", ["route"], registry=registry,
                         buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10))
 

@@ -155,9 +155,11 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 @click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
 @click.option("--delete-source", is_flag=True, help="Delete the MCAP once archives verified (and uploaded, with a store).")
 @click.option("--lease-ttl", type=float, default=600.0, show_default=True)
+@click.option("--scrub-interval", type=float, default=86400.0, show_default=True,
+              help="Seconds between scrubs (re-verify and repair every archived copy); 0: never.")
 @json_option
 def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, lease_ttl: float,
-           as_json: bool) -> None:
+           scrub_interval: float, as_json: bool) -> None:
     """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
     from .db import make_engine, migrate
     from .settings import Settings
@@ -175,7 +177,7 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
         if as_json:
             click.echo(json.dumps(res, indent=2))
         sys.exit(1 if res["failed"] else 0)
-    w.run_forever(interval)
+    w.run_forever(interval, scrub_interval)
 
 
 @click.command()

@@ -1,112 +1,14 @@
-"""Archive blobs through obstore: the local data root by default, any S3-compatible store when
-configured. Keys are paths relative to the data root (``sessions/<id>/archive/<fmt>/<file>``),
-the same on disk and in the bucket, so one code path serves both."""
+"""The API's object store: ``archive.blobs`` configured from the service settings."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
-from typing import Any, AsyncIterator
-
-import obstore
-from obstore.store import LocalStore, S3Store
+from archive.blobs import BlobStore, open_store, upload_archive
 
 from .settings import Settings
 
 __all__ = ["BlobStore", "make_store", "upload_archive"]
 
 
-class BlobStore:
-    def __init__(self, store: Any, *, prefix: str = "", kind: str = "local") -> None:
-        self.store = store
-        self.prefix = prefix.strip("/")
-        self.kind = kind
-
-    def _key(self, key: str) -> str:
-        return f"{self.prefix}/{key}" if self.prefix else key
-
-    def head(self, key: str) -> dict[str, Any] | None:
-        try:
-            return obstore.head(self.store, self._key(key))
-        except FileNotFoundError:
-            return None
-
-    def get_range(self, key: str, start: int, end: int) -> bytes:
-        """Bytes [start, end) of a blob."""
-        return bytes(obstore.get_range(self.store, self._key(key), start=start, end=end))
-
-    async def stream_range(self, key: str, start: int, end: int, chunk: int = 1 << 20) -> AsyncIterator[bytes]:
-        """[start, end) in pieces, so a multi-GB download never sits in memory."""
-        pos = start
-        while pos < end:
-            stop = min(end, pos + chunk)
-            data = await obstore.get_range_async(self.store, self._key(key), start=pos, end=stop)
-            yield bytes(data)
-            pos = stop
-
-    def put_file(self, key: str, path: Path) -> None:
-        with open(path, "rb") as f:
-            obstore.put(self.store, self._key(key), f, mode="overwrite")
-
-    def sign(self, key: str, expires_s: int = 300) -> str | None:
-        if self.kind != "s3":
-            return None
-        from datetime import timedelta
-
-        return obstore.sign(self.store, "GET", self._key(key), timedelta(seconds=expires_s))
-
-
 def make_store(settings: Settings) -> BlobStore:
-    if settings.s3_bucket:
-        kwargs: dict[str, Any] = {"region": settings.s3_region}
-        if settings.s3_endpoint:
-            kwargs["endpoint"] = settings.s3_endpoint
-            kwargs["virtual_hosted_style_request"] = False
-            if settings.s3_endpoint.startswith("http://"):
-                kwargs["client_options"] = {"allow_http": True}
-        for env, key in (("AWS_ACCESS_KEY_ID", "access_key_id"), ("AWS_SECRET_ACCESS_KEY", "secret_access_key")):
-            if os.environ.get(env):
-                kwargs[key] = os.environ[env]
-        return BlobStore(S3Store(settings.s3_bucket, **kwargs), prefix=settings.s3_prefix, kind="s3")
-    settings.root.mkdir(parents=True, exist_ok=True)
-    return BlobStore(LocalStore(str(settings.root.resolve())), kind="local")
-
-
-def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
-    """Upload a session's verified archive files with create-only writes, then its manifest.
-
-    An object already there with the same size is taken as uploaded (a rerun after a crash); one
-    with another size is an error, never an overwrite. The manifest records the upload, so
-    ``--delete-source`` and ``gc`` know the data is safe elsewhere. Returns the keys.
-    """
-    from obstore.exceptions import AlreadyExistsError
-
-    from archive.manifest import iso_now, load_manifest, save_manifest
-    from recorder.exceptions import ThermcapError
-
-    manifest = load_manifest(session_dir)
-    keys = []
-    extras = manifest.get("extras") or {}
-    groups = [(fmt, entry["files"]) for fmt, entry in manifest["formats"].items() if entry.get("verified")]
-    if extras.get("verified"):  # attachments and vendor metadata travel with the frames
-        groups.append(("", [{"path": extras["path"], "bytes": extras["bytes"]}]))
-    for fmt, files in groups:
-        for rec in files:
-            path = session_dir / "archive" / fmt / rec["path"]
-            key = path.resolve().relative_to(root.resolve()).as_posix()
-            head = store.head(key)
-            if head is None:
-                try:
-                    with open(path, "rb") as f:
-                        obstore.put(store.store, store._key(key), f, mode="create")
-                except AlreadyExistsError:
-                    head = store.head(key)
-            if head is not None and head["size"] != rec["bytes"]:
-                raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
-                                    f"expected {rec['bytes']}); refusing to overwrite")
-            keys.append(key)
-    manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
-    save_manifest(session_dir, manifest)
-    manifest_path = session_dir / "archive" / "manifest.json"
-    store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)
-    return keys
+    return open_store(settings.root, bucket=settings.s3_bucket, endpoint=settings.s3_endpoint,
+                      region=settings.s3_region, prefix=settings.s3_prefix)

@@ -23,6 +23,7 @@ from sqlalchemy.exc import IntegrityError
 
 from archive.archiver import archive_session
 from archive.manifest import load_manifest
+from archive.scrub import ScrubReport, scrub_session
 from recorder.exceptions import ThermcapError
 from recorder.reader import list_sessions, read_session_meta
 from recorder.lock import is_locked
@@ -111,7 +112,31 @@ class Worker:
                 release_lease(self.engine, sid, self.owner)
         return {"archived": done, "leased_elsewhere": skipped, "failed": failed}
 
-    def run_forever(self, interval_s: float = 5.0) -> None:
+    def scrub(self, repair: bool = True) -> dict[str, Any]:
+        """Re-verify every archived copy (and the bucket's), repair what another copy covers, and
+        re-index the sessions where anything was found, so the API stops offering damage at once."""
+        report = ScrubReport()
+        for d in list_sessions(self.root):
+            if not (d / "archive" / "manifest.json").is_file():
+                continue
+            before = len(report.findings)
+            try:
+                scrub_session(d, repair=repair, store=self.store, root=self.root, report=report)
+            except ThermcapError as exc:
+                self.log(f"error: scrub {d.name}: {exc}")
+                continue
+            if len(report.findings) > before:
+                index_session(self.engine, d, force=True)
+        for f in report.findings:
+            self.log(f"scrub: {f.session}: {f.copy} damaged ({f.problems[0]}); "
+                     + (f"repaired from {f.repaired_from}" if f.repaired else f"not repaired: {f.repair_error}"))
+        return report.to_dict()
+
+    def run_forever(self, interval_s: float = 5.0, scrub_interval_s: float = 86400.0) -> None:
+        next_scrub = time.monotonic() + scrub_interval_s if scrub_interval_s > 0 else None
         while True:
             self.run_once()
+            if next_scrub is not None and time.monotonic() >= next_scrub:
+                self.scrub()
+                next_scrub = time.monotonic() + scrub_interval_s
             time.sleep(interval_s)

@@ -15,9 +15,9 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
-from recorder.reader import count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
 from recorder.lock import holder, lock_session
 from recorder.segments import ACTIVE_SUFFIX, fsync_dir
 
@@ -31,7 +31,7 @@ from .extras import EXTRAS_NAME, write_extras
 from .manifest import (archive_dir, file_sha256, frame_sha256, iso_now, load_manifest, new_manifest, save_manifest,
                        sidecar_sha256)
 
-__all__ = ["archive_session", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
+__all__ = ["archive_session", "build_format", "verify_format_dir", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
 
 DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
 PARTIAL_SUFFIX = ".partial"
@@ -133,6 +133,78 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, A
     return problems, decode_s
 
 
+def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
+                 manifest: dict[str, Any], meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
+                 on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
+    """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
+    manifest's hashes, and only then take the final name (replacing an older copy only now) and
+    record it in the manifest. Returns the problems; a failed copy never takes the final name.
+    The archiver feeds it the MCAP source; ``scrub --repair`` any verified copy."""
+    adir = archive_dir(session_dir)
+    session_id = manifest.get("session_id", session_dir.name)
+    expected = manifest["frames"]["sha256"]
+    final = adir / fid
+    partial = adir / (fid + PARTIAL_SUFFIX)
+    if partial.exists():  # left by a crashed run; never taken for an archive
+        shutil.rmtree(partial)
+    partial.mkdir()
+    done = [0]
+
+    def tick() -> None:
+        done[0] += 1
+        if on_progress and done[0] % 16 == 0:
+            on_progress(f"writing {fid}", done[0], len(expected))
+
+    ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=len(expected),
+                         frames_per_segment=per_segment, workers=workers, on_frame=tick)
+    t = time.perf_counter()
+    records: list[FileRecord] = fmt.write(frames, partial, ctx)
+    encode_s = time.perf_counter() - t
+    for rec in records:
+        p = partial / rec.path
+        rec.bytes = p.stat().st_size
+        rec.sha256 = file_sha256(p)
+    files = [rec.__dict__.copy() for rec in records]
+    if on_progress:
+        on_progress(f"verifying {fid}", 0, len(expected))
+    problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid,
+                                           sidecars=manifest["frames"]["sidecar_sha256"],
+                                           times=manifest["frames"]["timestamps_ns"])
+    total_bytes = sum(r.bytes for r in records)
+    raw = manifest["source"]["raw_bytes"]
+    entry = {
+        "config": fmt.get_config(), "description": fmt.description, "files": files,
+        "frames_per_file": [r.frames for r in records], "objects": len(records), "bytes": total_bytes,
+        "compression_ratio": round(raw / total_bytes, 4) if total_bytes else None,
+        "bits_per_pixel": round(total_bytes * 8 / (raw / 2), 4) if raw else None,
+        "encode_fps": round(len(expected) / encode_s, 1) if encode_s else None,
+        "decode_fps": round(len(expected) / decode_s, 1) if decode_s else None,
+        "library_versions": library_versions(), "verified": not problems, "verified_at": iso_now(),
+        "verification": (f"bit-exact: {len(expected)} frames decoded with the format's reader match the "
+                         "MCAP source's pixels, sidecars and times (sha256)") if not problems else problems[:100],
+    }
+    if problems:
+        shutil.rmtree(partial)  # a failed archive never takes the final name
+        if not manifest["formats"].get(fid, {}).get("verified"):
+            manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
+            save_manifest(session_dir, manifest)
+        return problems
+    _fsync_tree(partial)
+    if final.exists():  # replace the old copy (--force, or a damaged one) only now that the new one verified
+        old = adir / (fid + ".old")
+        if old.exists():
+            shutil.rmtree(old)
+        os.replace(final, old)
+        os.replace(partial, final)
+        shutil.rmtree(old)
+    else:
+        os.replace(partial, final)
+    fsync_dir(adir)
+    manifest["formats"][fid] = entry
+    save_manifest(session_dir, manifest)
+    return []
+
+
 def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,
                     delete_source: bool = False, workers: int = 2, force: bool = False,
                     on_progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
@@ -185,68 +257,13 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
                                   "frames": total, "width": src.width, "height": src.height,
                                   "raw_bytes": total * src.width * src.height * 2, "deleted": False}
             save_manifest(session_dir, manifest)
-    expected = manifest["frames"]["sha256"]
     failures: list[str] = []
 
     for fid in todo:
-        fmt = fmts[fid]
-        final = adir / fid
-        partial = adir / (fid + PARTIAL_SUFFIX)
-        if partial.exists():  # left by a crashed run; never taken for an archive
-            shutil.rmtree(partial)
-        partial.mkdir()
-        done = [0]
-
-        def tick(fid: str = fid) -> None:
-            done[0] += 1
-            if on_progress and done[0] % 16 == 0:
-                on_progress(f"writing {fid}", done[0], len(expected))
-
-        ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=len(expected),
-                             frames_per_segment=per_segment, workers=workers, on_frame=tick)
-        t = time.perf_counter()
-        records: list[FileRecord] = fmt.write(iter_session_frames(session_dir), partial, ctx)
-        encode_s = time.perf_counter() - t
-        for rec in records:
-            p = partial / rec.path
-            rec.bytes = p.stat().st_size
-            rec.sha256 = file_sha256(p)
-        files = [rec.__dict__.copy() for rec in records]
-        if on_progress:
-            on_progress(f"verifying {fid}", 0, len(expected))
-        problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid,
-                                               sidecars=manifest["frames"]["sidecar_sha256"],
-                                               times=manifest["frames"]["timestamps_ns"])
-        total_bytes = sum(r.bytes for r in records)
-        raw = manifest["source"]["raw_bytes"]
-        entry = {
-            "config": fmt.get_config(), "description": fmt.description, "files": files,
-            "frames_per_file": [r.frames for r in records], "objects": len(records), "bytes": total_bytes,
-            "compression_ratio": round(raw / total_bytes, 4) if total_bytes else None,
-            "bits_per_pixel": round(total_bytes * 8 / (raw / 2), 4) if raw else None,
-            "encode_fps": round(len(expected) / encode_s, 1) if encode_s else None,
-            "decode_fps": round(len(expected) / decode_s, 1) if decode_s else None,
-            "library_versions": library_versions(), "verified": not problems, "verified_at": iso_now(),
-            "verification": (f"bit-exact: {len(expected)} frames decoded with the format's reader match the "
-                             "MCAP source's pixels, sidecars and times (sha256)") if not problems else problems[:100],
-        }
+        problems = build_format(session_dir, fid, fmts[fid], iter_session_frames(session_dir), manifest, meta,
+                                per_segment, workers=workers, on_progress=on_progress)
         if problems:
-            shutil.rmtree(partial)  # a failed archive never takes the final name
-            manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
-            save_manifest(session_dir, manifest)
             failures.append(f"{fid}: " + "; ".join(problems[:5]))
-            continue
-        _fsync_tree(partial)
-        if final.exists():  # --force: replace the old, verified copy only now that the new one verified
-            old = adir / (fid + ".old")
-            os.replace(final, old)
-            os.replace(partial, final)
-            shutil.rmtree(old)
-        else:
-            os.replace(partial, final)
-        fsync_dir(adir)
-        manifest["formats"][fid] = entry
-        save_manifest(session_dir, manifest)
 
     if segments and not source_gone and (force or todo or not manifest.get("extras", {}).get("verified")
                                          or not (adir / EXTRAS_NAME).is_file()):

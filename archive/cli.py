@@ -13,7 +13,7 @@ from recorder.exceptions import ThermcapError
 
 from .archiver import DEFAULT_FORMATS
 
-__all__ = ["archive", "verify", "audit", "bench_archive"]
+__all__ = ["archive", "verify", "audit", "scrub", "bench_archive"]
 
 
 def _formats(value: str) -> list[str]:
@@ -134,6 +134,64 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
                 for p in r["problems"]:
                     click.echo(f"  {p}")
     if bad:
+        sys.exit(1)
+
+
+@click.command()
+@click.argument("root_arg", metavar="[ROOT]", required=False, type=click.Path(file_okay=False))
+@root_option
+@click.option("--session", "sessions", multiple=True, help="Only this session (id or path); repeatable.")
+@click.option("--repair", is_flag=True, help="Rebuild each damaged copy from another verified one, then verify it.")
+@click.option("--workers", type=int, default=2, show_default=True, help="Encoder threads for repairs.")
+@json_option
+def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bool, workers: int, as_json: bool) -> None:
+    """Re-verify every archive copy (formats, extras.mcap, object-store objects) and mark damage.
+
+    Damaged copies are marked in the manifest, so the API stops offering them and gc no longer
+    counts them; --repair rebuilds them from a verified copy. Exit 1 if damage remains."""
+    import os
+
+    from rich.progress import Progress
+
+    from recorder.reader import list_sessions, resolve_session
+
+    from .blobs import open_store
+    from .scrub import ScrubReport, scrub_session
+
+    base = Path(root_arg or root)
+    bucket = os.environ.get("THERMCAP_S3_BUCKET")
+    store = open_store(base, bucket=bucket, endpoint=os.environ.get("THERMCAP_S3_ENDPOINT"),
+                       region=os.environ.get("THERMCAP_S3_REGION", "us-east-1"),
+                       prefix=os.environ.get("THERMCAP_S3_PREFIX", "")) if bucket else None
+    try:
+        dirs = [resolve_session(s, base) for s in sessions] if sessions else \
+            [d for d in list_sessions(base) if (d / "archive" / "manifest.json").is_file()]
+    except ThermcapError as exc:
+        fail(str(exc))
+    report = ScrubReport()
+    with Progress(disable=as_json or not sys.stderr.isatty(), transient=True) as bar:
+        task = bar.add_task("scrubbing", total=len(dirs))
+        for d in dirs:
+            before = len(report.findings)
+            try:
+                scrub_session(d, repair=repair, store=store, root=base, workers=workers, report=report)
+            except ThermcapError as exc:
+                fail(str(exc))
+            if len(report.findings) > before:
+                _run_hooks(d, str(base))  # the index drops (or takes back) the copies at once
+            bar.advance(task)
+    if as_json:
+        click.echo(json.dumps(report.to_dict(), indent=2))
+    else:
+        for f in report.findings:
+            state = (f"repaired from {f.repaired_from}" if f.repaired else
+                     f"NOT repaired ({f.repair_error})" if repair else "marked damaged")
+            click.echo(f"{f.session}: {f.copy}: {f.problems[0]}{' ...' if len(f.problems) > 1 else ''} -> {state}")
+        for s, who in report.skipped.items():
+            click.echo(f"{s}: skipped, {who} is working on it")
+        click.echo(f"scrubbed {report.sessions} sessions, {report.copies_checked} copies: {report.damaged} damaged, "
+                   f"{report.repaired} repaired")
+    if not report.ok:
         sys.exit(1)
 
 

@@ -19,7 +19,7 @@ from .exceptions import ManifestError
 from .formats import get_format
 from .manifest import load_manifest
 
-__all__ = ["archived_frames", "verified_formats", "READ_PREFERENCE"]
+__all__ = ["archived_frames", "frames_from_format", "verified_formats", "READ_PREFERENCE"]
 
 #: Fastest full-session readers first (sequential decode on one core).
 READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")
@@ -44,10 +44,11 @@ def archived_frames(session_dir: Path) -> Iterator[SessionFrame] | None:
     fmts = verified_formats(manifest, layout)
     if not fmts:
         return None
-    return _frames(manifest, layout, fmts[0])
+    return frames_from_format(manifest, layout, fmts[0])
 
 
-def _frames(manifest: dict[str, Any], layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
+def frames_from_format(manifest: dict[str, Any], layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
+    """The session's frames as format ``fid`` gives them back (with the manifest's segment names)."""
     entry = manifest["formats"][fid]
     fmt = get_format(entry.get("config") or fid)
     frames = manifest.get("frames", {})

@@ -35,6 +35,9 @@ def readyz(request: Request) -> dict:
 
 @router.get("/metrics", tags=["meta"], dependencies=[Depends(require("read"))])
 def metrics(request: Request) -> Response:
+    with request.app.state.engine.connect() as conn:
+        damaged = conn.execute(select(func.count()).select_from(db.archives).where(db.archives.c.verified.is_(False))).scalar()
+    request.app.state.archives_unverified.set(damaged or 0)
     return Response(generate_latest(request.app.state.metrics_registry), media_type="text/plain; version=0.0.4")
 
 

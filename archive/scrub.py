@@ -1,0 +1,264 @@
+"""``thermcap scrub``: re-verify every archived copy, mark the damaged ones, repair them.
+
+Disks rot and copies get damaged after they verified. Scrub re-reads each session's archive
+formats (every frame decoded by the format's reader, pixels, sidecar and time against the
+manifest), ``extras.mcap`` (its hash and content digests), and the object-store copies (each
+object re-read and hashed). A damaged copy is marked in the manifest (``damaged``), so the API's
+index stops offering it and gc no longer counts it as cover.
+
+With ``repair``, every format is rebuilt from another verified copy (all formats are lossless,
+so any one regenerates another; the MCAP source is used when it is still there), verified like
+a new archive, and only then put in place of the damaged one. A damaged ``extras.mcap`` is
+rebuilt from the source or taken back from a verified bucket copy; a damaged bucket object is
+uploaded again from a verified local copy. Each repaired copy is verified again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from recorder.layout import SessionLayout
+from recorder.lock import holder, lock_session
+from recorder.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
+
+from .archiver import build_format, verify_format_dir
+from .blobs import BlobStore
+from .exceptions import ArchiveError
+from .extras import write_extras
+from .formats import get_format
+from .manifest import file_sha256, iso_now, load_manifest, save_manifest
+from .reading import READ_PREFERENCE, frames_from_format
+from .verify import _verify_extras
+
+__all__ = ["ScrubFinding", "ScrubReport", "scrub_root", "scrub_session"]
+
+
+@dataclass
+class ScrubFinding:
+    session: str
+    copy: str  # "png16", "extras", "store:<key>"
+    problems: list[str]
+    repaired: bool = False
+    repaired_from: str | None = None
+    repair_error: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class ScrubReport:
+    sessions: int = 0
+    copies_checked: int = 0
+    skipped: dict[str, str] = field(default_factory=dict)  # session -> who holds it
+    findings: list[ScrubFinding] = field(default_factory=list)
+
+    @property
+    def damaged(self) -> int:
+        return len(self.findings)
+
+    @property
+    def repaired(self) -> int:
+        return sum(1 for f in self.findings if f.repaired)
+
+    @property
+    def ok(self) -> bool:
+        return all(f.repaired for f in self.findings)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"sessions": self.sessions, "copies_checked": self.copies_checked, "damaged": self.damaged,
+                "repaired": self.repaired, "ok": self.ok, "skipped": self.skipped,
+                "findings": [f.to_dict() for f in self.findings]}
+
+
+def scrub_root(root: Path, *, repair: bool = False, store: BlobStore | None = None, workers: int = 2) -> ScrubReport:
+    report = ScrubReport()
+    for d in list_sessions(root):
+        if SessionLayout.of(d).manifest.is_file():
+            scrub_session(d, repair=repair, store=store, root=root, workers=workers, report=report)
+    return report
+
+
+def scrub_session(session_dir: Path, *, repair: bool = False, store: BlobStore | None = None,
+                  root: Path | None = None, workers: int = 2, report: ScrubReport | None = None) -> ScrubReport:
+    report = report if report is not None else ScrubReport()
+    lock = lock_session(session_dir, "scrub", wait_s=0.0)
+    if lock is None:
+        report.skipped[str(session_dir)] = holder(session_dir) or "another process"
+        return report
+    try:
+        report.sessions += 1
+        _scrub_locked(Path(session_dir), repair, store, Path(root) if root else Path(session_dir).parents[1],
+                      workers, report)
+    finally:
+        lock.release()
+    return report
+
+
+def _scrub_locked(d: Path, repair: bool, store: BlobStore | None, root: Path, workers: int,
+                  report: ScrubReport) -> None:
+    layout = SessionLayout.of(d)
+    m = load_manifest(d)
+    frames = m.get("frames", {})
+    findings: list[ScrubFinding] = []
+    for fid, entry in sorted(m.get("formats", {}).items()):
+        if not entry.get("verified"):
+            continue
+        report.copies_checked += 1
+        problems = _check_format(layout, fid, entry, frames)
+        _mark(entry, problems)
+        if problems:
+            findings.append(ScrubFinding(str(d), fid, problems[:20]))
+    extras = m.get("extras") or {}
+    if extras.get("verified"):
+        report.copies_checked += 1
+        problems = _verify_extras(layout.archive, extras)["problems"]
+        _mark(extras, problems)
+        if problems:
+            findings.append(ScrubFinding(str(d), "extras", problems[:20]))
+    if store is not None and (m.get("upload") or {}).get("complete"):
+        damaged_keys = {}
+        for key, sha in _uploaded_hashes(m, d, root).items():
+            report.copies_checked += 1
+            problem = _check_object(store, key, sha)
+            if problem:
+                damaged_keys[key] = problem
+                findings.append(ScrubFinding(str(d), f"store:{key}", [problem]))
+        m["upload"]["damaged"] = damaged_keys
+    m["scrubbed_at"] = iso_now()
+    save_manifest(d, m)
+    if repair:
+        for finding in findings:
+            _repair(d, layout, m, finding, store, root, workers)
+        save_manifest(d, m)
+    report.findings += findings
+
+
+def _mark(entry: dict[str, Any], problems: list[str]) -> None:
+    if problems:
+        entry["damaged"] = {"at": iso_now(), "problems": problems[:20]}
+    else:
+        entry.pop("damaged", None)
+
+
+def _check_format(layout: SessionLayout, fid: str, entry: dict[str, Any], frames: dict[str, Any]) -> list[str]:
+    try:
+        fmt = get_format(entry.get("config") or fid)
+    except ArchiveError as exc:
+        return [str(exc)]
+    problems, _ = verify_format_dir(fmt, layout.format_dir(fid), entry.get("files", []), frames.get("sha256", []),
+                                    where=fid, sidecars=frames.get("sidecar_sha256"), times=frames.get("timestamps_ns"))
+    return problems
+
+
+def _uploaded_hashes(m: dict[str, Any], d: Path, root: Path) -> dict[str, str]:
+    """Object key -> the sha256 the manifest recorded for that file."""
+    rel = d.resolve().relative_to(root.resolve()).as_posix()
+    out = {}
+    for fid, entry in m.get("formats", {}).items():
+        for rec in entry.get("files", []) if entry.get("verified") else []:
+            out[f"{rel}/archive/{fid}/{rec['path']}"] = rec["sha256"]
+    extras = m.get("extras") or {}
+    if extras.get("verified"):
+        out[f"{rel}/archive/{extras['path']}"] = extras["sha256"]
+    uploaded = set((m.get("upload") or {}).get("keys", []))
+    return {k: v for k, v in out.items() if k in uploaded}
+
+
+def _check_object(store: BlobStore, key: str, sha256: str) -> str | None:
+    h = hashlib.sha256()
+    try:
+        for piece in store.iter_bytes(key):
+            h.update(piece)
+    except FileNotFoundError:
+        return "missing from the store"
+    except Exception as exc:  # a network or store error is reported, not taken for damage-free
+        return f"cannot be read ({type(exc).__name__}: {exc})"
+    return None if h.hexdigest() == sha256 else "sha256 differs from the manifest"
+
+
+def _good_formats(m: dict[str, Any], layout: SessionLayout, but: str) -> list[str]:
+    fmts = [f for f, e in m.get("formats", {}).items() if f != but and e.get("verified") and not e.get("damaged")
+            and layout.format_dir(f).is_dir()]
+    return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
+
+
+def _repair(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, store: BlobStore | None,
+            root: Path, workers: int) -> None:
+    try:
+        if finding.copy == "extras":
+            _repair_extras(d, layout, m, finding, store, root)
+        elif finding.copy.startswith("store:"):
+            _repair_object(d, layout, m, finding, store, root)
+        else:
+            _repair_format(d, layout, m, finding, workers)
+    except Exception as exc:  # a repair that fails leaves the damage marked and says why
+        finding.repair_error = f"{type(exc).__name__}: {exc}"
+
+
+def _repair_format(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, workers: int) -> None:
+    fid = finding.copy
+    if session_segments(d):
+        source, frames = "mcap source", iter_session_frames(d)
+    else:
+        good = _good_formats(m, layout, fid)
+        if not good:
+            finding.repair_error = "no other verified copy to rebuild it from"
+            return
+        source, frames = good[0], frames_from_format(m, layout, good[0])
+    entry = m["formats"][fid]
+    per_segment: dict[str, int] = {s["name"]: s["frames"] for s in m.get("source", {}).get("segments", [])}
+    problems = build_format(d, fid, get_format(entry.get("config") or fid), frames, m, read_session_meta(d),
+                            per_segment, workers=workers)
+    if problems:
+        finding.repair_error = "; ".join(problems[:5])
+        return
+    again = _check_format(layout, fid, m["formats"][fid], m["frames"])  # verified again, as the issue asks
+    _mark(m["formats"][fid], again)
+    finding.repaired, finding.repaired_from = not again, source
+
+
+def _repair_extras(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, store: BlobStore | None,
+                   root: Path) -> None:
+    extras = m["extras"]
+    if session_segments(d):
+        entry = write_extras(d, layout.archive)
+        if entry.get("verified") and entry.get("sha256") == extras.get("sha256"):
+            m["extras"] = entry
+            finding.repaired, finding.repaired_from = True, "mcap source"
+            return
+    key = f"{d.resolve().relative_to(root.resolve()).as_posix()}/archive/{extras['path']}"
+    if store is not None and store.kind == "s3" and _check_object(store, key, extras["sha256"]) is None:
+        with tempfile.NamedTemporaryFile(dir=layout.archive, delete=False, suffix=".partial") as tmp:
+            for piece in store.iter_bytes(key):
+                tmp.write(piece)
+            tmp.flush()
+            os.fsync(tmp.fileno())
+        os.replace(tmp.name, layout.extras)
+        problems = _verify_extras(layout.archive, extras)["problems"]
+        _mark(extras, problems)
+        finding.repaired, finding.repaired_from = not problems, "store"
+        return
+    finding.repair_error = "no MCAP source and no verified bucket copy to rebuild extras.mcap from"
+
+
+def _repair_object(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding,
+                   store: BlobStore | None, root: Path) -> None:
+    assert store is not None
+    key = finding.copy[len("store:"):]
+    rel = key.split("/archive/", 1)[1]
+    local = layout.archive / rel
+    want = _uploaded_hashes(m, d, root)[key]
+    if not local.is_file() or file_sha256(local) != want:
+        finding.repair_error = f"no verified local copy of {rel} to upload again"
+        return
+    store.put_file(key, local, overwrite=True)  # the object is known bad: replacing it is the repair
+    problem = _check_object(store, key, want)
+    if problem is None:
+        m["upload"].get("damaged", {}).pop(key, None)
+    finding.repaired, finding.repaired_from = problem is None, "local copy"
