@@ -13,6 +13,7 @@ from typing import Any
 from mcap.reader import make_reader
 
 from .exceptions import McapFileError
+from .layout import SessionLayout
 from .lock import session_status
 from .icd import iso_utc
 from .messages import TOPIC_IMAGE, TOPIC_STATS
@@ -97,6 +98,9 @@ def session_info(path: str | Path) -> dict[str, Any]:
         raise McapFileError(f"{path}: not a thermcap session (no NNNN.mcap segments, no session.json)")
     segs = [segment_info(p) for p in segments]
     frames = sum(s["frames"] for s in segs)
+    archived = _archived_counts(path) if not segments else None
+    if archived is not None:  # the source was deleted after archiving: the archive holds the frames
+        frames = archived["frames"]
     start = min((s["start_ns"] for s in segs if s["messages"]), default=None)
     end = max((s["end_ns"] for s in segs if s["messages"]), default=None)
     span = (end - start) / 1e9 if start is not None and end is not None else 0.0
@@ -137,7 +141,17 @@ def session_info(path: str | Path) -> dict[str, Any]:
         "topics": topics,
         "write_latency_ms": meta.get("write_latency_ms"),
         "error": meta.get("error"),
+        "frames_from": "archive" if archived is not None else "segments",
     }
+
+
+def _archived_counts(session_dir: Path) -> dict[str, Any] | None:
+    """Frame count and span from the archive manifest, for a session whose source was deleted."""
+    try:
+        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        return {"frames": int(manifest["source"]["frames"])}
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def info(path: str | Path) -> dict[str, Any]:

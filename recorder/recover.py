@@ -14,6 +14,7 @@ import io
 import json
 import os
 import struct
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import BinaryIO, Iterator
@@ -313,7 +314,18 @@ def _mark_session(session_dir: Path) -> None:
     except (OSError, ValueError):
         return
     if meta.get("status") in ("recording", "interrupted"):
+        # The recorder died before its summary: the counts come from what the segments now hold,
+        # so session.json, `info` and the catalog agree.
         meta["status"] = "recovered"
+        frames = 0
+        for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+            with open(seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+            if summary and summary.statistics:
+                ids = [c.id for c in summary.channels.values() if c.topic == "/thermal/image"]
+                frames += sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
+        meta["frames_written"] = frames
+        meta["recovered_ns"] = time.time_ns()
         write_json_atomic(meta_path, meta)
 
 
