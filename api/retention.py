@@ -13,7 +13,6 @@ analysed is never touched. A dry run lists every deletion with what it relies on
 
 from __future__ import annotations
 
-import hashlib
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -21,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from archive.archiver import DEFAULT_FORMATS
-from archive.manifest import load_manifest, save_manifest, iso_now
+from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
 from recorder.exceptions import ThermcapError
 from recorder.layout import SessionLayout
 from recorder.lock import holder, lock_session
@@ -63,14 +62,6 @@ class GcResult:
                 "kept_unverified": [d.session for d in self.decisions if d.action == "keep"]}
 
 
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], str | None]:
     """(what the source's deletion relies on, or why it cannot go): every requested format and
     extras verified, and their files on disk hash as the manifest says."""
@@ -82,11 +73,11 @@ def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], s
             return [], f"requested format {fid} is not verified"
         for rec in entry.get("files", []):
             path = layout.format_dir(fid) / rec["path"]
-            if not path.is_file() or _sha256(path) != rec.get("sha256"):
+            if not path.is_file() or file_sha256(path) != rec.get("sha256"):
                 return [], f"{fid}/{rec['path']} is missing or differs from the manifest"
         relies.append(f"{fid}: {len(entry.get('files', []))} files verified {entry.get('verified_at')}, hashes rechecked")
     extras = m.get("extras") or {}
-    if not extras.get("verified") or not layout.extras.is_file() or _sha256(layout.extras) != extras.get("sha256"):
+    if not extras.get("verified") or not layout.extras.is_file() or file_sha256(layout.extras) != extras.get("sha256"):
         return [], "extras.mcap (attachments, other topics) is not verified"
     relies.append("extras.mcap verified, hash rechecked")
     return relies, None

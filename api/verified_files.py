@@ -9,9 +9,10 @@ and by ``thermcap scrub``; here their size is compared.
 
 from __future__ import annotations
 
-import hashlib
 import threading
 from pathlib import Path
+
+from archive.manifest import file_sha256
 
 from .storage import BlobStore
 
@@ -42,11 +43,7 @@ class FileVerifier:
         with self._lock:
             known = self._known.get(key)
         if known is None or known[0] != stamp:
-            h = hashlib.sha256()
-            with open(path, "rb") as f:
-                while chunk := f.read(1 << 20):
-                    h.update(chunk)
-            known = (stamp, h.hexdigest())
+            known = (stamp, file_sha256(path))
             with self._lock:
                 if len(self._known) >= self.keep:
                     self._known.pop(next(iter(self._known)))
