@@ -15,15 +15,15 @@ from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from recorder import __version__
 
-from .db import make_engine, migrate
+from api.db import make_engine, migrate
 from recorder.radiometry import TemperatureUnavailable
 
-from .frames import FrameNotFound, FrameReader, FrameUnavailable
-from .index import index_root
-from .security import AuthGate
-from .verified_files import FileVerifier
-from .settings import Settings
-from .storage import make_store
+from api.frames import FrameNotFound, FrameReader, FrameUnavailable
+from api.index import index_root
+from api.security import AuthGate
+from api.verified_files import FileVerifier
+from api.settings import Settings
+from api.storage import make_store
 
 __all__ = ["create_app"]
 
@@ -142,7 +142,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
         problems = [{"where": ".".join(str(x) for x in e.get("loc", ())), "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from .routes import archives, export, frames, meta, sessions, ui
+    from api.routes import archives, export, frames, meta, sessions, ui
 
     for module in (meta, sessions, frames, archives, export, ui):
         app.include_router(module.router)

@@ -31,8 +31,8 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
     from recorder.recorder import Recorder
     from recorder.sources.sim import SimSource
 
-    from .db import make_engine
-    from .index import index_root
+    from api.db import make_engine
+    from api.index import index_root
 
     base = Path(tempfile.mkdtemp(prefix="thermcap-bench-api-"))
     rows = []
@@ -40,7 +40,7 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
         Recorder(SimSource(frames=frames, paced=False, seed=5), base, session_id="bench", recover_leftovers=False).run()
         archive_session(base / "sessions" / "bench", ["png16"])
         engine = make_engine(f"sqlite:///{base / 'index.sqlite'}")
-        from .db import migrate
+        from api.db import migrate
 
         migrate(engine)
         index_root(engine, base)
@@ -104,7 +104,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 
 
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
-    from .index import zip_entries
+    from api.index import zip_entries
 
     zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
     spans = [(z, off, info.file_size) for z in zips for info, off in zip_entries(z) if info.filename.endswith(".png")]

@@ -27,8 +27,8 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
     """Serve the data root over HTTP (catalog, frames, exports, archives, browser view)."""
     import os
 
-    from .app import create_app
-    from .settings import Settings
+    from api.app import create_app
+    from api.settings import Settings
 
     os.environ["THERMCAP_ROOT"] = root  # the workers build their own app from the environment
     try:
@@ -60,10 +60,10 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
 @json_option
 def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     """Index (or re-index) the sessions under ROOT for the API; idempotent."""
-    from .db import make_engine, migrate
-    from .index import index_root
-    from .settings import Settings
-    from .storage import make_store
+    from api.db import make_engine, migrate
+    from api.index import index_root
+    from api.settings import Settings
+    from api.storage import make_store
 
     from sqlalchemy.exc import SQLAlchemyError
 
@@ -87,7 +87,7 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
 
 def index_db_problem(settings: Any, exc: Exception) -> str:
     """One line for an index database that cannot be used, naming it (never its password)."""
-    from .settings import _redact
+    from api.settings import _redact
 
     orig = getattr(exc, "orig", None) or exc
     why = str(orig).splitlines()[0] if str(orig) else type(orig).__name__
@@ -107,8 +107,8 @@ def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
     """Copy verified archives to the configured S3 store (THERMCAP_S3_BUCKET, ...)."""
     from recorder.reader import resolve_session
 
-    from .settings import Settings
-    from .storage import make_store, upload_archive
+    from api.settings import Settings
+    from api.storage import make_store, upload_archive
 
     settings = Settings(root=Path(root))
     if not settings.s3_bucket:
@@ -126,9 +126,9 @@ def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
 
 def on_archived(session_dir: Path, root: Path) -> None:
     """Hook run by ``thermcap archive`` once a session verified: index it right away."""
-    from .db import make_engine, migrate
-    from .index import index_session
-    from .settings import Settings
+    from api.db import make_engine, migrate
+    from api.index import index_session
+    from api.settings import Settings
 
     engine = make_engine(Settings(root=Path(root)).db_url)
     migrate(engine)
@@ -142,7 +142,7 @@ def on_archived(session_dir: Path, root: Path) -> None:
 @json_option
 def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> None:
     """Frames/s and p50/p99 over real HTTP with concurrent clients; export MB/s; beside disk reads."""
-    from .bench import bench_api, print_table
+    from api.bench import bench_api, print_table
 
     rows = bench_api(frames, n_requests, clients)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
@@ -161,10 +161,10 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, lease_ttl: float,
            scrub_interval: float, as_json: bool) -> None:
     """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
-    from .db import make_engine, migrate
-    from .settings import Settings
-    from .storage import make_store
-    from .worker import Worker
+    from api.db import make_engine, migrate
+    from api.settings import Settings
+    from api.storage import make_store
+    from api.worker import Worker
 
     settings = Settings(root=Path(root))
     engine = make_engine(settings.db_url)
@@ -191,8 +191,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
        as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
-    from .settings import Settings
-    from .retention import gc_sessions
+    from api.settings import Settings
+    from api.retention import gc_sessions
 
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")
@@ -206,7 +206,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
         except ValueError:
             fail(f"--max-bytes: {max_bytes!r} is not a size like 500G")
     req = bool(settings.s3_bucket) if require_upload is None else require_upload
-    from .storage import make_store
+    from api.storage import make_store
 
     store = make_store(settings) if settings.s3_bucket else None
     try:

@@ -34,8 +34,8 @@ from archive.formats.base import locate
 from archive.manifest import frame_sha256
 from recorder.messages import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
-from . import db
-from .storage import BlobStore
+from api import db
+from api.storage import BlobStore
 
 __all__ = ["FrameNotFound", "FrameUnavailable", "FrameReader", "DamageLog", "Damage", "BlobFile"]
 

@@ -27,7 +27,7 @@ from recorder.reader import list_sessions, read_session_meta, session_segments
 from recorder.messages import TOPIC_METADATA
 from recorder.quality import graded_contrast
 
-from . import db
+from api import db
 
 __all__ = ["index_root", "index_session", "fingerprint", "ZIPPED_FORMATS"]
 

@@ -26,7 +26,7 @@ from recorder.layout import SessionLayout
 from recorder.lock import holder, lock_session
 from recorder.reader import list_sessions, read_session_meta
 
-from .storage import BlobStore
+from api.storage import BlobStore
 
 __all__ = ["GcDecision", "GcResult", "gc_sessions"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from archive.blobs import BlobStore, open_store, upload_archive
 
-from .settings import Settings
+from api.settings import Settings
 
 __all__ = ["BlobStore", "make_store", "upload_archive"]
 

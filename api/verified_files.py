@@ -14,7 +14,7 @@ from pathlib import Path
 
 from archive.manifest import file_sha256
 
-from .storage import BlobStore
+from api.storage import BlobStore
 
 __all__ = ["FileVerifier"]
 

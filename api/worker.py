@@ -28,9 +28,9 @@ from recorder.exceptions import ThermcapError
 from recorder.reader import list_sessions, read_session_meta
 from recorder.lock import is_locked
 
-from . import db
-from .index import index_session
-from .storage import BlobStore, upload_archive
+from api import db
+from api.index import index_session
+from api.storage import BlobStore, upload_archive
 
 __all__ = ["Worker", "acquire_lease", "release_lease", "finished_sessions"]
 

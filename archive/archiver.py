@@ -21,14 +21,14 @@ from recorder.reader import SessionFrame, count_frames, iter_session_frames, rea
 from recorder.lock import holder, lock_session
 from recorder.segments import ACTIVE_SUFFIX, fsync_dir
 
-from .codecs import library_versions
+from archive.codecs import library_versions
 from recorder.messages import TOPIC_METADATA
 
-from .exceptions import ArchiveError, SourceDamagedError, VerificationError
-from .source_checks import channel_problems
-from .formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
-from .extras import EXTRAS_NAME, write_extras
-from .manifest import (archive_dir, file_sha256, frame_sha256, iso_now, load_manifest, new_manifest, save_manifest,
+from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
+from archive.source_checks import channel_problems
+from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from archive.extras import EXTRAS_NAME, write_extras
+from archive.manifest import (archive_dir, file_sha256, frame_sha256, iso_now, load_manifest, new_manifest, save_manifest,
                        sidecar_sha256)
 
 __all__ = ["archive_session", "build_format", "verify_format_dir", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]

@@ -13,8 +13,8 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from .exceptions import ArchiveError
-from .manifest import load_manifest
+from archive.exceptions import ArchiveError
+from archive.manifest import load_manifest
 
 __all__ = ["DEFAULT_PRICES", "load_prices", "audit_sessions", "project", "render_markdown"]
 

@@ -24,7 +24,7 @@ import tifffile
 
 from recorder.sources.sim import SimSource
 
-from .codecs import get_codec
+from archive.codecs import get_codec
 
 __all__ = ["bench_archive", "print_table", "noise_entropy_bound"]
 

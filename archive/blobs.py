@@ -96,7 +96,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 
     from recorder.exceptions import ThermcapError
 
-    from .manifest import iso_now, load_manifest, save_manifest
+    from archive.manifest import iso_now, load_manifest, save_manifest
 
     manifest = load_manifest(session_dir)
     keys = []

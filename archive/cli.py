@@ -11,13 +11,13 @@ import click
 from recorder.cli import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
-from .archiver import DEFAULT_FORMATS
+from archive.archiver import DEFAULT_FORMATS
 
 __all__ = ["archive", "verify", "audit", "scrub", "bench_archive"]
 
 
 def _formats(value: str) -> list[str]:
-    from .formats import format_registry
+    from archive.formats import format_registry
 
     out = [v.strip() for v in value.split(",") if v.strip()]
     unknown = [v for v in out if v not in format_registry]
@@ -43,7 +43,7 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
 
     from recorder.reader import list_sessions, resolve_session
 
-    from .archiver import archive_session
+    from archive.archiver import archive_session
 
     try:
         fmts = _formats(formats)
@@ -113,7 +113,7 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
     """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
     from recorder.reader import resolve_session
 
-    from .verify import verify_session
+    from archive.verify import verify_session
 
     out, bad = {}, False
     for s in sessions:
@@ -155,8 +155,8 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 
     from recorder.reader import list_sessions, resolve_session
 
-    from .blobs import open_store
-    from .scrub import ScrubReport, scrub_session
+    from archive.blobs import open_store
+    from archive.scrub import ScrubReport, scrub_session
 
     base = Path(root_arg or root)
     bucket = os.environ.get("THERMCAP_S3_BUCKET")
@@ -211,7 +211,7 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
     """Storage cost of archived sessions per format and tier, and a fleet projection."""
     from recorder.reader import list_sessions, resolve_session
 
-    from .audit import audit_sessions, load_prices, project, render_markdown
+    from archive.audit import audit_sessions, load_prices, project, render_markdown
 
     try:
         table = load_prices(prices)
@@ -247,7 +247,7 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 @json_option
 def bench_archive(n_frames: int, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
-    from .bench import bench_archive as run, print_table
+    from archive.bench import bench_archive as run, print_table
 
     rows = run(n_frames)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))

@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 import imagecodecs
 import numpy as np
 
-from .exceptions import UnknownCodecError
+from archive.exceptions import UnknownCodecError
 
 __all__ = ["FrameCodec", "Png16", "JpegXl", "Htj2k", "JpegLs", "codec_registry", "register_codec", "get_codec",
            "library_versions"]

@@ -18,7 +18,7 @@ import numpy as np
 
 from recorder.segments import write_json_atomic
 
-from .exceptions import ManifestError
+from archive.exceptions import ManifestError
 
 __all__ = ["MANIFEST_NAME", "manifest_path", "load_manifest", "save_manifest", "frame_sha256", "file_sha256",
            "sidecar_sha256",

@@ -15,9 +15,9 @@ from typing import Any, Iterator
 from recorder.layout import SessionLayout
 from recorder.reader import SessionFrame
 
-from .exceptions import ManifestError
-from .formats import get_format
-from .manifest import load_manifest
+from archive.exceptions import ManifestError
+from archive.formats import get_format
+from archive.manifest import load_manifest
 
 __all__ = ["archived_frames", "frames_from_format", "verified_formats", "READ_PREFERENCE"]
 

@@ -26,14 +26,14 @@ from recorder.layout import SessionLayout
 from recorder.lock import holder, lock_session
 from recorder.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
 
-from .archiver import build_format, verify_format_dir
-from .blobs import BlobStore
-from .exceptions import ArchiveError
-from .extras import write_extras
-from .formats import get_format
-from .manifest import file_sha256, iso_now, load_manifest, save_manifest
-from .reading import READ_PREFERENCE, frames_from_format
-from .verify import _verify_extras
+from archive.archiver import build_format, verify_format_dir
+from archive.blobs import BlobStore
+from archive.exceptions import ArchiveError
+from archive.extras import write_extras
+from archive.formats import get_format
+from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from archive.reading import READ_PREFERENCE, frames_from_format
+from archive.verify import _verify_extras
 
 __all__ = ["ScrubFinding", "ScrubReport", "scrub_root", "scrub_session"]
 

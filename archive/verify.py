@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from .archiver import verify_format_dir
-from .formats import get_format
-from .manifest import file_sha256, archive_dir, load_manifest
+from archive.archiver import verify_format_dir
+from archive.formats import get_format
+from archive.manifest import file_sha256, archive_dir, load_manifest
 
 __all__ = ["verify_session"]
 
@@ -41,7 +41,7 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
 
 def _verify_extras(adir: Path, entry: dict[str, Any]) -> dict[str, Any]:
     """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
-    from .extras import summarize_mcap
+    from archive.extras import summarize_mcap
 
     path = adir / entry["path"]
     if not entry.get("verified"):

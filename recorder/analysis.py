@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from .icd import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
-from .quality import contrast_metrics, frame_analysis, graded_contrast
-from .radiometry import RadiometricModel
+from recorder.icd import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
+from recorder.quality import contrast_metrics, frame_analysis, graded_contrast
+from recorder.radiometry import RadiometricModel
 
 __all__ = ["HotSpotDetector", "Detection", "EventBuilder", "iou"]
 
@@ -57,7 +57,7 @@ def iou(a: list[int], b: list[int]) -> float:
 
 
 def _celsius32(model: RadiometricModel, raw: np.ndarray) -> np.ndarray:
-    from .radiometry import LinearModel
+    from recorder.radiometry import LinearModel
 
     if isinstance(model, LinearModel):  # float32 all the way: half the memory traffic
         out = raw.astype(np.float32)

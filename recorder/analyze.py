@@ -14,13 +14,13 @@ import os
 from pathlib import Path
 from typing import Any, Callable
 
-from .analysis import EventBuilder, HotSpotDetector
-from .exceptions import McapFileError
-from .radiometry import model_from_dict
-from .layout import SessionLayout
-from .lock import session_locked
-from .reader import frame_files, iter_session_frames, read_session_meta
-from .segments import write_json_atomic
+from recorder.analysis import EventBuilder, HotSpotDetector
+from recorder.exceptions import McapFileError
+from recorder.radiometry import model_from_dict
+from recorder.layout import SessionLayout
+from recorder.lock import session_locked
+from recorder.reader import frame_files, iter_session_frames, read_session_meta
+from recorder.segments import write_json_atomic
 
 __all__ = ["analyze_session", "ANALYSIS_FILE", "EVENTS_FILE"]
 

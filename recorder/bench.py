@@ -18,11 +18,11 @@ from typing import Any
 
 import zstandard
 
-from .recorder import Recorder
-from .mcap_writer import Compression
-from .segments import SegmentPolicy, auto_compression
-from .sources.base import CapturedFrame, FrameSource
-from .sources.sim import SimSource
+from recorder.recorder import Recorder
+from recorder.mcap_writer import Compression
+from recorder.segments import SegmentPolicy, auto_compression
+from recorder.sources.base import CapturedFrame, FrameSource
+from recorder.sources.sim import SimSource
 
 __all__ = ["bench_record", "run_soak", "print_table", "MemorySource"]
 

@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from .analysis import HotSpotDetector, iou
-from .sources.sim import SimSource, SimTarget
+from recorder.analysis import HotSpotDetector, iou
+from recorder.sources.sim import SimSource, SimTarget
 
 __all__ = ["bench_analysis", "print_table", "score"]
 
@@ -130,7 +130,7 @@ def overlay_png(temps: np.ndarray, boxes: list[list[int]], palette_name: str = "
     """A heatmap of ``temps`` with each detection's box drawn in white."""
     import imagecodecs
 
-    from .render import palette
+    from recorder.render import palette
 
     lo, hi = np.percentile(temps, 0.5), np.percentile(temps, 99.5)
     rgb = palette(palette_name)[np.clip((temps - lo) * (255.0 / max(hi - lo, 1e-6)), 0, 255).astype(np.uint8)].copy()
@@ -145,8 +145,8 @@ def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str
     """The detector on real files: hot spots per image, with an overlay PNG of each."""
     import os
 
-    from .importers import ImportError_, read_file
-    from .radiometry import TemperatureUnavailable
+    from recorder.importers import ImportError_, read_file
+    from recorder.radiometry import TemperatureUnavailable
 
     rows = []
     for dirpath, _d, names in sorted(os.walk(samples_dir)):

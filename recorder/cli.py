@@ -15,8 +15,8 @@ from typing import Any
 
 import click
 
-from . import __version__
-from .exceptions import ThermcapError
+from recorder import __version__
+from recorder.exceptions import ThermcapError
 
 __all__ = ["main", "cli", "bench", "default_root", "fail"]
 
@@ -105,10 +105,10 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
-    from .mcap_writer import Compression
-    from .recorder import Recorder
-    from .segments import SegmentPolicy, auto_compression
-    from .sources import make_source
+    from recorder.mcap_writer import Compression
+    from recorder.recorder import Recorder
+    from recorder.segments import SegmentPolicy, auto_compression
+    from recorder.sources import make_source
 
     try:
         is_sim = source == "sim"
@@ -193,7 +193,7 @@ def _progress_line():
 @json_option
 def info(paths: tuple[str, ...], as_json: bool) -> None:
     """Describe segments (NNNN.mcap) or session folders: frames, time span, fps, drops, bytes."""
-    from .info import info as get_info
+    from recorder.info import info as get_info
 
     try:
         data = [get_info(p) for p in paths]
@@ -242,7 +242,7 @@ def _print_info(d: dict[str, Any]) -> None:
 @json_option
 def recover(path: str, keep_original: bool, as_json: bool) -> None:
     """Turn interrupted segments (*.mcap.active) into valid, indexed MCAP files."""
-    from .recover import recover_path
+    from recorder.recover import recover_path
 
     try:
         results = recover_path(path, keep_original=keep_original)
@@ -274,8 +274,8 @@ def recover(path: str, keep_original: bool, as_json: bool) -> None:
 def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: int, min_crossover: float,
             as_json: bool) -> None:
     """(Re)run hot-spot detection on sessions: analysis.jsonl and events.json beside the segments."""
-    from .analyze import analyze_session
-    from .reader import resolve_session
+    from recorder.analyze import analyze_session
+    from recorder.reader import resolve_session
 
     results = []
     for s in sessions:
@@ -313,8 +313,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
     from rich.progress import Progress
 
-    from .importers.dji_sdk import find_backend
-    from .importers.session import import_paths
+    from recorder.importers.dji_sdk import find_backend
+    from recorder.importers.session import import_paths
 
     backend = find_backend(dji_sdk)
     if backend is not None and not as_json:
@@ -358,8 +358,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
-    from .export import export_session
-    from .reader import resolve_session
+    from recorder.export import export_session
+    from recorder.reader import resolve_session
 
     try:
         d = resolve_session(session, root)
@@ -382,7 +382,7 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
 @json_option
 def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, as_json: bool) -> None:
     """Recorder throughput vs plain zstd-to-file, or a paced soak."""
-    from .bench import bench_record as run_bench, run_soak, print_table
+    from recorder.bench import bench_record as run_bench, run_soak, print_table
 
     if soak:
         res = run_soak(soak, workdir=workdir)
@@ -408,8 +408,8 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
 @json_option
 def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: str, as_json: bool) -> None:
     """Import throughput per format vs reading + hashing the same files."""
-    from .bench_import import bench_import, print_table
-    from .importers.dji_sdk import find_backend
+    from recorder.bench_import import bench_import, print_table
+    from recorder.importers.dji_sdk import find_backend
 
     rows = bench_import(frames=n_frames, samples=samples, copies=copies, dji_sdk=find_backend(dji_sdk))
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
@@ -423,7 +423,7 @@ def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: s
 @json_option
 def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, as_json: bool) -> None:
     """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
-    from .bench_analysis import bench_analysis, print_table, sample_report
+    from recorder.bench_analysis import bench_analysis, print_table, sample_report
 
     res = bench_analysis(n_frames)
     if samples:

@@ -21,11 +21,11 @@ import imagecodecs
 import numpy as np
 import tifffile
 
-from .exceptions import ThermcapError
-from .icd import format_name
-from .radiometry import LinearModel, TemperatureUnavailable, model_from_dict
-from .reader import iter_session_frames, read_session_meta
-from .render import palette
+from recorder.exceptions import ThermcapError
+from recorder.icd import format_name
+from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
+from recorder.reader import iter_session_frames, read_session_meta
+from recorder.render import palette
 
 __all__ = ["export_session", "EXPORT_KINDS"]
 
@@ -58,7 +58,7 @@ def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
     """Per log time: the source file's name and its kept DJI APP segments (importers/dji.py)."""
     from mcap.reader import make_reader
 
-    from .importers.dji import SEGMENTS_BLOB
+    from recorder.importers.dji import SEGMENTS_BLOB
 
     out: dict[int, tuple[str, bytes]] = {}
     for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
@@ -137,7 +137,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
 
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
     """R-JPEGs rebuilt from the archive for DJI's own tools (see ``importers.dji.rebuild_rjpeg``)."""
-    from .importers.dji import rebuild_rjpeg
+    from recorder.importers.dji import rebuild_rjpeg
 
     kept = _dji_segments(session_dir)
     written, refused = [], []
@@ -192,7 +192,7 @@ def _has_temps(model) -> bool:
 
 
 def _iso(ns: int) -> str:
-    from .icd import iso_utc
+    from recorder.icd import iso_utc
 
     return iso_utc(ns)
 

@@ -12,12 +12,12 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from .exceptions import McapFileError
-from .layout import SessionLayout
-from .lock import session_status
-from .icd import iso_utc
-from .messages import TOPIC_IMAGE, TOPIC_STATS
-from .segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
+from recorder.exceptions import McapFileError
+from recorder.layout import SessionLayout
+from recorder.lock import session_status
+from recorder.icd import iso_utc
+from recorder.messages import TOPIC_IMAGE, TOPIC_STATS
+from recorder.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
 
 __all__ = ["segment_info", "session_info", "info"]
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterator
 
-from .exceptions import SessionBusyError, StorageError
+from recorder.exceptions import SessionBusyError, StorageError
 
 __all__ = ["LOCK_NAME", "SessionLock", "lock_session", "holder", "session_locked", "is_locked", "session_status"]
 

@@ -47,7 +47,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from . import __version__
+from recorder import __version__
 
 __all__ = ["Compression", "ChunkedWriter", "MCAP_MAGIC", "LIBRARY"]
 

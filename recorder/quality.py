@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from .icd import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
+from recorder.icd import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
 
 __all__ = [
     "contrast_grade",

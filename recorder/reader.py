@@ -16,9 +16,9 @@ from mcap.reader import make_reader
 
 from importlib.metadata import entry_points
 
-from .exceptions import McapFileError
-from .layout import SessionLayout
-from .messages import TOPIC_IMAGE, TOPIC_METADATA, decode_image
+from recorder.exceptions import McapFileError
+from recorder.layout import SessionLayout
+from recorder.messages import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
 __all__ = ["SessionFrame", "session_segments", "iter_session_frames", "frame_files", "read_session_meta", "count_frames",
            "resolve_session", "list_sessions"]

@@ -22,17 +22,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from . import __version__
-from .exceptions import RecordingError, ThermcapError
-from .icd import FORMAT_VERSION, iso_utc
-from .lock import lock_session
-from .messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
-from .analysis import EventBuilder, HotSpotDetector
-from .radiometry import LinearModel, describe_model
-from .segments import SegmentPolicy, SessionWriter, write_json_atomic
-from .sidecar import SidecarEncoder
-from .sources.base import CapturedFrame, FrameSource
-from .stats import LatencyHistogram, RecorderCounters
+from recorder import __version__
+from recorder.exceptions import RecordingError, ThermcapError
+from recorder.icd import FORMAT_VERSION, iso_utc
+from recorder.lock import lock_session
+from recorder.messages import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from recorder.analysis import EventBuilder, HotSpotDetector
+from recorder.radiometry import LinearModel, describe_model
+from recorder.segments import SegmentPolicy, SessionWriter, write_json_atomic
+from recorder.sidecar import SidecarEncoder
+from recorder.sources.base import CapturedFrame, FrameSource
+from recorder.stats import LatencyHistogram, RecorderCounters
 
 __all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
@@ -157,7 +157,7 @@ class Recorder:
             progress: Callable[["Recorder"], None] | None = None) -> RecordingResult:
         recovered: list[str] = []
         if self.recover_leftovers:
-            from .recover import recover_leftovers
+            from recorder.recover import recover_leftovers
             recovered = [str(p) for p in recover_leftovers(self.root)]
         try:
             self.session_dir.mkdir(parents=True, exist_ok=False)

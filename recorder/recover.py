@@ -25,10 +25,10 @@ from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from .exceptions import McapFileError
-from .lock import holder, lock_session
-from .mcap_writer import MCAP_MAGIC, ChunkedWriter, Compression
-from .segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
+from recorder.exceptions import McapFileError
+from recorder.lock import holder, lock_session
+from recorder.mcap_writer import MCAP_MAGIC, ChunkedWriter, Compression
+from recorder.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 
 __all__ = ["RecoveryResult", "recover_segment", "recover_path", "recover_leftovers", "scan_records"]
 

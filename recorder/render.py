@@ -10,7 +10,7 @@ import imagecodecs
 import numpy as np
 import tifffile
 
-from .radiometry import RadiometricModel, model_from_dict
+from recorder.radiometry import RadiometricModel, model_from_dict
 
 __all__ = ["PALETTES", "palette", "preview_png", "celsius", "celsius_tiff", "png16", "tiff16", "session_model"]
 
@@ -57,7 +57,7 @@ def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = 
                 t_min: float | None = None, t_max: float | None = None) -> bytes:
     """8-bit colour PNG; the range defaults to the frame's 0.5..99.5 percentiles in C. Where the
     model cannot give temperatures (DJI layouts that need DJI's SDK) the counts are stretched."""
-    from .radiometry import TemperatureUnavailable
+    from recorder.radiometry import TemperatureUnavailable
 
     try:
         temps = celsius(frame, model)

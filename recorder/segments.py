@@ -25,10 +25,10 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from . import __version__
-from .exceptions import RecordingError
-from .mcap_writer import ChunkedWriter, Compression
-from .messages import (
+from recorder import __version__
+from recorder.exceptions import RecordingError
+from recorder.mcap_writer import ChunkedWriter, Compression
+from recorder.messages import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
     STATS_SCHEMA,
@@ -36,7 +36,7 @@ from .messages import (
     TOPIC_METADATA,
     TOPIC_STATS,
 )
-from .sidecar import sidecar_schema_bytes
+from recorder.sidecar import sidecar_schema_bytes
 
 __all__ = ["auto_compression", "SegmentPolicy", "SessionWriter", "segment_name", "ACTIVE_SUFFIX", "fsync_dir", "write_json_atomic"]
 

@@ -19,8 +19,8 @@ from typing import Any
 
 import fastjsonschema
 
-from .exceptions import SidecarError
-from .icd import FORMAT_VERSION
+from recorder.exceptions import SidecarError
+from recorder.icd import FORMAT_VERSION
 
 __all__ = ["SIDECAR_SCHEMA", "validate_sidecar", "sidecar_schema_bytes", "dumps_sidecar", "SidecarEncoder"]
 

@@ -66,5 +66,5 @@ class RecorderCounters:
 
     @property
     def frames_dropped(self) -> int:
-        from .messages import TOPIC_IMAGE
+        from recorder.messages import TOPIC_IMAGE
         return self.dropped.get(TOPIC_IMAGE, 0)

@@ -9,10 +9,10 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
-from .. import db
-from ..frames import Damage
-from ..security import check_file_name, require
-from .common import session_row
+from api import db
+from api.frames import Damage
+from api.security import check_file_name, require
+from api.routes.common import session_row
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])

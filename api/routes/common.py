@@ -11,8 +11,8 @@ from sqlalchemy import select
 
 from recorder.icd import iso_utc, parse_rfc3339
 
-from .. import db
-from ..security import check_session_id
+from api import db
+from api.security import check_session_id
 
 __all__ = ["session_row", "encode_cursor", "decode_cursor", "parse_time", "iso", "page_size"]
 

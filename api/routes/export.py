@@ -10,11 +10,11 @@ import io
 
 from recorder.layout import EXTRAS_MCAP
 
-from .. import db
-from ..export import export_mcap
-from ..frames import BlobFile
-from ..security import require
-from .common import parse_time, session_row
+from api import db
+from api.export import export_mcap
+from api.frames import BlobFile
+from api.security import require
+from api.routes.common import parse_time, session_row
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
 

@@ -12,8 +12,8 @@ from recorder.importers.dji import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.radiometry import describe_model
 from recorder.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 
-from ..security import require
-from .common import session_row
+from api.security import require
+from api.routes.common import session_row
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],
                    dependencies=[Depends(require("read"))])

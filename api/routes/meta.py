@@ -8,9 +8,9 @@ from sqlalchemy import func, select
 
 from recorder.reader import list_sessions
 
-from .. import db
-from ..index import index_root
-from ..security import require
+from api import db
+from api.index import index_root
+from api.security import require
 
 router = APIRouter()
 

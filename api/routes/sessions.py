@@ -10,9 +10,9 @@ from sqlalchemy import and_, func, or_, select
 
 from recorder.radiometry import model_from_dict
 
-from .. import db
-from ..security import require
-from .common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
+from api import db
+from api.security import require
+from api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 

@@ -9,7 +9,7 @@ from urllib.parse import parse_qs
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse, RedirectResponse
 
-from ..security import TOKEN_COOKIE, scopes_for_token
+from api.security import TOKEN_COOKIE, scopes_for_token
 
 router = APIRouter(include_in_schema=False)
 _STATIC = Path(__file__).resolve().parent.parent / "static"

@@ -1,9 +1,9 @@
 """The archive formats, registered by id (ids never change once files carry them)."""
 
-from .base import ArchiveContext, ArchiveFormat, FileRecord, format_registry, get_format, register_format
-from .hdf5 import Hdf5
-from .tiff_lzw import TiffLzw
-from .zipped import ZippedFrames, zipped_factory
+from archive.formats.base import ArchiveContext, ArchiveFormat, FileRecord, format_registry, get_format, register_format
+from archive.formats.hdf5 import Hdf5
+from archive.formats.tiff_lzw import TiffLzw
+from archive.formats.zipped import ZippedFrames, zipped_factory
 
 register_format("png16", zipped_factory("png16"))
 register_format("tiff-lzw", TiffLzw)

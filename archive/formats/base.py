@@ -23,7 +23,7 @@ from recorder.icd import format_name
 from recorder.radiometry import LinearModel, model_from_dict
 from recorder.reader import SessionFrame
 
-from ..codecs import build_from_config
+from archive.codecs import build_from_config
 
 __all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "DecodedFrame", "format_registry", "register_format",
            "get_format", "ordered_map", "frame_name", "locate"]

@@ -17,8 +17,8 @@ import numpy as np
 
 from recorder.reader import SessionFrame
 
-from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
+from archive.exceptions import ArchiveError
+from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 
 __all__ = ["Hdf5"]
 

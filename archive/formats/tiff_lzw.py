@@ -19,8 +19,8 @@ import tifffile
 
 from recorder.reader import SessionFrame
 
-from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, locate, sidecar_text, time_from_sidecar
+from archive.exceptions import ArchiveError
+from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, locate, sidecar_text, time_from_sidecar
 
 __all__ = ["TiffLzw"]
 

@@ -15,9 +15,9 @@ import numpy as np
 
 from recorder.reader import SessionFrame
 
-from ..codecs import FrameCodec, get_codec
-from ..exceptions import ArchiveError
-from .base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, locate, group_by_segment, ordered_map, sidecar_text
+from archive.codecs import FrameCodec, get_codec
+from archive.exceptions import ArchiveError
+from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, locate, group_by_segment, ordered_map, sidecar_text
 
 __all__ = ["ZippedFrames"]
 

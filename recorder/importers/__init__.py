@@ -12,12 +12,12 @@ import mmap
 from pathlib import Path
 from typing import Iterator
 
-from .base import ImportedFrame, ImportError_, TruncatedImageError
-from .dji import is_dji, read_dji
-from .flir import iter_fff_file, read_fff_file, read_flir_jpeg
-from .icd_files import read_icd_raw, read_icd_tiff, sidecar_for
-from .jpeg import app_segments
-from .terraref import metadata_for, read_terraref
+from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError
+from recorder.importers.dji import is_dji, read_dji
+from recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
+from recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
+from recorder.importers.jpeg import app_segments
+from recorder.importers.terraref import metadata_for, read_terraref
 
 __all__ = ["ImportedFrame", "ImportError_", "read_file", "iter_file", "detect", "MAX_FILE_BYTES"]
 

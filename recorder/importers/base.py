@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from ..exceptions import SourceError
-from ..radiometry import RadiometricModel
+from recorder.exceptions import SourceError
+from recorder.radiometry import RadiometricModel
 
 __all__ = ["ImportedFrame", "ImportError_", "read_exact"]
 

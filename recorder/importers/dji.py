@@ -12,10 +12,10 @@ import struct
 
 import numpy as np
 
-from ..radiometry import DjiModel
-from .base import ImportedFrame, ImportError_
-from .exif import capture_time, exif_fields, xmp_fields
-from .jpeg import app_segments, concat_app
+from recorder.radiometry import DjiModel
+from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.importers.exif import capture_time, exif_fields, xmp_fields
+from recorder.importers.jpeg import app_segments, concat_app
 
 __all__ = ["read_dji", "dji_layout", "is_dji", "rebuild_rjpeg", "SEGMENTS_BLOB"]
 

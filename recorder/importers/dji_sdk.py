@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from ..exceptions import ThermcapError
+from recorder.exceptions import ThermcapError
 
 __all__ = ["DjiBackend", "DjiThermalCli", "LibDirp", "DjiSdkError", "find_backend", "ENV_VAR"]
 

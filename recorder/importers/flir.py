@@ -9,9 +9,9 @@ from typing import Iterator
 import imagecodecs
 import numpy as np
 
-from ..radiometry import FlirPlanckModel
-from .base import ImportedFrame, ImportError_, TruncatedImageError, read_exact
-from .jpeg import app_segments
+from recorder.radiometry import FlirPlanckModel
+from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError, read_exact
+from recorder.importers.jpeg import app_segments
 
 __all__ = ["read_flir_jpeg", "read_fff_file", "parse_fff", "iter_fff_records", "flir_jpeg_payload"]
 
@@ -148,7 +148,7 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
-    from .exif import capture_time, exif_fields, xmp_fields
+    from recorder.importers.exif import capture_time, exif_fields, xmp_fields
 
     fff = flir_jpeg_payload(path, data)
     if fff is None:

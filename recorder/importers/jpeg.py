@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import struct
 
-from .base import ImportError_
+from recorder.importers.base import ImportError_
 
 __all__ = ["app_segments", "concat_app"]
 

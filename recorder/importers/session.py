@@ -23,11 +23,11 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-from ..radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
-from ..recorder import Recorder, RecordingResult, new_session_id
-from ..sources.base import CapturedFrame, FrameSource, SensorInfo
-from . import ImportedFrame, ImportError_, TruncatedImageError, iter_file
-from .dji_sdk import DjiBackend
+from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
+from recorder.recorder import Recorder, RecordingResult, new_session_id
+from recorder.sources.base import CapturedFrame, FrameSource, SensorInfo
+from recorder.importers import ImportedFrame, ImportError_, TruncatedImageError, iter_file
+from recorder.importers.dji_sdk import DjiBackend
 
 __all__ = ["import_paths", "ImportReport"]
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..radiometry import ScaledKelvinModel, TerraRefPlanckModel
-from .base import ImportedFrame, ImportError_
+from recorder.radiometry import ScaledKelvinModel, TerraRefPlanckModel
+from recorder.importers.base import ImportedFrame, ImportError_
 
 __all__ = ["read_terraref", "metadata_for"]
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..exceptions import SourceError
-from .base import CapturedFrame, FrameSource, Pacer, SensorInfo
-from .raw import RawSource
-from .sim import SimSource
+from recorder.exceptions import SourceError
+from recorder.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from recorder.sources.raw import RawSource
+from recorder.sources.sim import SimSource
 
 __all__ = ["CapturedFrame", "FrameSource", "Pacer", "SensorInfo", "RawSource", "SimSource", "make_source"]
 

@@ -15,7 +15,7 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..radiometry import DEFAULT_MODEL, RadiometricModel
+from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
 __all__ = ["CapturedFrame", "FrameSource", "SensorInfo", "Pacer"]
 

@@ -22,9 +22,9 @@ from typing import BinaryIO, Iterator
 
 import numpy as np
 
-from ..exceptions import SourceError, TruncatedFrameError
-from ..radiometry import DEFAULT_MODEL, RadiometricModel
-from .base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from recorder.exceptions import SourceError, TruncatedFrameError
+from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
+from recorder.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 
 __all__ = ["RawSource"]
 

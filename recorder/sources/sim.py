@@ -24,11 +24,11 @@ from typing import Any, Iterator
 
 import numpy as np
 
-from ..icd import MAX_COUNT, iso_utc
-from ..quality import contrast_metrics, frame_analysis
-from ..radiometry import LinearModel
-from ..messages import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
-from .base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from recorder.icd import MAX_COUNT, iso_utc
+from recorder.quality import contrast_metrics, frame_analysis
+from recorder.radiometry import LinearModel
+from recorder.messages import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
+from recorder.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 
 __all__ = ["SimSource", "SimTarget", "SlewToCue"]
 

@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 from recorder.messages import decode_image
 from recorder.reader import iter_session_frames
 
-from .conftest import H, W
+from tests.api.conftest import H, W
 
 
 @pytest.fixture(scope="module")
