@@ -18,8 +18,8 @@ from recorder import __version__
 from api.db import make_engine, migrate
 from recorder.radiometry import TemperatureUnavailable
 
-from api.frames import FrameNotFound, FrameReader, FrameUnavailable
-from api.index import index_root
+from api.reading.frames import FrameNotFound, FrameReader, FrameUnavailable
+from api.indexing import index_root
 from api.security import AuthGate
 from api.verified_files import FileVerifier
 from api.settings import Settings

@@ -28,11 +28,11 @@ def _percentile(values: list[float], q: float) -> float:
 
 def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[dict[str, Any]]:
     from archive.archiver import archive_session
-    from recorder.recorder import Recorder
-    from recorder.sources.sim import SimSource
+    from recorder.capture.recorder import Recorder
+    from recorder.capture.sources.sim import SimSource
 
     from api.db import make_engine
-    from api.index import index_root
+    from api.indexing import index_root
 
     base = Path(tempfile.mkdtemp(prefix="thermcap-bench-api-"))
     rows = []
@@ -104,7 +104,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 
 
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
-    from api.index import zip_entries
+    from api.indexing import zip_entries
 
     zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
     spans = [(z, off, info.file_size) for z in zips for info, off in zip_entries(z) if info.filename.endswith(".png")]

@@ -10,7 +10,7 @@ from typing import Any
 
 import click
 
-from recorder.cli import fail, json_option, root_option
+from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
 __all__ = ["serve", "index", "upload", "on_archived"]
@@ -61,7 +61,7 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
 def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     """Index (or re-index) the sessions under ROOT for the API; idempotent."""
     from api.db import make_engine, migrate
-    from api.index import index_root
+    from api.indexing import index_root
     from api.settings import Settings
     from api.storage import make_store
 
@@ -105,7 +105,7 @@ def index_db_problem(settings: Any, exc: Exception) -> str:
 @json_option
 def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
     """Copy verified archives to the configured S3 store (THERMCAP_S3_BUCKET, ...)."""
-    from recorder.reader import resolve_session
+    from recorder.storage.reader import resolve_session
 
     from api.settings import Settings
     from api.storage import make_store, upload_archive
@@ -127,7 +127,7 @@ def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
 def on_archived(session_dir: Path, root: Path) -> None:
     """Hook run by ``thermcap archive`` once a session verified: index it right away."""
     from api.db import make_engine, migrate
-    from api.index import index_session
+    from api.indexing import index_session
     from api.settings import Settings
 
     engine = make_engine(Settings(root=Path(root)).db_url)
@@ -164,7 +164,7 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
     from api.db import make_engine, migrate
     from api.settings import Settings
     from api.storage import make_store
-    from api.worker import Worker
+    from api.jobs.worker import Worker
 
     settings = Settings(root=Path(root))
     engine = make_engine(settings.db_url)
@@ -192,7 +192,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
        as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
     from api.settings import Settings
-    from api.retention import gc_sessions
+    from api.jobs.retention import gc_sessions
 
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")

@@ -17,12 +17,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from recorder.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
-from recorder.lock import holder, lock_session
-from recorder.segments import ACTIVE_SUFFIX, fsync_dir
+from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
 from archive.codecs import library_versions
-from recorder.messages import TOPIC_METADATA
+from recorder.icd.topics import TOPIC_METADATA
 
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
 from archive.source_checks import channel_problems

@@ -22,7 +22,7 @@ import h5py
 import numpy as np
 import tifffile
 
-from recorder.sources.sim import SimSource
+from recorder.capture.sources.sim import SimSource
 
 from archive.codecs import get_codec
 

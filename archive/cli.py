@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from recorder.cli import fail, json_option, root_option
+from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
 from archive.archiver import DEFAULT_FORMATS
@@ -41,7 +41,7 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from recorder.reader import list_sessions, resolve_session
+    from recorder.storage.reader import list_sessions, resolve_session
 
     from archive.archiver import archive_session
 
@@ -111,7 +111,7 @@ def _run_hooks(session_dir: Path, root: str) -> None:
 @json_option
 def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: bool) -> None:
     """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
-    from recorder.reader import resolve_session
+    from recorder.storage.reader import resolve_session
 
     from archive.verify import verify_session
 
@@ -153,7 +153,7 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 
     from rich.progress import Progress
 
-    from recorder.reader import list_sessions, resolve_session
+    from recorder.storage.reader import list_sessions, resolve_session
 
     from archive.blobs import open_store
     from archive.scrub import ScrubReport, scrub_session
@@ -209,9 +209,9 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_cameras: int | None,
           project_hours: float, project_days: int, project_segment_s: float, markdown: bool, as_json: bool) -> None:
     """Storage cost of archived sessions per format and tier, and a fleet projection."""
-    from recorder.reader import list_sessions, resolve_session
+    from recorder.storage.reader import list_sessions, resolve_session
 
-    from archive.audit import audit_sessions, load_prices, project, render_markdown
+    from archive.costs import audit_sessions, load_prices, project, render_markdown
 
     try:
         table = load_prices(prices)

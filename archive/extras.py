@@ -18,8 +18,8 @@ from typing import Any, Iterator
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from recorder.messages import TOPIC_IMAGE
-from recorder.reader import session_segments
+from recorder.icd.topics import TOPIC_IMAGE
+from recorder.storage.reader import session_segments
 
 __all__ = ["EXTRAS_NAME", "write_extras", "summarize_mcap"]
 

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.segments import write_json_atomic
+from recorder.storage.segments import write_json_atomic
 
 from archive.exceptions import ManifestError
 

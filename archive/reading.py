@@ -3,7 +3,7 @@
 Every archive format is a full source: ``archived_frames`` gives the same ``SessionFrame``
 stream (counts, sidecar exactly as recorded, time, segment name) as the MCAP reader did, from
 the first verified format on disk, so ``analyze``, exports and re-archiving work after
-``--delete-source``. Registered for ``recorder.reader`` through the ``thermcap.session_frames``
+``--delete-source``. Registered for ``recorder.storage.reader`` through the ``thermcap.session_frames``
 entry point.
 """
 
@@ -12,8 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any, Iterator
 
-from recorder.layout import SessionLayout
-from recorder.reader import SessionFrame
+from recorder.storage.layout import SessionLayout
+from recorder.storage.reader import SessionFrame
 
 from archive.exceptions import ManifestError
 from archive.formats import get_format

@@ -22,9 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.layout import SessionLayout
-from recorder.lock import holder, lock_session
-from recorder.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
 
 from archive.archiver import build_format, verify_format_dir
 from archive.blobs import BlobStore

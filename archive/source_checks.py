@@ -17,8 +17,8 @@ from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel
 
-from recorder.messages import IMAGE_SCHEMA_NAME, TOPIC_IMAGE, TOPIC_METADATA
-from recorder.recover import scan_records
+from recorder.icd.topics import IMAGE_SCHEMA_NAME, TOPIC_IMAGE, TOPIC_METADATA
+from recorder.storage.recover import scan_records
 
 __all__ = ["channel_problems", "SIDECAR_SCHEMA_NAME"]
 

@@ -16,7 +16,7 @@ from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
-from recorder.icd import BIT_DEPTH, MAX_COUNT
+from recorder.icd.names import BIT_DEPTH, MAX_COUNT
 
 __all__ = [
     "RadiometricModel",

@@ -10,7 +10,7 @@ from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
 from api import db
-from api.frames import Damage
+from api.reading.frames import Damage
 from api.security import check_file_name, require
 from api.routes.common import session_row
 

@@ -9,7 +9,7 @@ from typing import Any
 from fastapi import HTTPException, Request
 from sqlalchemy import select
 
-from recorder.icd import iso_utc, parse_rfc3339
+from recorder.icd.names import iso_utc, parse_rfc3339
 
 from api import db
 from api.security import check_session_id

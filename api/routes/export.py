@@ -8,11 +8,11 @@ from sqlalchemy import select
 
 import io
 
-from recorder.layout import EXTRAS_MCAP
+from recorder.storage.layout import EXTRAS_MCAP
 
 from api import db
-from api.export import export_mcap
-from api.frames import BlobFile
+from api.reading.mcap_slice import export_mcap
+from api.reading.frames import BlobFile
 from api.security import require
 from api.routes.common import parse_time, session_row
 

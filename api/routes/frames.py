@@ -8,9 +8,9 @@ from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from recorder.importers.dji import SEGMENTS_BLOB, rebuild_rjpeg
+from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.radiometry import describe_model
-from recorder.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
+from recorder.exports.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 
 from api.security import require
 from api.routes.common import session_row

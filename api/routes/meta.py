@@ -6,10 +6,10 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from prometheus_client import generate_latest
 from sqlalchemy import func, select
 
-from recorder.reader import list_sessions
+from recorder.storage.reader import list_sessions
 
 from api import db
-from api.index import index_root
+from api.indexing import index_root
 from api.security import require
 
 router = APIRouter()
@@ -43,7 +43,7 @@ def metrics(request: Request) -> Response:
 
 @router.get("/api/v1/audit", tags=["meta"], dependencies=[Depends(require("read"))])
 def audit(request: Request, prices: str | None = None) -> dict:
-    from archive.audit import audit_sessions, load_prices
+    from archive.costs import audit_sessions, load_prices
 
     if prices is not None:
         raise HTTPException(400, "custom price tables are set on the server (thermcap audit --prices), not per request")

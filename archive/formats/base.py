@@ -1,7 +1,7 @@
 """An archive format: how a session's frames become files, and how the files give them back.
 
 ``write(frames, out_dir, context)`` writes every frame (the ``SessionFrame`` stream of
-``recorder.reader``) into files under ``out_dir`` and returns one ``FileRecord`` per file;
+``recorder.storage.reader``) into files under ``out_dir`` and returns one ``FileRecord`` per file;
 ``read(out_dir, files)`` yields the frames back in session order using the format's ordinary
 reader (zipfile + the image codec, tifffile, h5py), which is what verification trusts.
 Per-segment formats write one file per MCAP segment, so an hour is tens of objects.
@@ -19,9 +19,9 @@ from typing import Any, Callable, ClassVar, Iterable, Iterator, TypeVar
 
 import numpy as np
 
-from recorder.icd import format_name
+from recorder.icd.names import format_name
 from recorder.radiometry import LinearModel, model_from_dict
-from recorder.reader import SessionFrame
+from recorder.storage.reader import SessionFrame
 
 from archive.codecs import build_from_config
 
@@ -186,7 +186,7 @@ def sidecar_text(frame: SessionFrame) -> str:
 
 
 def time_from_sidecar(sidecar: bytes) -> int | None:
-    from recorder.icd import parse_rfc3339
+    from recorder.icd.names import parse_rfc3339
 
     try:
         return parse_rfc3339(json.loads(sidecar)["capture"]["timestamp"])

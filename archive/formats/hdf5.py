@@ -15,7 +15,7 @@ from typing import Iterable, Iterator
 import h5py
 import numpy as np
 
-from recorder.reader import SessionFrame
+from recorder.storage.reader import SessionFrame
 
 from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate

@@ -17,7 +17,7 @@ from typing import Iterable, Iterator
 import numpy as np
 import tifffile
 
-from recorder.reader import SessionFrame
+from recorder.storage.reader import SessionFrame
 
 from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, locate, sidecar_text, time_from_sidecar

@@ -13,7 +13,7 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
-from recorder.reader import SessionFrame
+from recorder.storage.reader import SessionFrame
 
 from archive.codecs import FrameCodec, get_codec
 from archive.exceptions import ArchiveError
@@ -85,7 +85,7 @@ class ZippedFrames(ArchiveFormat):
 
 
 def _time_from_name(base: str) -> int | None:
-    from recorder.icd import parse_name
+    from recorder.icd.names import parse_name
 
     try:
         return parse_name(base).timestamp_ns

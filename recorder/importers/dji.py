@@ -17,15 +17,15 @@ from recorder.importers.base import ImportedFrame, ImportError_
 from recorder.importers.exif import capture_time, exif_fields, xmp_fields
 from recorder.importers.jpeg import app_segments, concat_app
 
-__all__ = ["read_dji", "dji_layout", "is_dji", "rebuild_rjpeg", "SEGMENTS_BLOB"]
+__all__ = ["read_dji", "dji_layout", "is_dji", "SEGMENTS_BLOB", "RAW_PLACEHOLDER", "DJI_SEGMENT", "app_segment"]
 
 _MAGIC = b"\xff\xd2\xd1\xff"
 SEGMENTS_BLOB = "dji_rjpeg_segments.bin"
-_RAW_PLACEHOLDER = b"thermcap:raw-frame\x00"
-_DJI_SEGMENT = 65532  # DJI splits a blob into segments of this payload size (formats.md 1.1)
+RAW_PLACEHOLDER = b"thermcap:raw-frame\x00"
+DJI_SEGMENT = 65532  # DJI splits a blob into segments of this payload size (formats.md 1.1)
 
 
-def _segment(marker: int, payload: bytes) -> bytes:
+def app_segment(marker: int, payload: bytes) -> bytes:
     return b"\xff" + bytes([marker]) + struct.pack(">H", len(payload) + 2) + payload
 
 
@@ -38,38 +38,11 @@ def _app_segments_without_raw(segments: list[tuple[int, bytes]], raw_marker: int
             continue
         if marker == raw_marker:
             if not placed:
-                out.append(_segment(marker, _RAW_PLACEHOLDER))
+                out.append(app_segment(marker, RAW_PLACEHOLDER))
                 placed = True
             continue
-        out.append(_segment(marker, payload))
+        out.append(app_segment(marker, payload))
     return b"".join(out)
-
-
-def rebuild_rjpeg(pixels: np.ndarray, segments_blob: bytes) -> bytes:
-    """An R-JPEG from an archived frame and its ``dji_rjpeg_segments.bin``: the original APP
-    segments (EXIF, XMP, parameters, calibration) around the frame, split as DJI splits it, and an
-    8x8 grey picture in place of the visible image (DJI's SDK reads only the APP segments; checked
-    with dji-thermal-cli on every layout of the samples). Not the original file: its visible image
-    is not archived."""
-    import imagecodecs
-
-    raw = np.ascontiguousarray(pixels, dtype="<u2").tobytes()
-    parts, pos = [b"\xff\xd8"], 0
-    while pos + 4 <= len(segments_blob):
-        marker = segments_blob[pos + 1]
-        (length,) = struct.unpack(">H", segments_blob[pos + 2:pos + 4])
-        payload = segments_blob[pos + 4:pos + 2 + length]
-        if segments_blob[pos] != 0xFF or len(payload) != length - 2:
-            raise ValueError(f"{SEGMENTS_BLOB} is damaged at byte {pos}")
-        if payload == _RAW_PLACEHOLDER:
-            parts += [_segment(marker, raw[i:i + _DJI_SEGMENT]) for i in range(0, len(raw), _DJI_SEGMENT)]
-        else:
-            parts.append(segments_blob[pos:pos + 2 + length])
-        pos += 2 + length
-    grey = imagecodecs.jpeg8_encode(np.full((8, 8), 128, np.uint8))
-    tables = b"".join(_segment(m, p) for m, p in app_segments("grey", grey) if not 0xE0 <= m <= 0xEF)
-    parts += [tables, grey[grey.index(b"\xff\xda"):]]
-    return b"".join(parts)
 
 
 def is_dji(segments: list[tuple[int, bytes]]) -> bool:

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from recorder.icd import parse_name
+from recorder.icd.names import parse_name
 from recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
-from recorder.sidecar import validate_sidecar
+from recorder.icd.sidecar import validate_sidecar
 from recorder.importers.base import ImportedFrame, ImportError_
 
 __all__ = ["read_icd_tiff", "read_icd_raw", "sidecar_for"]
@@ -52,7 +52,7 @@ def _model(doc: dict | None):
 
 
 def _timestamp(path: str, doc: dict | None) -> int | None:
-    from recorder.icd import parse_rfc3339
+    from recorder.icd.names import parse_rfc3339
 
     if doc and doc.get("capture", {}).get("timestamp"):
         try:

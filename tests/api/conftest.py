@@ -7,9 +7,9 @@ from pathlib import Path
 import pytest
 
 from archive.archiver import archive_session
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sources.sim import SimSource
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import ApiServer
 
 W, H = 160, 120

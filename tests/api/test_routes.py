@@ -12,8 +12,8 @@ import pytest
 import tifffile
 from mcap.reader import make_reader
 
-from recorder.messages import decode_image
-from recorder.reader import iter_session_frames
+from recorder.icd.topics import decode_image
+from recorder.storage.reader import iter_session_frames
 
 from tests.api.conftest import H, W
 
@@ -158,7 +158,7 @@ def test_archive_download_range_etag_cors(client, data_root):
 def test_export_mcap_range_and_topics(client, source):
     frames = source["s-archived"]
     t_start, t_end = frames[10].log_time, frames[40].log_time
-    from recorder.icd import iso_utc
+    from recorder.icd.names import iso_utc
 
     r = client.get("/api/v1/sessions/s-archived/export.mcap", params={"start": iso_utc(t_start), "end": iso_utc(t_end)})
     assert r.status_code == 200

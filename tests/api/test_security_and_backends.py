@@ -13,8 +13,8 @@ from sqlalchemy import func, select
 
 from api import db
 from api.db import make_engine, migrate
-from api.index import index_root
-from recorder.reader import iter_session_frames
+from api.indexing import index_root
+from recorder.storage.reader import iter_session_frames
 from tests.conftest import ApiServer, run_cli
 
 READ, WRITE = "reader-token-123", "writer-token-456"

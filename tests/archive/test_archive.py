@@ -24,10 +24,10 @@ from archive.formats.zipped import ZippedFrames
 from archive.codecs import Png16
 from archive.manifest import frame_sha256, load_manifest
 from archive.verify import verify_session
-from recorder.reader import iter_session_frames
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
 
 W, H = 160, 120
@@ -274,7 +274,7 @@ def test_every_format_round_trips_large_and_odd_frames(tmp_path, width, height):
 
 
 def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path):
-    from recorder.importers.session import import_paths
+    from recorder.importers.run import import_paths
 
     picks = [str(samples / "flir" / "FLIR_E40.jpg"), str(samples / "dji" / "DJI_H20T.jpg"),
              str(next((samples / "terraref").glob("*_ir.bin"))), str(samples / "flir" / "example_radiometric.tiff")]
@@ -291,7 +291,7 @@ def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(se
     from mcap.reader import make_reader
 
     from archive.extras import summarize_mcap
-    from recorder.reader import session_segments
+    from recorder.storage.reader import session_segments
 
     before = summarize_mcap(session_segments(session))
     assert before["attachments"] and "/recorder/stats" in before["topics"]
@@ -303,7 +303,7 @@ def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(se
         reader = make_reader(f)
         assert "/thermal/image" not in {c.topic for c in reader.get_summary().channels.values()}
         names = [r.name for r in reader.iter_metadata()]
-    from recorder.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
+    from recorder.storage.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
 
     assert names.count(SESSION_METADATA) == 4 and names.count(SEGMENT_STATS_METADATA) == 4  # each segment's own
     assert verify_session(session)["extras"]["ok"]

@@ -10,7 +10,7 @@ import pytest
 from archive import codecs as C
 from archive.codecs import FrameCodec, codec_registry, get_codec
 from archive.exceptions import UnknownCodecError
-from recorder.sources.sim import SimSource
+from recorder.capture.sources.sim import SimSource
 
 CODECS = [get_codec(cid) for cid in sorted(codec_registry)]
 

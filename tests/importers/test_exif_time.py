@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import struct
 
-from recorder.icd import iso_utc
+from recorder.icd.names import iso_utc
 from recorder.importers.exif import capture_time, exif_fields
 
 

@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import tifffile
 
-from recorder.export import export_session
-from recorder.reader import iter_session_frames
-from recorder.recorder import Recorder
-from recorder.sources.sim import SimSource
-from recorder.sidecar import validate_sidecar
+from recorder.exports.files import export_session
+from recorder.storage.reader import iter_session_frames
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
+from recorder.icd.sidecar import validate_sidecar
 from tests.conftest import run_cli
 
 
@@ -83,7 +83,7 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
     files = {f["path"].rsplit("/", 1)[-1]: f for f in json.loads(r.stdout)["files"]}
     # H20T keeps its drone-dji XMP (formats.md): it has a position, but needs DJI's SDK for temperatures,
     # so check the tags through the helper with its recorded position, and M2EA (no XMP) gets none.
-    from recorder.export import _positions, geotiff_tags
+    from recorder.exports.files import _positions, geotiff_tags
 
     h20t = root / "sessions" / files["DJI_H20T.jpg"]["session_id"]
     (pos,) = _positions(h20t).values()

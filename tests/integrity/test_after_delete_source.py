@@ -14,14 +14,14 @@ from fastapi.testclient import TestClient
 from mcap.reader import make_reader
 
 from api.app import create_app
-from api.export import export_mcap
+from api.reading.mcap_slice import export_mcap
 from api.settings import Settings
 from archive.archiver import archive_session
-from recorder.analyze import analyze_session
-from recorder.reader import iter_session_frames
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sources.sim import SimSource
+from recorder.analysis.offline import analyze_session
+from recorder.storage.reader import iter_session_frames
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.capture.sources.sim import SimSource
 
 T0 = 1_800_000_000_000_000_000
 N = 90

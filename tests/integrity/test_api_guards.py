@@ -12,8 +12,8 @@ from fastapi.testclient import TestClient
 
 from api.app import create_app
 from api.settings import Settings, _parse_tokens
-from recorder.recorder import Recorder
-from recorder.sources.raw import RawSource
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.raw import RawSource
 from tests.api.conftest import make_root
 
 READ, WRITE = "integrity-read-token", "integrity-write-token"

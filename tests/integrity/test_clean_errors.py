@@ -8,8 +8,8 @@ import subprocess
 
 import pytest
 
-from recorder.recorder import Recorder
-from recorder.sources.sim import SimSource
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
 
 

@@ -8,7 +8,7 @@ import json
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.messages import decode_image
+from recorder.icd.topics import decode_image
 from tests.conftest import run_cli
 
 

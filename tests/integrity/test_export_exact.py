@@ -12,10 +12,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 from mcap.reader import make_reader
 
-from api.export import export_mcap
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sources.sim import SimSource
+from api.reading.mcap_slice import export_mcap
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.capture.sources.sim import SimSource
 
 T0 = 1_800_000_000_000_000_000
 TOPICS = ["/thermal/image", "/thermal/metadata", "/recorder/stats", "/radar/cue", "/sim/ground_truth"]

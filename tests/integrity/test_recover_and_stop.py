@@ -15,11 +15,11 @@ from pathlib import Path
 from mcap.reader import make_reader
 
 from recorder.exceptions import RecordingError
-from recorder.lock import holder
-from recorder.recover import recover_path, recover_segment
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy, SessionWriter
-from recorder.sources.sim import SimSource
+from recorder.storage.lock import holder
+from recorder.storage.recover import recover_path, recover_segment
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy, SessionWriter
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli, wait_for
 
 
@@ -90,7 +90,7 @@ def test_recover_never_replaces_a_file_it_did_not_create(tmp_path):
     active = session / "0000.mcap.active"
     data = seg.read_bytes()
     active.write_bytes(data[: len(data) // 2])  # a cut copy waiting for recovery
-    import recorder.recover as rmod
+    import recorder.storage.recover as rmod
 
     real = rmod.ChunkedWriter.finish
 

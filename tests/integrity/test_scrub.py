@@ -12,9 +12,9 @@ from api.app import create_app
 from api.settings import Settings
 from archive.archiver import archive_session
 from archive.manifest import load_manifest
-from recorder.reader import iter_session_frames
-from recorder.recorder import Recorder
-from recorder.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
 
 

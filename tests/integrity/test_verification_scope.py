@@ -9,11 +9,10 @@ import zipfile
 import pytest
 
 from archive.archiver import archive_session, verify_format_dir
-from archive.exceptions import VerificationError
 from archive.formats import get_format
 from archive.manifest import load_manifest, sidecar_sha256
-from recorder.recorder import Recorder
-from recorder.sources.sim import SimSource
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
 
 

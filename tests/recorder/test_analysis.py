@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from recorder.analysis import EventBuilder, HotSpotDetector, iou
-from recorder.analyze import analyze_session
-from recorder.bench_analysis import score
+from recorder.analysis.detector import EventBuilder, HotSpotDetector, iou
+from recorder.analysis.offline import analyze_session
+from recorder.bench.analysis import score
 from recorder.radiometry import LinearModel
-from recorder.recorder import Recorder
-from recorder.sources.sim import SimSource, SimTarget
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource, SimTarget
 
 MODEL = LinearModel()
 
@@ -109,7 +109,7 @@ def test_frames_with_nothing_to_grade_make_no_crossover():
 
 
 def test_recorder_fills_sidecars_from_the_detector_and_writes_events(tmp_path):
-    from recorder.reader import iter_session_frames
+    from recorder.storage.reader import iter_session_frames
 
     # Paced at 60 fps, as a camera: the detector keeps up and analyses every frame.
     res = Recorder(SimSource(width=320, height=256, frames=90, paced=True, seed=5, first_cue_s=0.2,
@@ -129,8 +129,8 @@ def test_recorder_fills_sidecars_from_the_detector_and_writes_events(tmp_path):
 
 
 def test_analysis_falling_behind_skips_and_says_so(tmp_path):
-    from recorder.bench import MemorySource
-    from recorder.reader import iter_session_frames
+    from recorder.bench.record import MemorySource
+    from recorder.storage.reader import iter_session_frames
 
     sim = SimSource(width=320, height=256, frames=30, paced=False, seed=6, start_time_ns=0)
     frames = list(sim.frames())

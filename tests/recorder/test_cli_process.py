@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from recorder.messages import decode_image
-from recorder.recover import recover_segment
+from recorder.icd.topics import decode_image
+from recorder.storage.recover import recover_segment
 from tests.conftest import run_cli, wait_for
 
 W, H = 96, 80
@@ -179,9 +179,9 @@ def test_recover_refuses_a_non_mcap(tmp_path):
 
 
 def test_recover_of_a_file_cut_anywhere_keeps_a_readable_prefix(tmp_path):
-    from recorder.recorder import Recorder
-    from recorder.segments import SegmentPolicy
-    from recorder.sources.sim import SimSource
+    from recorder.capture.recorder import Recorder
+    from recorder.storage.segments import SegmentPolicy
+    from recorder.capture.sources.sim import SimSource
 
     Recorder(SimSource(width=64, height=48, frames=40, paced=False), tmp_path, session_id="c",
              policy=SegmentPolicy(chunk_size=20_000)).run()

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 from recorder.exceptions import SidecarError
-from recorder.icd import format_name, parse_name
-from recorder.quality import contrast_grade, contrast_metrics, correct_bad_pixels, netd_mk
+from recorder.icd.names import format_name, parse_name
+from recorder.icd.quality import contrast_grade, contrast_metrics, correct_bad_pixels, netd_mk
 from recorder.radiometry import LinearModel, model_from_dict
-from recorder.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
+from recorder.icd.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
 
 ICD_EXAMPLE = {
     "format_version": "1.0",

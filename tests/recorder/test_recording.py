@@ -10,13 +10,13 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from recorder.mcap_writer import Compression
-from recorder.messages import decode_image
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sidecar import validate_sidecar
-from recorder.sources.sim import SimSource
-from recorder.bench import MemorySource
+from recorder.storage.writer import Compression
+from recorder.icd.topics import decode_image
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.icd.sidecar import validate_sidecar
+from recorder.capture.sources.sim import SimSource
+from recorder.bench.record import MemorySource
 
 W, H = 160, 128
 
@@ -140,7 +140,7 @@ def test_slow_writer_drops_are_counted_never_silent(tmp_path):
 
 
 def test_info_reports_the_session(tmp_path):
-    from recorder.info import info
+    from recorder.storage.info import info
 
     Recorder(_sim(frames=60, fps=60), tmp_path, session_id="i", policy=SegmentPolicy(max_duration_s=0.5)).run()
     d = info(tmp_path / "sessions" / "i")

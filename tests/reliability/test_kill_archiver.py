@@ -12,9 +12,9 @@ import sys
 import time
 
 from archive.verify import verify_session
-from recorder.recorder import Recorder
-from recorder.segments import SegmentPolicy
-from recorder.sources.sim import SimSource
+from recorder.capture.recorder import Recorder
+from recorder.storage.segments import SegmentPolicy
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
 
 

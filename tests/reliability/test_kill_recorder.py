@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.messages import decode_image
-from recorder.sources.sim import SimSource
+from recorder.icd.topics import decode_image
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli, wait_for
 
 W, H, FPS = 320, 256, 60

@@ -19,7 +19,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 import zipfile
 from pathlib import Path
 
@@ -27,8 +26,8 @@ import httpx
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.messages import decode_image
-from recorder.sources.sim import SimSource
+from recorder.icd.topics import decode_image
+from recorder.capture.sources.sim import SimSource
 from tests.conftest import ApiServer, run_cli, wait_for
 
 W, H, FPS = 96, 64, 60

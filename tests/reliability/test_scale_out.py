@@ -11,7 +11,7 @@ import sys
 import httpx
 import numpy as np
 
-from recorder.reader import iter_session_frames
+from recorder.storage.reader import iter_session_frames
 from tests.conftest import ApiServer, run_cli
 
 

@@ -1,0 +1,264 @@
+"""Indexing: what the service knows about each session, so catalog and search never scan files.
+
+``index_root`` walks ``ROOT/sessions``; a session is (re)indexed only when its fingerprint (the
+session summary, the manifest, the segment files) changed, inside one transaction, so indexing
+twice changes nothing and a session archived while the service was down is picked up at the
+next scan. Per-frame rows come from the sidecars (in a stored-ZIP archive when there is one,
+else the MCAP source); for zipped archives each frame's byte range is recorded, so a frame is
+one ranged read from local disk or S3.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import statistics
+import struct
+import time
+import zipfile
+from pathlib import Path
+from typing import Any, Iterator
+
+from sqlalchemy import delete, insert, select
+from sqlalchemy.engine import Engine
+
+from recorder.storage.layout import SessionLayout
+from recorder.storage.reader import list_sessions, read_session_meta, session_segments
+from recorder.icd.topics import TOPIC_METADATA
+from recorder.icd.quality import graded_contrast
+
+from api import db
+
+__all__ = ["index_root", "index_session", "fingerprint", "ZIPPED_FORMATS"]
+
+ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
+_LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
+
+
+#: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
+INDEX_RULES_VERSION = 2  # 2: frames with no graded target have no grade
+
+
+def fingerprint(session_dir: Path) -> str:
+    h = hashlib.sha256(f"rules:{INDEX_RULES_VERSION}".encode())
+    for p in [session_dir / "session.json", session_dir / "archive" / "manifest.json", session_dir / "events.json",
+              session_dir / "analysis.jsonl",
+              *session_segments(session_dir)]:
+        try:
+            st = p.stat()
+        except FileNotFoundError:
+            h.update(f"{p.name}:-".encode())
+            continue
+        h.update(f"{p.name}:{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()
+
+
+def _load_manifest(session_dir: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads((session_dir / "archive" / "manifest.json").read_text())
+    except (FileNotFoundError, ValueError):
+        return None
+
+
+def zip_entries(path: Path) -> Iterator[tuple[zipfile.ZipInfo, int]]:
+    """(entry, offset of its data) for each entry of a stored ZIP."""
+    with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
+        for info in zf.infolist():
+            f.seek(info.header_offset)
+            sig, *_rest, n, e = _LOCAL_HEADER.unpack(f.read(_LOCAL_HEADER.size))
+            if sig != b"PK\x03\x04":
+                raise ValueError(f"{path}: bad local header for {info.filename}")
+            yield info, info.header_offset + _LOCAL_HEADER.size + n + e
+
+
+def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]], *,
+                       read_sidecars: bool = True) -> tuple[list[dict], list[dict]]:
+    """(sidecars, blob rows) from a zipped archive: the JSON entries are read (unless another archive
+    already gave them), the images only located."""
+    sidecars, blobs = [], []
+    idx = 0
+    for rec in files:
+        path = session_dir / "archive" / fmt / rec["path"]
+        entries = list(zip_entries(path))
+        with open(path, "rb") as f:
+            for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2]):
+                if read_sidecars:
+                    f.seek(js_off)
+                    sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
+                blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off, "crc32": img.CRC,
+                              "length": img.file_size, "sidecar_offset": js_off, "sidecar_length": js.file_size})
+                idx += 1
+    return sidecars, blobs
+
+
+def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
+    from mcap.reader import make_reader
+
+    out, segs = [], []
+    for seg in files:
+        with open(seg, "rb") as f:
+            for _, _, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
+                out.append(json.loads(msg.data))
+                segs.append(seg.name)
+    return out, segs
+
+
+def _coverage(times: list[int]) -> list[list[int]]:
+    """Spans with data; a gap is a step over 1.5x the median frame period (drops, pauses)."""
+    if not times:
+        return []
+    if len(times) < 3:
+        return [[times[0], times[-1]]]
+    steps = [b - a for a, b in zip(times, times[1:])]
+    limit = 1.5 * statistics.median(steps)
+    spans, start = [], times[0]
+    for a, b in zip(times, times[1:]):
+        if b - a > limit:
+            spans.append([start, a])
+            start = b
+    spans.append([start, times[-1]])
+    return spans
+
+
+def _ts(sidecar: dict[str, Any]) -> int | None:
+    stamp = (sidecar.get("capture") or {}).get("timestamp")
+    if not stamp:
+        return None
+    from datetime import datetime, timezone
+
+    main, _, frac = stamp.rstrip("Z").partition(".")
+    sec = int(datetime.strptime(main, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc).timestamp())
+    return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
+
+
+def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> bool:
+    """Index one session; returns False when it was already indexed as it is."""
+    session_dir = Path(session_dir)
+    meta = read_session_meta(session_dir)
+    sid = meta.get("session_id") or session_dir.name
+    fp = fingerprint(session_dir)
+    with engine.connect() as conn:
+        old = conn.execute(select(db.sessions.c.fingerprint).where(db.sessions.c.id == sid)).scalar()
+    if old == fp and not force:
+        return False
+    manifest = _load_manifest(session_dir)
+    # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
+    verified = {f: e for f, e in (manifest or {}).get("formats", {}).items() if e.get("verified") and not e.get("damaged")}
+    zipped = next((f for f in ZIPPED_FORMATS if f in verified and (session_dir / "archive" / f).is_dir()), None)
+    blobs: list[dict[str, Any]] = []
+    if zipped:
+        sidecars, blobs = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
+        for other in ZIPPED_FORMATS:
+            if other != zipped and other in verified and (session_dir / "archive" / other).is_dir():
+                blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"], read_sidecars=False)[1]
+        segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
+        times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
+    elif session_segments(session_dir):
+        sidecars, segs = _sidecars_from_mcap(session_segments(session_dir))
+        times = [_ts(s) for s in sidecars]
+    else:
+        # Source deleted and no zipped archive (hdf5, tiff-lzw ...): the sidecars live in extras.mcap
+        # exactly as recorded, and the manifest has each frame's time and segment.
+        extras = SessionLayout.of(session_dir).extras
+        sidecars, _ = _sidecars_from_mcap([extras] if extras.is_file() else [])
+        frames_meta = (manifest or {}).get("frames", {})
+        times = frames_meta.get("timestamps_ns") or [_ts(s) for s in sidecars]
+        segs = frames_meta.get("segments") or [None] * len(times)
+        if len(sidecars) != len(times):
+            sidecars = (sidecars + [{}] * len(times))[: len(times)]
+    analysed = session_dir / "analysis.jsonl"
+    if analysed.is_file():  # `thermcap analyze` results take precedence over the recorded sidecars
+        by_index = {}
+        with open(analysed) as f:
+            for line in f:
+                row = json.loads(line)
+                by_index[row["index"]] = row
+        sidecars = [{**sc, **{k: by_index[i][k] for k in ("thermal_analysis", "targets")}} if i in by_index else sc
+                    for i, sc in enumerate(sidecars)]
+    frame_rows = []
+    hashes = (manifest or {}).get("frames", {}).get("sha256") or []
+    sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
+    for i, (sc, t) in enumerate(zip(sidecars, times)):
+        ta = sc.get("thermal_analysis") or {}
+        targets = sc.get("targets") or []
+        frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
+                           "sha256": hashes[i] if i < len(hashes) else None,
+                           "sidecar_sha256": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
+                           # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
+                           "grade": graded_contrast(ta),
+                           "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
+                           "target_count": len(targets),
+                           "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)})
+    grades = [r["grade"] for r in frame_rows if r["grade"] is not None]
+    sensor = meta.get("sensor") or (manifest or {}).get("session", {}).get("sensor") or {}
+    model = meta.get("radiometric_model") or (manifest or {}).get("session", {}).get("radiometric_model")
+    src = (manifest or {}).get("source", {})
+    first = sidecars[0] if sidecars else {}
+    res = (first.get("sensor") or {}).get("resolution") or {}
+    valid_times = [r["timestamp_ns"] for r in frame_rows]
+    row = {
+        "id": sid, "path": str(session_dir), "sensor": sensor.get("model"), "sensor_id": sensor.get("sensor_id"),
+        "width": res.get("width") or src.get("width"), "height": res.get("height") or src.get("height"),
+        "fps": sensor.get("frame_rate_hz"), "start_ns": min(valid_times) if valid_times else None,
+        "end_ns": max(valid_times) if valid_times else None, "frames": len(frame_rows),
+        "frames_dropped": int(meta.get("frames_dropped") or 0), "radiometric_model": json.dumps(model),
+        "status": meta.get("status"), "min_grade": min(grades) if grades else None,
+        "max_grade": max(grades) if grades else None,
+        "has_targets": any(r["target_count"] for r in frame_rows),
+        "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),
+        "coverage": json.dumps(_coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
+        "fingerprint": fp, "indexed_at": time.time_ns(),
+    }
+    seg_rows = [{"session_id": sid, "name": s.name, "frames": sum(1 for x in segs if x == s.name),
+                 "bytes": s.stat().st_size} for s in session_segments(session_dir)]
+    arch_rows = [{"session_id": sid, "format": f, "files": json.dumps(e["files"]), "bytes": e["bytes"],
+                  "objects": e["objects"], "ratio": e.get("compression_ratio"),
+                  "verified": bool(e.get("verified")) and not e.get("damaged")}
+                 for f, e in (manifest or {}).get("formats", {}).items()]
+    event_rows = []
+    events_path = session_dir / "events.json"
+    if events_path.is_file():
+        try:
+            for i, ev in enumerate(json.loads(events_path.read_text()).get("events", [])):
+                event_rows.append({"session_id": sid, "seq": i, "kind": ev["kind"], "start_ns": ev["start_ns"],
+                                   "end_ns": ev["end_ns"], "detail": json.dumps(ev.get("detail", {}))})
+        except (ValueError, KeyError, TypeError):
+            pass
+    with engine.begin() as conn:
+        for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+            conn.execute(delete(table).where(table.c.session_id == sid))
+        conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+        conn.execute(insert(db.sessions), [row])
+        for table, rows in ((db.segments, seg_rows), (db.archives, arch_rows), (db.frames, frame_rows),
+                            (db.frame_blobs, [{"session_id": sid, **b} for b in blobs]), (db.events, event_rows)):
+            for i in range(0, len(rows), 5000):
+                conn.execute(insert(table), rows[i:i + 5000])
+    return True
+
+
+def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> dict[str, Any]:
+    """Index every session under ROOT; drop sessions whose folder is gone, unless ``store`` is an
+    object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
+    bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
+    done, unchanged, failed = [], [], {}
+    present = set()
+    for d in list_sessions(root):
+        if list(d.glob("*.active")) or not (d / "session.json").exists() and not (d / "archive").exists():
+            continue
+        meta = read_session_meta(d)
+        present.add(meta.get("session_id") or d.name)
+        try:
+            (done if index_session(engine, d, force=force) else unchanged).append(d.name)
+        except Exception as exc:  # one broken session must not stop the others
+            failed[d.name] = f"{type(exc).__name__}: {exc}"
+    with engine.begin() as conn:
+        known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
+        gone = sorted(known - present)
+        if store is not None and store.kind != "local":
+            in_store = {sid for sid in gone if store.head(f"sessions/{sid}/archive/manifest.json") is not None}
+            gone = [sid for sid in gone if sid not in in_store]
+        for sid in gone:
+            for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+                conn.execute(delete(table).where(table.c.session_id == sid))
+            conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+    return {"indexed": done, "unchanged": unchanged, "removed": gone, "failed": failed}

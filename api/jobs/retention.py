@@ -1,0 +1,175 @@
+"""``thermcap gc``: retention that never deletes the last good copy.
+
+What may go, per session, oldest first, by age and/or total size:
+
+- the MCAP segments, once every requested archive format and ``extras.mcap`` verified and their
+  files still hash to the manifest (the archive covers the source);
+- the whole local folder (archives included), only once the upload to the object store is
+  complete and every uploaded object is there at its archived size (the bucket covers it).
+
+Each session is handled under its lock, so a session being recorded, recovered, archived or
+analysed is never touched. A dry run lists every deletion with what it relies on.
+"""
+
+from __future__ import annotations
+
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from archive.archiver import DEFAULT_FORMATS
+from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from recorder.exceptions import ThermcapError
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.reader import list_sessions, read_session_meta
+
+from api.storage import BlobStore
+
+__all__ = ["GcDecision", "GcResult", "gc_sessions"]
+
+
+@dataclass
+class GcDecision:
+    session: str
+    started_ns: int
+    bytes: int
+    action: str  # "delete-source", "delete-local", "keep"
+    frees: int = 0
+    relies_on: list[str] = field(default_factory=list)
+    why_kept: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return dict(self.__dict__)
+
+
+@dataclass
+class GcResult:
+    dry_run: bool
+    decisions: list[GcDecision]
+    bytes_remaining: int
+
+    @property
+    def deleted(self) -> list[GcDecision]:
+        return [d for d in self.decisions if d.action != "keep" and d.frees]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"dry_run": self.dry_run, "deleted": [d.session for d in self.deleted],
+                "bytes_freed": sum(d.frees for d in self.deleted), "bytes_remaining": self.bytes_remaining,
+                "decisions": [d.to_dict() for d in self.decisions],
+                "kept_unverified": [d.session for d in self.decisions if d.action == "keep"]}
+
+
+def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], str | None]:
+    """(what the source's deletion relies on, or why it cannot go): every requested format and
+    extras verified, and their files on disk hash as the manifest says."""
+    requested = m.get("requested_formats") or list(DEFAULT_FORMATS)
+    relies = []
+    for fid in requested:
+        entry = m.get("formats", {}).get(fid) or {}
+        if not entry.get("verified") or entry.get("damaged"):
+            return [], f"requested format {fid} is not verified"
+        for rec in entry.get("files", []):
+            path = layout.format_dir(fid) / rec["path"]
+            if not path.is_file() or file_sha256(path) != rec.get("sha256"):
+                return [], f"{fid}/{rec['path']} is missing or differs from the manifest"
+        relies.append(f"{fid}: {len(entry.get('files', []))} files verified {entry.get('verified_at')}, hashes rechecked")
+    extras = m.get("extras") or {}
+    if not extras.get("verified") or not layout.extras.is_file() or file_sha256(layout.extras) != extras.get("sha256"):
+        return [], "extras.mcap (attachments, other topics) is not verified"
+    relies.append("extras.mcap verified, hash rechecked")
+    return relies, None
+
+
+def _bucket_cover(m: dict[str, Any], store: BlobStore | None) -> tuple[list[str], str | None]:
+    up = m.get("upload") or {}
+    if not up.get("complete"):
+        return [], "not uploaded to the object store"
+    if store is None:
+        return [f"upload recorded complete {up.get('at')} ({len(up.get('keys', []))} objects)"], None
+    sizes = {}
+    for fid, entry in m.get("formats", {}).items():
+        for rec in entry.get("files", []) if entry.get("verified") else []:
+            sizes[f"{fid}/{rec['path']}"] = rec["bytes"]
+    if (m.get("extras") or {}).get("verified"):
+        sizes[m["extras"]["path"]] = m["extras"]["bytes"]
+    for key in up.get("keys", []):
+        rel = key.split("/archive/", 1)[-1]
+        head = store.head(key)
+        if head is None or (rel in sizes and head["size"] != sizes[rel]):
+            return [], f"object {key} is missing from the store or has another size"
+    return [f"{len(up.get('keys', []))} objects in the {store.kind} store, sizes rechecked"], None
+
+
+def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,
+                dry_run: bool, store: BlobStore | None = None) -> GcResult:
+    sessions = []
+    for d in list_sessions(root):
+        meta = read_session_meta(d)
+        size = sum(p.stat().st_size for p in d.rglob("*") if p.is_file())
+        sessions.append((int(meta.get("started_ns") or 0), d, size))
+    sessions.sort(key=lambda r: r[0])
+    total = sum(s for _, _, s in sessions)
+    now = time.time_ns()
+    decisions = []
+    for started, d, size in sessions:
+        too_old = keep_days is not None and started < now - keep_days * 86400e9
+        if not too_old and not (max_bytes is not None and total > max_bytes):
+            continue
+        decision = _decide_and_act(d, started, size, require_upload, dry_run, store)
+        decisions.append(decision)
+        total -= decision.frees
+    return GcResult(dry_run, decisions, total)
+
+
+def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_run: bool,
+                    store: BlobStore | None) -> GcDecision:
+    decision = GcDecision(str(d), started, size, "keep")
+    lock = lock_session(d, "gc", wait_s=0.0)
+    if lock is None:
+        decision.why_kept = f"{holder(d) or 'another process'} is working on it"
+        return decision
+    try:
+        layout = SessionLayout.of(d)
+        if layout.active_segments():
+            decision.why_kept = "unfinished segments (*.active): run `thermcap recover`"
+            return decision
+        try:
+            m = load_manifest(d, required=False)
+        except ThermcapError as exc:
+            decision.why_kept = str(exc)
+            return decision
+        if m is None:
+            decision.why_kept = "not archived"
+            return decision
+        relies, why = _bucket_cover(m, store)
+        if why is None:
+            decision.action, decision.relies_on, decision.frees = "delete-local", relies, size
+            if not dry_run:
+                shutil.rmtree(d)
+            return decision
+        if require_upload:
+            decision.why_kept = why
+            return decision
+        segments = layout.segments()
+        if not segments:
+            decision.why_kept = "only the archive is left (the last copy); upload it to free more"
+            return decision
+        relies, why = _local_cover(layout, m)
+        if why is not None:
+            decision.why_kept = why
+            return decision
+        decision.action, decision.relies_on = "delete-source", relies
+        decision.frees = sum(p.stat().st_size for p in segments)
+        if not dry_run:
+            for seg in segments:
+                seg.unlink()
+            m["source"]["deleted"] = True
+            m["source"]["deleted_at"] = iso_now()
+            m["source"]["deleted_by"] = "gc"
+            save_manifest(d, m)
+        return decision
+    finally:
+        lock.release()

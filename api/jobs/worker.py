@@ -1,0 +1,142 @@
+"""``thermcap worker``: archive, verify, upload and index finished sessions as they appear.
+
+A session is finished when it has a summary and no ``.active`` segment and nobody holds its
+recording lock. Workers coordinate through leases in the index (SQLite or PostgreSQL): a worker
+archives a session only while it holds the lease, so several workers on one root or one bucket
+never archive the same session twice; a lease expires, so a dead worker's session is picked up
+again. Uploads use create-only writes: an object that is already there with the same content is
+left alone, one with different content is an error, never an overwrite.
+"""
+
+from __future__ import annotations
+
+import os
+import socket
+import time
+import uuid
+from pathlib import Path
+from typing import Any, Callable
+
+from sqlalchemy import delete, insert, update
+from sqlalchemy.engine import Engine
+from sqlalchemy.exc import IntegrityError
+
+from archive.archiver import archive_session
+from archive.manifest import load_manifest
+from archive.scrub import ScrubReport, scrub_session
+from recorder.exceptions import ThermcapError
+from recorder.storage.reader import list_sessions, read_session_meta
+from recorder.storage.lock import is_locked
+
+from api import db
+from api.indexing import index_session
+from api.storage import BlobStore, upload_archive
+
+__all__ = ["Worker", "acquire_lease", "release_lease", "finished_sessions"]
+
+
+def acquire_lease(engine: Engine, session_id: str, owner: str, ttl_s: float) -> bool:
+    now = time.time_ns()
+    expires = now + int(ttl_s * 1e9)
+    with engine.begin() as conn:
+        try:
+            conn.execute(insert(db.leases).values(session_id=session_id, owner=owner, expires_ns=expires))
+            return True
+        except IntegrityError:
+            pass
+    with engine.begin() as conn:
+        res = conn.execute(update(db.leases).where(db.leases.c.session_id == session_id,
+                                                   (db.leases.c.expires_ns < now) | (db.leases.c.owner == owner))
+                           .values(owner=owner, expires_ns=expires))
+        return res.rowcount == 1
+
+
+def release_lease(engine: Engine, session_id: str, owner: str) -> None:
+    with engine.begin() as conn:
+        conn.execute(delete(db.leases).where(db.leases.c.session_id == session_id, db.leases.c.owner == owner))
+
+
+def finished_sessions(root: Path) -> list[Path]:
+    out = []
+    for d in list_sessions(root):
+        meta = read_session_meta(d)
+        if meta.get("status") not in ("complete", "recovered", "failed") or list(d.glob("*.active")):
+            continue
+        if is_locked(d):
+            continue  # still being recorded (or archived on this host)
+        out.append(d)
+    return out
+
+
+def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
+    try:
+        m = load_manifest(d, required=False)
+    except ThermcapError:
+        return True
+    if m is None or any(not m["formats"].get(f, {}).get("verified") for f in formats):
+        return True
+    return store is not None and not m.get("upload", {}).get("complete")
+
+
+class Worker:
+    def __init__(self, root: Path, engine: Engine, *, formats: list[str], store: BlobStore | None = None,
+                 delete_source: bool = False, lease_ttl_s: float = 600.0, owner: str | None = None,
+                 log: Callable[[str], None] = print) -> None:
+        self.root, self.engine, self.formats, self.store = Path(root), engine, formats, store
+        self.delete_source, self.lease_ttl_s = delete_source, lease_ttl_s
+        self.owner = owner or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}"
+        self.log = log
+
+    def run_once(self) -> dict[str, Any]:
+        done, skipped, failed = [], [], {}
+        for d in finished_sessions(self.root):
+            if not _needs_work(d, self.formats, self.store):
+                continue
+            sid = read_session_meta(d).get("session_id", d.name)
+            if not acquire_lease(self.engine, sid, self.owner, self.lease_ttl_s):
+                skipped.append(sid)
+                continue
+            try:
+                archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
+                if self.store is not None:
+                    upload_archive(self.store, self.root, d)
+                    if self.delete_source:
+                        archive_session(d, self.formats, delete_source=True)
+                index_session(self.engine, d)
+                done.append(sid)
+                self.log(f"archived {sid}")
+            except ThermcapError as exc:
+                failed[sid] = str(exc)
+                self.log(f"error: {sid}: {exc}")
+            finally:
+                release_lease(self.engine, sid, self.owner)
+        return {"archived": done, "leased_elsewhere": skipped, "failed": failed}
+
+    def scrub(self, repair: bool = True) -> dict[str, Any]:
+        """Re-verify every archived copy (and the bucket's), repair what another copy covers, and
+        re-index the sessions where anything was found, so the API stops offering damage at once."""
+        report = ScrubReport()
+        for d in list_sessions(self.root):
+            if not (d / "archive" / "manifest.json").is_file():
+                continue
+            before = len(report.findings)
+            try:
+                scrub_session(d, repair=repair, store=self.store, root=self.root, report=report)
+            except ThermcapError as exc:
+                self.log(f"error: scrub {d.name}: {exc}")
+                continue
+            if len(report.findings) > before:
+                index_session(self.engine, d, force=True)
+        for f in report.findings:
+            self.log(f"scrub: {f.session}: {f.copy} damaged ({f.problems[0]}); "
+                     + (f"repaired from {f.repaired_from}" if f.repaired else f"not repaired: {f.repair_error}"))
+        return report.to_dict()
+
+    def run_forever(self, interval_s: float = 5.0, scrub_interval_s: float = 86400.0) -> None:
+        next_scrub = time.monotonic() + scrub_interval_s if scrub_interval_s > 0 else None
+        while True:
+            self.run_once()
+            if next_scrub is not None and time.monotonic() >= next_scrub:
+                self.scrub()
+                next_scrub = time.monotonic() + scrub_interval_s
+            time.sleep(interval_s)

@@ -1,0 +1,1 @@
+"""thermcap archive: lossless repacking, a bit-exact proof of every frame, the manifest, verify, scrub, storage costs."""

@@ -1,0 +1,267 @@
+"""Hot-spot detection for every source, the ICD contrast metrics from real masks, and events.
+
+The detector works on temperatures (through the session's radiometric model), against a
+*local* background: a grey opening wider than any target (``max_size``), which removes warm
+objects but keeps edges such as the horizon. (A global mean + 1 sigma, tried on a real DJI
+frame, gave 1,794 peaks for 28 animals.) Candidates stand at least ``threshold_k`` (the ICD's
+5 K detection threshold) above that background; a connected component of at least
+``min_area`` pixels is a target if its peak also stands ``threshold_k`` and ``min_sigma`` ring
+deviations above the median of the ring around it, which rejects texture and slopes. Targets
+are tracked across frames by overlap.
+Each target is graded against a ring of its own local background with ICD 7.1's exact code
+(``quality.contrast_metrics``); the frame reports its most detectable target.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import ndimage
+
+from recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
+from recorder.icd.quality import contrast_metrics, frame_analysis, graded_contrast
+from recorder.radiometry import RadiometricModel
+
+__all__ = ["HotSpotDetector", "Detection", "EventBuilder", "iou"]
+
+
+@dataclass
+class Detection:
+    target_id: str
+    bbox: list[int]  # [x_min, y_min, x_max, y_max], inclusive pixel coordinates
+    centroid: list[float]  # [x, y]
+    max_temp_c: float
+    mean_temp_c: float
+    confidence: float
+    metrics: dict[str, Any]
+    classification: str = "hot_spot"
+
+    def to_sidecar(self) -> dict[str, Any]:
+        return {"target_id": self.target_id, "bbox": self.bbox, "centroid": self.centroid,
+                "max_temp_c": round(self.max_temp_c, 3), "mean_temp_c": round(self.mean_temp_c, 3),
+                "classification": self.classification, "confidence": round(self.confidence, 3)}
+
+
+def iou(a: list[int], b: list[int]) -> float:
+    """Intersection over union of two inclusive pixel boxes."""
+    ix = min(a[2], b[2]) - max(a[0], b[0]) + 1
+    iy = min(a[3], b[3]) - max(a[1], b[1]) + 1
+    if ix <= 0 or iy <= 0:
+        return 0.0
+    inter = ix * iy
+    area = lambda r: (r[2] - r[0] + 1) * (r[3] - r[1] + 1)  # noqa: E731
+    return inter / (area(a) + area(b) - inter)
+
+
+def _celsius32(model: RadiometricModel, raw: np.ndarray) -> np.ndarray:
+    from recorder.radiometry import LinearModel
+
+    if isinstance(model, LinearModel):  # float32 all the way: half the memory traffic
+        out = raw.astype(np.float32)
+        out *= np.float32(model.scale_c_per_count)
+        out += np.float32(model.offset_c)
+        return out
+    return np.asarray(model.to_celsius(raw), dtype=np.float32)
+
+
+@dataclass
+class HotSpotDetector:
+    model: RadiometricModel
+    threshold_k: float = DETECTION_THRESHOLD_K
+    min_sigma: float = 4.0
+    min_area: int = 4
+    max_size: int = 48
+    ring_px: int = 6
+    bad_pixel_map: np.ndarray | None = None
+    max_targets: int = 64
+    _tracks: list[tuple[str, list[int]]] = field(default_factory=list, repr=False)
+    _bad_coords: np.ndarray | None = field(default=None, repr=False)
+    _next_id: int = field(default=1, repr=False)
+
+    _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _coarse assume 4)
+
+    def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quarter-resolution (opened background, local mean, cell maximum) of ``temps``.
+
+        The background is a grey opening (min then max filter) wider than any target
+        (``max_size``): it removes warm objects but keeps edges such as the horizon, where a
+        smoothed or block background would leave a band of false targets."""
+        f = self._F
+        h, w = temps.shape
+        ph, pw = -(-h // f) * f, -(-w // f) * f
+        padded = np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
+        # Strided element-wise ops: numpy's reductions over a 4-long inner axis are 10x slower.
+        cols = [padded[:, j::f] for j in range(f)]
+        csum, cmx = cols[0] + cols[1] + cols[2] + cols[3], np.maximum(np.maximum(cols[0], cols[1]), np.maximum(cols[2], cols[3]))
+        mean = (csum[0::f] + csum[1::f] + csum[2::f] + csum[3::f]) * np.float32(1.0 / (f * f))
+        cmax = np.maximum(np.maximum(cmx[0::f], cmx[1::f]), np.maximum(cmx[2::f], cmx[3::f]))
+        k = self.max_size // f + 1
+        opened = ndimage.maximum_filter(ndimage.minimum_filter(mean, size=k, mode="nearest"), size=k, mode="nearest")
+        local_mean = ndimage.uniform_filter(mean, size=2 * k - 1, mode="nearest")
+        return opened, local_mean, cmax
+
+    def background(self, temps: np.ndarray) -> np.ndarray:
+        """The local background (C) at full resolution."""
+        opened = self._coarse(temps)[0]
+        h, w = temps.shape
+        return np.repeat(np.repeat(opened, self._F, axis=0), self._F, axis=1)[:h, :w]
+
+    def _fix_bad_pixels(self, temps: np.ndarray) -> np.ndarray:
+        if self.bad_pixel_map is None or self.bad_pixel_map.shape != temps.shape or not self.bad_pixel_map.any():
+            return temps
+        if self._bad_coords is None:
+            self._bad_coords = np.argwhere(self.bad_pixel_map)
+        out = temps.copy()
+        h, w = temps.shape
+        for y, x in self._bad_coords:  # dead and hot pixels would read as 1-px targets
+            win = temps[max(0, y - 1):y + 2, max(0, x - 1):x + 2]
+            good = win[~self.bad_pixel_map[max(0, y - 1):y + 2, max(0, x - 1):x + 2]]
+            out[y, x] = np.median(good) if good.size else out[y, x]
+        return out
+
+    def detect(self, raw: np.ndarray) -> tuple[list[Detection], dict[str, Any]]:
+        """Targets in one frame, and the sidecar's ``thermal_analysis`` block.
+
+        Coarse to fine: cells whose maximum stands ``threshold_k`` above the background are found
+        at quarter resolution, and only those regions are labelled at full resolution, so a frame
+        with few warm spots costs little more than the background estimate."""
+        temps = self._fix_bad_pixels(_celsius32(self.model, raw))
+        f = self._F
+        h, w = temps.shape
+        opened, local_mean, cmax = self._coarse(temps)
+        cells = (cmax - opened) >= self.threshold_k
+        dets: list[Detection] = []
+        per_target = []
+        if cells.any():
+            bg = np.repeat(np.repeat(opened, f, axis=0), f, axis=1)[:h, :w]
+            regions, nreg = ndimage.label(cells, structure=np.ones((3, 3), bool))
+            # Regions whose warmest cell does not stand out from the local mean are texture:
+            # dropped here, at quarter resolution, before any full-resolution work.
+            rmax = ndimage.maximum(cmax, regions, np.arange(1, nreg + 1))
+            found = []
+            for rsl, top in zip(ndimage.find_objects(regions), np.atleast_1d(rmax)):
+                cy = min((rsl[0].start + rsl[0].stop) // 2, local_mean.shape[0] - 1)
+                cx = min((rsl[1].start + rsl[1].stop) // 2, local_mean.shape[1] - 1)
+                if top - local_mean[cy, cx] < 0.8 * self.threshold_k:
+                    continue
+                ry0, ry1 = rsl[0].start * f, min(h, rsl[0].stop * f)
+                rx0, rx1 = rsl[1].start * f, min(w, rsl[1].stop * f)
+                cand = (temps[ry0:ry1, rx0:rx1] - bg[ry0:ry1, rx0:rx1]) >= self.threshold_k
+                labels, n = ndimage.label(cand)
+                if not n:
+                    continue
+                areas = np.bincount(labels.ravel(), minlength=n + 1)
+                for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+                    if areas[i] >= self.min_area:
+                        found.append((int(areas[i]), sl[0].start + ry0, sl[0].stop + ry0, sl[1].start + rx0,
+                                      sl[1].stop + rx0, labels[sl] == i))
+            found.sort(key=lambda c: -c[0])
+            for _area, y0, y1, x0, x1, own in found:
+                if len(dets) >= self.max_targets:
+                    break
+                # Cheapest test: the peak against the local mean around it (texture bumps fail here).
+                local = local_mean[min((y0 + y1) // (2 * f), local_mean.shape[0] - 1),
+                                   min((x0 + x1) // (2 * f), local_mean.shape[1] - 1)]
+                peak = float(temps[y0:y1, x0:x1][own].max())
+                if peak - local < 0.8 * self.threshold_k:
+                    continue
+                r = self.ring_px
+                Y0, Y1, X0, X1 = max(0, y0 - r), min(h, y1 + r), max(0, x0 - r), min(w, x1 + r)
+                crop = temps[Y0:Y1, X0:X1]
+                tmask = np.zeros(crop.shape, bool)
+                tmask[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0] = own
+                # Next, the rectangular ring outside the component's box: a target stands above
+                # the ring around it, not just above the opening's floor; texture and slopes do not.
+                rect = np.ones(crop.shape, bool)
+                rect[max(0, y0 - 1 - Y0):y1 + 1 - Y0, max(0, x0 - 1 - X0):x1 + 1 - X0] = False
+                if not rect.any():
+                    continue
+                ring = crop[rect]
+                excess = peak - float(np.median(ring))
+                if excess < self.threshold_k or excess < self.min_sigma * (float(np.std(ring)) + 1e-3):
+                    continue
+                warm = (crop - bg[Y0:Y1, X0:X1]) >= self.threshold_k  # this and any neighbouring target
+                bmask = ~ndimage.binary_dilation(warm | tmask, iterations=2)
+                if not bmask.any():
+                    continue
+                m = contrast_metrics(crop, tmask, bmask)
+                ys, xs = np.nonzero(tmask)
+                dets.append(Detection(
+                    target_id="", bbox=[int(x0), int(y0), int(x1 - 1), int(y1 - 1)],
+                    centroid=[round(float(xs.mean() + X0), 2), round(float(ys.mean() + Y0), 2)],
+                    max_temp_c=m["max_target_temp_c"], mean_temp_c=m["mean_target_temp_c"],
+                    confidence=float(1.0 - math.exp(-excess / max(self.threshold_k, 1e-6))), metrics=m))
+                per_target.append(m)
+        self._track(dets)
+        conf = max((d.confidence for d in dets), default=None)
+        return dets, frame_analysis(per_target, source="detector", confidence=round(conf, 3) if conf else None)
+
+    def _track(self, dets: list[Detection]) -> None:
+        """Keep a target's id while its box overlaps the one it had in the previous frame."""
+        free = list(self._tracks)
+        new_tracks = []
+        for d in sorted(dets, key=lambda d: -(d.bbox[2] - d.bbox[0] + 1) * (d.bbox[3] - d.bbox[1] + 1)):
+            best = max(free, key=lambda t: iou(t[1], d.bbox), default=None)
+            if best is not None and iou(best[1], d.bbox) > 0.1:
+                d.target_id = best[0]
+                free.remove(best)
+            else:
+                d.target_id = f"HS{self._next_id:05d}"
+                self._next_id += 1
+            new_tracks.append((d.target_id, d.bbox))
+        self._tracks = new_tracks
+
+
+@dataclass
+class EventBuilder:
+    """Session events from per-frame sidecars: ``thermal_crossover`` (grade below 0.3 for at
+    least ``min_crossover_s``) and ``slew_to_cue`` (cue received until lock)."""
+
+    min_crossover_s: float = 1.0
+    events: list[dict[str, Any]] = field(default_factory=list)
+    _low_start: int | None = None
+    _low_last: int | None = None
+    _low_min: float = 1.0
+    _cue_start: int | None = None
+    _cue_detail: dict[str, Any] = field(default_factory=dict)
+    _last_t: int | None = None
+
+    def add(self, t_ns: int, sidecar: dict[str, Any]) -> None:
+        grade = graded_contrast(sidecar.get("thermal_analysis"))
+        if grade is not None and grade < CROSSOVER_GRADE:
+            if self._low_start is None:
+                self._low_start, self._low_min = t_ns, grade
+            self._low_last = t_ns
+            self._low_min = min(self._low_min, grade)
+        elif grade is not None:
+            self._close_low()
+        stc = sidecar.get("slew_to_cue") or {}
+        state = stc.get("state")
+        active = state in ("slew", "search") if state else bool(stc.get("slew_to_cue_active"))
+        if active and self._cue_start is None:
+            self._cue_start = t_ns
+            self._cue_detail = {k: stc.get(k) for k in ("radar_azimuth_deg", "radar_elevation_deg", "radar_range_m")}
+        elif not active and self._cue_start is not None:
+            self._cue_detail["ended_in"] = state or "inactive"
+            self.events.append({"kind": "slew_to_cue", "start_ns": self._cue_start, "end_ns": t_ns,
+                                "detail": self._cue_detail})
+            self._cue_start = None
+        self._last_t = t_ns
+
+    def _close_low(self) -> None:
+        if self._low_start is not None and self._low_last is not None:
+            if (self._low_last - self._low_start) / 1e9 >= self.min_crossover_s:
+                self.events.append({"kind": "thermal_crossover", "start_ns": self._low_start, "end_ns": self._low_last,
+                                    "detail": {"min_grade": round(self._low_min, 4)}})
+        self._low_start = self._low_last = None
+
+    def finish(self) -> list[dict[str, Any]]:
+        self._close_low()
+        if self._cue_start is not None and self._last_t is not None:
+            self.events.append({"kind": "slew_to_cue", "start_ns": self._cue_start, "end_ns": self._last_t,
+                                "detail": {**self._cue_detail, "ended_in": "end of session"}})
+            self._cue_start = None
+        return sorted(self.events, key=lambda e: e["start_ns"])

@@ -1,0 +1,99 @@
+"""``thermcap analyze``: run the detector over a recorded (or imported) session, offline.
+
+Results go beside the segments, never into them (recorded data is not rewritten):
+``analysis.jsonl`` (one line per frame: index, log time, thermal_analysis, targets) and
+``events.json`` (thermal crossover and slew-to-cue spans), both written to a temporary name
+and renamed, and both the same bytes for the same input, so running it twice changes nothing.
+The API's index prefers these per-frame results over the recorded sidecars.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+from recorder.analysis.detector import EventBuilder, HotSpotDetector
+from recorder.exceptions import McapFileError
+from recorder.radiometry import model_from_dict
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import session_locked
+from recorder.storage.reader import frame_files, iter_session_frames, read_session_meta
+from recorder.storage.segments import write_json_atomic
+
+__all__ = ["analyze_session", "ANALYSIS_FILE", "EVENTS_FILE"]
+
+ANALYSIS_FILE = "analysis.jsonl"
+EVENTS_FILE = "events.json"
+
+
+def _bad_pixel_map(session_dir: Path):
+    import numpy as np
+    from mcap.reader import make_reader
+
+    files = frame_files(session_dir)  # the segments, or extras.mcap once they are archived and gone
+    if not files:
+        return None
+    with open(files[0], "rb") as f:
+        for att in make_reader(f).iter_attachments():
+            if att.name == "bad_pixel_map.json":
+                bpm = json.loads(att.data)
+                out = np.zeros((bpm["height"], bpm["width"]), bool)
+                for x, y in bpm["pixels"]:
+                    out[y, x] = True
+                return out
+    return None
+
+
+def analyze_session(session_dir: str | Path, *, threshold_k: float = 5.0, min_area: int = 4,
+                    min_crossover_s: float = 1.0, on_frame: Callable[[int], None] | None = None) -> dict[str, Any]:
+    session_dir = Path(session_dir)
+    meta = read_session_meta(session_dir)
+    if not meta and not list(session_dir.glob("*.mcap")):
+        raise McapFileError(f"{session_dir}: not a thermcap session")
+    with session_locked(session_dir, "analyze"):
+        return _analyze(session_dir, meta, threshold_k, min_area, min_crossover_s, on_frame)
+
+
+def _expected_frames(session_dir: Path, meta: dict[str, Any]) -> int | None:
+    try:
+        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        return int(manifest["source"]["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    n = meta.get("frames_written")
+    return int(n) if isinstance(n, int) else None
+
+
+def _analyze(session_dir: Path, meta: dict[str, Any], threshold_k: float, min_area: int, min_crossover_s: float,
+             on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+    model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
+    detector = HotSpotDetector(model, threshold_k=threshold_k, min_area=min_area,
+                               bad_pixel_map=_bad_pixel_map(session_dir))
+    events = EventBuilder(min_crossover_s=min_crossover_s)
+    tmp = session_dir / (ANALYSIS_FILE + ".tmp")
+    frames = targets = 0
+    with open(tmp, "w") as out:
+        for frame in iter_session_frames(session_dir):
+            dets, analysis = detector.detect(frame.pixels)
+            recorded = frame.sidecar_dict()
+            row = {"index": frame.index, "log_time": frame.log_time, "thermal_analysis": analysis,
+                   "targets": [d.to_sidecar() for d in dets]}
+            out.write(json.dumps(row, separators=(",", ":"), sort_keys=True) + "\n")
+            events.add(frame.log_time, {"thermal_analysis": analysis, "slew_to_cue": recorded.get("slew_to_cue") or {}})
+            frames += 1
+            targets += len(dets)
+            if on_frame:
+                on_frame(frames)
+        out.flush()
+        os.fsync(out.fileno())
+    expected = _expected_frames(session_dir, meta)
+    if expected is not None and frames != expected:
+        tmp.unlink()
+        raise McapFileError(f"{session_dir}: read {frames} frames but the session holds {expected} (is its "
+                            "source gone without a verified archive?); the previous analysis was kept")
+    os.replace(tmp, session_dir / ANALYSIS_FILE)
+    ev = events.finish()
+    write_json_atomic(session_dir / EVENTS_FILE, {"session_id": meta.get("session_id", session_dir.name), "events": ev})
+    return {"session": str(session_dir), "frames": frames, "detections": targets, "events": ev}

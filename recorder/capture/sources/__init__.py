@@ -1,0 +1,24 @@
+"""Frame sources: ``make_source`` turns a ``--source`` argument into one."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from recorder.exceptions import SourceError
+from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from recorder.capture.sources.raw import RawSource
+from recorder.capture.sources.sim import SimSource
+
+__all__ = ["CapturedFrame", "FrameSource", "Pacer", "SensorInfo", "RawSource", "SimSource", "make_source"]
+
+
+def make_source(spec: str, **options: Any) -> FrameSource:
+    """``sim`` or ``raw:PATH`` / ``raw:-`` (stdin) -> a FrameSource."""
+    if spec == "sim":
+        keep = {"width", "height", "fps", "seed", "frames", "duration_s", "paced", "crossover", "cue_period_s",
+                "start_time_ns", "sensor_id"}
+        return SimSource(**{k: v for k, v in options.items() if k in keep and v is not None})
+    if spec.startswith("raw:"):
+        keep = {"width", "height", "fps", "paced", "sensor_id", "model", "max_frames", "timestamps"}
+        return RawSource(spec[4:], **{k: v for k, v in options.items() if k in keep and v is not None})
+    raise SourceError(f"unknown source {spec!r}: use 'sim', 'raw:PATH' or 'raw:-' for stdin")

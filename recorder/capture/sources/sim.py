@@ -1,0 +1,368 @@
+"""A seeded thermal scene simulator that also plays the radar side of ICD section 8.
+
+The scene: cold sky over warmer textured ground, warm targets moving across it (a drone motor
+at 40-50 C, a vehicle, a person), NETD temporal noise, column fixed-pattern noise and a few
+dead/hot pixels (listed in the bad-pixel map). An optional thermal crossover fades every
+target's contrast against its local background to nothing and back, as at dawn or dusk, so the
+contrast grade falls below 0.3.
+
+The radar side: at ``cue_period_s`` the radar cues the drone; the turret state machine runs
+cue -> slew -> spiral search -> lock -> handoff -> idle and fills ``slew_to_cue``. The camera
+image itself stays scene-fixed (the turret motion is simulated in the metadata only), which keeps
+ground truth simple and exact.
+
+Determinism: frame ``i`` depends only on the seed and ``i`` (timestamps aside): two runs with
+the same seed give the same pixels, bit for bit.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from typing import Any, Iterator
+
+import numpy as np
+
+from recorder.icd.names import MAX_COUNT, iso_utc
+from recorder.icd.quality import contrast_metrics, frame_analysis
+from recorder.radiometry import LinearModel
+from recorder.icd.topics import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
+from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+
+__all__ = ["SimSource", "SimTarget", "SlewToCue"]
+
+
+@dataclass
+class SimTarget:
+    target_id: str
+    classification: str
+    temp_c: float  # temperature at full contrast
+    size: tuple[int, int]  # (w, h) px at 640 wide
+    pos: tuple[float, float]  # initial top-left as a fraction of (W, H)
+    vel: tuple[float, float]  # px/s at 640 wide
+    region: str  # "sky" or "ground": where it bounces
+    delta_k: float | None = None  # if set: this many K above its local background, not temp_c
+    scale_size: bool = True  # sizes scale with the frame width (off: exact pixel sizes)
+
+
+DEFAULT_TARGETS = (
+    SimTarget("TGT001", "drone_motor", 46.0, (6, 6), (0.20, 0.15), (48.0, 9.0), "sky"),
+    SimTarget("TGT002", "vehicle", 38.0, (40, 18), (0.55, 0.70), (-30.0, 0.0), "ground"),
+    SimTarget("TGT003", "person", 33.0, (6, 16), (0.30, 0.62), (7.0, 2.0), "ground"),
+)
+
+
+class SlewToCue:
+    """The turret's cue-handling state machine (ICD 4.3.2 / 8.1), advanced once a frame."""
+
+    SLEW_RATE_DEG_S = 40.0
+    SEARCH_S = 1.5
+    LOCK_S = 3.0
+    HANDOFF_S = 0.5
+
+    def __init__(self, rng: np.random.Generator, cue_period_s: float, first_cue_s: float = 2.0):
+        self.rng = rng
+        self.cue_period_s = cue_period_s
+        self.next_cue_s = first_cue_s
+        self.state = "idle"
+        self.state_since = 0.0
+        self.pan, self.tilt = 0.0, 5.0
+        self.cue: dict[str, Any] | None = None
+        self.cue_count = 0
+
+    def step(self, t: float, ts_ns: int, target_visible: bool) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+        cues: list[dict[str, Any]] = []
+        if self.state == "idle" and self.cue_period_s > 0 and t >= self.next_cue_s:
+            self.cue_count += 1
+            az = float(self.rng.uniform(-60, 60))
+            el = float(self.rng.uniform(5, 25))
+            rng_m = float(self.rng.uniform(400, 1500))
+            lat0, lon0 = 37.7749, -122.4194
+            north = rng_m * math.cos(math.radians(el)) * math.cos(math.radians(az))
+            east = rng_m * math.cos(math.radians(el)) * math.sin(math.radians(az))
+            self.cue = {
+                "timestamp": iso_utc(ts_ns),
+                "target_id": f"TRK{self.cue_count:03d}",
+                "latitude": lat0 + north / 111_320.0,
+                "longitude": lon0 + east / (111_320.0 * math.cos(math.radians(lat0))),
+                "altitude_m": rng_m * math.sin(math.radians(el)),
+                "azimuth_deg": az,
+                "elevation_deg": el,
+                "range_m": rng_m,
+                "uncertainty_m": 10.0,
+            }
+            cues.append(dict(self.cue))
+            self.next_cue_s = t + self.cue_period_s
+            self._enter("slew", t)
+        dt_state = t - self.state_since
+        if self.state == "slew" and self.cue:
+            max_step = self.SLEW_RATE_DEG_S / 60.0
+            dp = self.cue["azimuth_deg"] + 0.3 - self.pan
+            dtl = self.cue["elevation_deg"] + 0.3 - self.tilt
+            dist = math.hypot(dp, dtl)
+            if dist <= max_step:
+                self.pan, self.tilt = self.cue["azimuth_deg"] + 0.3, self.cue["elevation_deg"] + 0.3
+                self._enter("search", t)
+            else:
+                self.pan += dp / dist * max_step
+                self.tilt += dtl / dist * max_step
+        elif self.state == "search" and self.cue:
+            # Archimedean spiral within +-2 deg of the cue.
+            theta = dt_state * 4 * math.pi
+            r = min(2.0, 2.0 * dt_state / self.SEARCH_S)
+            self.pan = self.cue["azimuth_deg"] + r * math.cos(theta)
+            self.tilt = self.cue["elevation_deg"] + r * math.sin(theta)
+            if dt_state >= self.SEARCH_S and target_visible:
+                self._enter("lock", t)
+        elif self.state == "lock" and self.cue:
+            self.pan = self.cue["azimuth_deg"] + 0.05 * math.sin(t)
+            self.tilt = self.cue["elevation_deg"] + 0.05 * math.cos(t)
+            if dt_state >= self.LOCK_S:
+                self._enter("handoff", t)
+        elif self.state == "handoff" and dt_state >= self.HANDOFF_S:
+            self._enter("idle", t)
+            self.cue = None
+        if self.state in ("slew", "search") and self.cue and cues == [] and int(t) != int(t - 1 / 60.0):
+            cues.append({**self.cue, "timestamp": iso_utc(ts_ns)})  # radar keeps reporting, 1 Hz
+        cue = self.cue
+        block = {
+            "slew_to_cue_active": self.state in ("slew", "search", "lock"),
+            "radar_cue_received": cue is not None,
+            "radar_azimuth_deg": cue["azimuth_deg"] if cue else None,
+            "radar_elevation_deg": cue["elevation_deg"] if cue else None,
+            "radar_range_m": cue["range_m"] if cue else None,
+            "turret_pan_deg": round(self.pan, 4),
+            "turret_tilt_deg": round(self.tilt, 4),
+            "search_pattern_active": self.state == "search",
+            "state": self.state,
+        }
+        return block, cues
+
+    def _enter(self, state: str, t: float) -> None:
+        self.state = state
+        self.state_since = t
+
+
+class SimSource(FrameSource):
+    """``thermcap record --source sim``: see the module docstring for what it simulates."""
+
+    name = "sim"
+    extra_topics = {TOPIC_RADAR_CUE: RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH: GROUND_TRUTH_SCHEMA}
+
+    def __init__(
+        self,
+        *,
+        width: int = 640,
+        height: int = 512,
+        fps: float = 60.0,
+        seed: int = 0,
+        frames: int | None = None,
+        duration_s: float | None = None,
+        paced: bool = True,
+        netd_mk: float = 50.0,
+        fpn_mk: float = 20.0,
+        bad_pixels: int = 12,
+        crossover: bool = False,
+        crossover_center_s: float | None = None,
+        crossover_half_width_s: float | None = None,
+        cue_period_s: float = 20.0,
+        first_cue_s: float = 2.0,
+        targets: tuple[SimTarget, ...] = DEFAULT_TARGETS,
+        start_time_ns: int | None = None,
+        sensor_id: str = "SIM640",
+    ) -> None:
+        if width < 16 or height < 16:
+            raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
+        self.width, self.height, self.fps = width, height, fps
+        self.model = LinearModel()
+        self.sensor = SensorInfo(model="thermcap simulator (Boson-like)", sensor_id=sensor_id,
+                                 serial_number=f"SIM-{seed}", width=width, height=height,
+                                 netd_mk=netd_mk, frame_rate_hz=fps)
+        if frames is None and duration_s is not None:
+            frames = int(round(duration_s * fps))
+        self.n_frames = frames
+        self.paced = paced
+        # Paced, it plays a live camera (stamped when each frame is released, late frames counted);
+        # unpaced, a recording read as fast as it can be written (stamped at its position).
+        self.can_wait = not paced
+        self.time_basis = "capture" if paced else "stream"
+        self.seed = seed
+        self.netd_mk = netd_mk
+        self.targets = targets
+        self.crossover = crossover
+        total_s = (frames / fps) if frames else 60.0
+        self.crossover_center_s = crossover_center_s if crossover_center_s is not None else total_s / 2
+        self.crossover_half_width_s = crossover_half_width_s if crossover_half_width_s is not None else total_s / 4
+        self.cue_period_s = cue_period_s
+        self.first_cue_s = first_cue_s
+        self.start_time_ns = start_time_ns
+        self._scale = width / 640.0
+        rng = np.random.default_rng(seed)
+        self._rng_noise = np.random.default_rng([seed, 1])
+        self._rng_radar = np.random.default_rng([seed, 2])
+        self._horizon = int(height * 0.45)
+        self._background_c = self._make_background(rng)
+        sigma_counts = netd_mk / 1000.0 / self.model.scale_c_per_count
+        fpn = rng.normal(0.0, fpn_mk / 1000.0 / self.model.scale_c_per_count, size=(1, width)).astype(np.float32)
+        self._background_counts = (
+            (self._background_c - self.model.offset_c) / self.model.scale_c_per_count + fpn
+        ).astype(np.float32)
+        n = width * height
+        self._noise_pool = (rng.standard_normal(n * 3, dtype=np.float32) * np.float32(sigma_counts))
+        # Dead (0) and hot (max) pixels, away from the borders.
+        self.bad_pixel_map = np.zeros((height, width), dtype=bool)
+        ys = rng.integers(2, height - 2, size=bad_pixels)
+        xs = rng.integers(2, width - 2, size=bad_pixels)
+        self.bad_pixel_map[ys, xs] = True
+        self._bad_values = np.where(np.arange(bad_pixels) % 2 == 0, 0, MAX_COUNT).astype(np.uint16)
+        self._bad_ys, self._bad_xs = ys, xs
+
+    def describe(self) -> dict[str, Any]:
+        return {"source": "sim", "seed": self.seed, "crossover": self.crossover, "netd_mk": self.netd_mk,
+                "cue_period_s": self.cue_period_s}
+
+    # -- scene ------------------------------------------------------------------------------
+    def _make_background(self, rng: np.random.Generator) -> np.ndarray:
+        h, w, hz = self.height, self.width, self._horizon
+        y = np.arange(h, dtype=np.float32)[:, None]
+        sky = -18.0 + 20.0 * (y / max(hz, 1))  # -18 C at the top to +2 C at the horizon
+        ground = 14.0 + 6.0 * ((y - hz) / max(h - hz, 1))
+        bg = np.where(y < hz, sky, ground) * np.ones((1, w), np.float32)
+        # Smooth ground texture: coarse noise, upsampled.
+        coarse = rng.normal(0.0, 1.5, size=(h // 16 + 2, w // 16 + 2)).astype(np.float32)
+        tex = np.kron(coarse, np.ones((16, 16), np.float32))[:h, :w]
+        k = np.ones(9, np.float32) / 9
+        tex = np.apply_along_axis(lambda r: np.convolve(r, k, mode="same"), 1, tex)
+        tex = np.apply_along_axis(lambda c: np.convolve(c, k, mode="same"), 0, tex)
+        bg[hz:] += tex[hz:]
+        return bg.astype(np.float32)
+
+    def crossover_factor(self, t: float) -> float:
+        """1 = full contrast. Within ``crossover_half_width_s`` of the centre it ramps down to 0,
+        stays at 0 for the middle third (targets at their background's temperature), and recovers."""
+        if not self.crossover:
+            return 1.0
+        hw = self.crossover_half_width_s
+        d = abs(t - self.crossover_center_s)
+        return float(np.clip((d - hw / 3) / (hw * 2 / 3), 0.0, 1.0))
+
+    def _target_box(self, tgt: SimTarget, t: float) -> tuple[int, int, int, int]:
+        s = self._scale if tgt.scale_size else 1.0
+        tw, th = max(2, int(round(tgt.size[0] * s))), max(2, int(round(tgt.size[1] * s)))
+        if tgt.region == "sky":
+            y_lo, y_hi = 0, self._horizon - th - 2
+        else:
+            y_lo, y_hi = self._horizon + 2, self.height - th
+        x_lo, x_hi = 0, self.width - tw
+
+        def bounce(p0: float, v: float, lo: int, hi: int) -> int:
+            span = max(hi - lo, 1)
+            p = (p0 - lo + v * t) % (2 * span)
+            return int(lo + (p if p <= span else 2 * span - p))
+
+        x = bounce(tgt.pos[0] * self.width, tgt.vel[0] * s, x_lo, x_hi)
+        y = bounce(min(max(tgt.pos[1] * self.height, y_lo), y_hi), tgt.vel[1] * s, y_lo, y_hi)
+        return x, y, tw, th
+
+    def render(self, index: int) -> tuple[np.ndarray, list[dict[str, Any]], dict[str, Any], np.ndarray]:
+        """Frame ``index``: (counts, ground-truth targets, thermal_analysis, noiseless target temps)."""
+        t = index / self.fps
+        f = self.crossover_factor(t)
+        counts_f = self._background_counts.copy()
+        truths = []
+        model = self.model
+        for tgt in self.targets:
+            x, y, tw, th = self._target_box(tgt, t)
+            local_bg = float(self._background_c[y:y + th, x:x + tw].mean())
+            full = tgt.temp_c if tgt.delta_k is None else local_bg + tgt.delta_k
+            temp = local_bg + (full - local_bg) * f
+            yy, xx = np.ogrid[:th, :tw]
+            ell = ((yy - (th - 1) / 2) / (th / 2)) ** 2 + ((xx - (tw - 1) / 2) / (tw / 2)) ** 2 <= 1.0
+            # A hot core: the centre 2 K above the rim at full contrast (never below the background).
+            core = 1.0 - np.clip(((yy - (th - 1) / 2) / (th / 2)) ** 2 + ((xx - (tw - 1) / 2) / (tw / 2)) ** 2, 0, 1)
+            hot = max(0.0, min(1.0, (temp - local_bg) / 2.0))
+            temps = (temp - hot * f + 2.0 * hot * f * core).astype(np.float32)
+            region = counts_f[y:y + th, x:x + tw]
+            region[ell] = ((temps - model.offset_c) / model.scale_c_per_count)[ell]
+            truths.append({"target": tgt, "box": (x, y, tw, th), "mask": ell, "temp_c": temp})
+        n = self.width * self.height
+        off = int(self._rng_noise.integers(0, self._noise_pool.size - n))
+        counts_f += self._noise_pool[off:off + n].reshape(self.height, self.width)
+        np.rint(counts_f, out=counts_f)
+        np.clip(counts_f, 0, MAX_COUNT, out=counts_f)
+        frame = counts_f.astype(np.uint16)
+        frame[self._bad_ys, self._bad_xs] = self._bad_values
+        gt, analysis = self._truth(frame, truths)
+        return frame, gt, analysis, counts_f
+
+    def _truth(self, frame: np.ndarray, truths: list[dict[str, Any]]) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+        """Sidecar targets and ICD 7.1 metrics from the true masks: each target against a ring of
+        local background 3..10 px around it (a global background would always include the sky)."""
+        model = self.model
+        gt = []
+        per_target = []
+        ring = max(4, int(round(8 * self._scale)))
+        for tr in truths:
+            x, y, tw, th = tr["box"]
+            mask = tr["mask"]
+            temps = model.to_celsius(frame[y:y + th, x:x + tw][mask])
+            ys, xs = np.nonzero(mask)
+            gt.append({
+                "target_id": tr["target"].target_id,
+                "bbox": [int(x + xs.min()), int(y + ys.min()), int(x + xs.max()), int(y + ys.max())],
+                "centroid": [round(float(x + xs.mean()), 2), round(float(y + ys.mean()), 2)],
+                "max_temp_c": round(float(temps.max()), 3),
+                "mean_temp_c": round(float(temps.mean()), 3),
+                "classification": tr["target"].classification,
+                "confidence": 1.0,
+                "true_temp_c": round(tr["temp_c"], 3),
+            })
+            y0, y1 = max(0, y - ring), min(self.height, y + th + ring)
+            x0, x1 = max(0, x - ring), min(self.width, x + tw + ring)
+            crop = model.to_celsius(frame[y0:y1, x0:x1])
+            bg_mask = np.ones(crop.shape, bool)
+            bg_mask[max(0, y - 2 - y0):y + th + 2 - y0, max(0, x - 2 - x0):x + tw + 2 - x0] = False
+            bg_mask &= ~self.bad_pixel_map[y0:y1, x0:x1]
+            tgt_mask = np.zeros(crop.shape, bool)
+            tgt_mask[y - y0:y - y0 + th, x - x0:x - x0 + tw] = mask
+            tgt_mask &= ~self.bad_pixel_map[y0:y1, x0:x1]
+            if tgt_mask.any() and bg_mask.any():
+                per_target.append(contrast_metrics(crop, tgt_mask, bg_mask))
+        return gt, frame_analysis(per_target, source="ground_truth", confidence=1.0)
+
+    # -- the source ---------------------------------------------------------------------------
+    def frames(self) -> Iterator[CapturedFrame]:
+        start_ns = self.start_time_ns if self.start_time_ns is not None else time.time_ns()
+        period_ns = 1e9 / self.fps
+        pacer = Pacer(self.fps, self.paced)
+        stc = SlewToCue(self._rng_radar, self.cue_period_s, self.first_cue_s)
+        index = 0
+        while (self.n_frames is None or index < self.n_frames) and not self.stopped:
+            released = pacer.wait(index)
+            self.frames_late = pacer.late
+            if self.paced:  # the time the frame was actually produced, late or not
+                ts = start_ns + (released - pacer.start)
+            else:
+                ts = start_ns + int(round(index * period_ns))
+            frame, gt, analysis, _ = self.render(index)
+            t = index / self.fps
+            drone_visible = any(g["classification"] == "drone_motor" for g in gt) and analysis["thermal_contrast_grade"] >= 0.3
+            stc_block, cues = stc.step(t, ts, drone_visible)
+            messages: list[tuple[str, dict[str, Any]]] = [(TOPIC_RADAR_CUE, c) for c in cues]
+            messages.append((TOPIC_GROUND_TRUTH, {
+                "frame_index": index, "targets": gt, "crossover_factor": round(self.crossover_factor(t), 4),
+                "slew_state": stc_block["state"]}))
+            yield CapturedFrame(
+                index=index, timestamp_ns=ts, pixels=frame, capture_mono_ns=released,
+                sidecar={
+                    "thermal_analysis": analysis,
+                    "slew_to_cue": stc_block,
+                    "targets": [{k: v for k, v in g.items() if k != "true_temp_c"} for g in gt],
+                    "environment": {"ambient_temp_c": 18.0, "humidity_percent": 45.0,
+                                    "atmospheric_transmission": 0.98, "weather_condition": "clear",
+                                    "visibility_m": 10000},
+                },
+                messages=messages,
+            )
+            index += 1

@@ -1,0 +1,77 @@
+"""``thermcap bench record|import|analysis``: the recorder's benchmarks."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from recorder.cli.options import fail, json_option
+from recorder.cli.root import bench
+
+
+@bench.command("record")
+@click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
+@click.option("--sizes", default="640x512,1280x1024", show_default=True)
+@click.option("--soak", type=float, default=None, help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None, help="Where to write (default: a temp folder).")
+@json_option
+def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, as_json: bool) -> None:
+    """Recorder throughput vs plain zstd-to-file, or a paced soak."""
+    from recorder.bench.record import bench_record as run_bench, run_soak, print_table
+
+    if soak:
+        res = run_soak(soak, workdir=workdir)
+        click.echo(json.dumps(res, indent=2) if as_json else "\n".join(f"{k}: {v}" for k, v in res.items()))
+        if res["frames_dropped"]:
+            sys.exit(1)
+        return
+    try:
+        dims = [tuple(int(v) for v in s.lower().split("x")) for s in sizes.split(",")]
+    except ValueError:
+        fail(f"--sizes must look like 640x512,1280x1024, got {sizes!r}")
+    rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json)
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+@bench.command("import")
+@click.option("--frames", "n_frames", type=int, default=300, show_default=True, help="Simulated ICD TIFF files.")
+@click.option("--samples", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Also real files here (e.g. ../shared/samples), each copied --copies times, one row per format.")
+@click.option("--copies", type=int, default=8, show_default=True)
+@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+              help="Also time DJI files with this SDK backend.")
+@json_option
+def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: str, as_json: bool) -> None:
+    """Import throughput per format vs reading + hashing the same files."""
+    from recorder.bench.imports import bench_import, print_table
+    from recorder.importers.dji_sdk import find_backend
+
+    rows = bench_import(frames=n_frames, samples=samples, copies=copies, dji_sdk=find_backend(dji_sdk))
+    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+@bench.command("analysis")
+@click.option("--frames", "n_frames", type=int, default=12, show_default=True, help="Frames per scene.")
+@click.option("--samples", type=click.Path(file_okay=False), default=None,
+              help="Also run on real files here (e.g. ../shared/samples) and count hot spots per image.")
+@click.option("--overlays", type=click.Path(file_okay=False), default=None, help="Write overlay PNGs of those here.")
+@json_option
+def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, as_json: bool) -> None:
+    """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
+    from recorder.bench.analysis import bench_analysis, print_table, sample_report
+
+    res = bench_analysis(n_frames)
+    if samples:
+        res["samples"] = sample_report(samples, overlays)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(print_table(res))
+    for r in res.get("samples", []):
+        click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
+                   + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px" if r["hot_spots"] is not None
+                      else r["note"]))
+
+

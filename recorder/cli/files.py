@@ -1,0 +1,94 @@
+"""``thermcap import`` and ``export``: camera files in, temperature files out."""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.root import cli
+from recorder.exceptions import ThermcapError
+
+
+@cli.command("import")
+@click.argument("paths", nargs=-1, required=True, type=click.Path())
+@root_option
+@click.option("--session", "session_name", default=None, help="Session id (suffixed -1, -2 ... when files need several).")
+@click.option("--session-per-file", is_flag=True, help="One session per file.")
+@click.option("--analysis/--no-analysis", default=True, show_default=True, help="Run the hot-spot detector on the frames.")
+@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+              help="DJI temperatures by DJI's own code: auto = dji-thermal-cli if on PATH; off; or the path to "
+                   "libdirp (.so/.dll) or a dji-thermal-cli executable. Without one, DJI dirp/girp/hirp frames "
+                   "import with no temperature and iirp with an approximate one.")
+@click.option("--terraref-variant", type=click.Choice(["pipeline", "physical", "plain"]), default="pipeline",
+              show_default=True, help="TERRA-REF Planck form for uncalibrated _ir.bin: pipeline = what every published "
+                                      "TERRA-REF product used; physical = the measurement equation inverted properly.")
+@json_option
+def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
+               dji_sdk: str, terraref_variant: str, as_json: bool) -> None:
+    """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
+    from rich.progress import Progress
+
+    from recorder.importers.dji_sdk import find_backend
+    from recorder.importers.run import import_paths
+
+    backend = find_backend(dji_sdk)
+    if backend is not None and not as_json:
+        click.echo(f"DJI temperatures by {backend.name}", err=True)
+
+    show = not as_json and sys.stderr.isatty()
+    with Progress(disable=not show, transient=True) as bar:
+        task = bar.add_task("importing", total=None)
+        report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
+                              analysis=analysis, dji_sdk=backend,
+                              terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task))
+    if as_json:
+        click.echo(json.dumps({"files": report.files, "failed": report.failed, "truncated": report.truncated,
+                               "dji_sdk": backend.name if backend else None,
+                               "sessions": [r.to_dict() for r in report.sessions]}, indent=2))
+    else:
+        for f in report.files:
+            c = f["celsius"]
+            temp = (f"{c['min']:.2f}..{c['max']:.2f} C (mean {c['mean']:.2f})" + (" approximate" if c.get("approximate") else "")
+                    if c else f"no temperature: {f.get('dji_sdk_error') or f.get('celsius_unavailable')}")
+            click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} -> {f.get('session_id')}")
+        for r in report.sessions:
+            click.echo(f"session {r.session_id}: {r.frames_written} frames")
+        for f in report.failed:
+            click.echo(f"error: {f['error']}", err=True)
+        for f in report.truncated:
+            click.echo(f"error: {f['error']}", err=True)
+    if report.failed or report.truncated or any(not r.ok for r in report.sessions):
+        sys.exit(1)
+
+
+@cli.command("export")
+@click.argument("session")
+@root_option
+@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg"]), required=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None, help="Folder (default: SESSION/export/KIND).")
+@click.option("--summary", type=click.Choice(["csv", "json"]), default=None,
+              help="Also write per-frame surface_temperature statistics.")
+@click.option("--palette", default="ironbow", type=click.Choice(["ironbow", "gray", "turbo"]), show_default=True)
+@json_option
+def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
+               as_json: bool) -> None:
+    """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
+    from recorder.exports.files import export_session
+    from recorder.storage.reader import resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette)
+    except ThermcapError as exc:
+        fail(str(exc))
+    click.echo(json.dumps(res, indent=2) if as_json else
+               f"{res['files']} files in {res['out']}" + (f"; summary {res['summary']}" if res["summary"] else ""))
+    for r in res["refused"][:5]:
+        click.echo(f"warning: {r}", err=True)
+    if res["refused"]:
+        sys.exit(1)
+
+

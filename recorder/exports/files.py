@@ -1,0 +1,216 @@
+"""``thermcap export``: a session's frames as files for the people downstream.
+
+``celsius-tiff`` / ``kelvin-tiff``: float32 temperature TIFFs through the session's model (the
+source position, where one was recorded, in the TIFF's ImageDescription JSON); ``heatmap-png``:
+8-bit colour PNGs on one fixed temperature range for the whole session, so colours compare
+across frames; ``icd``: the ICD's own pairs, an uncompressed 16-bit TIFF with every mandatory
+tag and its JSON sidecar; ``dji-rjpeg``: R-JPEGs rebuilt from imported DJI frames and their kept APP
+segments, which DJI's own tools measure as they did the originals. ``summary`` writes per-frame ``surface_temperature`` statistics (CF
+standard name; cell_methods min, max, mean and percentiles) as CSV or JSON.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+from pathlib import Path
+from typing import Any, Callable
+
+import imagecodecs
+import numpy as np
+import tifffile
+
+from recorder.exceptions import ThermcapError
+from recorder.icd.names import format_name
+from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
+from recorder.storage.reader import iter_session_frames, read_session_meta
+from recorder.exports.render import palette
+
+__all__ = ["export_session", "EXPORT_KINDS"]
+
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg")
+PERCENTILES = (5, 25, 50, 75, 95)
+
+
+def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
+    """Per log time: the position an importer recorded (DJI XMP GPS, TERRA-REF gantry)."""
+    from mcap.reader import make_reader
+
+    out: dict[int, dict[str, Any]] = {}
+    for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+        with open(seg, "rb") as f:
+            for _, _, msg in make_reader(f).iter_messages(topics=["/import/source"]):
+                vendor = json.loads(msg.data).get("vendor", {})
+                xmp = vendor.get("xmp_drone_dji") or {}
+                if xmp.get("GpsLatitude") or xmp.get("GpsLongitude"):
+                    out[msg.log_time] = {"crs": "EPSG:4326", "latitude": xmp.get("GpsLatitude"),
+                                         "longitude": xmp.get("GpsLongitude") or xmp.get("GpsLongtitude"),
+                                         "absolute_altitude_m": xmp.get("AbsoluteAltitude"),
+                                         "relative_altitude_m": xmp.get("RelativeAltitude"),
+                                         "gimbal_yaw_deg": xmp.get("GimbalYawDegree")}
+                elif vendor.get("position_m"):
+                    out[msg.log_time] = {"crs": "TERRA-REF gantry (m)", **vendor["position_m"]}
+    return out
+
+
+def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
+    """Per log time: the source file's name and its kept DJI APP segments (importers/dji.py)."""
+    from mcap.reader import make_reader
+
+    from recorder.importers.dji import SEGMENTS_BLOB
+
+    out: dict[int, tuple[str, bytes]] = {}
+    for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+        with open(seg, "rb") as f:
+            for att in make_reader(f).iter_attachments():
+                if att.name.endswith("/" + SEGMENTS_BLOB):
+                    out[att.log_time] = (att.name[: -len(SEGMENTS_BLOB) - 1], att.data)
+    return out
+
+
+def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
+                   palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None) -> dict[str, Any]:
+    if kind not in EXPORT_KINDS:
+        raise ThermcapError(f"unknown export {kind!r}; use one of {', '.join(EXPORT_KINDS)}")
+    session_dir, out = Path(session_dir), Path(out_dir)
+    meta = read_session_meta(session_dir)
+    model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
+    sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
+    t_range = (model.temp_min_c, model.temp_max_c) if isinstance(model, LinearModel) else (-40.0, 550.0)
+    out.mkdir(parents=True, exist_ok=True)
+    if kind == "dji-rjpeg":
+        return _export_dji(session_dir, out, on_frame)
+    positions = _positions(session_dir)
+    frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
+    lo = hi = None
+    if frames is not None:  # one colour scale for the whole session
+        temps_all = [np.asarray(model.to_celsius(f.pixels)) for f in frames] if _has_temps(model) else []
+        if temps_all:
+            lo = float(min(np.percentile(t, 0.5) for t in temps_all))
+            hi = float(max(np.percentile(t, 99.5) for t in temps_all))
+    written, stats, refused = [], [], []
+    for f in frames if frames is not None else iter_session_frames(session_dir):
+        name = format_name(f.log_time, sensor_id, *t_range)
+        try:
+            temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32) if kind != "icd" or summary else None
+        except TemperatureUnavailable as exc:
+            if kind != "icd":
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            temps = None
+        desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
+                "position": positions.get(f.log_time)}
+        if kind in ("celsius-tiff", "kelvin-tiff"):
+            data = temps if kind == "celsius-tiff" else temps + np.float32(273.15)
+            path = out / f"{name}.{'celsius' if kind == 'celsius-tiff' else 'kelvin'}.tiff"
+            tifffile.imwrite(path, data, photometric="minisblack", byteorder="<", metadata=None,
+                             description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}),
+                             extratags=geotiff_tags(positions.get(f.log_time), data.shape))
+        elif kind == "heatmap-png":
+            a, b = (lo, hi) if lo is not None else (float(f.pixels.min()), float(f.pixels.max()) + 1)
+            src = temps if temps is not None else f.pixels.astype(np.float32)
+            idx = np.clip((src - a) * (255.0 / max(b - a, 1e-6)), 0, 255).astype(np.uint8)
+            path = out / f"{name}.png"
+            path.write_bytes(imagecodecs.png_encode(palette(palette_name)[idx]))
+        else:
+            path = out / f"{name}.tiff"
+            tifffile.imwrite(path, np.ascontiguousarray(f.pixels, dtype=np.uint16), photometric="minisblack",
+                             byteorder="<", compression=None, metadata=None, rowsperstrip=f.pixels.shape[0])
+            (out / f"{name}.json").write_bytes(f.sidecar or b"{}")
+        written.append(path.name)
+        if temps is not None and summary:
+            pct = np.percentile(temps, PERCENTILES)
+            stats.append({"frame_index": f.index, "time": desc.get("time") or _iso(f.log_time), "file": path.name,
+                          "surface_temperature_mean": round(float(temps.mean()), 4),
+                          "surface_temperature_min": round(float(temps.min()), 4),
+                          "surface_temperature_max": round(float(temps.max()), 4),
+                          **{f"surface_temperature_p{p}": round(float(v), 4) for p, v in zip(PERCENTILES, pct)},
+                          "units": "degC"})
+        if on_frame:
+            on_frame(len(written))
+    if summary:
+        _write_summary(out, summary, stats, meta)
+    return {"out": str(out), "kind": kind, "files": len(written), "refused": refused,
+            "summary": (str(out / f"summary.{summary}") if summary else None)}
+
+
+def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+    """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.exports.rjpeg``)."""
+    from recorder.exports.rjpeg import rebuild_rjpeg
+
+    kept = _dji_segments(session_dir)
+    written, refused = [], []
+    for f in iter_session_frames(session_dir):
+        if f.log_time not in kept:
+            refused.append(f"frame {f.index}: not imported from a DJI R-JPEG (no DJI segments kept)")
+            continue
+        name, blob = kept[f.log_time]
+        path = out / name
+        if path.name in written or not name or "/" in name or name.startswith("."):
+            path = out / f"frame{f.index:06d}_{Path(name).name or 'dji'}.jpg"
+        try:
+            path.write_bytes(rebuild_rjpeg(f.pixels, blob))
+        except ValueError as exc:
+            refused.append(f"frame {f.index}: {exc}")
+            continue
+        written.append(path.name)
+        if on_frame:
+            on_frame(len(written))
+    return {"out": str(out), "kind": "dji-rjpeg", "files": len(written), "refused": refused, "summary": None}
+
+
+def geotiff_tags(position: dict[str, Any] | None, shape: tuple[int, int]) -> list[tuple]:
+    """GeoTIFF tags for a frame taken at a known WGS 84 position: one tie point, the image centre
+    at the camera's longitude, latitude and altitude (EPSG:4326), which GDAL reads as a GCP. No
+    pixel scale is written: a footprint would need the lens's field of view and the view angle,
+    which the files do not carry reliably, and a wrong scale would be worse than none."""
+    if not position or position.get("crs") != "EPSG:4326":
+        return []
+    try:
+        lat, lon = float(position["latitude"]), float(position["longitude"])
+    except (TypeError, ValueError, KeyError):
+        return []
+    try:
+        alt = float(position.get("absolute_altitude_m") or 0.0)
+    except ValueError:
+        alt = 0.0
+    h, w = shape
+    tiepoint = (w / 2.0, h / 2.0, 0.0, lon, lat, alt)
+    # GeoKeyDirectory: version 1.1.0, 3 keys: GTModelType=Geographic(2), GTRasterType=PixelIsArea(1),
+    # GeographicType=WGS 84 (4326).
+    keys = (1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326)
+    return [(33922, "d", 6, tiepoint, True), (34735, "H", len(keys), keys, True)]
+
+
+def _has_temps(model) -> bool:
+    try:
+        model.to_celsius(np.zeros((1, 1), np.uint16))
+        return True
+    except TemperatureUnavailable:
+        return False
+
+
+def _iso(ns: int) -> str:
+    from recorder.icd.names import iso_utc
+
+    return iso_utc(ns)
+
+
+def _write_summary(out: Path, fmt: str, stats: list[dict[str, Any]], meta: dict[str, Any]) -> None:
+    path = out / f"summary.{fmt}"
+    tmp = path.with_name(path.name + ".tmp")
+    if fmt == "json":
+        doc = {"standard_name": "surface_temperature", "units": "degC",
+               "cell_methods": "area: mean area: minimum area: maximum area: percentile",
+               "session_id": meta.get("session_id"), "radiometric_model": meta.get("radiometric_model"), "frames": stats}
+        tmp.write_text(json.dumps(doc, indent=1))
+    elif fmt == "csv":
+        with open(tmp, "w", newline="") as f:
+            if stats:
+                w = csv.DictWriter(f, fieldnames=list(stats[0]))
+                w.writeheader()
+                w.writerows(stats)
+    else:
+        raise ThermcapError(f"--summary must be csv or json, got {fmt!r}")
+    os.replace(tmp, path)

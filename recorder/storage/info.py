@@ -1,0 +1,165 @@
+"""``thermcap info``: what a segment or a session holds, read from MCAP summaries (no full scan).
+
+Per-topic byte counts come from the ``thermcap.segment`` metadata record our writer leaves in
+each segment; for MCAP files written by other tools they are counted by reading the messages.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+
+from recorder.exceptions import McapFileError
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import session_status
+from recorder.icd.names import iso_utc
+from recorder.icd.topics import TOPIC_IMAGE, TOPIC_STATS
+from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
+
+__all__ = ["segment_info", "session_info", "info"]
+
+
+def segment_info(path: str | Path) -> dict[str, Any]:
+    path = Path(path)
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            if summary is None or summary.statistics is None:
+                raise McapFileError(f"{path}: no summary section (an unfinished segment? try `thermcap recover`)")
+            stats = summary.statistics
+            topics = {c.id: c.topic for c in summary.channels.values()}
+            meta: dict[str, dict[str, str]] = {}
+            for rec in reader.iter_metadata():
+                meta[rec.name] = rec.metadata
+            last_stats = None
+            for _, _, msg in reader.iter_messages(topics=[TOPIC_STATS]):
+                last_stats = msg.data
+            topic_bytes: dict[str, int] = {}
+            if SEGMENT_STATS_METADATA in meta:
+                topic_bytes = {t: 0 for t in topics.values()}
+                topic_bytes.update(json.loads(meta[SEGMENT_STATS_METADATA].get("topic_bytes", "{}")))
+            else:
+                for _, channel, msg in reader.iter_messages():
+                    topic_bytes[channel.topic] = topic_bytes.get(channel.topic, 0) + len(msg.data)
+    except McapFileError:
+        raise
+    except Exception as exc:
+        raise McapFileError(f"{path}: not a readable MCAP file ({type(exc).__name__}: {exc})") from exc
+    chunks = summary.chunk_indexes
+    compressions = sorted({c.compression or "none" for c in chunks})
+    comp = sum(c.compressed_size for c in chunks)
+    uncomp = sum(c.uncompressed_size for c in chunks)
+    counts = {topics[cid]: n for cid, n in stats.channel_message_counts.items() if cid in topics}
+    frames = counts.get(TOPIC_IMAGE, 0)
+    span_s = (stats.message_end_time - stats.message_start_time) / 1e9 if stats.message_count else 0.0
+    out: dict[str, Any] = {
+        "path": str(path),
+        "frames": frames,
+        "messages": stats.message_count,
+        "start": iso_utc(stats.message_start_time) if stats.message_count else None,
+        "end": iso_utc(stats.message_end_time) if stats.message_count else None,
+        "start_ns": stats.message_start_time,
+        "end_ns": stats.message_end_time,
+        "duration_s": round(span_s, 6),
+        "effective_fps": round((frames - 1) / span_s, 3) if frames > 1 and span_s > 0 else None,
+        "chunks": len(chunks),
+        "chunk_compression": compressions,
+        "bytes": path.stat().st_size,
+        "compressed_bytes": comp,
+        "uncompressed_bytes": uncomp,
+        "compression_ratio": round(uncomp / comp, 3) if comp else None,
+        "topics": {t: {"messages": counts.get(t, 0), "bytes": topic_bytes.get(t)} for t in sorted(set(counts) | set(topic_bytes))},
+        "attachments": [a.name for a in summary.attachment_indexes],
+    }
+    if last_stats is not None:
+        s = json.loads(last_stats)
+        out["dropped"] = s.get("dropped", {})
+        out["write_latency_ms"] = s.get("write_latency_ms", {}).get("session")
+    if SESSION_METADATA in meta:
+        out["session_id"] = meta[SESSION_METADATA].get("session_id")
+    return out
+
+
+def session_info(path: str | Path) -> dict[str, Any]:
+    path = Path(path)
+    segments = sorted(p for p in path.glob("[0-9][0-9][0-9][0-9].mcap"))
+    active = sorted(p.name for p in path.glob(f"*.mcap{ACTIVE_SUFFIX}"))
+    meta: dict[str, Any] = {}
+    if (path / "session.json").is_file():
+        try:
+            meta = json.loads((path / "session.json").read_text())
+        except ValueError as exc:
+            raise McapFileError(f"{path / 'session.json'}: not valid JSON ({exc})") from exc
+    if not segments and not meta:
+        raise McapFileError(f"{path}: not a thermcap session (no NNNN.mcap segments, no session.json)")
+    segs = [segment_info(p) for p in segments]
+    frames = sum(s["frames"] for s in segs)
+    archived = _archived_counts(path) if not segments else None
+    if archived is not None:  # the source was deleted after archiving: the archive holds the frames
+        frames = archived["frames"]
+    start = min((s["start_ns"] for s in segs if s["messages"]), default=None)
+    end = max((s["end_ns"] for s in segs if s["messages"]), default=None)
+    span = (end - start) / 1e9 if start is not None and end is not None else 0.0
+    topics: dict[str, dict[str, Any]] = {}
+    for s in segs:
+        for t, v in s["topics"].items():
+            agg = topics.setdefault(t, {"messages": 0, "bytes": 0})
+            agg["messages"] += v["messages"]
+            agg["bytes"] = None if v["bytes"] is None or agg["bytes"] is None else agg["bytes"] + v["bytes"]
+    comp = sum(s["compressed_bytes"] for s in segs)
+    uncomp = sum(s["uncompressed_bytes"] for s in segs)
+    status, hint = session_status(path, meta.get("status"))
+    timing = meta.get("timing") or {}
+    return {
+        "path": str(path),
+        "session_id": meta.get("session_id", path.name),
+        "status": status,
+        "hint": hint,
+        "time_basis": timing.get("time_basis") or (meta.get("source") or {}).get("time_basis"),
+        "declared_fps": timing.get("declared_fps"),
+        "achieved_fps": timing.get("achieved_fps"),
+        "frames_late": timing.get("frames_late"),
+        "sensor": meta.get("sensor", {}).get("model"),
+        "radiometric_model": meta.get("radiometric_model"),
+        "frames": frames,
+        "frames_captured": meta.get("frames_captured"),
+        "frames_dropped": meta.get("frames_dropped", 0),
+        "dropped": meta.get("dropped", {}),
+        "start": iso_utc(start) if start is not None else None,
+        "end": iso_utc(end) if end is not None else None,
+        "duration_s": round(span, 6),
+        "effective_fps": round((frames - 1) / span, 3) if frames > 1 and span > 0 else None,
+        "segments": segs,
+        "active_segments": active,
+        "bytes": sum(s["bytes"] for s in segs),
+        "compression_ratio": round(uncomp / comp, 3) if comp else None,
+        "chunk_compression": sorted({c for s in segs for c in s["chunk_compression"]}),
+        "topics": topics,
+        "write_latency_ms": meta.get("write_latency_ms"),
+        "error": meta.get("error"),
+        "frames_from": "archive" if archived is not None else "segments",
+    }
+
+
+def _archived_counts(session_dir: Path) -> dict[str, Any] | None:
+    """Frame count and span from the archive manifest, for a session whose source was deleted."""
+    try:
+        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        return {"frames": int(manifest["source"]["frames"])}
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def info(path: str | Path) -> dict[str, Any]:
+    p = Path(path)
+    if p.is_dir():
+        return session_info(p)
+    if p.is_file():
+        if p.name.endswith(ACTIVE_SUFFIX):
+            raise McapFileError(f"{p}: an unfinished segment; run `thermcap recover {p}` first")
+        return segment_info(p)
+    raise McapFileError(f"{p}: no such file or folder")

@@ -1,0 +1,149 @@
+"""Read a recorded session back: frames with their sidecars, in capture order.
+
+This is the one place that knows how a session folder maps to frames, so the archiver and
+the API read sessions the same way the recorder wrote them.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import numpy as np
+from mcap.reader import make_reader
+
+from importlib.metadata import entry_points
+
+from recorder.exceptions import McapFileError
+from recorder.storage.layout import SessionLayout
+from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
+
+__all__ = ["SessionFrame", "session_segments", "iter_session_frames", "frame_files", "read_session_meta", "count_frames",
+           "resolve_session", "list_sessions"]
+
+
+@dataclass
+class SessionFrame:
+    index: int  # position in the session, from 0
+    segment: str  # segment file name, e.g. "0003.mcap"
+    log_time: int
+    pixels: np.ndarray  # (H, W) uint16, read-only view
+    sidecar: bytes  # the JSON sidecar exactly as recorded (b"" if it is missing)
+
+    def sidecar_dict(self) -> dict[str, Any]:
+        return json.loads(self.sidecar) if self.sidecar else {}
+
+
+def session_segments(session_dir: str | Path) -> list[Path]:
+    """The finished segments of a session, in order (``.active`` ones are not data yet)."""
+    d = Path(session_dir)
+    if not d.is_dir():
+        raise McapFileError(f"{d}: no such session folder")
+    return sorted(p for p in d.glob("[0-9][0-9][0-9][0-9].mcap"))
+
+
+def read_session_meta(session_dir: str | Path) -> dict[str, Any]:
+    path = Path(session_dir) / "session.json"
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        return {}
+    except ValueError as exc:
+        raise McapFileError(f"{path}: not valid JSON ({exc})") from exc
+
+
+def iter_segment_frames(path: Path, *, first_index: int = 0) -> Iterator[SessionFrame]:
+    """Frames of one segment; each image is paired with the sidecar that has its log time."""
+    try:
+        with open(path, "rb") as f:
+            reader = make_reader(f)
+            pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
+            index = first_index
+            for _, channel, msg in reader.iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA]):
+                img, meta = pending.get(msg.log_time, (None, None))
+                if channel.topic == TOPIC_IMAGE:
+                    img = decode_image(msg.data)[1]
+                else:
+                    meta = bytes(msg.data)
+                if img is not None and meta is not None:
+                    pending.pop(msg.log_time, None)
+                    yield SessionFrame(index, path.name, msg.log_time, img, meta)
+                    index += 1
+                else:
+                    pending[msg.log_time] = (img, meta)
+                # An image whose sidecar never comes (should not happen) is still a frame.
+                for t in [t for t in pending if t < msg.log_time and pending[t][0] is not None]:
+                    yield SessionFrame(index, path.name, t, pending.pop(t)[0], b"")
+                    index += 1
+            for t in sorted(pending):
+                if pending[t][0] is not None:
+                    yield SessionFrame(index, path.name, t, pending[t][0], b"")
+                    index += 1
+    except McapFileError:
+        raise
+    except Exception as exc:
+        raise McapFileError(f"{path}: cannot read frames ({type(exc).__name__}: {exc})") from exc
+
+
+def iter_session_frames(session_dir: str | Path) -> Iterator[SessionFrame]:
+    """Every frame of a session, from its MCAP segments, or once they are deleted after archiving,
+    from the archive. The archive package registers that reader (entry-point group
+    ``thermcap.session_frames``), so the recorder reads archives without importing them."""
+    segments = session_segments(session_dir)
+    if segments:
+        index = 0
+        for seg in segments:
+            for frame in iter_segment_frames(seg, first_index=index):
+                yield frame
+                index = frame.index + 1
+        return
+    for ep in entry_points(group="thermcap.session_frames"):
+        frames = ep.load()(Path(session_dir))
+        if frames is not None:
+            yield from frames
+            return
+
+
+def frame_files(session_dir: str | Path) -> list[Path]:
+    """The MCAP files that hold a session's other topics and attachments: its segments, or the
+    archive's extras.mcap once they are deleted."""
+    segments = session_segments(session_dir)
+    if segments:
+        return segments
+    extras = SessionLayout.of(session_dir).extras
+    return [extras] if extras.is_file() else []
+
+
+def count_frames(session_dir: str | Path) -> dict[str, int]:
+    """Frames per segment, from the MCAP summaries (no decompression)."""
+    out = {}
+    for seg in session_segments(session_dir):
+        try:
+            with open(seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+        except Exception as exc:  # a cut or damaged file may fail anywhere inside the reader
+            raise McapFileError(f"{seg}: no readable summary ({type(exc).__name__}: {exc}); is it cut short? "
+                                f"`thermcap recover {seg}` keeps every complete chunk") from None
+        if summary is None or summary.statistics is None:
+            raise McapFileError(f"{seg}: no summary; is it a finished segment?")
+        ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
+        out[seg.name] = sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
+    return out
+
+
+def resolve_session(arg: str | Path, root: str | Path) -> Path:
+    """A session folder from a path or an id under ``root/sessions``."""
+    p = Path(arg)
+    if p.is_dir():
+        return p
+    candidate = Path(root) / "sessions" / str(arg)
+    if "/" not in str(arg) and candidate.is_dir():
+        return candidate
+    raise McapFileError(f"{arg}: no such session (not a folder, and not an id under {Path(root) / 'sessions'})")
+
+
+def list_sessions(root: str | Path) -> list[Path]:
+    base = Path(root) / "sessions"
+    return sorted(p for p in base.iterdir() if p.is_dir()) if base.is_dir() else []

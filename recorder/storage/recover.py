@@ -1,0 +1,355 @@
+"""Turn an interrupted segment (``NNNN.mcap.active``) into a valid, indexed ``NNNN.mcap``.
+
+A segment cut by ``kill -9`` or a power loss is a valid MCAP prefix: magic, header, schemas and
+channels (written outside chunks for exactly this), then whole chunks, then perhaps a partial
+record. We walk the records, keep every complete record whose chunk decompresses and checks out,
+and stop at the first one that does not; everything before it is rewritten into a new file
+with a fresh summary. The new file is fsynced and checked with the official mcap reader before
+it takes the final name, and only then is the ``.active`` file removed.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import struct
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import BinaryIO, Iterator
+
+from mcap.data_stream import ReadDataStream
+from mcap.opcode import Opcode
+from mcap.reader import make_reader
+from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
+from mcap.stream_reader import breakup_chunk
+
+from recorder.exceptions import McapFileError
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
+from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
+
+__all__ = ["RecoveryResult", "recover_segment", "recover_path", "recover_leftovers", "scan_records"]
+
+_READERS = {
+    Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
+    Opcode.ATTACHMENT: Attachment, Opcode.METADATA: Metadata, Opcode.CHUNK: Chunk,
+}
+
+
+@dataclass
+class RecoveryResult:
+    source: str
+    output: str
+    messages: int = 0
+    frames: int = 0
+    chunks: int = 0
+    bytes_kept: int = 0
+    bytes_discarded: int = 0
+    damaged_chunks: int = 0
+    stopped_because: str = ""
+    topics: dict[str, int] = field(default_factory=dict)
+    skipped: bool = False  # a live process holds the session: nothing was touched
+
+    def to_dict(self) -> dict:
+        return self.__dict__.copy()
+
+
+def scan_records(stream: BinaryIO, size: int, path: str) -> Iterator[tuple[int, int, bytes]]:
+    """Yield (offset, opcode, body) for every complete record; stop silently at a cut record.
+
+    Raises McapFileError only when the file is not an MCAP at all.
+    """
+    if stream.read(8) != MCAP_MAGIC:
+        raise McapFileError(f"{path}: not an MCAP file (bad magic)")
+    pos = 8
+    while True:
+        head = stream.read(9)
+        if len(head) < 9:
+            return
+        opcode, length = struct.unpack("<BQ", head)
+        if length > size - pos - 9:
+            return
+        body = stream.read(length)
+        if len(body) < length:
+            return
+        yield pos, opcode, body
+        pos += 9 + length
+
+
+def _parse(opcode: int, body: bytes):
+    reader = _READERS[opcode]
+    return reader.read(ReadDataStream(io.BytesIO(body)))
+
+
+def _is_complete(path: Path) -> bool:
+    """Finished and intact: closing magic, a summary, and every message readable (checksums
+    included). A finished file with a damaged chunk is not renamed as it is: it is rewritten."""
+    try:
+        with open(path, "rb") as f:
+            f.seek(-8, os.SEEK_END)
+            if f.read(8) != MCAP_MAGIC:
+                return False
+            f.seek(0)
+            reader = make_reader(f)
+            summary = reader.get_summary()
+            n = sum(1 for _ in reader.iter_messages(log_time_order=False))
+        return summary is not None and summary.statistics is not None and n == summary.statistics.message_count
+    except Exception:
+        return False
+
+
+def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None = None,
+                    keep_original: bool = False) -> RecoveryResult:
+    """Recover one ``.active`` (or otherwise truncated) MCAP file; returns what was kept."""
+    src = Path(path)
+    if not src.is_file():
+        raise McapFileError(f"{src}: no such file")
+    if output is None:
+        name = src.name[: -len(ACTIVE_SUFFIX)] if src.name.endswith(ACTIVE_SUFFIX) else src.stem + ".recovered.mcap"
+        output = src.with_name(name)
+    dst = Path(output)
+    if dst.exists():
+        raise McapFileError(f"{dst} already exists; refusing to overwrite a finished segment")
+    before = src.stat()
+    size = before.st_size
+    result = RecoveryResult(source=str(src), output=str(dst))
+    if _is_complete(src):
+        # finish() completed but the rename did not: the file is whole, just name it.
+        if keep_original:
+            _copy(src, dst)
+        else:
+            _rename_no_clobber(src, dst)
+        fsync_dir(dst.parent)
+        with open(dst, "rb") as f:
+            summary = make_reader(f).get_summary()
+        stats = summary.statistics if summary else None
+        result.messages = stats.message_count if stats else 0
+        result.bytes_kept = size
+        result.stopped_because = "file was complete"
+        return result
+
+    tmp = dst.with_name(dst.name + ".recovering")
+    if tmp.exists():
+        tmp.unlink()  # a previous recovery died half way; it was never the real file
+    writer = ChunkedWriter(tmp, compression=Compression.ZSTD, compression_level=3, workers=2)
+    channel_map: dict[int, int] = {}
+    schema_map: dict[int, int] = {0: 0}
+    channel_topics: dict[int, str] = {}
+    pending_channels: dict[int, Channel] = {}
+    last_good = 8
+    started = False
+
+    def ensure_channel(cid: int) -> int | None:
+        if cid in channel_map:
+            return channel_map[cid]
+        ch = pending_channels.get(cid)
+        if ch is None or ch.schema_id not in schema_map:
+            return None
+        channel_map[cid] = writer.register_channel(ch.topic, ch.message_encoding, schema_map[ch.schema_id], ch.metadata)
+        channel_topics[cid] = ch.topic
+        return channel_map[cid]
+
+    def add(msg: Message) -> bool:
+        new_id = ensure_channel(msg.channel_id)
+        if new_id is None:
+            return False
+        writer.add_message(new_id, msg.log_time, msg.data, msg.publish_time, msg.sequence)
+        topic = channel_topics[msg.channel_id]
+        result.topics[topic] = result.topics.get(topic, 0) + 1
+        result.messages += 1
+        return True
+
+    try:
+        with open(src, "rb") as f:
+            for offset, opcode, body in scan_records(f, size, str(src)):
+                if opcode in (Opcode.DATA_END, Opcode.FOOTER):
+                    result.stopped_because = "reached the end of the data section"
+                    break
+                if opcode not in _READERS and opcode != Opcode.MESSAGE:
+                    last_good = offset + 9 + len(body)
+                    continue
+                try:
+                    if opcode == Opcode.MESSAGE:
+                        record = Message.read(ReadDataStream(io.BytesIO(body)), len(body))
+                    else:
+                        record = _parse(opcode, body)
+                    if opcode == Opcode.HEADER:
+                        writer.start(profile=record.profile, library=record.library)
+                        started = True
+                    elif not started:
+                        raise McapFileError(f"{src}: first record is not a header")
+                    elif opcode == Opcode.SCHEMA:
+                        schema_map[record.id] = writer.register_schema(record.name, record.encoding, record.data)
+                    elif opcode == Opcode.CHANNEL:
+                        pending_channels[record.id] = record
+                    elif opcode == Opcode.ATTACHMENT:
+                        writer.add_attachment(record.name, record.media_type, record.data,
+                                              log_time=record.log_time, create_time=record.create_time)
+                    elif opcode == Opcode.METADATA:
+                        writer.add_metadata(record.name, record.metadata)
+                    elif opcode == Opcode.MESSAGE:
+                        add(record)
+                    elif opcode == Opcode.CHUNK:
+                        inner = breakup_chunk(record, validate_crc=True)
+                        for r in inner:
+                            if isinstance(r, Schema) and r.id not in schema_map:
+                                schema_map[r.id] = writer.register_schema(r.name, r.encoding, r.data)
+                            elif isinstance(r, Channel):
+                                pending_channels.setdefault(r.id, r)
+                        for r in inner:
+                            if isinstance(r, Message):
+                                add(r)
+                        result.chunks += 1
+                except McapFileError:
+                    raise
+                except Exception as exc:
+                    if opcode == Opcode.CHUNK:
+                        # The record's framing held, only its content is damaged (checksum, codec):
+                        # lose this chunk, keep reading the ones after it.
+                        result.damaged_chunks += 1
+                        result.stopped_because = f"skipped a damaged chunk at byte {offset}: {exc}"
+                        last_good = offset + 9 + len(body)
+                        continue
+                    result.stopped_because = f"damaged {Opcode(opcode).name.lower()} record at byte {offset}: {exc}"
+                    break
+                last_good = offset + 9 + len(body)
+            else:
+                result.stopped_because = "end of file"
+        if not started:
+            raise McapFileError(f"{src}: no MCAP header survived; nothing to recover")
+        writer.finish(fsync=True)
+    except BaseException:
+        writer.close()
+        if tmp.exists():
+            tmp.unlink()
+        raise
+    result.bytes_kept = last_good
+    result.bytes_discarded = size - last_good
+    result.frames = result.topics.get("/thermal/image", 0)
+    # Check the result with the official reader before it takes the final name.
+    with open(tmp, "rb") as f:
+        summary = make_reader(f).get_summary()
+    count = summary.statistics.message_count if summary and summary.statistics else 0
+    if count != result.messages:
+        tmp.unlink()
+        raise McapFileError(f"{src}: recovered file holds {count} messages, expected {result.messages}")
+    if _changed(src, before):
+        tmp.unlink()
+        raise McapFileError(f"{src}: changed while it was being recovered (is a recorder writing it?); left as it was")
+    try:
+        _rename_no_clobber(tmp, dst)
+    except McapFileError:
+        tmp.unlink()
+        raise
+    fsync_dir(dst.parent)
+    if not keep_original:
+        src.unlink()
+        fsync_dir(src.parent)
+    return result
+
+
+def _changed(path: Path, before: os.stat_result) -> bool:
+    try:
+        now = path.stat()
+    except FileNotFoundError:
+        return True
+    return (now.st_ino, now.st_size, now.st_mtime_ns) != (before.st_ino, before.st_size, before.st_mtime_ns)
+
+
+def _rename_no_clobber(src: Path, dst: Path) -> None:
+    """Give ``src`` the name ``dst`` only if nothing has it: link (fails if it exists), then unlink.
+    A plain rename would silently replace a segment that appeared in the meantime."""
+    try:
+        os.link(src, dst)
+    except FileExistsError:
+        raise McapFileError(f"{dst} already exists; refusing to overwrite a finished segment") from None
+    src.unlink()
+
+
+def _copy(src: Path, dst: Path) -> None:
+    with open(src, "rb") as a, open(dst, "xb") as b:
+        while chunk := a.read(1 << 20):
+            b.write(chunk)
+        b.flush()
+        os.fsync(b.fileno())
+
+
+def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> list[RecoveryResult]:
+    """A file, a session folder, or a data root: recover every ``.active`` segment found.
+
+    Each session is recovered under its lock; a session some live process holds (a recorder
+    still writing it) is skipped and reported, never touched."""
+    p = Path(path)
+    if p.is_file():
+        by_session = {p.parent: [p]}
+    elif p.is_dir():
+        by_session = {}
+        for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
+            by_session.setdefault(active.parent, []).append(active)
+    else:
+        raise McapFileError(f"{p}: no such file or folder")
+    results = []
+    for session, actives in by_session.items():
+        lock = lock_session(session, "recover")
+        if lock is None:
+            who = holder(session) or "another process"
+            results += [RecoveryResult(source=str(a), output="", skipped=True,
+                                       stopped_because=f"skipped: {who} holds the session") for a in actives]
+            continue
+        try:
+            for active in actives:
+                results.append(recover_segment(active, keep_original=keep_original))
+            _mark_session(session)
+        finally:
+            lock.release()
+    return results
+
+
+def _mark_session(session_dir: Path) -> None:
+    meta_path = session_dir / "session.json"
+    try:
+        meta = json.loads(meta_path.read_text())
+    except (OSError, ValueError):
+        return
+    if meta.get("status") in ("recording", "interrupted"):
+        # The recorder died before its summary: the counts come from what the segments now hold,
+        # so session.json, `info` and the catalog agree.
+        meta["status"] = "recovered"
+        frames = 0
+        for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
+            with open(seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+            if summary and summary.statistics:
+                ids = [c.id for c in summary.channels.values() if c.topic == "/thermal/image"]
+                frames += sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
+        meta["frames_written"] = frames
+        meta["recovered_ns"] = time.time_ns()
+        write_json_atomic(meta_path, meta)
+
+
+def recover_leftovers(root: str | os.PathLike) -> list[Path]:
+    """At recorder start: recover ``.active`` segments of sessions no live recorder holds."""
+    done: list[Path] = []
+    base = Path(root) / "sessions"
+    if not base.is_dir():
+        return done
+    for session in sorted(base.iterdir()):
+        actives = sorted(session.glob(f"*.mcap{ACTIVE_SUFFIX}")) if session.is_dir() else []
+        if not actives:
+            continue
+        lock = lock_session(session, "recover")
+        if lock is None:
+            continue  # a recorder is still writing it
+        try:
+            for active in actives:
+                try:
+                    recover_segment(active)
+                    done.append(active)
+                except McapFileError:
+                    continue  # left for the user, with `thermcap recover` to say why
+            _mark_session(session)
+        finally:
+            lock.release()
+    return done
