@@ -13,17 +13,15 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
-from recorder import __version__
-
 from api.db import make_engine, migrate
-from recorder.radiometry import TemperatureUnavailable
-
-from api.reading.frames import FrameNotFound, FrameReader, FrameUnavailable
 from api.indexing import index_root
+from api.reading.frames import FrameNotFound, FrameReader, FrameUnavailable
 from api.security import AuthGate
-from api.verified_files import FileVerifier
 from api.settings import Settings
 from api.storage import make_store
+from api.verified_files import FileVerifier
+from recorder import __version__
+from recorder.radiometry import TemperatureUnavailable
 
 __all__ = ["create_app"]
 
@@ -139,7 +137,8 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
 
     @app.exception_handler(RequestValidationError)
     async def bad_request(_request: Request, exc: RequestValidationError) -> JSONResponse:
-        problems = [{"where": ".".join(str(x) for x in e.get("loc", ())), "problem": e.get("msg")} for e in exc.errors()]
+        problems = [{"where": ".".join(str(x) for x in e.get("loc", ())),
+                     "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
     from api.routes import archives, export, frames, meta, sessions, ui

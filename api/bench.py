@@ -23,16 +23,15 @@ __all__ = ["bench_api"]
 
 def _percentile(values: list[float], q: float) -> float:
     values = sorted(values)
-    return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))]
+    return values[min(len(values) - 1, round(q / 100 * (len(values) - 1)))]
 
 
 def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[dict[str, Any]]:
+    from api.db import make_engine
+    from api.indexing import index_root
     from archive.archiver import archive_session
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources.sim import SimSource
-
-    from api.db import make_engine
-    from api.indexing import index_root
 
     base = Path(tempfile.mkdtemp(prefix="thermcap-bench-api-"))
     rows = []
@@ -44,9 +43,9 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
 
         migrate(engine)
         index_root(engine, base)
+        import socket
         import subprocess
         import sys
-        import socket
 
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))

@@ -13,7 +13,7 @@ import click
 from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
-__all__ = ["serve", "index", "upload", "on_archived"]
+__all__ = ["index", "on_archived", "serve", "upload"]
 
 
 @click.command()
@@ -22,7 +22,8 @@ __all__ = ["serve", "index", "upload", "on_archived"]
               help="Interface to bind; 0.0.0.0 exposes the service to the network (set tokens first).")
 @click.option("-p", "--port", type=int, default=8000, show_default=True, help="0 picks a free port.")
 @click.option("--workers", type=int, default=1, show_default=True)
-@click.option("--get", "get_path", default=None, help="Answer one GET request in-process, print it, exit (1 unless 200).")
+@click.option("--get", "get_path", default=None,
+              help="Answer one GET request in-process, print it, exit (1 unless 200).")
 def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -> None:
     """Serve the data root over HTTP (catalog, frames, exports, archives, browser view)."""
     import os
@@ -60,12 +61,12 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
 @json_option
 def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     """Index (or re-index) the sessions under ROOT for the API; idempotent."""
+    from sqlalchemy.exc import SQLAlchemyError
+
     from api.db import make_engine, migrate
     from api.indexing import index_root
     from api.settings import Settings
     from api.storage import make_store
-
-    from sqlalchemy.exc import SQLAlchemyError
 
     settings = Settings(root=Path(root_arg or root))
     try:
@@ -105,10 +106,9 @@ def index_db_problem(settings: Any, exc: Exception) -> str:
 @json_option
 def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
     """Copy verified archives to the configured S3 store (THERMCAP_S3_BUCKET, ...)."""
-    from recorder.storage.reader import resolve_session
-
     from api.settings import Settings
     from api.storage import make_store, upload_archive
+    from recorder.storage.reader import resolve_session
 
     settings = Settings(root=Path(root))
     if not settings.s3_bucket:
@@ -153,7 +153,8 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 @click.option("--formats", default="png16,tiff-lzw,hdf5,jxl", show_default=True)
 @click.option("--once", is_flag=True, help="One pass over the root, then exit.")
 @click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
-@click.option("--delete-source", is_flag=True, help="Delete the MCAP once archives verified (and uploaded, with a store).")
+@click.option("--delete-source", is_flag=True,
+              help="Delete the MCAP once archives verified (and uploaded, with a store).")
 @click.option("--lease-ttl", type=float, default=600.0, show_default=True)
 @click.option("--scrub-interval", type=float, default=86400.0, show_default=True,
               help="Seconds between scrubs (re-verify and repair every archived copy); 0: never.")
@@ -162,9 +163,9 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
            scrub_interval: float, as_json: bool) -> None:
     """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
     from api.db import make_engine, migrate
+    from api.jobs.worker import Worker
     from api.settings import Settings
     from api.storage import make_store
-    from api.jobs.worker import Worker
 
     settings = Settings(root=Path(root))
     engine = make_engine(settings.db_url)
@@ -191,8 +192,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
        as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
-    from api.settings import Settings
     from api.jobs.retention import gc_sessions
+    from api.settings import Settings
 
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")

@@ -23,8 +23,18 @@ from sqlalchemy import (
 )
 from sqlalchemy.engine import Engine
 
-__all__ = ["metadata", "sessions", "segments", "archives", "frames", "frame_blobs", "events", "leases", "make_engine",
-           "migrate"]
+__all__ = [
+    "archives",
+    "events",
+    "frame_blobs",
+    "frames",
+    "leases",
+    "make_engine",
+    "metadata",
+    "migrate",
+    "segments",
+    "sessions",
+]
 
 metadata = MetaData()
 
@@ -148,7 +158,6 @@ def migrate(engine: Engine) -> None:
     """Bring the schema to the newest Alembic revision (idempotent, safe on every start)."""
     from alembic import command
     from alembic.config import Config
-
     from sqlalchemy import text
 
     cfg = Config()

@@ -16,20 +16,22 @@ import statistics
 import struct
 import time
 import zipfile
+from collections.abc import Iterator
+from datetime import UTC
+from itertools import pairwise
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from sqlalchemy import delete, insert, select
 from sqlalchemy.engine import Engine
 
+from api import db
+from recorder.icd.quality import graded_contrast
+from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions, read_session_meta, session_segments
-from recorder.icd.topics import TOPIC_METADATA
-from recorder.icd.quality import graded_contrast
 
-from api import db
-
-__all__ = ["index_root", "index_session", "fingerprint", "ZIPPED_FORMATS"]
+__all__ = ["ZIPPED_FORMATS", "fingerprint", "index_root", "index_session"]
 
 ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
 _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
@@ -81,7 +83,7 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]],
         path = session_dir / "archive" / fmt / rec["path"]
         entries = list(zip_entries(path))
         with open(path, "rb") as f:
-            for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2]):
+            for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2], strict=True):
                 if read_sidecars:
                     f.seek(js_off)
                     sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
@@ -109,10 +111,10 @@ def _coverage(times: list[int]) -> list[list[int]]:
         return []
     if len(times) < 3:
         return [[times[0], times[-1]]]
-    steps = [b - a for a, b in zip(times, times[1:])]
+    steps = [b - a for a, b in pairwise(times)]
     limit = 1.5 * statistics.median(steps)
     spans, start = [], times[0]
-    for a, b in zip(times, times[1:]):
+    for a, b in pairwise(times):
         if b - a > limit:
             spans.append([start, a])
             start = b
@@ -124,10 +126,10 @@ def _ts(sidecar: dict[str, Any]) -> int | None:
     stamp = (sidecar.get("capture") or {}).get("timestamp")
     if not stamp:
         return None
-    from datetime import datetime, timezone
+    from datetime import datetime
 
     main, _, frac = stamp.rstrip("Z").partition(".")
-    sec = int(datetime.strptime(main, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=timezone.utc).timestamp())
+    sec = int(datetime.strptime(main, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=UTC).timestamp())
     return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
 
 
@@ -143,7 +145,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         return False
     manifest = _load_manifest(session_dir)
     # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
-    verified = {f: e for f, e in (manifest or {}).get("formats", {}).items() if e.get("verified") and not e.get("damaged")}
+    verified = {f: e for f, e in (manifest or {}).get("formats",
+                                                      {}).items() if e.get("verified") and not e.get("damaged")}
     zipped = next((f for f in ZIPPED_FORMATS if f in verified and (session_dir / "archive" / f).is_dir()), None)
     blobs: list[dict[str, Any]] = []
     if zipped:
@@ -178,10 +181,11 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     frame_rows = []
     hashes = (manifest or {}).get("frames", {}).get("sha256") or []
     sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
-    for i, (sc, t) in enumerate(zip(sidecars, times)):
+    for i, (sc, t) in enumerate(zip(sidecars, times, strict=True)):
         ta = sc.get("thermal_analysis") or {}
         targets = sc.get("targets") or []
-        frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0), "segment": segs[i] if i < len(segs) else None,
+        frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0),
+                           "segment": segs[i] if i < len(segs) else None,
                            "sha256": hashes[i] if i < len(hashes) else None,
                            "sidecar_sha256": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
                            # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
@@ -243,7 +247,7 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     done, unchanged, failed = [], [], {}
     present = set()
     for d in list_sessions(root):
-        if list(d.glob("*.active")) or not (d / "session.json").exists() and not (d / "archive").exists():
+        if list(d.glob("*.active")) or (not (d / "session.json").exists() and not (d / "archive").exists()):
             continue
         meta = read_session_meta(d)
         present.add(meta.get("session_id") or d.name)

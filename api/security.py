@@ -22,8 +22,17 @@ from typing import Any
 
 from fastapi import HTTPException, Request
 
-__all__ = ["require", "SESSION_ID_RE", "FILE_NAME_RE", "check_session_id", "check_file_name", "AuthGate",
-           "PUBLIC_PATHS", "TOKEN_COOKIE", "scopes_for_token"]
+__all__ = [
+    "FILE_NAME_RE",
+    "PUBLIC_PATHS",
+    "SESSION_ID_RE",
+    "TOKEN_COOKIE",
+    "AuthGate",
+    "check_file_name",
+    "check_session_id",
+    "require",
+    "scopes_for_token",
+]
 
 PUBLIC_PATHS = frozenset({"/healthz", "/readyz", "/login"})
 TOKEN_COOKIE = "thermcap_token"
@@ -88,7 +97,7 @@ class AuthGate:
 
 async def _send(send: Any, status: int, body: bytes, headers: list[tuple[bytes, bytes]]) -> None:
     await send({"type": "http.response.start", "status": status,
-                "headers": headers + [(b"content-length", str(len(body)).encode())]})
+                "headers": [*headers, (b"content-length", str(len(body)).encode())]})
     await send({"type": "http.response.body", "body": body})
 
 

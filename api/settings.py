@@ -36,7 +36,8 @@ def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
             raise ValueError(f"THERMCAP_TOKENS item {n}: unknown scope(s) {sorted(unknown)}; use read and/or write")
         if len(token) < MIN_TOKEN_LENGTH:
             raise ValueError(f"THERMCAP_TOKENS item {n}: the token is {len(token)} characters; use at least "
-                             f"{MIN_TOKEN_LENGTH} (for example `python -c 'import secrets; print(secrets.token_hex(16))'`)")
+                             f"{MIN_TOKEN_LENGTH} (for example "
+                             "`python -c 'import secrets; print(secrets.token_hex(16))'`)")
         tokens[token] = scope_set
     return tokens
 
@@ -69,7 +70,8 @@ class Settings:
         return self.database_url or f"sqlite:///{(self.root / 'index.sqlite').resolve()}"
 
     def __repr__(self) -> str:  # never print tokens or credentials
-        return f"Settings(root={str(self.root)!r}, db={_redact(self.db_url)!r}, s3={self.s3_bucket!r}, tokens={len(self.tokens)})"
+        return (f"Settings(root={str(self.root)!r}, db={_redact(self.db_url)!r}, s3={self.s3_bucket!r}, "
+                f"tokens={len(self.tokens)})")
 
 
 def _redact(url: str) -> str:

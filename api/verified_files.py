@@ -12,9 +12,8 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
-from archive.manifest import file_sha256
-
 from api.storage import BlobStore
+from archive.manifest import file_sha256
 
 __all__ = ["FileVerifier"]
 

@@ -1,1 +1,2 @@
-"""thermcap archive: lossless repacking, a bit-exact proof of every frame, the manifest, verify, scrub, storage costs."""
+"""thermcap archive: lossless repacking, a bit-exact proof of every frame, the manifest, verify,
+scrub and storage costs."""

@@ -13,25 +13,32 @@ from __future__ import annotations
 import os
 import shutil
 import time
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable
-
-from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
+from typing import Any
 
 from archive.codecs import library_versions
-from recorder.icd.topics import TOPIC_METADATA
-
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.source_checks import channel_problems
-from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from archive.extras import EXTRAS_NAME, write_extras
-from archive.manifest import (archive_dir, file_sha256, frame_sha256, iso_now, load_manifest, new_manifest, save_manifest,
-                       sidecar_sha256)
+from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from archive.manifest import (
+    archive_dir,
+    file_sha256,
+    frame_sha256,
+    iso_now,
+    load_manifest,
+    new_manifest,
+    save_manifest,
+    sidecar_sha256,
+)
+from archive.source_checks import channel_problems
+from recorder.icd.topics import TOPIC_METADATA
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
-__all__ = ["archive_session", "build_format", "verify_format_dir", "DEFAULT_FORMATS", "PARTIAL_SUFFIX"]
+__all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
 
 DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
 PARTIAL_SUFFIX = ".partial"
@@ -252,7 +259,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             src = _scan_source(session_dir, per_segment)
             manifest["frames"] = {"sha256": src.hashes, "sidecar_sha256": src.sidecar_hashes,
                                   "timestamps_ns": src.timestamps, "segments": src.segments}
-            manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name], "bytes": s.stat().st_size}
+            manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name],
+                                                "bytes": s.stat().st_size}
                                                for s in segments],
                                   "frames": total, "width": src.width, "height": src.height,
                                   "raw_bytes": total * src.width * src.height * 2, "deleted": False}

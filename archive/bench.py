@@ -14,19 +14,19 @@ import io
 import os
 import tempfile
 import time
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import h5py
 import numpy as np
 import tifffile
 
+from archive.codecs import get_codec
 from recorder.capture.sources.sim import SimSource
 
-from archive.codecs import get_codec
-
-__all__ = ["bench_archive", "print_table", "noise_entropy_bound"]
+__all__ = ["bench_archive", "noise_entropy_bound", "print_table"]
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
 
@@ -58,7 +58,7 @@ def _pair(encode: Callable[[np.ndarray], bytes], decode: Callable[[bytes], np.nd
         t = time.perf_counter()
         outs = list(pool.map(decode, blobs))
         dec = len(work) / (time.perf_counter() - t)
-    for a, b in zip(work, outs):
+    for a, b in zip(work, outs, strict=True):
         if not np.array_equal(a, b):
             raise AssertionError("a codec in the benchmark is not lossless")
     ratio = sum(f.nbytes for f in work) / sum(len(b) for b in blobs)
@@ -107,7 +107,7 @@ def _hdf5(frames: list[np.ndarray], reps: int, **filters: Any) -> tuple[float, f
         with h5py.File(path) as f:
             out = [f["frames"][i] for i in range(len(work))]
         dec = len(work) / (time.perf_counter() - t)
-    assert all(np.array_equal(a, b) for a, b in zip(work, out))
+    assert all(np.array_equal(a, b) for a, b in zip(work, out, strict=True))
     return sum(x.nbytes for x in work) / size, enc, dec
 
 
@@ -151,6 +151,6 @@ def bench_archive(n_frames: int = 60) -> list[dict[str, Any]]:
 def print_table(rows: list[dict[str, Any]]) -> str:
     lines = [f"{'frames':24} {'codec':34} {'kind':9} {'ratio':>6} {'xPNG16':>7} {'enc fps':>8} {'dec fps':>8}"]
     for r in rows:
-        lines.append(f"{r['frames']:24} {r['codec']:34} {r['kind']:9} {r['ratio']:>6} {str(r['x_png16']):>7} "
-                     f"{str(r['encode_fps']):>8} {str(r['decode_fps']):>8}")
+        lines.append(f"{r['frames']:24} {r['codec']:34} {r['kind']:9} {r['ratio']:>6} {r['x_png16']!s:>7} "
+                     f"{r['encode_fps']!s:>8} {r['decode_fps']!s:>8}")
     return "\n".join(lines)

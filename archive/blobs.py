@@ -6,8 +6,9 @@ scrub's re-reads of the bucket copies live here, beside the store they use."""
 from __future__ import annotations
 
 import os
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
-from typing import Any, AsyncIterator, Iterator
+from typing import Any
 
 import obstore
 from obstore.store import LocalStore, S3Store
@@ -94,9 +95,8 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
     """
     from obstore.exceptions import AlreadyExistsError
 
-    from recorder.exceptions import ThermcapError
-
     from archive.manifest import iso_now, load_manifest, save_manifest
+    from recorder.exceptions import ThermcapError
 
     manifest = load_manifest(session_dir)
     keys = []

@@ -8,12 +8,11 @@ from pathlib import Path
 
 import click
 
+from archive.archiver import DEFAULT_FORMATS
 from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
-from archive.archiver import DEFAULT_FORMATS
-
-__all__ = ["archive", "verify", "audit", "scrub", "bench_archive"]
+__all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
 
 
 def _formats(value: str) -> list[str]:
@@ -41,9 +40,8 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
-    from recorder.storage.reader import list_sessions, resolve_session
-
     from archive.archiver import archive_session
+    from recorder.storage.reader import list_sessions, resolve_session
 
     try:
         fmts = _formats(formats)
@@ -111,9 +109,8 @@ def _run_hooks(session_dir: Path, root: str) -> None:
 @json_option
 def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: bool) -> None:
     """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
-    from recorder.storage.reader import resolve_session
-
     from archive.verify import verify_session
+    from recorder.storage.reader import resolve_session
 
     out, bad = {}, False
     for s in sessions:
@@ -129,7 +126,8 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
     else:
         for d, report in out.items():
             for fid, r in report.items():
-                what = "attachments, metadata and other topics intact" if fid == "extras" else f"{r['frames']} frames bit-exact"
+                what = ("attachments, metadata and other topics intact" if fid == "extras"
+                        else f"{r['frames']} frames bit-exact")
                 click.echo(f"{d} {fid}: {'ok, ' + what if r['ok'] else 'FAILED'}")
                 for p in r["problems"]:
                     click.echo(f"  {p}")
@@ -144,7 +142,8 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
 @click.option("--repair", is_flag=True, help="Rebuild each damaged copy from another verified one, then verify it.")
 @click.option("--workers", type=int, default=2, show_default=True, help="Encoder threads for repairs.")
 @json_option
-def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bool, workers: int, as_json: bool) -> None:
+def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bool, workers: int,
+          as_json: bool) -> None:
     """Re-verify every archive copy (formats, extras.mcap, object-store objects) and mark damage.
 
     Damaged copies are marked in the manifest, so the API stops offering them and gc no longer
@@ -153,10 +152,9 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 
     from rich.progress import Progress
 
-    from recorder.storage.reader import list_sessions, resolve_session
-
     from archive.blobs import open_store
     from archive.scrub import ScrubReport, scrub_session
+    from recorder.storage.reader import list_sessions, resolve_session
 
     base = Path(root_arg or root)
     bucket = os.environ.get("THERMCAP_S3_BUCKET")
@@ -198,9 +196,11 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 @click.command()
 @click.argument("sessions", nargs=-1)
 @root_option
-@click.option("--prices", type=click.Path(dir_okay=False), default=None, help="JSON price table overriding the defaults.")
+@click.option("--prices", type=click.Path(dir_okay=False), default=None,
+              help="JSON price table overriding the defaults.")
 @click.option("--project-cameras", type=int, default=None, help="Projection: number of cameras.")
-@click.option("--project-hours", type=float, default=8.0, show_default=True, help="Projection: recorded hours a day per camera.")
+@click.option("--project-hours", type=float, default=8.0, show_default=True,
+              help="Projection: recorded hours a day per camera.")
 @click.option("--project-days", type=int, default=365, show_default=True)
 @click.option("--project-segment-s", type=float, default=60.0, show_default=True,
               help="Projection: segment length (one object per segment; hdf5: one per camera-day).")
@@ -209,9 +209,8 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_cameras: int | None,
           project_hours: float, project_days: int, project_segment_s: float, markdown: bool, as_json: bool) -> None:
     """Storage cost of archived sessions per format and tier, and a fleet projection."""
-    from recorder.storage.reader import list_sessions, resolve_session
-
     from archive.costs import audit_sessions, load_prices, project, render_markdown
+    from recorder.storage.reader import list_sessions, resolve_session
 
     try:
         table = load_prices(prices)
@@ -235,7 +234,8 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
     if "projection" in report:
         p = report["projection"]
         click.echo(f"\nProjection: {p['cameras']} camera(s) x {p['hours_per_day']} h/day x {p['days']} days")
-        click.echo("| format | TiB | objects | " + " | ".join(f"{table[t]['label']} $ total (storage+PUT)" for t in table) + " |")
+        tiers = " | ".join(f"{table[t]['label']} $ total (storage+PUT)" for t in table)
+        click.echo(f"| format | TiB | objects | {tiers} |")
         click.echo("|---|---|---|" + "---|" * len(table))
         for fid, f in sorted(p["formats"].items(), key=lambda kv: kv[1]["bytes"]):
             click.echo(f"| {fid} | {f['tib']} | {f['objects']:,} | " + " | ".join(
@@ -247,7 +247,8 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 @json_option
 def bench_archive(n_frames: int, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
-    from archive.bench import bench_archive as run, print_table
+    from archive.bench import bench_archive as run
+    from archive.bench import print_table
 
     rows = run(n_frames)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))

@@ -21,8 +21,17 @@ import numpy as np
 
 from archive.exceptions import UnknownCodecError
 
-__all__ = ["FrameCodec", "Png16", "JpegXl", "Htj2k", "JpegLs", "codec_registry", "register_codec", "get_codec",
-           "library_versions"]
+__all__ = [
+    "FrameCodec",
+    "Htj2k",
+    "JpegLs",
+    "JpegXl",
+    "Png16",
+    "codec_registry",
+    "get_codec",
+    "library_versions",
+    "register_codec",
+]
 
 
 class FrameCodec(ABC):
@@ -40,7 +49,7 @@ class FrameCodec(ABC):
         return {"id": self.codec_id, **{k: v for k, v in vars(self).items() if not k.startswith("_")}}
 
     @classmethod
-    def from_config(cls, config: dict[str, Any]) -> "FrameCodec":
+    def from_config(cls, config: dict[str, Any]) -> FrameCodec:
         return cls(**{k: v for k, v in config.items() if k != "id"})
 
     def __eq__(self, other: object) -> bool:

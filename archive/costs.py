@@ -16,7 +16,7 @@ from typing import Any
 from archive.exceptions import ArchiveError
 from archive.manifest import load_manifest
 
-__all__ = ["DEFAULT_PRICES", "load_prices", "audit_sessions", "project", "render_markdown"]
+__all__ = ["DEFAULT_PRICES", "audit_sessions", "load_prices", "project", "render_markdown"]
 
 GIB = 1024**3
 

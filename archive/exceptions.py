@@ -28,8 +28,8 @@ class UnknownCodecError(ArchiveError, KeyError):
 class VerificationError(ArchiveError):
     def __init__(self, message: str, problems: list[str] | None = None):
         self.problems = problems or []
-        super().__init__(message + ("".join(f"\n  {p}" for p in self.problems[:50])
-                                    + (f"\n  ... and {len(self.problems) - 50} more" if len(self.problems) > 50 else "")))
+        more = f"\n  ... and {len(self.problems) - 50} more" if len(self.problems) > 50 else ""
+        super().__init__(message + "".join(f"\n  {p}" for p in self.problems[:50]) + more)
 
 
 class ManifestError(ArchiveError):

@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import hashlib
 import os
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
@@ -21,7 +22,7 @@ from mcap.writer import CompressionType, Writer
 from recorder.icd.topics import TOPIC_IMAGE
 from recorder.storage.reader import session_segments
 
-__all__ = ["EXTRAS_NAME", "write_extras", "summarize_mcap"]
+__all__ = ["EXTRAS_NAME", "summarize_mcap", "write_extras"]
 
 EXTRAS_NAME = "extras.mcap"
 

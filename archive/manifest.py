@@ -16,13 +16,20 @@ from typing import Any
 
 import numpy as np
 
+from archive.exceptions import ManifestError
 from recorder.storage.segments import write_json_atomic
 
-from archive.exceptions import ManifestError
-
-__all__ = ["MANIFEST_NAME", "manifest_path", "load_manifest", "save_manifest", "frame_sha256", "file_sha256",
-           "sidecar_sha256",
-           "new_manifest", "iso_now"]
+__all__ = [
+    "MANIFEST_NAME",
+    "file_sha256",
+    "frame_sha256",
+    "iso_now",
+    "load_manifest",
+    "manifest_path",
+    "new_manifest",
+    "save_manifest",
+    "sidecar_sha256",
+]
 
 MANIFEST_NAME = "manifest.json"
 MANIFEST_VERSION = 1

@@ -9,17 +9,17 @@ entry point.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Any, Iterator
-
-from recorder.storage.layout import SessionLayout
-from recorder.storage.reader import SessionFrame
+from typing import Any
 
 from archive.exceptions import ManifestError
 from archive.formats import get_format
 from archive.manifest import load_manifest
+from recorder.storage.layout import SessionLayout
+from recorder.storage.reader import SessionFrame
 
-__all__ = ["archived_frames", "frames_from_format", "verified_formats", "READ_PREFERENCE"]
+__all__ = ["READ_PREFERENCE", "archived_frames", "frames_from_format", "verified_formats"]
 
 #: Fastest full-session readers first (sequential decode on one core).
 READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")

@@ -22,10 +22,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
-
 from archive.archiver import build_format, verify_format_dir
 from archive.blobs import BlobStore
 from archive.exceptions import ArchiveError
@@ -34,6 +30,9 @@ from archive.formats import get_format
 from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
 from archive.reading import READ_PREFERENCE, frames_from_format
 from archive.verify import _verify_extras
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import holder, lock_session
+from recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
 
 __all__ = ["ScrubFinding", "ScrubReport", "scrub_root", "scrub_session"]
 

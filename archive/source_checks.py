@@ -8,9 +8,8 @@ segment is refused instead of being proved good.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import io
+from pathlib import Path
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -20,7 +19,7 @@ from mcap.records import Channel
 from recorder.icd.topics import IMAGE_SCHEMA_NAME, TOPIC_IMAGE, TOPIC_METADATA
 from recorder.storage.recover import scan_records
 
-__all__ = ["channel_problems", "SIDECAR_SCHEMA_NAME"]
+__all__ = ["SIDECAR_SCHEMA_NAME", "channel_problems"]
 
 SIDECAR_SCHEMA_NAME = "thermcap.ThermalSidecar"
 _EXPECTED = {IMAGE_SCHEMA_NAME: TOPIC_IMAGE, SIDECAR_SCHEMA_NAME: TOPIC_METADATA}

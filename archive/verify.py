@@ -7,7 +7,7 @@ from typing import Any
 
 from archive.archiver import verify_format_dir
 from archive.formats import get_format
-from archive.manifest import file_sha256, archive_dir, load_manifest
+from archive.manifest import archive_dir, file_sha256, load_manifest
 
 __all__ = ["verify_session"]
 

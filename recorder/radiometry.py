@@ -12,6 +12,7 @@ import functools
 import hashlib
 import json
 from dataclasses import asdict, dataclass, fields
+from itertools import pairwise
 from typing import Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
@@ -19,18 +20,18 @@ import numpy as np
 from recorder.icd.names import BIT_DEPTH, MAX_COUNT
 
 __all__ = [
-    "RadiometricModel",
-    "LinearModel",
-    "FlirPlanckModel",
-    "TerraRefPlanckModel",
-    "ScaledKelvinModel",
-    "DjiModel",
-    "LookupTableModel",
-    "TemperatureUnavailable",
-    "register_model",
-    "model_from_dict",
-    "describe_model",
     "DEFAULT_MODEL",
+    "DjiModel",
+    "FlirPlanckModel",
+    "LinearModel",
+    "LookupTableModel",
+    "RadiometricModel",
+    "ScaledKelvinModel",
+    "TemperatureUnavailable",
+    "TerraRefPlanckModel",
+    "describe_model",
+    "model_from_dict",
+    "register_model",
 ]
 
 
@@ -98,7 +99,7 @@ class LinearModel:
             raise ValueError(f"bit_depth must be 1..16, got {self.bit_depth}")
 
     @classmethod
-    def from_range(cls, temp_min_c: float, temp_max_c: float, bit_depth: int = BIT_DEPTH) -> "LinearModel":
+    def from_range(cls, temp_min_c: float, temp_max_c: float, bit_depth: int = BIT_DEPTH) -> LinearModel:
         """ICD 3.3 user-defined range: the full count range spans [temp_min_c, temp_max_c]."""
         if not temp_max_c > temp_min_c:
             raise ValueError(f"temp_max_c ({temp_max_c}) must exceed temp_min_c ({temp_min_c})")
@@ -190,7 +191,8 @@ class FlirPlanckModel:
                   + (1 - tau) / e / tau / irt / tau * raw_atm)
         raw_obj = np.asarray(raw, dtype=np.float64) / e / tau / irt / tau - offset
         with np.errstate(invalid="ignore", divide="ignore"):
-            return self.planck_b / np.log(self.planck_r1 / (self.planck_r2 * (raw_obj + self.planck_o)) + self.planck_f) - 273.15
+            ratio = self.planck_r1 / (self.planck_r2 * (raw_obj + self.planck_o))
+            return self.planck_b / np.log(ratio + self.planck_f) - 273.15
 
     def to_dict(self) -> dict[str, Any]:
         return {"kind": self.kind, **asdict(self)}
@@ -333,7 +335,7 @@ class LookupTableModel:
         celsius = tuple(float(c) for c in self.celsius)
         if len(counts) != len(celsius) or not counts:
             raise ValueError(f"lookup table needs as many temperatures as counts, got {len(counts)} and {len(celsius)}")
-        if any(b <= a for a, b in zip(counts, counts[1:])):
+        if any(b <= a for a, b in pairwise(counts)):
             raise ValueError("lookup table counts must be strictly increasing")
         if counts[0] < 0 or counts[-1] > 0xFFFF:
             raise ValueError("lookup table counts must be uint16 values")
@@ -342,7 +344,7 @@ class LookupTableModel:
 
     @classmethod
     def from_measurement(cls, raw: np.ndarray, celsius: np.ndarray, *, source: str,
-                         derived_from: dict[str, Any] | None = None) -> "LookupTableModel":
+                         derived_from: dict[str, Any] | None = None) -> LookupTableModel:
         """Build the table from one frame and the vendor's temperatures for it; refuses when the
         vendor gave two temperatures for one count (then a table would misstate some pixels)."""
         raw = np.asarray(raw, dtype=np.uint16).ravel()
@@ -363,12 +365,12 @@ class LookupTableModel:
                 "apart): not a per-count curve, so thermcap stores no table")
         return cls(tuple(counts.tolist()), tuple(lo.tolist()), source, derived_from)
 
-    def merged(self, other: "LookupTableModel") -> "LookupTableModel | None":
+    def merged(self, other: LookupTableModel) -> LookupTableModel | None:
         """This table and ``other`` as one, or None where they disagree on a shared count."""
         if self.source != other.source or self.derived_from != other.derived_from:
             return None
-        table = dict(zip(self.counts, self.celsius))
-        for c, t in zip(other.counts, other.celsius):
+        table = dict(zip(self.counts, self.celsius, strict=True))
+        for c, t in zip(other.counts, other.celsius, strict=True):
             if table.setdefault(c, t) != t:
                 return None
         counts = sorted(table)

@@ -3,8 +3,12 @@
 from __future__ import annotations
 
 import os
+import shutil as _shutil
+import socket as _socket
 import subprocess
 import sys
+import time as _time
+import urllib.request as _urlreq
 from pathlib import Path
 
 import pytest
@@ -30,10 +34,6 @@ def run_cli(*args: str, input: bytes | None = None, timeout: float = 120, env: d
 
 
 # -- servers: our API, PostgreSQL, SeaweedFS, all real processes on 127.0.0.1 -------------------
-import shutil as _shutil
-import socket as _socket
-import time as _time
-import urllib.request as _urlreq
 
 
 def wait_for(pred, timeout: float = 60.0, step: float = 0.02) -> bool:
@@ -79,7 +79,7 @@ class ApiServer:
             wait_http(self.url + "/healthz")
         except RuntimeError:
             self.proc.kill()
-            raise RuntimeError(self.proc.stderr.read().decode()[-2000:])
+            raise RuntimeError(self.proc.stderr.read().decode()[-2000:]) from None
 
     def stop(self) -> None:
         self.proc.terminate()
@@ -120,15 +120,15 @@ def postgres_url(tmp_path_factory):
         _shutil.chown(sock, "postgres")
         prefix = ["runuser", "-u", "postgres", "--"]
     port = free_port()
-    subprocess.run(prefix + [initdb, "-D", str(data), "-U", "postgres", "--auth=trust", "-E", "UTF8"], check=True,
+    subprocess.run([*prefix, initdb, "-D", str(data), "-U", "postgres", "--auth=trust", "-E", "UTF8"], check=True,
                    capture_output=True)
-    subprocess.run(prefix + [pg_ctl, "-D", str(data), "-w", "-l", str(base / "log"), "-o",
-                             f"-p {port} -c listen_addresses=127.0.0.1 -k {sock}", "start"], check=True,
+    subprocess.run([*prefix, pg_ctl, "-D", str(data), "-w", "-l", str(base / "log"), "-o",
+                    f"-p {port} -c listen_addresses=127.0.0.1 -k {sock}", "start"], check=True,
                    capture_output=True)
     try:
         yield f"postgresql://postgres@127.0.0.1:{port}/postgres"
     finally:
-        subprocess.run(prefix + [pg_ctl, "-D", str(data), "-m", "immediate", "stop"], capture_output=True)
+        subprocess.run([*prefix, pg_ctl, "-D", str(data), "-m", "immediate", "stop"], capture_output=True)
         _shutil.rmtree(base, ignore_errors=True)
 
 
@@ -145,7 +145,8 @@ def seaweedfs(tmp_path_factory):
                              f"-master.port={ports['master']}", f"-volume.port={ports['volume']}",
                              f"-filer.port={ports['filer']}", f"-s3.port={ports['s3']}",
                              f"-webdav.port={ports['webdav']}", "-admin.ui=false", "-bucket=thermcap"],
-                            env={**os.environ, **creds}, stdout=open(d / "log", "wb"), stderr=subprocess.STDOUT)
+                            env={**os.environ, **creds}, stdout=open(d / "log", "wb"),  # noqa: SIM115 - the server's log
+                            stderr=subprocess.STDOUT)
     endpoint = f"http://127.0.0.1:{ports['s3']}"
     try:
         end = _time.monotonic() + 90
@@ -155,7 +156,7 @@ def seaweedfs(tmp_path_factory):
                     break
             except OSError:
                 if _time.monotonic() > end or proc.poll() is not None:
-                    raise RuntimeError("SeaweedFS did not start: " + (d / "log").read_text()[-2000:])
+                    raise RuntimeError("SeaweedFS did not start: " + (d / "log").read_text()[-2000:]) from None
                 _time.sleep(0.2)
         _time.sleep(1.0)
         yield {"endpoint": endpoint, "bucket": "thermcap", **creds}

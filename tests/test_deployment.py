@@ -39,7 +39,8 @@ def test_docker_compose_config_where_the_cli_exists(tmp_path):
     docker = shutil.which("docker")
     if not docker or subprocess.run([docker, "compose", "version"], capture_output=True).returncode != 0:
         pytest.skip("no Docker Compose CLI on this machine")
-    r = subprocess.run([docker, "compose", "--env-file", str(ROOT / ".env.example"), "-f", str(ROOT / "docker-compose.yml"),
+    r = subprocess.run([docker, "compose", "--env-file", str(ROOT / ".env.example"), "-f",
+                        str(ROOT / "docker-compose.yml"),
                         "config", "--quiet"], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
 

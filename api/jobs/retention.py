@@ -19,14 +19,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from api.storage import BlobStore
 from archive.archiver import DEFAULT_FORMATS
 from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
 from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import list_sessions, read_session_meta
-
-from api.storage import BlobStore
 
 __all__ = ["GcDecision", "GcResult", "gc_sessions"]
 
@@ -75,7 +74,8 @@ def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], s
             path = layout.format_dir(fid) / rec["path"]
             if not path.is_file() or file_sha256(path) != rec.get("sha256"):
                 return [], f"{fid}/{rec['path']} is missing or differs from the manifest"
-        relies.append(f"{fid}: {len(entry.get('files', []))} files verified {entry.get('verified_at')}, hashes rechecked")
+        n_files = len(entry.get("files", []))
+        relies.append(f"{fid}: {n_files} files verified {entry.get('verified_at')}, hashes rechecked")
     extras = m.get("extras") or {}
     if not extras.get("verified") or not layout.extras.is_file() or file_sha256(layout.extras) != extras.get("sha256"):
         return [], "extras.mcap (attachments, other topics) is not verified"

@@ -14,25 +14,25 @@ import os
 import socket
 import time
 import uuid
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from sqlalchemy import delete, insert, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.exc import IntegrityError
 
+from api import db
+from api.indexing import index_session
+from api.storage import BlobStore, upload_archive
 from archive.archiver import archive_session
 from archive.manifest import load_manifest
 from archive.scrub import ScrubReport, scrub_session
 from recorder.exceptions import ThermcapError
-from recorder.storage.reader import list_sessions, read_session_meta
 from recorder.storage.lock import is_locked
+from recorder.storage.reader import list_sessions, read_session_meta
 
-from api import db
-from api.indexing import index_session
-from api.storage import BlobStore, upload_archive
-
-__all__ = ["Worker", "acquire_lease", "release_lease", "finished_sessions"]
+__all__ = ["Worker", "acquire_lease", "finished_sessions", "release_lease"]
 
 
 def acquire_lease(engine: Engine, session_id: str, owner: str, ttl_s: float) -> bool:

@@ -17,9 +17,10 @@ import threading
 import time
 import zlib
 from collections import OrderedDict, deque
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
@@ -28,16 +29,15 @@ from mcap.stream_reader import StreamReader
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
+from api import db
+from api.storage import BlobStore
 from archive.codecs import get_codec
 from archive.formats import get_format
 from archive.formats.base import locate
 from archive.manifest import frame_sha256
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
-from api import db
-from api.storage import BlobStore
-
-__all__ = ["FrameNotFound", "FrameUnavailable", "FrameReader", "DamageLog", "Damage", "BlobFile"]
+__all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 
 log = logging.getLogger("thermcap.api")
 
@@ -173,14 +173,16 @@ class FrameReader:
 
         return open_file
 
-    def _copies(self, session_id: str, idx: int, row: dict[str, Any]) -> Iterator[tuple[str, Callable[[], tuple[Any, Any]]]]:
+    def _copies(self, session_id: str, idx: int, row: dict[str, Any]) -> Iterator[tuple[str,
+                                                                                        Callable[[], tuple[Any, Any]]]]:
         """(name, read) for every copy of the frame; read() gives (pixels, sidecar bytes)."""
         blobs = self._ordered_blobs(session_id, idx)
         for blob in blobs:
             def read_blob(blob: dict[str, Any] = blob) -> tuple[Any, Any]:
                 key = self._key(session_id, blob)
                 data = self.store.get_range(key, blob["offset"], blob["offset"] + blob["length"])
-                side = self.store.get_range(key, blob["sidecar_offset"], blob["sidecar_offset"] + blob["sidecar_length"])
+                side = self.store.get_range(key, blob["sidecar_offset"],
+                                            blob["sidecar_offset"] + blob["sidecar_length"])
                 return get_codec(blob["format"]).decode(data), side
             yield f"{blob['format']}:{blob['file']}", read_blob
         if row["segment"]:
@@ -226,7 +228,8 @@ class FrameReader:
         except FileNotFoundError:
             return None
         if blob.get("crc32") is not None and zlib.crc32(data) != blob["crc32"]:
-            self.damage.report(Damage(session_id, idx, f"{fmt}:{blob['file']}", "CRC-32 differs from the ZIP directory"))
+            self.damage.report(Damage(session_id, idx, f"{fmt}:{blob['file']}",
+                                      "CRC-32 differs from the ZIP directory"))
             return None
         return data
 
@@ -254,7 +257,7 @@ class FrameReader:
         seg = self.root / "sessions" / session_id / (row["segment"] or "")
         extras = f"sessions/{session_id}/archive/extras.mcap"
         if row["segment"] and seg.is_file():
-            f: Any = open(seg, "rb")
+            f: Any = open(seg, "rb")  # noqa: SIM115 - one of two kinds of file, closed by the `with f` below
         elif (head := self.store.head(extras)) is not None:
             f = io.BufferedReader(BlobFile(self.store, extras, head["size"]), buffer_size=256 * 1024)
         else:

@@ -13,16 +13,17 @@ import hashlib
 import heapq
 import io
 import json
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import breakup_chunk
 
-from recorder.storage.writer import ChunkedWriter, Compression
+from recorder.icd.sidecar import sidecar_schema_bytes
 from recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
@@ -31,7 +32,7 @@ from recorder.icd.topics import (
     image_message_parts,
 )
 from recorder.storage.reader import session_segments
-from recorder.icd.sidecar import sidecar_schema_bytes
+from recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["export_mcap"]
 

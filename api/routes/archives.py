@@ -11,8 +11,8 @@ from sqlalchemy import select
 
 from api import db
 from api.reading.frames import Damage
-from api.security import check_file_name, require
 from api.routes.common import session_row
+from api.security import check_file_name, require
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
@@ -54,7 +54,8 @@ def _parse_range(header: str, size: int) -> tuple[int, int] | None:
     else:
         start, end = max(0, size - int(m[2])), size
     if start >= size or end <= start:
-        raise HTTPException(416, f"range not satisfiable for {size} bytes", headers={"Content-Range": f"bytes */{size}"})
+        raise HTTPException(416, f"range not satisfiable for {size} bytes",
+                            headers={"Content-Range": f"bytes */{size}"})
     return start, end
 
 

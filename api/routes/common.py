@@ -9,12 +9,11 @@ from typing import Any
 from fastapi import HTTPException, Request
 from sqlalchemy import select
 
-from recorder.icd.names import iso_utc, parse_rfc3339
-
 from api import db
 from api.security import check_session_id
+from recorder.icd.names import iso_utc, parse_rfc3339
 
-__all__ = ["session_row", "encode_cursor", "decode_cursor", "parse_time", "iso", "page_size"]
+__all__ = ["decode_cursor", "encode_cursor", "iso", "page_size", "parse_time", "session_row"]
 
 
 def session_row(request: Request, session_id: str) -> dict[str, Any]:

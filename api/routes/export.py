@@ -2,19 +2,18 @@
 
 from __future__ import annotations
 
+import io
+
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import StreamingResponse
 from sqlalchemy import select
 
-import io
-
-from recorder.storage.layout import EXTRAS_MCAP
-
 from api import db
-from api.reading.mcap_slice import export_mcap
 from api.reading.frames import BlobFile
-from api.security import require
+from api.reading.mcap_slice import export_mcap
 from api.routes.common import parse_time, session_row
+from api.security import require
+from recorder.storage.layout import EXTRAS_MCAP
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
 

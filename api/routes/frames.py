@@ -2,18 +2,16 @@
 
 from __future__ import annotations
 
-import json
 from typing import Literal
 from urllib.parse import quote
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
+from api.routes.common import session_row
+from api.security import require
+from recorder.exports.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
 from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.radiometry import describe_model
-from recorder.exports.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
-
-from api.security import require
-from api.routes.common import session_row
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],
                    dependencies=[Depends(require("read"))])
@@ -30,7 +28,8 @@ def _check_index(row: dict, n: int) -> None:
 def get_frame(request: Request, session_id: str, n: int,
               format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",
-              min: float | None = Query(None, ge=-273.15, le=5000), max: float | None = Query(None, ge=-273.15, le=5000)) -> Response:
+              min: float | None = Query(None, ge=-273.15, le=5000),
+              max: float | None = Query(None, ge=-273.15, le=5000)) -> Response:
     row = session_row(request, session_id)
     _check_index(row, n)
     reader = request.app.state.frames
@@ -71,7 +70,8 @@ def get_frame_metadata(request: Request, session_id: str, n: int) -> dict:
 
 
 @router.get("/{n}/temperature")
-def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..., ge=0), y: int = Query(..., ge=0)) -> dict:
+def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..., ge=0),
+                    y: int = Query(..., ge=0)) -> dict:
     """Temperature (C) of one pixel through the session's radiometric model."""
     row = session_row(request, session_id)
     _check_index(row, n)
@@ -81,6 +81,7 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
         raise HTTPException(400, f"pixel ({x}, {y}) is outside the {w}x{h} frame")
     model = session_model(row["radiometric_model"])
     value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
-    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "approximate": getattr(model, "approximate", False),
+    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value,
+            "approximate": getattr(model, "approximate", False),
             "model": describe_model(model)}
 

@@ -6,11 +6,10 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from prometheus_client import generate_latest
 from sqlalchemy import func, select
 
-from recorder.storage.reader import list_sessions
-
 from api import db
 from api.indexing import index_root
 from api.security import require
+from recorder.storage.reader import list_sessions
 
 router = APIRouter()
 
@@ -36,7 +35,8 @@ def readyz(request: Request) -> dict:
 @router.get("/metrics", tags=["meta"], dependencies=[Depends(require("read"))])
 def metrics(request: Request) -> Response:
     with request.app.state.engine.connect() as conn:
-        damaged = conn.execute(select(func.count()).select_from(db.archives).where(db.archives.c.verified.is_(False))).scalar()
+        unverified = select(func.count()).select_from(db.archives).where(db.archives.c.verified.is_(False))
+        damaged = conn.execute(unverified).scalar()
     request.app.state.archives_unverified.set(damaged or 0)
     return Response(generate_latest(request.app.state.metrics_registry), media_type="text/plain; version=0.0.4")
 

@@ -3,16 +3,16 @@
 from __future__ import annotations
 
 import json
+from itertools import pairwise
 from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy import and_, func, or_, select
 
-from recorder.radiometry import model_from_dict
-
 from api import db
-from api.security import require
 from api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
+from api.security import require
+from recorder.radiometry import model_from_dict
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 
@@ -84,7 +84,7 @@ def get_session(request: Request, session_id: str) -> dict:
         segments = conn.execute(select(db.segments).where(db.segments.c.session_id == session_id)
                                 .order_by(db.segments.c.name)).mappings().all()
     coverage = json.loads(row["coverage"] or "[]")
-    gaps = [[a[1], b[0]] for a, b in zip(coverage, coverage[1:])]
+    gaps = [[a[1], b[0]] for a, b in pairwise(coverage)]
     return {
         **_session_summary(row, full_model=True),
         "archives": [{"format": a["format"], "bytes": a["bytes"], "objects": a["objects"], "ratio": a["ratio"],

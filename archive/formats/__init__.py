@@ -12,5 +12,14 @@ register_format("jxl", zipped_factory("jxl", effort=2))
 register_format("htj2k", zipped_factory("htj2k"))
 register_format("jpegls", zipped_factory("jpegls"))
 
-__all__ = ["ArchiveContext", "ArchiveFormat", "FileRecord", "format_registry", "get_format", "register_format",
-           "Hdf5", "TiffLzw", "ZippedFrames"]
+__all__ = [
+           "ArchiveContext",
+           "ArchiveFormat",
+           "FileRecord",
+           "Hdf5",
+           "TiffLzw",
+           "ZippedFrames",
+           "format_registry",
+           "get_format",
+           "register_format",
+]

@@ -12,21 +12,31 @@ from __future__ import annotations
 import json
 from abc import ABC, abstractmethod
 from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, ClassVar, Iterable, Iterator, TypeVar
+from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
+from archive.codecs import build_from_config
 from recorder.icd.names import format_name
 from recorder.radiometry import LinearModel, model_from_dict
 from recorder.storage.reader import SessionFrame
 
-from archive.codecs import build_from_config
-
-__all__ = ["ArchiveFormat", "FileRecord", "ArchiveContext", "DecodedFrame", "format_registry", "register_format",
-           "get_format", "ordered_map", "frame_name", "locate"]
+__all__ = [
+    "ArchiveContext",
+    "ArchiveFormat",
+    "DecodedFrame",
+    "FileRecord",
+    "format_registry",
+    "frame_name",
+    "get_format",
+    "locate",
+    "ordered_map",
+    "register_format",
+]
 
 T = TypeVar("T")
 R = TypeVar("R")

@@ -9,16 +9,15 @@ sidecars; the radiometric model, sensor and session id as attributes.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import h5py
 import numpy as np
 
-from recorder.storage.reader import SessionFrame
-
 from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
+from recorder.storage.reader import SessionFrame
 
 __all__ = ["Hdf5"]
 

@@ -4,23 +4,32 @@ Every page carries the ICD's mandatory tags (width, length, 16 bits, photometric
 strip offsets, one sample, rows per strip, chunky, unsigned) and its frame's sidecar JSON in
 ImageDescription. tifffile omits PlanarConfiguration (284) and SampleFormat (339) for one-sample
 unsigned images and refuses to add them: their TIFF 6.0 defaults are exactly the ICD's values
-(1 = chunky, 1 = unsigned), so every reader sees the same image. Compression is LZW (5), not the ICD's 1, because this is the archive copy;
+(1 = chunky, 1 = unsigned), so every reader sees the same image. Compression is LZW (5), not the
+ICD's 1, because this is the archive copy;
 ``thermcap export --to icd`` writes uncompressed ICD files. 64-row strips let tifffile compress
 a page on both cores; tifffile, ImageJ and GDAL all read it.
 """
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 import tifffile
 
-from recorder.storage.reader import SessionFrame
-
 from archive.exceptions import ArchiveError
-from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, group_by_segment, locate, sidecar_text, time_from_sidecar
+from archive.formats.base import (
+    ArchiveContext,
+    ArchiveFormat,
+    DecodedFrame,
+    FileRecord,
+    group_by_segment,
+    locate,
+    sidecar_text,
+    time_from_sidecar,
+)
+from recorder.storage.reader import SessionFrame
 
 __all__ = ["TiffLzw"]
 

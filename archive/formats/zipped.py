@@ -8,16 +8,25 @@ are already compressed), so any frame is one ranged read once the central direct
 from __future__ import annotations
 
 import zipfile
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Iterable, Iterator
 
 import numpy as np
 
-from recorder.storage.reader import SessionFrame
-
 from archive.codecs import FrameCodec, get_codec
 from archive.exceptions import ArchiveError
-from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, frame_name, locate, group_by_segment, ordered_map, sidecar_text
+from archive.formats.base import (
+    ArchiveContext,
+    ArchiveFormat,
+    DecodedFrame,
+    FileRecord,
+    frame_name,
+    group_by_segment,
+    locate,
+    ordered_map,
+    sidecar_text,
+)
+from recorder.storage.reader import SessionFrame
 
 __all__ = ["ZippedFrames"]
 

@@ -25,7 +25,7 @@ from recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
 from recorder.icd.quality import contrast_metrics, frame_analysis, graded_contrast
 from recorder.radiometry import RadiometricModel
 
-__all__ = ["HotSpotDetector", "Detection", "EventBuilder", "iou"]
+__all__ = ["Detection", "EventBuilder", "HotSpotDetector", "iou"]
 
 
 @dataclass
@@ -95,7 +95,8 @@ class HotSpotDetector:
         padded = np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
         # Strided element-wise ops: numpy's reductions over a 4-long inner axis are 10x slower.
         cols = [padded[:, j::f] for j in range(f)]
-        csum, cmx = cols[0] + cols[1] + cols[2] + cols[3], np.maximum(np.maximum(cols[0], cols[1]), np.maximum(cols[2], cols[3]))
+        csum, cmx = cols[0] + cols[1] + cols[2] + cols[3], np.maximum(np.maximum(cols[0], cols[1]),
+                                                                      np.maximum(cols[2], cols[3]))
         mean = (csum[0::f] + csum[1::f] + csum[2::f] + csum[3::f]) * np.float32(1.0 / (f * f))
         cmax = np.maximum(np.maximum(cmx[0::f], cmx[1::f]), np.maximum(cmx[2::f], cmx[3::f]))
         k = self.max_size // f + 1
@@ -115,7 +116,6 @@ class HotSpotDetector:
         if self._bad_coords is None:
             self._bad_coords = np.argwhere(self.bad_pixel_map)
         out = temps.copy()
-        h, w = temps.shape
         for y, x in self._bad_coords:  # dead and hot pixels would read as 1-px targets
             win = temps[max(0, y - 1):y + 2, max(0, x - 1):x + 2]
             good = win[~self.bad_pixel_map[max(0, y - 1):y + 2, max(0, x - 1):x + 2]]
@@ -142,7 +142,7 @@ class HotSpotDetector:
             # dropped here, at quarter resolution, before any full-resolution work.
             rmax = ndimage.maximum(cmax, regions, np.arange(1, nreg + 1))
             found = []
-            for rsl, top in zip(ndimage.find_objects(regions), np.atleast_1d(rmax)):
+            for rsl, top in zip(ndimage.find_objects(regions), np.atleast_1d(rmax), strict=True):
                 cy = min((rsl[0].start + rsl[0].stop) // 2, local_mean.shape[0] - 1)
                 cx = min((rsl[1].start + rsl[1].stop) // 2, local_mean.shape[1] - 1)
                 if top - local_mean[cy, cx] < 0.8 * self.threshold_k:
@@ -252,10 +252,10 @@ class EventBuilder:
         self._last_t = t_ns
 
     def _close_low(self) -> None:
-        if self._low_start is not None and self._low_last is not None:
-            if (self._low_last - self._low_start) / 1e9 >= self.min_crossover_s:
-                self.events.append({"kind": "thermal_crossover", "start_ns": self._low_start, "end_ns": self._low_last,
-                                    "detail": {"min_grade": round(self._low_min, 4)}})
+        if self._low_start is not None and self._low_last is not None \
+                and (self._low_last - self._low_start) / 1e9 >= self.min_crossover_s:
+            self.events.append({"kind": "thermal_crossover", "start_ns": self._low_start, "end_ns": self._low_last,
+                                "detail": {"min_grade": round(self._low_min, 4)}})
         self._low_start = self._low_last = None
 
     def finish(self) -> list[dict[str, Any]]:

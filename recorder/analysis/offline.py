@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
 from recorder.exceptions import McapFileError
@@ -22,7 +23,7 @@ from recorder.storage.lock import session_locked
 from recorder.storage.reader import frame_files, iter_session_frames, read_session_meta
 from recorder.storage.segments import write_json_atomic
 
-__all__ = ["analyze_session", "ANALYSIS_FILE", "EVENTS_FILE"]
+__all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
 
 ANALYSIS_FILE = "analysis.jsonl"
 EVENTS_FILE = "events.json"

@@ -89,7 +89,8 @@ def bench_analysis(frames_per_scene: int = 12) -> dict[str, Any]:
     # A dawn crossover: the grade follows the truth's fade.
     xo = SimSource(frames=240, paced=False, seed=7, crossover=True, cue_period_s=0, start_time_ns=0)
     det = HotSpotDetector(xo.model, bad_pixel_map=xo.bad_pixel_map)
-    grades = [(det.detect(f.pixels)[1]["thermal_contrast_grade"], f.sidecar["thermal_analysis"]["thermal_contrast_grade"])
+    grades = [(det.detect(f.pixels)[1]["thermal_contrast_grade"],
+               f.sidecar["thermal_analysis"]["thermal_contrast_grade"])
               for f in xo.frames()]
     agree = sum((a < 0.3) == (b < 0.3) for a, b in grades) / len(grades)
     # Speed on one core, 640x512.
@@ -113,13 +114,15 @@ def print_table(res: dict[str, Any]) -> str:
     for name in ("< 5 K", "5-10 K", ">= 10 K"):
         b = res["bands"].get(name)
         if b:
-            lines.append(f"{name:>8} {b['precision']:>10} {b['recall']:>8} {b['f1']:>7} {b['tp']:>6} {b['fp']:>5} {b['fn']:>5}")
+            lines.append(f"{name:>8} {b['precision']:>10} {b['recall']:>8} {b['f1']:>7} {b['tp']:>6} "
+                         f"{b['fp']:>5} {b['fn']:>5}")
     lines.append("recall by delta T (rows) and target size in px (columns):")
     lines.append("        " + "".join(f"{s:>7}" for s in SIZES))
     for d in DELTAS:
         row = [c for c in res["cells"] if c["delta_k"] == d]
         lines.append(f"{d:>6} K" + "".join(f"{c['recall']:>7}" for c in row))
-    lines.append(f"centroid error: mean {res['centroid_error_px']['mean']} px, p95 {res['centroid_error_px']['p95']} px")
+    err = res["centroid_error_px"]
+    lines.append(f"centroid error: mean {err['mean']} px, p95 {err['p95']} px")
     lines.append(f"false detections per 100 target-free frames: {res['false_per_100_empty_frames']}")
     lines.append(f"crossover (grade < 0.3) agreement with ground truth: {res['crossover_agreement_with_truth']}")
     lines.append(f"detector speed, 640x512, one core: {res['fps_640x512_one_core']} fps")
@@ -135,7 +138,8 @@ def overlay_png(temps: np.ndarray, boxes: list[list[int]], palette_name: str = "
     lo, hi = np.percentile(temps, 0.5), np.percentile(temps, 99.5)
     rgb = palette(palette_name)[np.clip((temps - lo) * (255.0 / max(hi - lo, 1e-6)), 0, 255).astype(np.uint8)].copy()
     for x0, y0, x1, y1 in boxes:
-        x0, y0, x1, y1 = max(0, x0 - 1), max(0, y0 - 1), min(temps.shape[1] - 1, x1 + 1), min(temps.shape[0] - 1, y1 + 1)
+        x0, y0, x1, y1 = max(0, x0 - 1), max(0, y0 - 1), min(temps.shape[1] - 1,
+                                                             x1 + 1), min(temps.shape[0] - 1, y1 + 1)
         rgb[y0, x0:x1 + 1] = rgb[y1, x0:x1 + 1] = 255
         rgb[y0:y1 + 1, x0] = rgb[y0:y1 + 1, x1] = 255
     return imagecodecs.png_encode(rgb)
@@ -168,7 +172,8 @@ def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str
             row = {"file": name, "format": f.format, "layout": f.layout, "hot_spots": len(dets),
                    "grade": analysis["thermal_contrast_grade"], "delta_t": analysis["delta_t_deg_c"],
                    "scene_c": [round(float(temps.min()), 1), round(float(temps.max()), 1)],
-                   "largest_px": max(((d.bbox[2] - d.bbox[0] + 1) * (d.bbox[3] - d.bbox[1] + 1) for d in dets), default=0)}
+                   "largest_px": max(((d.bbox[2] - d.bbox[0] + 1) * (d.bbox[3] - d.bbox[1] + 1) for d in dets),
+                                     default=0)}
             if out_dir:
                 os.makedirs(out_dir, exist_ok=True)
                 out = os.path.join(out_dir, os.path.splitext(name)[0] + ".overlay.png")

@@ -23,9 +23,9 @@ __all__ = ["bench_import", "print_table"]
 
 
 def _simulated_icd(folder: Path, frames: int) -> list[Path]:
-    from recorder.exports.files import export_session
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources import make_source
+    from recorder.exports.files import export_session
 
     rec = Recorder(make_source("sim", frames=frames, paced=False, seed=7), folder / "rec", session_id="bench",
                    analysis=False)

@@ -19,12 +19,12 @@ from typing import Any
 import zstandard
 
 from recorder.capture.recorder import Recorder
-from recorder.storage.writer import Compression
-from recorder.storage.segments import SegmentPolicy, auto_compression
 from recorder.capture.sources.base import CapturedFrame, FrameSource
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy, auto_compression
+from recorder.storage.writer import Compression
 
-__all__ = ["bench_record", "run_soak", "print_table", "MemorySource"]
+__all__ = ["MemorySource", "bench_record", "print_table", "run_soak"]
 
 
 class MemorySource(FrameSource):
@@ -131,7 +131,8 @@ def run_soak(seconds: float, *, workdir: str | None = None, width: int = 640, he
             "rss_start_mb": round(rss[0][1], 1) if rss else None,
             "rss_end_mb": round(rss[-1][1], 1) if rss else None,
             # After the first minute (allocator arenas, caches and the first segment warmed up):
-            "rss_growth_after_60s_mb": round(rss[-1][1] - next((m for t, m in rss if t >= 60), rss[-1][1]), 1) if rss else None,
+            "rss_growth_after_60s_mb": round(rss[-1][1] - next((m for t, m in rss if t >= 60), rss[-1][1]),
+                                             1) if rss else None,
             "rss_mb_every_10s": [round(m, 1) for _, m in rss],
             "rss_peak_mb": round(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024, 1),
             "segments": len(res.segments), "ok": res.ok,

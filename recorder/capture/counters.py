@@ -27,7 +27,8 @@ class LatencyHistogram:
         self.sum_s = 0.0
 
     def add(self, seconds: float) -> None:
-        i = 0 if seconds <= self._LO else min(len(self.bins) - 1, int(math.log(seconds / self._LO) / math.log(self._STEP)) + 1)
+        i = 0 if seconds <= self._LO else min(len(self.bins) - 1,
+                                              int(math.log(seconds / self._LO) / math.log(self._STEP)) + 1)
         self.bins[i] += 1
         self.count += 1
         self.sum_s += seconds

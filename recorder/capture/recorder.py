@@ -9,8 +9,8 @@ is bounded by the queue length plus the chunks in flight, however long the sessi
 
 from __future__ import annotations
 
+import contextlib
 import json
-from concurrent.futures import Future, TimeoutError as FutureTimeout
 import os
 import queue
 import secrets
@@ -18,21 +18,24 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Callable
+from concurrent.futures import Future
+from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from recorder import __version__
+from recorder.analysis.detector import EventBuilder, HotSpotDetector
+from recorder.capture.counters import LatencyHistogram, RecorderCounters
+from recorder.capture.sources.base import CapturedFrame, FrameSource
 from recorder.exceptions import RecordingError, ThermcapError
 from recorder.icd.names import FORMAT_VERSION, iso_utc
-from recorder.storage.lock import lock_session
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
-from recorder.analysis.detector import EventBuilder, HotSpotDetector
-from recorder.radiometry import LinearModel, describe_model
-from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 from recorder.icd.sidecar import SidecarEncoder
-from recorder.capture.sources.base import CapturedFrame, FrameSource
-from recorder.capture.counters import LatencyHistogram, RecorderCounters
+from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from recorder.radiometry import LinearModel, describe_model
+from recorder.storage.lock import lock_session
+from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 
 __all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
@@ -154,7 +157,7 @@ class Recorder:
         self.source.stop()
 
     def run(self, duration_s: float | None = None,
-            progress: Callable[["Recorder"], None] | None = None) -> RecordingResult:
+            progress: Callable[[Recorder], None] | None = None) -> RecordingResult:
         recovered: list[str] = []
         if self.recover_leftovers:
             from recorder.storage.recover import recover_leftovers
@@ -201,10 +204,8 @@ class Recorder:
         wall = time.monotonic() - t0
         error = self._writer_error or self._source_error
         events = self._events.finish()
-        try:
+        with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(self.session_dir / "events.json", {"session_id": self.session_id, "events": events})
-        except OSError:
-            pass  # a full disk: the events can be rebuilt with `thermcap analyze`
         result = RecordingResult(
             session_id=self.session_id, session_dir=self.session_dir,
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
@@ -297,7 +298,8 @@ class Recorder:
             return
         try:
             self._aq.put_nowait((frame.pixels, fut))
-            self._next_analysis_ns = max(self._next_analysis_ns + self._analysis_period_ns, now - self._analysis_period_ns)
+            self._next_analysis_ns = max(self._next_analysis_ns + self._analysis_period_ns,
+                                         now - self._analysis_period_ns)
         except queue.Full:
             fut.set_result(None)
 

@@ -5,4 +5,4 @@ from recorder.cli import analyze, bench, files, record  # noqa: F401  (registers
 from recorder.cli.options import default_root, fail, json_option, root_option
 from recorder.cli.root import cli, main
 
-__all__ = ["cli", "main", "default_root", "fail", "json_option", "root_option"]
+__all__ = ["cli", "default_root", "fail", "json_option", "main", "root_option"]

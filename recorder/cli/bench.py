@@ -15,11 +15,13 @@ from recorder.cli.root import bench
 @click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
 @click.option("--sizes", default="640x512,1280x1024", show_default=True)
 @click.option("--soak", type=float, default=None, help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
-@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None, help="Where to write (default: a temp folder).")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None,
+              help="Where to write (default: a temp folder).")
 @json_option
 def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, as_json: bool) -> None:
     """Recorder throughput vs plain zstd-to-file, or a paced soak."""
-    from recorder.bench.record import bench_record as run_bench, run_soak, print_table
+    from recorder.bench.record import bench_record as run_bench
+    from recorder.bench.record import print_table, run_soak
 
     if soak:
         res = run_soak(soak, workdir=workdir)
@@ -71,7 +73,7 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
     click.echo(print_table(res))
     for r in res.get("samples", []):
         click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
-                   + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px" if r["hot_spots"] is not None
-                      else r["note"]))
+                   + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px"
+                      if r["hot_spots"] is not None else r["note"]))
 
 

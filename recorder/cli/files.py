@@ -15,9 +15,11 @@ from recorder.exceptions import ThermcapError
 @cli.command("import")
 @click.argument("paths", nargs=-1, required=True, type=click.Path())
 @root_option
-@click.option("--session", "session_name", default=None, help="Session id (suffixed -1, -2 ... when files need several).")
+@click.option("--session", "session_name", default=None,
+              help="Session id (suffixed -1, -2 ... when files need several).")
 @click.option("--session-per-file", is_flag=True, help="One session per file.")
-@click.option("--analysis/--no-analysis", default=True, show_default=True, help="Run the hot-spot detector on the frames.")
+@click.option("--analysis/--no-analysis", default=True, show_default=True,
+              help="Run the hot-spot detector on the frames.")
 @click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
               help="DJI temperatures by DJI's own code: auto = dji-thermal-cli if on PATH; off; or the path to "
                    "libdirp (.so/.dll) or a dji-thermal-cli executable. Without one, DJI dirp/girp/hirp frames "
@@ -51,9 +53,11 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
     else:
         for f in report.files:
             c = f["celsius"]
-            temp = (f"{c['min']:.2f}..{c['max']:.2f} C (mean {c['mean']:.2f})" + (" approximate" if c.get("approximate") else "")
+            temp = (f"{c['min']:.2f}..{c['max']:.2f} C (mean {c['mean']:.2f})"
+                    + (" approximate" if c.get("approximate") else "")
                     if c else f"no temperature: {f.get('dji_sdk_error') or f.get('celsius_unavailable')}")
-            click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} -> {f.get('session_id')}")
+            click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} "
+                       f"-> {f.get('session_id')}")
         for r in report.sessions:
             click.echo(f"session {r.session_id}: {r.frames_written} frames")
         for f in report.failed:
@@ -67,8 +71,10 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @cli.command("export")
 @click.argument("session")
 @root_option
-@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg"]), required=True)
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None, help="Folder (default: SESSION/export/KIND).")
+@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg"]),
+              required=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder (default: SESSION/export/KIND).")
 @click.option("--summary", type=click.Choice(["csv", "json"]), default=None,
               help="Also write per-frame surface_temperature statistics.")
 @click.option("--palette", default="ironbow", type=click.Choice(["ironbow", "gray", "turbo"]), show_default=True)

@@ -8,7 +8,7 @@ from typing import NoReturn
 
 import click
 
-__all__ = ["default_root", "fail", "root_option", "json_option"]
+__all__ = ["default_root", "fail", "json_option", "root_option"]
 
 
 def default_root() -> str:

@@ -17,7 +17,8 @@ from recorder.exceptions import ThermcapError
 # -- record ---------------------------------------------------------------------------------
 @cli.command()
 @click.option("--source", default="sim", show_default=True, help="sim, raw:PATH, or raw:- for stdin.")
-@click.option("--duration", type=float, default=None, help="Seconds to record (default: until the input ends or Ctrl-C).")
+@click.option("--duration", type=float, default=None,
+              help="Seconds to record (default: until the input ends or Ctrl-C).")
 @click.option("--fps", type=float, default=60.0, show_default=True)
 @click.option("--width", type=int, default=640, show_default=True)
 @click.option("--height", type=int, default=512, show_default=True)
@@ -31,26 +32,31 @@ from recorder.exceptions import ThermcapError
                    "arrives (a pipe from a live camera tool).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulator seed.")
 @click.option("--crossover", is_flag=True, help="Simulator: include a dawn/dusk thermal crossover.")
-@click.option("--cue-period", type=float, default=20.0, show_default=True, help="Simulator: seconds between radar cues (0: none).")
-@click.option("--segment-duration", type=float, default=60.0, show_default=True, help="Rotate segments after this many seconds.")
-@click.option("--segment-size", type=float, default=4096.0, show_default=True, help="Rotate segments after this many MiB.")
+@click.option("--cue-period", type=float, default=20.0, show_default=True,
+              help="Simulator: seconds between radar cues (0: none).")
+@click.option("--segment-duration", type=float, default=60.0, show_default=True,
+              help="Rotate segments after this many seconds.")
+@click.option("--segment-size", type=float, default=4096.0, show_default=True,
+              help="Rotate segments after this many MiB.")
 @click.option("--compression", type=click.Choice(["auto", "zstd", "lz4", "none"]), default="auto", show_default=True,
               help="Chunk compression; auto: zstd-1 up to 25 Mpixel/s, lz4 above (e.g. 1280x1024@60).")
 @click.option("--level", type=int, default=None, help="Compression level (default: zstd 1, lz4 0).")
-@click.option("--queue", "queue_frames", type=int, default=120, show_default=True, help="Capture queue capacity in frames.")
+@click.option("--queue", "queue_frames", type=int, default=120, show_default=True,
+              help="Capture queue capacity in frames.")
 @click.option("--analysis/--no-analysis", default=True, show_default=True,
               help="Run the hot-spot detector beside recording (fills sidecar targets and contrast grade).")
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
 def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
-           root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool, cue_period: float,
+           root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool,
+           cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
-    from recorder.storage.writer import Compression
     from recorder.capture.recorder import Recorder
-    from recorder.storage.segments import SegmentPolicy, auto_compression
     from recorder.capture.sources import make_source
+    from recorder.storage.segments import SegmentPolicy, auto_compression
+    from recorder.storage.writer import Compression
 
     try:
         is_sim = source == "sim"

@@ -15,7 +15,7 @@ from recorder import __version__
 from recorder.cli.options import fail
 from recorder.exceptions import ThermcapError
 
-__all__ = ["cli", "bench", "main"]
+__all__ = ["bench", "cli", "main"]
 
 
 class _PluginGroup(click.Group):

@@ -5,8 +5,9 @@ source position, where one was recorded, in the TIFF's ImageDescription JSON); `
 8-bit colour PNGs on one fixed temperature range for the whole session, so colours compare
 across frames; ``icd``: the ICD's own pairs, an uncompressed 16-bit TIFF with every mandatory
 tag and its JSON sidecar; ``dji-rjpeg``: R-JPEGs rebuilt from imported DJI frames and their kept APP
-segments, which DJI's own tools measure as they did the originals. ``summary`` writes per-frame ``surface_temperature`` statistics (CF
-standard name; cell_methods min, max, mean and percentiles) as CSV or JSON.
+segments, which DJI's own tools measure as they did the originals. ``summary`` writes per-frame
+``surface_temperature`` statistics (CF standard name; cell_methods min, max, mean and
+percentiles) as CSV or JSON.
 """
 
 from __future__ import annotations
@@ -14,20 +15,21 @@ from __future__ import annotations
 import csv
 import json
 import os
+from collections.abc import Callable
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import imagecodecs
 import numpy as np
 import tifffile
 
 from recorder.exceptions import ThermcapError
+from recorder.exports.render import palette
 from recorder.icd.names import format_name
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
 from recorder.storage.reader import iter_session_frames, read_session_meta
-from recorder.exports.render import palette
 
-__all__ = ["export_session", "EXPORT_KINDS"]
+__all__ = ["EXPORT_KINDS", "export_session"]
 
 EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg")
 PERCENTILES = (5, 25, 50, 75, 95)
@@ -125,7 +127,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                           "surface_temperature_mean": round(float(temps.mean()), 4),
                           "surface_temperature_min": round(float(temps.min()), 4),
                           "surface_temperature_max": round(float(temps.max()), 4),
-                          **{f"surface_temperature_p{p}": round(float(v), 4) for p, v in zip(PERCENTILES, pct)},
+                          **{f"surface_temperature_p{p}": round(float(v), 4) for p,
+                             v in zip(PERCENTILES, pct, strict=True)},
                           "units": "degC"})
         if on_frame:
             on_frame(len(written))
@@ -203,7 +206,8 @@ def _write_summary(out: Path, fmt: str, stats: list[dict[str, Any]], meta: dict[
     if fmt == "json":
         doc = {"standard_name": "surface_temperature", "units": "degC",
                "cell_methods": "area: mean area: minimum area: maximum area: percentile",
-               "session_id": meta.get("session_id"), "radiometric_model": meta.get("radiometric_model"), "frames": stats}
+               "session_id": meta.get("session_id"), "radiometric_model": meta.get("radiometric_model"),
+               "frames": stats}
         tmp.write_text(json.dumps(doc, indent=1))
     elif fmt == "csv":
         with open(tmp, "w", newline="") as f:

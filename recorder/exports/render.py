@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import io
 import json
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import imagecodecs
 import numpy as np
@@ -12,7 +12,7 @@ import tifffile
 
 from recorder.radiometry import RadiometricModel, model_from_dict
 
-__all__ = ["PALETTES", "palette", "preview_png", "celsius", "celsius_tiff", "png16", "tiff16", "session_model"]
+__all__ = ["PALETTES", "celsius", "celsius_tiff", "palette", "png16", "preview_png", "session_model", "tiff16"]
 
 PALETTES = ("ironbow", "gray", "turbo")
 
@@ -25,7 +25,7 @@ def _turbo(x: np.ndarray) -> np.ndarray:
     return np.stack([r, g, b], axis=-1)
 
 
-@lru_cache(maxsize=None)
+@cache
 def palette(name: str) -> np.ndarray:
     """A (256, 3) uint8 lookup table."""
     x = np.linspace(0.0, 1.0, 256)

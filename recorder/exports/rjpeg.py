@@ -14,7 +14,7 @@ import numpy as np
 from recorder.importers.dji import DJI_SEGMENT, RAW_PLACEHOLDER, SEGMENTS_BLOB, app_segment
 from recorder.importers.jpeg import app_segments
 
-__all__ = ["rebuild_rjpeg", "SEGMENTS_BLOB"]
+__all__ = ["SEGMENTS_BLOB", "rebuild_rjpeg"]
 
 
 def rebuild_rjpeg(pixels: np.ndarray, segments_blob: bytes) -> bytes:

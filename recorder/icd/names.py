@@ -10,20 +10,20 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
 __all__ = [
-    "iso_utc",
-    "parse_rfc3339",
-    "FORMAT_VERSION",
-    "MAX_COUNT",
+    "CROSSOVER_GRADE",
     "DETECTION_THRESHOLD_K",
     "EXCELLENT_THRESHOLD_K",
-    "CROSSOVER_GRADE",
+    "FORMAT_VERSION",
+    "MAX_COUNT",
     "IcdName",
     "format_name",
-    "parse_name",
     "format_temp_range",
+    "iso_utc",
+    "parse_name",
+    "parse_rfc3339",
 ]
 
 FORMAT_VERSION = "1.0"
@@ -67,7 +67,7 @@ def format_name(timestamp_ns: int, sensor_id: str, temp_min_c: float, temp_max_c
                 *, subsecond: bool = True) -> str:
     """The ICD base name (no extension) for a frame captured at ``timestamp_ns`` (Unix, UTC)."""
     seconds, frac_ns = divmod(int(timestamp_ns), 1_000_000_000)
-    stamp = datetime.fromtimestamp(seconds, tz=timezone.utc).strftime("%Y%m%dT%H%M%S")
+    stamp = datetime.fromtimestamp(seconds, tz=UTC).strftime("%Y%m%dT%H%M%S")
     if subsecond:
         stamp += f".{frac_ns:09d}"
     return f"thermal_{stamp}Z_{_sanitize_sensor(sensor_id)}_{format_temp_range(temp_min_c, temp_max_c)}"
@@ -82,7 +82,7 @@ def parse_name(name: str) -> IcdName:
             f"{name!r} does not follow the ICD naming convention "
             "thermal_<YYYYMMDDTHHMMSS[.fraction]Z>_<sensor>_<N|P><min>_<N|P><max>"
         )
-    dt = datetime.strptime(m["ts"], "%Y%m%dT%H%M%S").replace(tzinfo=timezone.utc)
+    dt = datetime.strptime(m["ts"], "%Y%m%dT%H%M%S").replace(tzinfo=UTC)
     frac = m["frac"] or ""
     ns = int(dt.timestamp()) * 1_000_000_000 + (int(frac.ljust(9, "0")) if frac else 0)
 
@@ -95,7 +95,7 @@ def parse_name(name: str) -> IcdName:
 def iso_utc(ns: int) -> str:
     """RFC 3339 UTC with nanoseconds (the sidecar's capture.timestamp and the API's times)."""
     sec, frac = divmod(int(ns), 1_000_000_000)
-    return datetime.fromtimestamp(sec, tz=timezone.utc).strftime("%Y-%m-%dT%H:%M:%S") + f".{frac:09d}Z"
+    return datetime.fromtimestamp(sec, tz=UTC).strftime("%Y-%m-%dT%H:%M:%S") + f".{frac:09d}Z"
 
 
 _RFC3339 = re.compile(r"^(\d{4}-\d\d-\d\d)[Tt ](\d\d:\d\d:\d\d)(?:\.(\d{1,9}))?(Z|z|[+-]\d\d:\d\d)$")
@@ -109,5 +109,5 @@ def parse_rfc3339(text: str) -> int:
     base = datetime.strptime(f"{m[1]}T{m[2]}", "%Y-%m-%dT%H:%M:%S")
     tz = m[4].upper()
     offset = 0 if tz == "Z" else (1 if tz[0] == "+" else -1) * (int(tz[1:3]) * 3600 + int(tz[4:6]) * 60)
-    sec = int(base.replace(tzinfo=timezone.utc).timestamp()) - offset
+    sec = int(base.replace(tzinfo=UTC).timestamp()) - offset
     return sec * 1_000_000_000 + int((m[3] or "0").ljust(9, "0"))

@@ -15,10 +15,10 @@ from recorder.icd.names import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
 __all__ = [
     "contrast_grade",
     "contrast_metrics",
-    "snr_db",
+    "correct_bad_pixels",
     "frame_analysis",
     "netd_mk",
-    "correct_bad_pixels",
+    "snr_db",
 ]
 
 
@@ -121,7 +121,7 @@ def correct_bad_pixels(frame: np.ndarray, bad_pixel_map: np.ndarray) -> np.ndarr
         raise ValueError(f"bad-pixel map shape {bpm.shape} does not match the frame {frame.shape}")
     out = frame.copy()
     h, w = frame.shape
-    for y, x in zip(*np.nonzero(bpm)):
+    for y, x in zip(*np.nonzero(bpm), strict=True):
         for radius in range(1, max(h, w)):
             y0, y1, x0, x1 = max(0, y - radius), min(h, y + radius + 1), max(0, x - radius), min(w, x + radius + 1)
             good = frame[y0:y1, x0:x1][~bpm[y0:y1, x0:x1]]

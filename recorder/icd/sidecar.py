@@ -15,14 +15,14 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any
+from typing import Any, ClassVar
 
 import fastjsonschema
 
 from recorder.exceptions import SidecarError
 from recorder.icd.names import FORMAT_VERSION
 
-__all__ = ["SIDECAR_SCHEMA", "validate_sidecar", "sidecar_schema_bytes", "dumps_sidecar", "SidecarEncoder"]
+__all__ = ["SIDECAR_SCHEMA", "SidecarEncoder", "dumps_sidecar", "sidecar_schema_bytes", "validate_sidecar"]
 
 _num = {"type": "number"}
 _nnum = {"type": ["number", "null"]}
@@ -167,7 +167,8 @@ class SidecarEncoder:
     """
 
     _PER_FRAME = ("capture", "environment", "thermal_analysis", "slew_to_cue", "targets")
-    _validators = {k: fastjsonschema.compile(SIDECAR_SCHEMA["properties"][k]) for k in _PER_FRAME}
+    _validators: ClassVar[dict[str,
+                               Any]] = {k: fastjsonschema.compile(SIDECAR_SCHEMA["properties"][k]) for k in _PER_FRAME}
 
     def __init__(self, sensor: dict[str, Any], radiometric: dict[str, Any]) -> None:
         probe = {"format_version": FORMAT_VERSION, "sensor": sensor, "radiometric": radiometric,
@@ -215,7 +216,8 @@ def _find_non_finite(value: Any, path: str) -> str | None:
         return path
     items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
     for k, v in items:
-        found = _find_non_finite(v, f"{path}.{k}" if isinstance(k, str) and path else (k if isinstance(k, str) else f"{path}[{k}]"))
+        where = f"{path}.{k}" if isinstance(k, str) and path else (k if isinstance(k, str) else f"{path}[{k}]")
+        found = _find_non_finite(v, where)
         if found:
             return found
     return None

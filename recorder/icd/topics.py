@@ -14,19 +14,19 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "GROUND_TRUTH_SCHEMA",
     "IMAGE_SCHEMA_NAME",
     "IMAGE_SCHEMA_TEXT",
-    "encode_image_prefix",
-    "image_message_parts",
-    "decode_image",
+    "RADAR_CUE_SCHEMA",
+    "STATS_SCHEMA",
+    "TOPIC_GROUND_TRUTH",
     "TOPIC_IMAGE",
     "TOPIC_METADATA",
     "TOPIC_RADAR_CUE",
     "TOPIC_STATS",
-    "TOPIC_GROUND_TRUTH",
-    "RADAR_CUE_SCHEMA",
-    "STATS_SCHEMA",
-    "GROUND_TRUTH_SCHEMA",
+    "decode_image",
+    "encode_image_prefix",
+    "image_message_parts",
 ]
 
 TOPIC_IMAGE = "/thermal/image"

@@ -9,8 +9,8 @@ and raw Gray16 with their JSON sidecars.
 from __future__ import annotations
 
 import mmap
+from collections.abc import Iterator
 from pathlib import Path
-from typing import Iterator
 
 from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError
 from recorder.importers.dji import is_dji, read_dji
@@ -19,7 +19,7 @@ from recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_fo
 from recorder.importers.jpeg import app_segments
 from recorder.importers.terraref import metadata_for, read_terraref
 
-__all__ = ["ImportedFrame", "ImportError_", "read_file", "iter_file", "detect", "MAX_FILE_BYTES"]
+__all__ = ["MAX_FILE_BYTES", "ImportError_", "ImportedFrame", "TruncatedImageError", "detect", "iter_file", "read_file"]
 
 MAX_FILE_BYTES = 4 * 1024**3
 

@@ -10,10 +10,10 @@ import numpy as np
 from recorder.exceptions import SourceError
 from recorder.radiometry import RadiometricModel
 
-__all__ = ["ImportedFrame", "ImportError_", "read_exact"]
+__all__ = ["ImportError_", "ImportedFrame", "read_exact"]
 
 
-class ImportError_(SourceError):  # noqa: N801 - "ImportError" is a builtin
+class ImportError_(SourceError):
     """A file could not be imported; the message names the file and the problem."""
 
 

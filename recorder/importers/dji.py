@@ -12,12 +12,12 @@ import struct
 
 import numpy as np
 
-from recorder.radiometry import DjiModel
 from recorder.importers.base import ImportedFrame, ImportError_
 from recorder.importers.exif import capture_time, exif_fields, xmp_fields
 from recorder.importers.jpeg import app_segments, concat_app
+from recorder.radiometry import DjiModel
 
-__all__ = ["read_dji", "dji_layout", "is_dji", "SEGMENTS_BLOB", "RAW_PLACEHOLDER", "DJI_SEGMENT", "app_segment"]
+__all__ = ["DJI_SEGMENT", "RAW_PLACEHOLDER", "SEGMENTS_BLOB", "app_segment", "dji_layout", "is_dji", "read_dji"]
 
 _MAGIC = b"\xff\xd2\xd1\xff"
 SEGMENTS_BLOB = "dji_rjpeg_segments.bin"
@@ -123,7 +123,8 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
     w, h = _size(path, layout, model, app4)
     payload = app4 if xt_s else app3
     if len(payload) != w * h * 2:
-        raise ImportError_(f"{path}: DJI {layout} raw payload is {len(payload)} bytes, expected {w}x{h}x2 = {w * h * 2}")
+        raise ImportError_(f"{path}: DJI {layout} raw payload is {len(payload)} bytes, "
+                           f"expected {w}x{h}x2 = {w * h * 2}")
     # Signed layouts (girp, XT S) keep their int16 bit pattern in the uint16 container: bit-exact.
     pixels = np.frombuffer(payload, dtype="<u2").reshape(h, w).copy()
     blobs = {}
@@ -146,5 +147,6 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
     return [ImportedFrame(path=path, format="dji-rjpeg", layout=layout, pixels=pixels,
                           model=DjiModel(layout=layout, **{k: (None if v is None else round(float(v), 6))
                                                            for k, v in params.items()}),
-                          timestamp_ns=ts, sensor_model=f"DJI {model}".strip(), sensor_id=f"DJI-{model or 'UNKNOWN'}"[:32],
+                          timestamp_ns=ts, sensor_model=f"DJI {model}".strip(),
+                          sensor_id=f"DJI-{model or 'UNKNOWN'}"[:32],
                           vendor_metadata=meta, blobs=blobs)]

@@ -24,7 +24,7 @@ import numpy as np
 
 from recorder.exceptions import ThermcapError
 
-__all__ = ["DjiBackend", "DjiThermalCli", "LibDirp", "DjiSdkError", "find_backend", "ENV_VAR"]
+__all__ = ["ENV_VAR", "DjiBackend", "DjiSdkError", "DjiThermalCli", "LibDirp", "find_backend"]
 
 ENV_VAR = "THERMCAP_DJI_SDK"
 

@@ -4,13 +4,36 @@ from __future__ import annotations
 
 import re
 import struct
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 
-__all__ = ["exif_fields", "xmp_fields", "exif_time_ns", "capture_time"]
+__all__ = ["capture_time", "exif_fields", "exif_time_ns", "xmp_fields"]
 
 _TAGS = {0x010F: "Make", 0x0110: "Model", 0x0132: "DateTime", 0x9003: "DateTimeOriginal", 0x8769: "ExifIFD",
          0x8825: "GPSIFD", 0x9010: "OffsetTime", 0x9011: "OffsetTimeOriginal", 0x9291: "SubSecTimeOriginal"}
 _GPS_TAGS = {0x0007: "GPSTimeStamp", 0x001D: "GPSDateStamp"}
+
+
+def _walk_ifd(t: bytes, order: str, out: dict[str, object], offset: int, tags: dict[int, str],
+              depth: int = 0) -> None:
+    """One IFD's tags into ``out``; the Exif and GPS sub-IFDs once, one level deep."""
+    (n,) = struct.unpack(order + "H", t[offset:offset + 2])
+    for i in range(min(n, 512)):
+        e = t[offset + 2 + 12 * i: offset + 14 + 12 * i]
+        tag, typ, count = struct.unpack(order + "HHI", e[:8])
+        name = tags.get(tag)
+        if name is None:
+            continue
+        if name in ("ExifIFD", "GPSIFD") and depth == 0:
+            _walk_ifd(t, order, out, struct.unpack(order + "I", e[8:12])[0],
+                      _GPS_TAGS if name == "GPSIFD" else _TAGS, 1)
+        elif typ == 2:  # ASCII
+            off = struct.unpack(order + "I", e[8:12])[0] if count > 4 else None
+            raw = e[8:8 + count] if off is None else t[off:off + count]
+            out[name] = raw.split(b"\x00")[0].decode("latin-1").strip()
+        elif typ == 5 and count == 3:  # RATIONAL x3: GPS hours, minutes, seconds
+            (off,) = struct.unpack(order + "I", e[8:12])
+            v = struct.unpack(order + "6I", t[off:off + 24])
+            out[name] = tuple(a / b if b else 0.0 for a, b in zip(v[::2], v[1::2], strict=True))
 
 
 def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
@@ -24,27 +47,8 @@ def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
             order = {b"II": "<", b"MM": ">"}[t[:2]]
             out: dict[str, object] = {}
 
-            def walk(offset: int, tags: dict[int, str], depth: int = 0) -> None:
-                (n,) = struct.unpack(order + "H", t[offset:offset + 2])
-                for i in range(min(n, 512)):
-                    e = t[offset + 2 + 12 * i: offset + 14 + 12 * i]
-                    tag, typ, count = struct.unpack(order + "HHI", e[:8])
-                    name = tags.get(tag)
-                    if name is None:
-                        continue
-                    if name in ("ExifIFD", "GPSIFD") and depth == 0:
-                        walk(struct.unpack(order + "I", e[8:12])[0], _GPS_TAGS if name == "GPSIFD" else _TAGS, 1)
-                    elif typ == 2:  # ASCII
-                        off = struct.unpack(order + "I", e[8:12])[0] if count > 4 else None
-                        raw = e[8:8 + count] if off is None else t[off:off + count]
-                        out[name] = raw.split(b"\x00")[0].decode("latin-1").strip()
-                    elif typ == 5 and count == 3:  # RATIONAL x3: GPS hours, minutes, seconds
-                        (off,) = struct.unpack(order + "I", e[8:12])
-                        v = struct.unpack(order + "6I", t[off:off + 24])
-                        out[name] = tuple(a / b if b else 0.0 for a, b in zip(v[::2], v[1::2]))
-
             (ifd0,) = struct.unpack(order + "I", t[4:8])
-            walk(ifd0, _TAGS)
+            _walk_ifd(t, order, out, ifd0, _TAGS)
             return out
         except (KeyError, struct.error, IndexError):
             return {}
@@ -67,7 +71,7 @@ def exif_time_ns(value: str | None) -> int | None:
     if not value:
         return None
     try:
-        dt = datetime.strptime(value[:19], "%Y:%m:%d %H:%M:%S").replace(tzinfo=timezone.utc)
+        dt = datetime.strptime(value[:19], "%Y:%m:%d %H:%M:%S").replace(tzinfo=UTC)
     except ValueError:
         return None
     return int(dt.timestamp()) * 1_000_000_000
@@ -106,7 +110,7 @@ def capture_time(exif: dict[str, object], xmp: dict[str, str] | None = None) -> 
     if isinstance(date, str) and isinstance(hms, tuple) and len(hms) == 3:
         day = exif_time_ns(date[:10] + " 00:00:00")
         if day is not None:
-            return day + int(round((hms[0] * 3600 + hms[1] * 60 + hms[2]) * 1e9)), "utc: exif GPS date and time"
+            return day + round((hms[0] * 3600 + hms[1] * 60 + hms[2]) * 1e9), "utc: exif GPS date and time"
     if base is not None:
         return base, "camera local time, zone unknown (taken as UTC)"
     return None, "none stated (file modification time used)"

@@ -4,16 +4,16 @@ from __future__ import annotations
 
 import mmap
 import struct
-from typing import Iterator
+from collections.abc import Iterator
 
 import imagecodecs
 import numpy as np
 
-from recorder.radiometry import FlirPlanckModel
 from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError, read_exact
 from recorder.importers.jpeg import app_segments
+from recorder.radiometry import FlirPlanckModel
 
-__all__ = ["read_flir_jpeg", "read_fff_file", "parse_fff", "iter_fff_records", "flir_jpeg_payload"]
+__all__ = ["flir_jpeg_payload", "iter_fff_records", "parse_fff", "read_fff_file", "read_flir_jpeg"]
 
 RAW, CAMERA_INFO = 0x01, 0x20
 
@@ -144,7 +144,8 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
     return ImportedFrame(path=path, format=fmt, layout={1: "raw-be", 2: "raw-le", 3: "png", 4: "jpeg-ls"}.get(sub),
                          pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model, timestamp_ns=stamp,
                          sensor_model=meta["camera_model"] or creator or "FLIR", sensor_id="FLIR",
-                         vendor_metadata=meta, frame_index=index, blobs={"flir_camera_info.bin": records[CAMERA_INFO][1]})
+                         vendor_metadata=meta, frame_index=index,
+                         blobs={"flir_camera_info.bin": records[CAMERA_INFO][1]})
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:

@@ -11,11 +11,11 @@ import numpy as np
 import tifffile
 
 from recorder.icd.names import parse_name
-from recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
 from recorder.icd.sidecar import validate_sidecar
 from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
 
-__all__ = ["read_icd_tiff", "read_icd_raw", "sidecar_for"]
+__all__ = ["read_icd_raw", "read_icd_tiff", "sidecar_for"]
 
 
 def sidecar_for(path: str) -> Path | None:
@@ -70,7 +70,8 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
         with tifffile.TiffFile(io.BytesIO(data)) as tif:
             page = tif.pages[0]
             if page.dtype != np.uint16 or page.samplesperpixel != 1:
-                raise ImportError_(f"{path}: not a single-channel 16-bit TIFF ({page.dtype}, {page.samplesperpixel} samples)")
+                raise ImportError_(f"{path}: not a single-channel 16-bit TIFF "
+                                   f"({page.dtype}, {page.samplesperpixel} samples)")
             pixels = page.asarray()
             software = (page.software or "")
             if pixels.ndim != 2 or pixels.shape != (page.imagelength, page.imagewidth) or pixels.size == 0:
@@ -86,7 +87,8 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
     if model is None:
         # No sidecar: the FLIR/flirpy radiometric-TIFF convention (T = counts*0.04 - 273.15),
         # said plainly in the metadata since nothing in the file states it.
-        model, note = ScaledKelvinModel(counts_per_kelvin=25.0), "no ICD sidecar: FLIR radiometric TIFF convention 0.04 K/count assumed"
+        model = ScaledKelvinModel(counts_per_kelvin=25.0)
+        note = "no ICD sidecar: FLIR radiometric TIFF convention 0.04 K/count assumed"
     sensor = (doc or {}).get("sensor", {})
     return [ImportedFrame(path=path, format="icd-tiff" if doc else "radiometric-tiff", layout=None,
                           pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model,
@@ -101,7 +103,8 @@ def read_icd_raw(path: str, data: bytes) -> list[ImportedFrame]:
     if len(data) != w * h * 2:
         raise ImportError_(f"{path}: {len(data)} bytes, but the sidecar's {w}x{h} Gray16 frame needs {w * h * 2}")
     return [ImportedFrame(path=path, format="icd-raw", layout=None,
-                          pixels=np.frombuffer(data, dtype="<u2").reshape(h, w).copy(), model=_model(doc) or LinearModel(),
+                          pixels=np.frombuffer(data, dtype="<u2").reshape(h, w).copy(),
+                          model=_model(doc) or LinearModel(),
                           timestamp_ns=_timestamp(path, doc), sensor_model=doc["sensor"].get("model", "ICD"),
                           sensor_id=_sensor_id(path, doc["sensor"]), vendor_metadata={"sidecar": doc})]
 

@@ -17,25 +17,27 @@ import hashlib
 import json
 import os
 import time
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
 from recorder.capture.recorder import Recorder, RecordingResult, new_session_id
 from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
 from recorder.importers import ImportedFrame, ImportError_, TruncatedImageError, iter_file
 from recorder.importers.dji_sdk import DjiBackend
+from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
 
-__all__ = ["import_paths", "ImportReport"]
+__all__ = ["ImportReport", "import_paths"]
 
 TOPIC_IMPORT = "/import/source"
 SDK_BATCH = 96  # files measured per SDK call: amortises its start-up, bounds the frames held
 _IMPORT_SCHEMA = {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": "thermcap.ImportSource",
                   "type": "object", "properties": {"path": {"type": "string"}, "format": {"type": "string"},
-                                                   "layout": {"type": ["string", "null"]}, "vendor": {"type": "object"}},
+                                                   "layout": {"type": ["string", "null"]},
+                                                   "vendor": {"type": "object"}},
                   "required": ["path", "format"]}
 
 
@@ -99,7 +101,7 @@ class _ImportSource(FrameSource):
     """Replays checked files (re-read now, so memory holds one file at a time)."""
 
     name = "import"
-    extra_topics = {TOPIC_IMPORT: _IMPORT_SCHEMA}
+    extra_topics: ClassVar[dict[str, dict[str, Any]]] = {TOPIC_IMPORT: _IMPORT_SCHEMA}
 
     def __init__(self, items: list[tuple[str, int, int]], first: ImportedFrame, model: RadiometricModel) -> None:
         self.items = items  # (path, frame index within file, timestamp ns)
@@ -191,7 +193,7 @@ def _split_tables(members: list[_Entry]) -> list[tuple[Any, list[_Entry]]]:
         for i, (table, group) in enumerate(parts):
             merged = table.merged(e.frame.model)
             if merged is not None:
-                parts[i] = (merged, group + [e])
+                parts[i] = (merged, [*group, e])
                 break
         else:
             parts.append((e.frame.model, [e]))

@@ -9,15 +9,15 @@ default (what every published TERRA-REF product used), with the physical inversi
 from __future__ import annotations
 
 import json
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
 
-from recorder.radiometry import ScaledKelvinModel, TerraRefPlanckModel
 from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.radiometry import ScaledKelvinModel, TerraRefPlanckModel
 
-__all__ = ["read_terraref", "metadata_for"]
+__all__ = ["metadata_for", "read_terraref"]
 
 ROWS, COLS = 480, 640
 
@@ -39,7 +39,8 @@ def _num(d: dict, key: str, path: str) -> float:
 
 def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[ImportedFrame]:
     if len(data) != ROWS * COLS * 2:
-        raise ImportError_(f"{path}: a TERRA-REF _ir.bin is {ROWS}x{COLS}x2 = {ROWS * COLS * 2} bytes, this one is {len(data)}")
+        raise ImportError_(f"{path}: a TERRA-REF _ir.bin is {ROWS}x{COLS}x2 = {ROWS * COLS * 2} bytes, "
+                           f"this one is {len(data)}")
     meta_path = metadata_for(path)
     if meta_path is None:
         raise ImportError_(f"{path}: the TERRA-REF metadata file <uuid>_metadata.json is missing beside it")
@@ -54,7 +55,8 @@ def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[
         model = ScaledKelvinModel(counts_per_kelvin=10.0)
     else:
         model = TerraRefPlanckModel(
-            r=_num(fixed, "calibration R", path), b=_num(fixed, "calibration B", path), f=_num(fixed, "calibration F", path),
+            r=_num(fixed, "calibration R", path), b=_num(fixed, "calibration B", path),
+                                    f=_num(fixed, "calibration F", path),
             j0=_num(fixed, "calibration J0", path), j1=_num(fixed, "calibration J1", path),
             alpha1=_num(fixed, "calibration alpha1", path), alpha2=_num(fixed, "calibration alpha2", path),
             beta1=_num(fixed, "calibration beta1", path), beta2=_num(fixed, "calibration beta2", path),
@@ -62,15 +64,18 @@ def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[
     ts = None
     if gantry.get("time"):
         try:
-            ts = int(datetime.strptime(gantry["time"], "%m/%d/%Y %H:%M:%S").replace(tzinfo=timezone.utc).timestamp()) * 10**9
+            ts = int(datetime.strptime(gantry["time"], "%m/%d/%Y %H:%M:%S").replace(tzinfo=UTC).timestamp()) * 10**9
         except ValueError:
             ts = None
     pixels = np.frombuffer(data, dtype="<u2").reshape(ROWS, COLS).copy()
     vendor = {"gantry_time": gantry.get("time"), "position_m": {k: gantry.get(f"position {k} [m]") for k in "xyz"},
               "speed_m_s": {k: gantry.get(f"speed {k} [m/s]") for k in "xyz"},
-              "shutter_temperature_k": var.get("shutter temperature [K]"), "lens_temperature_k": var.get("lens temperature [K]"),
-              "is_calibrated": fixed.get("is calibrated"), "display_rotation": "numpy.rot90(raw, 3) in the TERRA-REF pipeline",
+              "shutter_temperature_k": var.get("shutter temperature [K]"),
+              "lens_temperature_k": var.get("lens temperature [K]"),
+              "is_calibrated": fixed.get("is calibrated"),
+              "display_rotation": "numpy.rot90(raw, 3) in the TERRA-REF pipeline",
               "temperature_variant": variant if isinstance(model, TerraRefPlanckModel) else "deci-kelvin"}
     return [ImportedFrame(path=path, format="terraref-bin", layout="480x640-le", pixels=pixels, model=model,
                           timestamp_ns=ts, sensor_model=f"FLIR {fixed.get('sensor product name', 'A615')}",
-                          sensor_id="A615", vendor_metadata=vendor, blobs={"terraref_metadata.json": meta_path.read_bytes()})]
+                          sensor_id="A615", vendor_metadata=vendor,
+                          blobs={"terraref_metadata.json": meta_path.read_bytes()})]

@@ -13,13 +13,13 @@ from typing import Any
 from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import session_status
 from recorder.icd.names import iso_utc
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_STATS
+from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import session_status
 from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
 
-__all__ = ["segment_info", "session_info", "info"]
+__all__ = ["info", "segment_info", "session_info"]
 
 
 def segment_info(path: str | Path) -> dict[str, Any]:
@@ -72,7 +72,8 @@ def segment_info(path: str | Path) -> dict[str, Any]:
         "compressed_bytes": comp,
         "uncompressed_bytes": uncomp,
         "compression_ratio": round(uncomp / comp, 3) if comp else None,
-        "topics": {t: {"messages": counts.get(t, 0), "bytes": topic_bytes.get(t)} for t in sorted(set(counts) | set(topic_bytes))},
+        "topics": {t: {"messages": counts.get(t, 0),
+                       "bytes": topic_bytes.get(t)} for t in sorted(set(counts) | set(topic_bytes))},
         "attachments": [a.name for a in summary.attachment_indexes],
     }
     if last_stats is not None:

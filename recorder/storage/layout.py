@@ -11,8 +11,18 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["SessionLayout", "ACTIVE_SUFFIX", "PARTIAL_SUFFIX", "SESSION_JSON", "EVENTS_JSON", "ANALYSIS_JSONL",
-           "ARCHIVE_DIR", "MANIFEST_JSON", "EXTRAS_MCAP", "LOCK_FILE"]
+__all__ = [
+    "ACTIVE_SUFFIX",
+    "ANALYSIS_JSONL",
+    "ARCHIVE_DIR",
+    "EVENTS_JSON",
+    "EXTRAS_MCAP",
+    "LOCK_FILE",
+    "MANIFEST_JSON",
+    "PARTIAL_SUFFIX",
+    "SESSION_JSON",
+    "SessionLayout",
+]
 
 ACTIVE_SUFFIX = ".active"  # a segment being written, or left by a crash for `recover`
 PARTIAL_SUFFIX = ".partial"  # an archive format (or extras) not verified yet
@@ -32,7 +42,7 @@ class SessionLayout:
     dir: Path
 
     @classmethod
-    def of(cls, session_dir: str | os.PathLike) -> "SessionLayout":
+    def of(cls, session_dir: str | os.PathLike) -> SessionLayout:
         return cls(Path(session_dir))
 
     @property

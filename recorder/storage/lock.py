@@ -16,14 +16,14 @@ import fcntl
 import json
 import os
 import time
-from contextlib import contextmanager
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 from recorder.exceptions import SessionBusyError, StorageError
 
-__all__ = ["LOCK_NAME", "SessionLock", "lock_session", "holder", "session_locked", "is_locked", "session_status"]
+__all__ = ["LOCK_NAME", "SessionLock", "holder", "is_locked", "lock_session", "session_locked", "session_status"]
 
 LOCK_NAME = ".lock"
 
@@ -38,10 +38,8 @@ class SessionLock:
 
     def release(self) -> None:
         if self.fd >= 0:
-            try:
+            with suppress(OSError):
                 os.ftruncate(self.fd, 0)
-            except OSError:
-                pass
             os.close(self.fd)
             self.fd = -1
 

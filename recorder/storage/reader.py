@@ -7,21 +7,29 @@ the API read sessions the same way the recorder wrote them.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
 
-from importlib.metadata import entry_points
-
 from recorder.exceptions import McapFileError
-from recorder.storage.layout import SessionLayout
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
+from recorder.storage.layout import SessionLayout
 
-__all__ = ["SessionFrame", "session_segments", "iter_session_frames", "frame_files", "read_session_meta", "count_frames",
-           "resolve_session", "list_sessions"]
+__all__ = [
+    "SessionFrame",
+    "count_frames",
+    "frame_files",
+    "iter_session_frames",
+    "list_sessions",
+    "read_session_meta",
+    "resolve_session",
+    "session_segments",
+]
 
 
 @dataclass

@@ -15,9 +15,10 @@ import json
 import os
 import struct
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO, Iterator
+from typing import BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -27,10 +28,10 @@ from mcap.stream_reader import breakup_chunk
 
 from recorder.exceptions import McapFileError
 from recorder.storage.lock import holder, lock_session
-from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
+from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
-__all__ = ["RecoveryResult", "recover_segment", "recover_path", "recover_leftovers", "scan_records"]
+__all__ = ["RecoveryResult", "recover_leftovers", "recover_path", "recover_segment", "scan_records"]
 
 _READERS = {
     Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,

@@ -17,17 +17,18 @@ import os
 import socket
 import threading
 import time
-from contextlib import contextmanager
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any
 
 import numpy as np
 
 from recorder import __version__
 from recorder.exceptions import RecordingError
-from recorder.storage.writer import ChunkedWriter, Compression
+from recorder.icd.sidecar import sidecar_schema_bytes
 from recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
@@ -36,9 +37,10 @@ from recorder.icd.topics import (
     TOPIC_METADATA,
     TOPIC_STATS,
 )
-from recorder.icd.sidecar import sidecar_schema_bytes
+from recorder.storage.writer import ChunkedWriter, Compression
 
-__all__ = ["auto_compression", "SegmentPolicy", "SessionWriter", "segment_name", "ACTIVE_SUFFIX", "fsync_dir", "write_json_atomic"]
+__all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir", "segment_name",
+           "write_json_atomic"]
 
 ACTIVE_SUFFIX = ".active"
 SEGMENT_STATS_METADATA = "thermcap.segment"
@@ -194,7 +196,7 @@ class SessionWriter:
                 ys, xs = np.nonzero(self.bad_pixel_map)
                 bpm = {"width": int(self.bad_pixel_map.shape[1]), "height": int(self.bad_pixel_map.shape[0]),
                        "convention": "[x, y] of each defective pixel; correct by median of good neighbours (ICD 5.3)",
-                       "pixels": [[int(x), int(y)] for y, x in zip(ys, xs)]}
+                       "pixels": [[int(x), int(y)] for y, x in zip(ys, xs, strict=True)]}
                 writer.add_attachment("bad_pixel_map.json", "application/json", json.dumps(bpm).encode(),
                                       log_time=time.time_ns(), create_time=time.time_ns())
         except OSError as exc:
@@ -298,10 +300,8 @@ class SessionWriter:
     def abandon(self) -> None:
         """After a write error: keep the open segment as .active for ``recover``; touch nothing else."""
         if self._writer is not None:
-            try:
+            with suppress(OSError):
                 self._writer.close()
-            except OSError:
-                pass
             self._writer = None
         self.shutdown()
 

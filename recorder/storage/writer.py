@@ -22,10 +22,11 @@ import threading
 import time
 import zlib
 from collections import deque
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
-from enum import Enum
-from typing import Any, BinaryIO, Callable, Iterable
+from enum import StrEnum
+from typing import Any, BinaryIO
 
 import lz4.frame
 import zstandard
@@ -49,7 +50,7 @@ from mcap.records import (
 
 from recorder import __version__
 
-__all__ = ["Compression", "ChunkedWriter", "MCAP_MAGIC", "LIBRARY"]
+__all__ = ["LIBRARY", "MCAP_MAGIC", "ChunkedWriter", "Compression"]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 LIBRARY = f"thermcap/{__version__}"
@@ -57,7 +58,7 @@ _MSG_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequen
 _MSG_FIXED = 2 + 4 + 8 + 8
 
 
-class Compression(str, Enum):
+class Compression(StrEnum):
     NONE = "none"
     LZ4 = "lz4"
     ZSTD = "zstd"
@@ -137,7 +138,7 @@ class ChunkedWriter:
         on_chunk_written: Callable[[list[Any]], None] | None = None,
     ) -> None:
         if isinstance(output, (str, os.PathLike)):
-            self._stream: BinaryIO = open(output, "xb", buffering=0)
+            self._stream: BinaryIO = open(output, "xb", buffering=0)  # noqa: SIM115 - owned, closed by close()
             self._owns_stream = True
         else:
             self._stream = output
@@ -148,7 +149,8 @@ class ChunkedWriter:
         self.max_chunk_age_s = max_chunk_age_s
         self.max_pending = max(1, max_pending)
         self._own_executor = executor is None and workers > 0
-        self._executor = executor or (ThreadPoolExecutor(workers, thread_name_prefix="mcap-compress") if workers > 0 else None)
+        self._executor = executor or (ThreadPoolExecutor(workers,
+                                                         thread_name_prefix="mcap-compress") if workers > 0 else None)
         self._on_chunk_written = on_chunk_written
         self._pos = 0
         self._schemas: dict[int, Schema] = {}
@@ -250,7 +252,8 @@ class ChunkedWriter:
         self._close_chunk()
         self._drain(block=True)
 
-    def add_attachment(self, name: str, media_type: str, data: bytes, *, log_time: int = 0, create_time: int = 0) -> None:
+    def add_attachment(self, name: str, media_type: str, data: bytes, *, log_time: int = 0,
+                       create_time: int = 0) -> None:
         self.flush()
         offset = self._pos
         attachment = Attachment(create_time=create_time, log_time=log_time, name=name, media_type=media_type, data=data)

@@ -8,8 +8,8 @@ import pytest
 
 from archive.archiver import archive_session
 from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy
 from tests.conftest import ApiServer
 
 W, H = 160, 120
@@ -24,7 +24,8 @@ def make_root(root: Path) -> Path:
     Recorder(SimSource(width=W, height=H, frames=120, paced=False, seed=2, crossover=True, cue_period_s=0,
                        start_time_ns=T0 + 10**12), root, session_id="s-crossover", policy=pol, analysis=False).run()
     archive_session(root / "sessions" / "s-crossover", ["png16"])
-    Recorder(SimSource(width=W, height=H, frames=30, paced=False, seed=3, start_time_ns=T0 + 2 * 10**12, first_cue_s=0.1,
+    Recorder(SimSource(width=W, height=H, frames=30, paced=False, seed=3, start_time_ns=T0 + 2 * 10**12,
+                       first_cue_s=0.1,
                        sensor_id="OTHERCAM"), root, session_id="s-mcap-only", policy=pol, analysis=False).run()
     return root
 

@@ -14,7 +14,6 @@ from mcap.reader import make_reader
 
 from recorder.icd.topics import decode_image
 from recorder.storage.reader import iter_session_frames
-
 from tests.api.conftest import H, W
 
 
@@ -41,11 +40,14 @@ def test_sessions_list_filters_and_cursor(client):
     items = client.get("/api/v1/sessions").json()["items"]
     assert [s["id"] for s in items] == ["s-mcap-only", "s-crossover", "s-archived"]  # newest first
     assert items[0]["start"].endswith("Z") and len(items[0]["start"].split(".")[1]) == 10  # ns + Z
-    assert [s["id"] for s in client.get("/api/v1/sessions", params={"sort": "start"}).json()["items"]][0] == "s-archived"
+    assert next(s["id"] for s in client.get("/api/v1/sessions",
+                                            params={"sort": "start"}).json()["items"]) == "s-archived"
     crossover = client.get("/api/v1/sessions", params={"max_grade": 0.3}).json()["items"]
     assert [s["id"] for s in crossover] == ["s-crossover"]
-    assert [s["id"] for s in client.get("/api/v1/sessions", params={"sensor": "OTHERCAM"}).json()["items"]] == ["s-mcap-only"]
-    assert [s["id"] for s in client.get("/api/v1/sessions", params={"slew_to_cue": False}).json()["items"]] == ["s-crossover"]
+    assert [s["id"] for s in client.get("/api/v1/sessions",
+                                        params={"sensor": "OTHERCAM"}).json()["items"]] == ["s-mcap-only"]
+    assert [s["id"] for s in client.get("/api/v1/sessions",
+                                        params={"slew_to_cue": False}).json()["items"]] == ["s-crossover"]
     r = client.get("/api/v1/sessions", params={"start": "2027-01-15T08:00:00Z", "end": "2027-01-15T08:10:00Z"})
     assert r.status_code == 200
     seen, cursor = [], None
@@ -167,7 +169,7 @@ def test_export_mcap_range_and_topics(client, source):
     assert summary.chunk_indexes and summary.statistics.message_count > 0
     imgs = [(m.log_time, decode_image(m.data)[1]) for _, _, m in reader.iter_messages(topics=["/thermal/image"])]
     assert [t for t, _ in imgs] == [f.log_time for f in frames[10:40]]
-    assert all(np.array_equal(px, f.pixels) for (_, px), f in zip(imgs, frames[10:40]))
+    assert all(np.array_equal(px, f.pixels) for (_, px), f in zip(imgs, frames[10:40], strict=True))
     whole = make_reader(io.BytesIO(client.get("/api/v1/sessions/s-archived/export.mcap").content))
     assert sum(1 for _ in whole.iter_messages(topics=["/thermal/image"])) == 60
     only = make_reader(io.BytesIO(client.get("/api/v1/sessions/s-archived/export.mcap",

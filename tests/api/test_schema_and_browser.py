@@ -39,7 +39,8 @@ def test_session_page_renders_in_headless_chromium(server, tmp_path):
                              capture_output=True, text=True, timeout=120).stdout
     assert 'data-ready="1"' in dom, dom[-2000:]
     assert "frame 0 / 59" in dom and "s-archived" in dom
-    assert "/frames/0?format=celsius-tiff" in dom and "?format=dji-rjpeg" not in dom  # per-frame links; not a DJI session
+    assert "/frames/0?format=celsius-tiff" in dom  # per-frame links
+    assert "?format=dji-rjpeg" not in dom  # not a DJI session
     assert 'src="blob:' in dom  # the colour preview was fetched and shown
     out = tmp_path / "session.png"
     with tempfile.TemporaryDirectory() as profile:
@@ -51,7 +52,8 @@ def test_session_page_renders_in_headless_chromium(server, tmp_path):
 
     img = imagecodecs.png_decode(out.read_bytes())
     assert img.shape[0] >= 800 and img.shape[1] >= 1200
-    assert len(np.unique(img.reshape(-1, img.shape[-1])[:, :3], axis=0)) > 50  # a rendered thermal image, not a blank page
+    assert len(np.unique(img.reshape(-1, img.shape[-1])[:, :3],
+                         axis=0)) > 50  # a rendered thermal image, not a blank page
 
 
 def test_sessions_page_lists_sessions_in_chromium(server):

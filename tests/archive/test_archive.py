@@ -18,16 +18,16 @@ import pytest
 import tifffile
 
 from archive.archiver import archive_session
+from archive.codecs import Png16
 from archive.exceptions import ArchiveError, VerificationError
 from archive.formats import format_registry, register_format
 from archive.formats.zipped import ZippedFrames
-from archive.codecs import Png16
 from archive.manifest import frame_sha256, load_manifest
 from archive.verify import verify_session
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
+from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
 
 W, H = 160, 120
@@ -89,7 +89,7 @@ def test_png16_zip_is_stored_icd_pairs_readable_by_zipfile(archived):
             names = [x.filename for x in infos]
             assert names[0].startswith("thermal_") and names[0].endswith("Z_SIM640_N40_P550.png")
             assert names[1] == names[0][:-4] + ".json"
-            for png, js in zip(names[::2], names[1::2]):
+            for png, js in zip(names[::2], names[1::2], strict=True):
                 img = imagecodecs.png_decode(zf.read(png))
                 assert img.dtype == np.uint16 and np.array_equal(img, frames[i])
                 assert json.loads(zf.read(js)) == meta[i]
@@ -254,7 +254,8 @@ def test_audit_reports_costs_and_recommends_the_smallest_verified(archived, tmp_
     std = fmts["png16"]["cost"]["s3-standard"]
     assert std["storage_per_month"] == pytest.approx(fmts["png16"]["bytes"] / 1024**3 * 0.023, rel=1e-3)
     assert std["put_once"] == pytest.approx(4 / 1000 * 0.005)
-    assert set(fmts["png16"]["cost"]) == {"s3-standard", "s3-standard-ia", "s3-glacier-ir", "s3-deep-archive", "r2", "b2"}
+    assert set(fmts["png16"]["cost"]) == {"s3-standard", "s3-standard-ia", "s3-glacier-ir", "s3-deep-archive", "r2",
+                                          "b2"}
     assert rep["projection"]["cameras"] == 4
     prices = tmp_path / "p.json"
     prices.write_text(json.dumps({"s3-standard": {"storage": 1.0}}))

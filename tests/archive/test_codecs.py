@@ -47,7 +47,7 @@ def test_every_codec_class_is_registered():
 
 
 def test_unknown_codec_names_the_known_ones():
-    with pytest.raises(UnknownCodecError, match="known: .*png16"):
+    with pytest.raises(UnknownCodecError, match=r"known: .*png16"):
         get_codec("gif")
 
 

@@ -20,7 +20,8 @@ from recorder.radiometry import LookupTableModel, TemperatureUnavailable, model_
 from tests.conftest import ApiServer, run_cli
 
 DJI_CLI = shutil.which("dji-thermal-cli")
-needs_cli = pytest.mark.skipif(DJI_CLI is None, reason="dji-thermal-cli is not installed (optional, needs Python >= 3.12; "
+needs_cli = pytest.mark.skipif(DJI_CLI is None,
+                               reason="dji-thermal-cli is not installed (optional, needs Python >= 3.12; "
                                                         ".ci/run installs it where one exists)")
 
 
@@ -194,18 +195,21 @@ def test_libdirp_binding_passes_the_buffer_and_frees_every_handle(samples, fake_
 
 def test_import_with_libdirp_path_uses_it_and_reports_its_refusals(samples, fake_libdirp, tmp_path):
     h20t = str(samples / "dji" / "DJI_H20T.jpg")
-    r = run_cli("import", h20t, "--root", str(tmp_path / "a"), "--json", "--no-analysis", "--dji-sdk", str(fake_libdirp))
+    r = run_cli("import", h20t, "--root", str(tmp_path / "a"), "--json", "--no-analysis", "--dji-sdk",
+                str(fake_libdirp))
     assert r.returncode == 0, r.stderr
     (f,) = json.loads(r.stdout)["files"]
     assert f["celsius"] == {"min": 21.5, "max": 21.5, "mean": 21.5} and "libdirp" in f["model"]["source"]
     # the SDK refuses the file: imported all the same (the counts are fine), without a temperature
-    r = run_cli("import", h20t, "--root", str(tmp_path / "b"), "--json", "--no-analysis", "--dji-sdk", str(fake_libdirp),
+    r = run_cli("import", h20t, "--root", str(tmp_path / "b"), "--json", "--no-analysis", "--dji-sdk",
+                str(fake_libdirp),
                 env={"FAKE_DIRP_REJECT": "1"})
     assert r.returncode == 0, r.stderr
     (f,) = json.loads(r.stdout)["files"]
     assert f["celsius"] is None and "returned -9" in f["dji_sdk_error"]
     # an output that is not a function of the count is not turned into a table
-    r = run_cli("import", h20t, "--root", str(tmp_path / "c"), "--json", "--no-analysis", "--dji-sdk", str(fake_libdirp),
+    r = run_cli("import", h20t, "--root", str(tmp_path / "c"), "--json", "--no-analysis", "--dji-sdk",
+                str(fake_libdirp),
                 env={"FAKE_DIRP_NOISY": "1"})
     (f,) = json.loads(r.stdout)["files"]
     assert f["celsius"] is None and "not a per-count curve" in f["dji_sdk_error"]

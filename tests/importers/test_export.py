@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 import tifffile
 
-from recorder.exports.files import export_session
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.exports.files import export_session
 from recorder.icd.sidecar import validate_sidecar
+from recorder.storage.reader import iter_session_frames
 from tests.conftest import run_cli
 
 
@@ -37,7 +37,8 @@ def test_celsius_and_kelvin_tiffs_follow_the_model(session, tmp_path):
     tc, tk = tifffile.imread(c[2]), tifffile.imread(k[2])
     assert tc.dtype == np.float32 and np.allclose(tc, frames[2].pixels * 0.036 - 40, atol=1e-4)
     assert np.allclose(tk, tc + 273.15, atol=1e-3)
-    rows = list(csv.DictReader(open(tmp_path / "c" / "summary.csv")))
+    with open(tmp_path / "c" / "summary.csv") as fh:
+        rows = list(csv.DictReader(fh))
     assert len(rows) == 5 and float(rows[2]["surface_temperature_max"]) == pytest.approx(float(tc.max()), abs=1e-3)
     assert float(rows[2]["surface_temperature_p50"]) == pytest.approx(float(np.percentile(tc, 50)), abs=1e-3)
 
@@ -64,7 +65,8 @@ def test_heatmaps_share_one_scale(session, tmp_path):
 
 def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
     root = tmp_path / "r"
-    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t", "--no-analysis",
+    r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--session", "h20t",
+                "--no-analysis",
                 "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     r = run_cli("export", "h20t", "--root", str(root), "--to", "celsius-tiff")

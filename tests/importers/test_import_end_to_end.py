@@ -38,7 +38,8 @@ def test_samples_import_archive_and_serve(samples, tmp_path):
     server = ApiServer(root)
     try:
         with httpx.Client(base_url=server.url, timeout=30) as c:
-            t = tifffile.imread(io.BytesIO(c.get(f"/api/v1/sessions/{e40}/frames/0", params={"format": "celsius-tiff"}).content))
+            t = tifffile.imread(io.BytesIO(c.get(f"/api/v1/sessions/{e40}/frames/0",
+                                                 params={"format": "celsius-tiff"}).content))
             tr = ref_flir["FLIR_E40.jpg"]["temperature_reference"]
             for y, x, v in tr["pixels_row_col_C"]:
                 assert abs(t[y, x] - v) < 0.01

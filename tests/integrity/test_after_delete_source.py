@@ -18,10 +18,10 @@ from api.reading.mcap_slice import export_mcap
 from api.settings import Settings
 from archive.archiver import archive_session
 from recorder.analysis.offline import analyze_session
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
+from recorder.storage.segments import SegmentPolicy
 
 T0 = 1_800_000_000_000_000_000
 N = 90

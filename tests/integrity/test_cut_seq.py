@@ -28,7 +28,8 @@ def test_every_complete_image_of_a_cut_seq_is_imported_and_the_cut_one_reported(
     frames = []
     for seg in sorted(session.glob("*.mcap")):
         with open(seg, "rb") as f:
-            frames += [decode_image(m.data)[1].copy() for _, _, m in make_reader(f).iter_messages(topics=["/thermal/image"])]
+            frames += [decode_image(m.data)[1].copy() for _, _,
+                       m in make_reader(f).iter_messages(topics=["/thermal/image"])]
     assert len(frames) == 2
     ref = json.loads((samples / "flir" / "reference.json").read_text())
     want = next(v["raw_sha256"] for k, v in ref.items() if k.endswith(".fff"))

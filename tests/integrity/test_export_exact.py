@@ -9,13 +9,14 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from mcap.reader import make_reader
 
 from api.reading.mcap_slice import export_mcap
 from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy
 
 T0 = 1_800_000_000_000_000_000
 TOPICS = ["/thermal/image", "/thermal/metadata", "/recorder/stats", "/radar/cue", "/sim/ground_truth"]
@@ -34,8 +35,7 @@ def session(request, tmp_path_factory) -> Path:
 def _messages(paths_or_bytes) -> Counter:
     out: Counter = Counter()
     for item in paths_or_bytes:
-        f = io.BytesIO(item) if isinstance(item, bytes) else open(item, "rb")
-        with f:
+        with io.BytesIO(item) if isinstance(item, bytes) else open(item, "rb") as f:
             for _, ch, msg in make_reader(f).iter_messages(log_time_order=False):
                 out[(ch.topic, msg.log_time, hashlib.sha256(msg.data).hexdigest())] += 1
     return out

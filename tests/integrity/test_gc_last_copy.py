@@ -10,10 +10,10 @@ import pytest
 
 import archive.archiver as archiver
 from archive.archiver import archive_session
-from recorder.storage.lock import lock_session
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.lock import lock_session
+from recorder.storage.reader import iter_session_frames
 from tests.conftest import run_cli
 
 

@@ -14,12 +14,12 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
 from recorder.exceptions import RecordingError
 from recorder.storage.lock import holder
 from recorder.storage.recover import recover_path, recover_segment
-from recorder.capture.recorder import Recorder
 from recorder.storage.segments import SegmentPolicy, SessionWriter
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli, wait_for
 
 
@@ -53,7 +53,7 @@ def test_recover_skips_a_live_recording_and_loses_nothing(tmp_path):
     assert "recorder" in (r.stdout + r.stderr)
     for name, data in closed.items():
         assert (session / name).read_bytes() == data
-    out, err = proc.communicate(timeout=60)
+    _out, err = proc.communicate(timeout=60)
     assert proc.returncode == 0, err.decode()
     meta = json.loads((session / "session.json").read_text())
     assert meta["status"] == "complete"
@@ -164,7 +164,7 @@ def test_double_ctrl_c_finishes_and_status_tells_the_truth(tmp_path):
     proc.send_signal(signal.SIGINT)
     time.sleep(0.3)
     proc.send_signal(signal.SIGINT)
-    out, err = proc.communicate(timeout=60)
+    _out, err = proc.communicate(timeout=60)
     meta = json.loads((session / "session.json").read_text())
     assert meta["status"] == "complete", err.decode()
     assert not list(session.glob("*.active"))

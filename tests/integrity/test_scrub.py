@@ -12,9 +12,9 @@ from api.app import create_app
 from api.settings import Settings
 from archive.archiver import archive_session
 from archive.manifest import load_manifest
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
 from tests.conftest import run_cli
 
 
@@ -53,7 +53,7 @@ def test_scrub_marks_damage_and_the_api_stops_offering_that_copy(tmp_path):
 
 
 def test_scrub_repair_rebuilds_from_another_verified_copy_and_verifies_it(tmp_path):
-    session, truth = _root(tmp_path)
+    session, _truth = _root(tmp_path)
     good = (session / "archive" / "png16" / "0000.zip").read_bytes()
     _flip(session / "archive" / "png16" / "0000.zip")
     r = run_cli("scrub", str(tmp_path), "--repair", "--json")

@@ -11,9 +11,9 @@ from fastapi.testclient import TestClient
 from api.app import create_app
 from api.settings import Settings
 from archive.archiver import archive_session
-from recorder.storage.reader import iter_session_frames
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
 
 
 def _flip_entry(path, n: int) -> None:

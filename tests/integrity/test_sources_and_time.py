@@ -8,9 +8,9 @@ import json
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.topics import decode_image
 from tests.conftest import run_cli
 
 W, H = 160, 128

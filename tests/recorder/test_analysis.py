@@ -10,9 +10,9 @@ import pytest
 from recorder.analysis.detector import EventBuilder, HotSpotDetector, iou
 from recorder.analysis.offline import analyze_session
 from recorder.bench.analysis import score
-from recorder.radiometry import LinearModel
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource, SimTarget
+from recorder.radiometry import LinearModel
 
 MODEL = LinearModel()
 
@@ -54,7 +54,7 @@ def test_simulated_targets_found_within_one_pixel():
     for f in src.frames():
         truth = next(m for t, m in f.messages if t == "/sim/ground_truth")["targets"]
         dets, _ = det.detect(f.pixels)
-        tp, fp, fn, matched = score([t["bbox"] for t in truth], [d.bbox for d in dets])
+        tp, fp, fn, _matched = score([t["bbox"] for t in truth], [d.bbox for d in dets])
         assert (tp, fp, fn) == (3, 0, 0)
         for t in truth:
             d = max(dets, key=lambda d: iou(d.bbox, t["bbox"]))
@@ -93,7 +93,8 @@ def test_event_builder_finds_crossover_and_slew_spans():
         state = "slew" if 10 <= i < 20 else ("search" if 20 <= i < 25 else ("lock" if 25 <= i < 40 else "idle"))
         eb.add(i * 16_666_667, {"thermal_analysis": {"thermal_contrast_grade": grade, "delta_t_deg_c": 3.0,
                                                      "source": "detector"},
-                                "slew_to_cue": {"state": state, "slew_to_cue_active": state in ("slew", "search", "lock")}})
+                                "slew_to_cue": {"state": state,
+                                                "slew_to_cue_active": state in ("slew", "search", "lock")}})
     events = eb.finish()
     kinds = [(e["kind"], round(e["start_ns"] / 16_666_667), round(e["end_ns"] / 16_666_667)) for e in events]
     assert kinds == [("slew_to_cue", 10, 25), ("thermal_crossover", 30, 89)]

@@ -39,13 +39,14 @@ def test_raw_file_records_bit_exact(tmp_path):
     frames = rng.integers(0, 65536, size=(7, H, W), dtype=np.uint16)  # all 16 bits, not just 14
     raw = tmp_path / "in.gray16"
     frames.astype("<u2").tofile(raw)
-    r = run_cli("record", "--source", f"raw:{raw}", "--width", str(W), "--height", str(H), "--root", str(tmp_path / "d"),
+    r = run_cli("record", "--source", f"raw:{raw}", "--width", str(W), "--height", str(H), "--root",
+                str(tmp_path / "d"),
                 "--json")
     assert r.returncode == 0, r.stderr
     out = json.loads(r.stdout)
     assert out["frames_written"] == 7 and out["frames_dropped"] == 0
     got = _frames_in(_session(tmp_path / "d"))
-    assert len(got) == 7 and all(np.array_equal(a, b) for a, b in zip(got, frames))
+    assert len(got) == 7 and all(np.array_equal(a, b) for a, b in zip(got, frames, strict=True))
 
 
 def test_raw_stdin_with_truncated_last_frame_keeps_the_rest(tmp_path):
@@ -59,7 +60,7 @@ def test_raw_stdin_with_truncated_last_frame_keeps_the_rest(tmp_path):
     assert "<stdin>" in r.stderr
     session = _session(tmp_path / "d")
     got = _frames_in(session)
-    assert len(got) == 5 and all(np.array_equal(a, b) for a, b in zip(got, frames))
+    assert len(got) == 5 and all(np.array_equal(a, b) for a, b in zip(got, frames, strict=True))
     assert not list(session.glob("*.active"))
 
 
@@ -180,8 +181,8 @@ def test_recover_refuses_a_non_mcap(tmp_path):
 
 def test_recover_of_a_file_cut_anywhere_keeps_a_readable_prefix(tmp_path):
     from recorder.capture.recorder import Recorder
-    from recorder.storage.segments import SegmentPolicy
     from recorder.capture.sources.sim import SimSource
+    from recorder.storage.segments import SegmentPolicy
 
     Recorder(SimSource(width=64, height=48, frames=40, paced=False), tmp_path, session_id="c",
              policy=SegmentPolicy(chunk_size=20_000)).run()

@@ -10,13 +10,13 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from recorder.storage.writer import Compression
-from recorder.icd.topics import decode_image
-from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
-from recorder.icd.sidecar import validate_sidecar
-from recorder.capture.sources.sim import SimSource
 from recorder.bench.record import MemorySource
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
+from recorder.icd.sidecar import validate_sidecar
+from recorder.icd.topics import decode_image
+from recorder.storage.segments import SegmentPolicy
+from recorder.storage.writer import Compression
 
 W, H = 160, 128
 
@@ -36,7 +36,7 @@ def _read_all(session_dir: Path):
                 out["schemas"][s.name] = s.encoding
             out["attachments"] += [a.name for a in reader.iter_attachments()]
             out["metadata"] += [(m.name, m.metadata) for m in reader.iter_metadata()]
-            for schema, channel, msg in reader.iter_messages(log_time_order=False):
+            for _schema, channel, msg in reader.iter_messages(log_time_order=False):
                 if channel.topic == "/thermal/image":
                     stamp, px = decode_image(msg.data)
                     assert stamp == msg.log_time
@@ -58,13 +58,13 @@ def test_recorded_session_reads_back_bit_exact(tmp_path):
     data = _read_all(tmp_path / "sessions" / "s1")
     expected = list(_sim(frames=90, seed=5).frames())
     assert len(data["frames"]) == 90 == len(data["meta"])
-    for (t, px), exp in zip(data["frames"], expected):
+    for (t, px), exp in zip(data["frames"], expected, strict=True):
         assert t == exp.timestamp_ns
         assert px.dtype == np.dtype("<u2") and np.array_equal(px, exp.pixels)
     times = [t for t, _ in data["frames"]]
     assert times == sorted(times) and len(set(times)) == len(times)
     # the sidecar has the frame's log time and validates
-    for (t_img, _), (t_meta, meta) in zip(data["frames"], data["meta"]):
+    for (t_img, _), (t_meta, meta) in zip(data["frames"], data["meta"], strict=True):
         assert t_img == t_meta
         validate_sidecar(meta)
     assert data["schemas"]["sensor_msgs/msg/Image"] == "ros2msg"
@@ -92,7 +92,7 @@ def test_every_chunk_compression_round_trips(tmp_path, compression):
     policy = SegmentPolicy(compression=compression, compression_level=1 if compression is Compression.ZSTD else 0)
     Recorder(_sim(frames=20, seed=1), tmp_path, session_id="c", policy=policy).run()
     data = _read_all(tmp_path / "sessions" / "c")
-    for (_, px), exp in zip(data["frames"], _sim(frames=20, seed=1).frames()):
+    for (_, px), exp in zip(data["frames"], _sim(frames=20, seed=1).frames(), strict=True):
         assert np.array_equal(px, exp.pixels)
 
 

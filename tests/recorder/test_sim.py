@@ -14,7 +14,7 @@ def _frames(**kw):
 def test_same_seed_same_frames_bit_for_bit():
     a = _frames(frames=20, seed=7, width=160, height=128)
     b = _frames(frames=20, seed=7, width=160, height=128)
-    for fa, fb in zip(a, b):
+    for fa, fb in zip(a, b, strict=True):
         assert np.array_equal(fa.pixels, fb.pixels)
         assert fa.sidecar == fb.sidecar and fa.messages == fb.messages
 

@@ -13,8 +13,8 @@ import time
 
 from archive.verify import verify_session
 from recorder.capture.recorder import Recorder
-from recorder.storage.segments import SegmentPolicy
 from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
 
 
@@ -29,7 +29,7 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
            "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"],
            "THERMCAP_DATABASE_URL": f"sqlite:///{tmp_path / 'i.sqlite'}"}
     rng = random.Random(7)
-    for attempt in range(int(os.environ.get("THERMCAP_ARCHIVER_KILLS", "3"))):
+    for _attempt in range(int(os.environ.get("THERMCAP_ARCHIVER_KILLS", "3"))):
         p = subprocess.Popen([sys.executable, "-m", "recorder", "worker", "--root", str(root), "--once",
                               "--formats", "png16,tiff-lzw,jxl", "--delete-source", "--lease-ttl", "2"], env=env,
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.topics import decode_image
 from tests.conftest import run_cli, wait_for
 
 W, H, FPS = 320, 256, 60
@@ -35,9 +35,10 @@ def test_kill_9_at_random_moments(tmp_path):
         root = tmp_path / f"k{k}"
         proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "60", "--width", str(W),
                                  "--height", str(H), "--segment-duration", "1", "--seed", str(k), "--root", str(root),
-                                 "--session", "s", "--no-analysis"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                 "--session", "s", "--no-analysis"], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
         session = root / "sessions" / "s"
-        assert wait_for(lambda: any(session.glob("*.mcap.active")))
+        assert wait_for(lambda s=session: any(s.glob("*.mcap.active")))
         time.sleep(rng.uniform(0.3, 3.5))
         proc.send_signal(signal.SIGKILL)
         proc.wait()
@@ -54,7 +55,7 @@ def test_kill_9_at_random_moments(tmp_path):
                     got.append((msg.log_time, decode_image(msg.data)[1].copy()))
         assert got, "nothing recovered"
         expected = SimSource(width=W, height=H, fps=FPS, seed=k, paced=False, frames=len(got)).frames()
-        for (t, px), exp in zip(got, expected):
+        for (_t, px), exp in zip(got, expected, strict=True):
             assert np.array_equal(px, exp.pixels)  # bit-exact, in order, no gaps
         lost_s = (killed_at - got[-1][0]) / 1e9
         report.append({"kill": k, "frames_kept": len(got), "closed_segments": len(closed_before),

@@ -26,8 +26,8 @@ import httpx
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.topics import decode_image
 from tests.conftest import ApiServer, run_cli, wait_for
 
 W, H, FPS = 96, 64, 60
@@ -112,7 +112,7 @@ def test_the_whole_life_of_a_session_loses_nothing(tmp_path):
                                      "--height", str(H), "--segment-duration", "0.5", "--seed", str(n), "--root",
                                      str(root), "--session", sid, "--no-analysis"],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-            assert wait_for(lambda: len(list(session.glob("*.mcap"))) >= 2, timeout=30)
+            assert wait_for(lambda s=session: len(list(s.glob("*.mcap"))) >= 2, timeout=30)
             racing = run_cli("recover", str(root))  # defect 1: a recover racing the live recorder
             assert racing.returncode == 0, racing.stderr
             closed = {p.name: p.read_bytes() for p in session.glob("*.mcap")}

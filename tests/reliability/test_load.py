@@ -38,7 +38,8 @@ def test_mixed_load_while_indexing(tmp_path):
             for _ in range(count):
                 kind = rng.choices(["frame", "list", "export"], weights=[8, 3, 1])[0]
                 if kind == "frame":
-                    url = f"/api/v1/sessions/s-archived/frames/{rng.randrange(60)}?format={rng.choice(['raw', 'png16', 'preview'])}"
+                    fmt = rng.choice(["raw", "png16", "preview"])
+                    url = f"/api/v1/sessions/s-archived/frames/{rng.randrange(60)}?format={fmt}"
                 elif kind == "list":
                     url = rng.choice(["/api/v1/sessions", "/api/v1/sessions/s-crossover/frames?max_grade=0.3",
                                       "/api/v1/sessions/s-archived"])

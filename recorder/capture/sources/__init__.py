@@ -4,12 +4,12 @@ from __future__ import annotations
 
 from typing import Any
 
-from recorder.exceptions import SourceError
 from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 from recorder.capture.sources.raw import RawSource
 from recorder.capture.sources.sim import SimSource
+from recorder.exceptions import SourceError
 
-__all__ = ["CapturedFrame", "FrameSource", "Pacer", "SensorInfo", "RawSource", "SimSource", "make_source"]
+__all__ = ["CapturedFrame", "FrameSource", "Pacer", "RawSource", "SensorInfo", "SimSource", "make_source"]
 
 
 def make_source(spec: str, **options: Any) -> FrameSource:

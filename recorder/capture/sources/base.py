@@ -10,14 +10,15 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
+from collections.abc import Iterator
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from typing import Any, ClassVar
 
 import numpy as np
 
 from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
-__all__ = ["CapturedFrame", "FrameSource", "SensorInfo", "Pacer"]
+__all__ = ["CapturedFrame", "FrameSource", "Pacer", "SensorInfo"]
 
 
 @dataclass
@@ -75,7 +76,7 @@ class FrameSource(ABC):
     model: RadiometricModel = DEFAULT_MODEL
     bad_pixel_map: np.ndarray | None = None
     #: topics (besides image and metadata) this source may emit, with their JSON schemas
-    extra_topics: dict[str, dict[str, Any]] = {}
+    extra_topics: ClassVar[dict[str, dict[str, Any]]] = {}
     #: True for input that can be paused (a file, a pipe, an importer): the recorder then waits
     #: for its writer instead of dropping. Only a live camera, which cannot wait, is dropped from.
     can_wait: bool = False
@@ -97,8 +98,8 @@ class FrameSource(ABC):
     def stopped(self) -> bool:
         return getattr(self, "_stopped", False)
 
-    def close(self) -> None:
-        pass
+    def close(self) -> None:  # noqa: B027 - an optional hook: most sources have nothing to release
+        """Release the input (a file, a device); called once capture ends, however it ends."""
 
     def describe(self) -> dict[str, Any]:
         return {"source": self.name, "time_basis": self.time_basis}
@@ -111,7 +112,7 @@ class Pacer:
     produce frames at its rate is seen, not hidden behind evenly spaced timestamps."""
 
     def __init__(self, fps: float, enabled: bool = True):
-        self.period_ns = int(round(1e9 / fps))
+        self.period_ns = round(1e9 / fps)
         self.enabled = enabled
         self.start = time.monotonic_ns()
         self.late = 0

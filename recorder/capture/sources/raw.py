@@ -18,13 +18,14 @@ import io
 import os
 import sys
 import time
-from typing import BinaryIO, Iterator
+from collections.abc import Iterator
+from typing import BinaryIO
 
 import numpy as np
 
+from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 from recorder.exceptions import SourceError, TruncatedFrameError
 from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
-from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 
 __all__ = ["RawSource"]
 
@@ -95,7 +96,7 @@ class RawSource(FrameSource):
                 if index == 0:
                     wall0, mono0 = time.time_ns(), mono
                 if self.time_basis == "stream":
-                    ts = wall0 + int(round(index * 1e9 / self.fps))
+                    ts = wall0 + round(index * 1e9 / self.fps)
                 else:
                     ts = wall0 + (mono - mono0)
                 pixels = np.frombuffer(buf, dtype="<u2").reshape(self.height, self.width)

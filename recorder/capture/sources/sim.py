@@ -19,16 +19,17 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
-from typing import Any, Iterator
+from typing import Any, ClassVar
 
 import numpy as np
 
+from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
 from recorder.icd.names import MAX_COUNT, iso_utc
 from recorder.icd.quality import contrast_metrics, frame_analysis
-from recorder.radiometry import LinearModel
 from recorder.icd.topics import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
-from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from recorder.radiometry import LinearModel
 
 __all__ = ["SimSource", "SimTarget", "SlewToCue"]
 
@@ -148,7 +149,8 @@ class SimSource(FrameSource):
     """``thermcap record --source sim``: see the module docstring for what it simulates."""
 
     name = "sim"
-    extra_topics = {TOPIC_RADAR_CUE: RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH: GROUND_TRUTH_SCHEMA}
+    extra_topics: ClassVar[dict[str, dict[str, Any]]] = {TOPIC_RADAR_CUE: RADAR_CUE_SCHEMA,
+                                                         TOPIC_GROUND_TRUTH: GROUND_TRUTH_SCHEMA}
 
     def __init__(
         self,
@@ -180,7 +182,7 @@ class SimSource(FrameSource):
                                  serial_number=f"SIM-{seed}", width=width, height=height,
                                  netd_mk=netd_mk, frame_rate_hz=fps)
         if frames is None and duration_s is not None:
-            frames = int(round(duration_s * fps))
+            frames = round(duration_s * fps)
         self.n_frames = frames
         self.paced = paced
         # Paced, it plays a live camera (stamped when each frame is released, late frames counted);
@@ -249,7 +251,7 @@ class SimSource(FrameSource):
 
     def _target_box(self, tgt: SimTarget, t: float) -> tuple[int, int, int, int]:
         s = self._scale if tgt.scale_size else 1.0
-        tw, th = max(2, int(round(tgt.size[0] * s))), max(2, int(round(tgt.size[1] * s)))
+        tw, th = max(2, round(tgt.size[0] * s)), max(2, round(tgt.size[1] * s))
         if tgt.region == "sky":
             y_lo, y_hi = 0, self._horizon - th - 2
         else:
@@ -302,7 +304,7 @@ class SimSource(FrameSource):
         model = self.model
         gt = []
         per_target = []
-        ring = max(4, int(round(8 * self._scale)))
+        ring = max(4, round(8 * self._scale))
         for tr in truths:
             x, y, tw, th = tr["box"]
             mask = tr["mask"]
@@ -341,13 +343,12 @@ class SimSource(FrameSource):
         while (self.n_frames is None or index < self.n_frames) and not self.stopped:
             released = pacer.wait(index)
             self.frames_late = pacer.late
-            if self.paced:  # the time the frame was actually produced, late or not
-                ts = start_ns + (released - pacer.start)
-            else:
-                ts = start_ns + int(round(index * period_ns))
+            # paced: the time the frame was actually produced, late or not; else its stream position
+            ts = start_ns + (released - pacer.start) if self.paced else start_ns + round(index * period_ns)
             frame, gt, analysis, _ = self.render(index)
             t = index / self.fps
-            drone_visible = any(g["classification"] == "drone_motor" for g in gt) and analysis["thermal_contrast_grade"] >= 0.3
+            drone_visible = any(g["classification"] == "drone_motor" for g in gt) \
+                and analysis["thermal_contrast_grade"] >= 0.3
             stc_block, cues = stc.step(t, ts, drone_visible)
             messages: list[tuple[str, dict[str, Any]]] = [(TOPIC_RADAR_CUE, c) for c in cues]
             messages.append((TOPIC_GROUND_TRUTH, {
