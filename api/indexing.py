@@ -178,7 +178,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
                 by_index[row["index"]] = row
         sidecars = [{**sc, **{k: by_index[i][k] for k in ("thermal_analysis", "targets")}} if i in by_index else sc
                     for i, sc in enumerate(sidecars)]
-    frame_rows = []
+    frame_rows: list[dict[str, Any]] = []
     hashes = (manifest or {}).get("frames", {}).get("sha256") or []
     sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
     for i, (sc, t) in enumerate(zip(sidecars, times, strict=True)):
@@ -199,7 +199,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     src = (manifest or {}).get("source", {})
     first = sidecars[0] if sidecars else {}
     res = (first.get("sensor") or {}).get("resolution") or {}
-    valid_times = [r["timestamp_ns"] for r in frame_rows]
+    valid_times: list[int] = [r["timestamp_ns"] for r in frame_rows]
     row = {
         "id": sid, "path": str(session_dir), "sensor": sensor.get("model"), "sensor_id": sensor.get("sensor_id"),
         "width": res.get("width") or src.get("width"), "height": res.get("height") or src.get("height"),
@@ -244,7 +244,9 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     """Index every session under ROOT; drop sessions whose folder is gone, unless ``store`` is an
     object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
     bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
-    done, unchanged, failed = [], [], {}
+    done: list[str] = []
+    unchanged: list[str] = []
+    failed: dict[str, str] = {}
     present = set()
     for d in list_sessions(root):
         if list(d.glob("*.active")) or (not (d / "session.json").exists() and not (d / "archive").exists()):

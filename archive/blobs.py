@@ -27,7 +27,7 @@ class BlobStore:
 
     def head(self, key: str) -> dict[str, Any] | None:
         try:
-            return obstore.head(self.store, self._key(key))
+            return dict(obstore.head(self.store, self._key(key)))
         except FileNotFoundError:
             return None
 

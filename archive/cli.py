@@ -124,11 +124,11 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
     if as_json:
         click.echo(json.dumps(out, indent=2))
     else:
-        for d, report in out.items():
+        for name, report in out.items():
             for fid, r in report.items():
                 what = ("attachments, metadata and other topics intact" if fid == "extras"
                         else f"{r['frames']} frames bit-exact")
-                click.echo(f"{d} {fid}: {'ok, ' + what if r['ok'] else 'FAILED'}")
+                click.echo(f"{name} {fid}: {'ok, ' + what if r['ok'] else 'FAILED'}")
                 for p in r["problems"]:
                     click.echo(f"  {p}")
     if bad:

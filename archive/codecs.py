@@ -14,7 +14,7 @@ import struct
 import threading
 import zlib
 from abc import ABC, abstractmethod
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import imagecodecs
 import numpy as np
@@ -95,14 +95,14 @@ class Png16(FrameCodec):
     def encode(self, frame: np.ndarray) -> bytes:
         frame = self._check(frame)
         if self.writer == "libpng":
-            return imagecodecs.png_encode(frame, level=self.level)
+            return cast(bytes, imagecodecs.png_encode(frame, level=self.level))
         h, w = frame.shape
         be = frame.astype(">u2").view(np.uint8).reshape(h, 2 * w)
         rows = np.empty((h, 2 * w + 1), np.uint8)
         rows[:, 0] = 2  # filter type Up
         rows[0, 1:] = be[0]
         np.subtract(be[1:], be[:-1], out=rows[1:, 1:])  # modulo 256, as PNG defines it
-        idat = imagecodecs.deflate_encode(rows, level=self.level, raw=False)
+        idat = cast(bytes, imagecodecs.deflate_encode(cast(Any, rows), level=self.level, raw=False))
         return (b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
                 + _png_chunk(b"IDAT", idat) + _png_chunk(b"IEND", b""))
 
@@ -125,7 +125,7 @@ class JpegXl(FrameCodec):
         self.effort = effort
 
     def encode(self, frame: np.ndarray) -> bytes:
-        return imagecodecs.jpegxl_encode(self._check(frame), lossless=True, effort=self.effort)
+        return cast(bytes, imagecodecs.jpegxl_encode(self._check(frame), lossless=True, effort=self.effort))
 
     def decode(self, buf: bytes) -> np.ndarray:
         return self._as_frame(imagecodecs.jpegxl_decode(buf))
@@ -144,7 +144,7 @@ class Htj2k(FrameCodec):
 
     def encode(self, frame: np.ndarray) -> bytes:
         with _OJPH_LOCK:
-            return imagecodecs.htj2k_encode(self._check(frame), level=0)
+            return cast(bytes, imagecodecs.htj2k_encode(self._check(frame), level=0))
 
     def decode(self, buf: bytes) -> np.ndarray:
         with _OJPH_LOCK:
@@ -159,7 +159,7 @@ class JpegLs(FrameCodec):
     media_type = "image/jls"
 
     def encode(self, frame: np.ndarray) -> bytes:
-        return imagecodecs.jpegls_encode(self._check(frame))
+        return cast(bytes, imagecodecs.jpegls_encode(self._check(frame)))
 
     def decode(self, buf: bytes) -> np.ndarray:
         return self._as_frame(imagecodecs.jpegls_decode(buf))

@@ -85,7 +85,8 @@ def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
                     ckey = (channel.topic, channel.message_encoding, skey)
                     if ckey not in channels:
                         channels[ckey] = writer.register_channel(channel.topic, channel.message_encoding,
-                                                                 schemas.get(skey, 0), dict(channel.metadata))
+                                                                 schemas[skey] if skey is not None else 0,
+                                                                 dict(channel.metadata))
                     writer.add_message(channels[ckey], msg.log_time, msg.data, msg.publish_time, msg.sequence)
                 elif kind == "attachment":
                     writer.add_attachment(rec.create_time, rec.log_time, rec.name, rec.media_type, rec.data)

@@ -12,7 +12,7 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -50,7 +50,7 @@ def manifest_path(session_dir: Path) -> Path:
 def frame_sha256(pixels: np.ndarray) -> str:
     """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
     arr = np.ascontiguousarray(pixels, dtype="<u2")
-    return hashlib.sha256(memoryview(arr).cast("B")).hexdigest()
+    return hashlib.sha256(arr.data.cast("B")).hexdigest()
 
 
 def sidecar_sha256(sidecar: bytes) -> str:
@@ -73,6 +73,10 @@ def new_manifest(session_id: str, session_meta: dict[str, Any]) -> dict[str, Any
             "formats": {}}
 
 
+@overload
+def load_manifest(session_dir: Path, *, required: Literal[True] = True) -> dict[str, Any]: ...
+@overload
+def load_manifest(session_dir: Path, *, required: bool) -> dict[str, Any] | None: ...
 def load_manifest(session_dir: Path, *, required: bool = True) -> dict[str, Any] | None:
     path = manifest_path(session_dir)
     try:

@@ -39,7 +39,7 @@ def channel_problems(path: Path) -> list[str]:
     for ch in summary.channels.values():
         schema = summary.schemas.get(ch.schema_id)
         want = _EXPECTED.get(schema.name) if schema else None
-        if want is not None and ch.topic != want:
+        if schema is not None and want is not None and ch.topic != want:
             problems.append(f"channel {ch.id} has schema {schema.name} but topic {ch.topic!r} (expected {want!r})")
     if TOPIC_IMAGE in topics and TOPIC_METADATA not in topics:
         problems.append(f"has {TOPIC_IMAGE} but no {TOPIC_METADATA} channel")

@@ -13,12 +13,13 @@ import hashlib
 import json
 from dataclasses import asdict, dataclass, fields
 from itertools import pairwise
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
 from recorder.icd.names import BIT_DEPTH, MAX_COUNT
 
+T = TypeVar("T", bound=type)
 __all__ = [
     "DEFAULT_MODEL",
     "DjiModel",
@@ -47,9 +48,9 @@ class RadiometricModel(Protocol):
 _MODELS: dict[str, type] = {}
 
 
-def register_model(cls: type) -> type:
+def register_model(cls: T) -> T:
     """Class decorator: make a model kind rebuildable from session metadata."""
-    _MODELS[cls.kind] = cls
+    _MODELS[cls.kind] = cls  # type: ignore[attr-defined]
     return cls
 
 

@@ -16,7 +16,7 @@ import json
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO, cast
 
 from mcap.data_stream import ReadDataStream
 from mcap.reader import make_reader
@@ -63,7 +63,7 @@ class _Sink(io.RawIOBase):
 def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, topics: list[str] | None,
                 frames_from_archive=None, extras_file: Callable[[], Any] | None = None) -> Iterator[bytes]:
     sink = _Sink()
-    writer = ChunkedWriter(sink, compression=Compression.ZSTD, compression_level=1, workers=0)
+    writer = ChunkedWriter(cast(BinaryIO, sink), compression=Compression.ZSTD, compression_level=1, workers=0)
     writer.start(profile="ros2", library="thermcap export")
     segs = session_segments(session_dir) if session_dir.is_dir() else []
     if segs:
@@ -172,6 +172,7 @@ def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] 
         img = writer.register_channel(TOPIC_IMAGE, "cdr", writer.register_schema(IMAGE_SCHEMA_NAME, "ros2msg",
                                                                                   IMAGE_SCHEMA_TEXT.encode()))
     f = extras_file() if extras_file is not None else None
+    stream: Iterator[tuple[int, int, Any]]
     with f if f is not None else contextlib.nullcontext():
         if f is not None:
             reader = make_reader(f)
@@ -186,6 +187,7 @@ def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] 
             stream = _frame_messages(writer, frames, img, not topics or TOPIC_METADATA in topics)
         for t, kind, item in stream:
             if kind == 0:
+                assert img is not None  # images are only yielded when the image topic is wanted
                 idx, t, pixels = item
                 writer.add_message(img, t, image_message_parts(pixels(), t), sequence=idx)
             else:

@@ -39,7 +39,7 @@ def decode_cursor(cursor: str | None, types: tuple[type, ...]) -> list[Any] | No
     except (ValueError, TypeError):
         raise HTTPException(400, "invalid cursor") from None
     ok = isinstance(values, list) and len(values) == len(types) and all(
-        type(v) is t and (t is not int or -2**63 <= v < 2**63) for v, t in zip(values, types, strict=False))
+        type(v) is t and (not isinstance(v, int) or -2**63 <= v < 2**63) for v, t in zip(values, types, strict=False))
     if not ok:
         raise HTTPException(400, "invalid cursor")
     return values

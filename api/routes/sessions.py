@@ -12,7 +12,7 @@ from sqlalchemy import and_, func, or_, select
 from api import db
 from api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
 from api.security import require
-from recorder.radiometry import model_from_dict
+from recorder.radiometry import LookupTableModel, model_from_dict
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 
@@ -21,7 +21,9 @@ def _model(text: str | None, full: bool) -> dict[str, Any] | None:
     """A session's model; listings show a lookup table (thousands of entries) by its identity only."""
     model = json.loads(text) if text else None
     if not full and model and model.get("kind") == "lookup_table":
-        return model_from_dict(model).summary()
+        table = model_from_dict(model)
+        assert isinstance(table, LookupTableModel)
+        return table.summary()
     return model
 
 

@@ -93,7 +93,7 @@ def frame_name(ctx: ArchiveContext, frame: SessionFrame) -> str:
 
 
 class ArchiveFormat(ABC):
-    format_id: ClassVar[str]
+    format_id: str  # a class constant, except where one class serves several ids (ZippedFrames)
     description: ClassVar[str]
 
     @abstractmethod
@@ -175,7 +175,7 @@ def group_by_segment(frames: Iterable[SessionFrame]) -> Iterator[tuple[str, Iter
         first = next(it)
     except StopIteration:
         return
-    state = {"next": first}
+    state: dict[str, Any] = {"next": first}
 
     def run(segment: str) -> Iterator[SessionFrame]:
         while state["next"] is not None and state["next"].segment == segment:

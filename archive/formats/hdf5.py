@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
 import h5py
 import numpy as np
@@ -52,7 +53,9 @@ class Hdf5(ArchiveFormat):
             raise ArchiveError("hdf5 needs the frame count up front")
         n = 0
         with h5py.File(out_dir / rel, "w-", libver="latest") as f:
-            dset = times = meta = None
+            dset: Any = None
+            times: Any = None
+            meta: Any = None
             for frame in frames:
                 px = np.asarray(frame.pixels)
                 if dset is None:

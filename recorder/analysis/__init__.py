@@ -1,0 +1,1 @@
+"""Hot-spot analysis: the detector and session events (detector), re-run offline (offline)."""

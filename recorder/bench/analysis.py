@@ -9,7 +9,7 @@ target-free frames, and the detector's frames per second on one core.
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -55,7 +55,7 @@ def _scene(delta: float, size: int, seed: int, frames: int) -> SimSource:
 
 
 def bench_analysis(frames_per_scene: int = 12) -> dict[str, Any]:
-    bands: dict[str, dict[str, float]] = {}
+    bands: dict[str, dict[str, Any]] = {}
     cells = []
     cerr: list[float] = []
     for delta in DELTAS:
@@ -78,10 +78,10 @@ def bench_analysis(frames_per_scene: int = 12) -> dict[str, Any]:
             band["fn"] += fn
             cells.append({"delta_k": delta, "size": size, "recall": round(tp / max(1, tp + fn), 3),
                           "precision": round(tp / max(1, tp + fp), 3) if tp + fp else None})
-    for b in bands.values():
-        p = b["tp"] / (b["tp"] + b["fp"]) if b["tp"] + b["fp"] else 0.0
-        r = b["tp"] / (b["tp"] + b["fn"]) if b["tp"] + b["fn"] else 0.0
-        b.update(precision=round(p, 4), recall=round(r, 4), f1=round(2 * p * r / (p + r), 4) if p + r else 0.0)
+    for stats in bands.values():
+        p = stats["tp"] / (stats["tp"] + stats["fp"]) if stats["tp"] + stats["fp"] else 0.0
+        r = stats["tp"] / (stats["tp"] + stats["fn"]) if stats["tp"] + stats["fn"] else 0.0
+        stats.update(precision=round(p, 4), recall=round(r, 4), f1=round(2 * p * r / (p + r), 4) if p + r else 0.0)
     # Target-free scenes: every detection is false.
     empty = SimSource(frames=100, paced=False, seed=99, targets=(), cue_period_s=0, start_time_ns=0)
     det = HotSpotDetector(empty.model, bad_pixel_map=empty.bad_pixel_map)
@@ -142,7 +142,7 @@ def overlay_png(temps: np.ndarray, boxes: list[list[int]], palette_name: str = "
                                                              x1 + 1), min(temps.shape[0] - 1, y1 + 1)
         rgb[y0, x0:x1 + 1] = rgb[y1, x0:x1 + 1] = 255
         rgb[y0:y1 + 1, x0] = rgb[y0:y1 + 1, x1] = 255
-    return imagecodecs.png_encode(rgb)
+    return cast(bytes, imagecodecs.png_encode(rgb))
 
 
 def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str, Any]]:

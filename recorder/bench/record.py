@@ -36,7 +36,7 @@ class MemorySource(FrameSource):
         self.sensor = template.sensor
         self.model = template.model
         self.bad_pixel_map = template.bad_pixel_map
-        self.extra_topics = template.extra_topics
+        self.extra_topics = template.extra_topics  # type: ignore[misc]  # mirrors its template's topics
         self._frames = frames
         self._count = count
 

@@ -289,6 +289,7 @@ class Recorder:
     def _offer_analysis(self, frame: CapturedFrame) -> None:
         fut: Future = Future()
         frame.analysis = fut
+        assert self._aq is not None
         if self.wait_when_full:  # not real time: every frame is analysed
             self._aq.put((frame.pixels, fut))
             return

@@ -30,7 +30,7 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
             sys.exit(1)
         return
     try:
-        dims = [tuple(int(v) for v in s.lower().split("x")) for s in sizes.split(",")]
+        dims = [(int(w), int(h)) for w, h in (s.lower().split("x") for s in sizes.split(","))]
     except ValueError:
         fail(f"--sizes must look like 640x512,1280x1024, got {sizes!r}")
     rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json)

@@ -64,9 +64,10 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
                           cue_period_s=cue_period, paced=(is_sim if pace is None else pace),
                           duration_s=duration if is_sim else None, sensor_id=sensor_id,
                           timestamps=None if is_sim else timestamps)
-        if getattr(src, "file_remainder", 0):
+        remainder = getattr(src, "file_remainder", 0)
+        if remainder:
             click.echo(f"warning: {source[4:]} is not a whole number of {width}x{height} Gray16 frames "
-                       f"({src.file_remainder} bytes left over); the last frame will be reported as truncated",
+                       f"({remainder} bytes left over); the last frame will be reported as truncated",
                        err=True)
         if compression == "auto":
             comp, default_level = auto_compression(width, height, fps)

@@ -85,7 +85,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         return _export_dji(session_dir, out, on_frame)
     positions = _positions(session_dir)
     frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
-    lo = hi = None
+    lo: float | None = None
+    hi: float | None = None
     if frames is not None:  # one colour scale for the whole session
         temps_all = [np.asarray(model.to_celsius(f.pixels)) for f in frames] if _has_temps(model) else []
         if temps_all:
@@ -104,13 +105,15 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
                 "position": positions.get(f.log_time)}
         if kind in ("celsius-tiff", "kelvin-tiff"):
+            assert temps is not None  # a missing temperature was refused above
             data = temps if kind == "celsius-tiff" else temps + np.float32(273.15)
             path = out / f"{name}.{'celsius' if kind == 'celsius-tiff' else 'kelvin'}.tiff"
             tifffile.imwrite(path, data, photometric="minisblack", byteorder="<", metadata=None,
                              description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}),
                              extratags=geotiff_tags(positions.get(f.log_time), data.shape))
         elif kind == "heatmap-png":
-            a, b = (lo, hi) if lo is not None else (float(f.pixels.min()), float(f.pixels.max()) + 1)
+            a, b = (lo, hi) if lo is not None and hi is not None else (float(f.pixels.min()),
+                                                                         float(f.pixels.max()) + 1)
             src = temps if temps is not None else f.pixels.astype(np.float32)
             idx = np.clip((src - a) * (255.0 / max(b - a, 1e-6)), 0, 255).astype(np.uint8)
             path = out / f"{name}.png"

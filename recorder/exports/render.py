@@ -5,6 +5,7 @@ from __future__ import annotations
 import io
 import json
 from functools import cache, lru_cache
+from typing import cast
 
 import imagecodecs
 import numpy as np
@@ -68,11 +69,11 @@ def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = 
     if hi <= lo:
         hi = lo + 1e-3
     idx = np.clip((temps - lo) * (255.0 / (hi - lo)), 0, 255).astype(np.uint8)
-    return imagecodecs.png_encode(palette(palette_name)[idx], level=1)
+    return cast(bytes, imagecodecs.png_encode(palette(palette_name)[idx], level=1))
 
 
 def png16(frame: np.ndarray) -> bytes:
-    return imagecodecs.png_encode(np.ascontiguousarray(frame, dtype=np.uint16), level=1)
+    return cast(bytes, imagecodecs.png_encode(np.ascontiguousarray(frame, dtype=np.uint16), level=1))
 
 
 def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:

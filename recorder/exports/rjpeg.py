@@ -8,6 +8,7 @@ R-JPEG that DJI's Thermal SDK measures exactly as it measured the original.
 from __future__ import annotations
 
 import struct
+from typing import cast
 
 import numpy as np
 
@@ -38,7 +39,7 @@ def rebuild_rjpeg(pixels: np.ndarray, segments_blob: bytes) -> bytes:
         else:
             parts.append(segments_blob[pos:pos + 2 + length])
         pos += 2 + length
-    grey = imagecodecs.jpeg8_encode(np.full((8, 8), 128, np.uint8))
+    grey = cast(bytes, imagecodecs.jpeg8_encode(np.full((8, 8), 128, np.uint8)))
     tables = b"".join(app_segment(m, p) for m, p in app_segments("grey", grey) if not 0xE0 <= m <= 0xEF)
     parts += [tables, grey[grey.index(b"\xff\xda"):]]
     return b"".join(parts)

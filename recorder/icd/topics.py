@@ -97,7 +97,7 @@ def image_message_parts(frame: np.ndarray, stamp_ns: int, frame_id: str = "therm
         frame = np.ascontiguousarray(frame)
     le = frame if frame.dtype.byteorder in "<=|" else frame.astype("<u2")
     h, w = frame.shape
-    return [encode_image_prefix(stamp_ns, frame_id, h, w), memoryview(le).cast("B")]
+    return [encode_image_prefix(stamp_ns, frame_id, h, w), le.data.cast("B")]
 
 
 def decode_image(data: bytes | memoryview) -> tuple[int, np.ndarray]:

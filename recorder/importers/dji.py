@@ -9,6 +9,7 @@ it exactly.
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 import numpy as np
 
@@ -43,6 +44,10 @@ def _app_segments_without_raw(segments: list[tuple[int, bytes]], raw_marker: int
             continue
         out.append(app_segment(marker, payload))
     return b"".join(out)
+
+
+def _rounded(params: dict[str, Any]) -> dict[str, Any]:
+    return {k: (None if v is None else round(float(v), 6)) for k, v in params.items()}
 
 
 def is_dji(segments: list[tuple[int, bytes]]) -> bool:
@@ -145,8 +150,7 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
             "signed_int16": layout == "girp" or xt_s, "xmp_drone_dji": xmp,
             "exif_time": exif.get("DateTimeOriginal") or exif.get("DateTime"), "time_basis": time_basis}
     return [ImportedFrame(path=path, format="dji-rjpeg", layout=layout, pixels=pixels,
-                          model=DjiModel(layout=layout, **{k: (None if v is None else round(float(v), 6))
-                                                           for k, v in params.items()}),
+                          model=DjiModel(layout=layout, **_rounded(params)),
                           timestamp_ns=ts, sensor_model=f"DJI {model}".strip(),
                           sensor_id=f"DJI-{model or 'UNKNOWN'}"[:32],
                           vendor_metadata=meta, blobs=blobs)]

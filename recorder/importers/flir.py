@@ -28,6 +28,8 @@ def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
             last = payload[7]
     if not chunks:
         return None
+    if last is None:
+        raise ImportError_(f"{path}: FLIR APP1 chunks carry no chunk count (damaged file?)")
     missing = [i for i in range(last + 1) if i not in chunks] if last is not None else []
     if missing:
         raise ImportError_(f"{path}: FLIR APP1 chunks {missing} of 0..{last} are missing (truncated file?)")
@@ -50,7 +52,7 @@ def parse_fff(path: str, fff: bytes) -> dict[int, tuple[int, bytes]]:
     dir_off, count = struct.unpack(order + "II", read_exact(path, fff, 0x18, 8, "FFF header"))
     if count > 10_000:
         raise ImportError_(f"{path}: FFF directory claims {count} entries")
-    records = {}
+    records: dict[int, tuple[int, bytes]] = {}
     for i in range(count):
         e = read_exact(path, fff, dir_off + 32 * i, 32, "FFF directory")
         rtype, sub, _ver, _idx, off, length = struct.unpack(order + "HHIIII", e[:20])
@@ -171,7 +173,7 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
     return [frame]
 
 
-def iter_fff_records(path: str, data: bytes) -> Iterator[bytes]:
+def iter_fff_records(path: str, data: bytes | mmap.mmap) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
     image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file)."""
@@ -208,7 +210,7 @@ def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:
     return list(iter_fff_file(path, data))
 
 
-def iter_fff_file(path: str, data: bytes) -> Iterator[ImportedFrame]:
+def iter_fff_file(path: str, data: bytes | mmap.mmap) -> Iterator[ImportedFrame]:
     """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be an mmap): a long SEQ never
     sits decoded in memory. A file with a second image is a SEQ (CSQ when JPEG-LS coded)."""
     records = iter_fff_records(path, data)

@@ -69,6 +69,7 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
     try:
         with tifffile.TiffFile(io.BytesIO(data)) as tif:
             page = tif.pages[0]
+            assert isinstance(page, tifffile.TiffPage)  # the first page is always a full page
             if page.dtype != np.uint16 or page.samplesperpixel != 1:
                 raise ImportError_(f"{path}: not a single-channel 16-bit TIFF "
                                    f"({page.dtype}, {page.samplesperpixel} samples)")
@@ -98,6 +99,7 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
 
 def read_icd_raw(path: str, data: bytes) -> list[ImportedFrame]:
     doc = _sidecar(path, required=True)
+    assert doc is not None  # required: missing raises
     res = doc["sensor"]["resolution"]
     w, h = res["width"], res["height"]
     if len(data) != w * h * 2:

@@ -14,7 +14,7 @@ def app_segments(path: str, data: bytes) -> list[tuple[int, bytes]]:
     """[(marker, payload)] for every segment from SOI up to SOS, in file order."""
     if data[:2] != b"\xff\xd8":
         raise ImportError_(f"{path}: not a JPEG (no SOI marker)")
-    out = []
+    out: list[tuple[int, bytes]] = []
     pos = 2
     n = len(data)
     while pos + 4 <= n:

@@ -20,7 +20,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, cast
 
 import numpy as np
 
@@ -191,12 +191,13 @@ def _split_tables(members: list[_Entry]) -> list[tuple[Any, list[_Entry]]]:
     parts: list[tuple[LookupTableModel, list[_Entry]]] = []
     for e in members:
         for i, (table, group) in enumerate(parts):
+            assert isinstance(e.frame.model, LookupTableModel)  # one session's frames share a model kind
             merged = table.merged(e.frame.model)
             if merged is not None:
                 parts[i] = (merged, [*group, e])
                 break
         else:
-            parts.append((e.frame.model, [e]))
+            parts.append((cast(LookupTableModel, e.frame.model), [e]))
     return parts
 
 

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from recorder.importers.base import ImportedFrame, ImportError_
-from recorder.radiometry import ScaledKelvinModel, TerraRefPlanckModel
+from recorder.radiometry import RadiometricModel, ScaledKelvinModel, TerraRefPlanckModel
 
 __all__ = ["metadata_for", "read_terraref"]
 
@@ -51,6 +51,7 @@ def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[
     fixed = meta.get("sensor_fixed_metadata", {})
     var = meta.get("sensor_variable_metadata", {})
     gantry = meta.get("gantry_system_variable_metadata", {})
+    model: RadiometricModel
     if str(fixed.get("is calibrated", "False")).strip().lower() == "true":
         model = ScaledKelvinModel(counts_per_kelvin=10.0)
     else:

@@ -83,11 +83,14 @@ def iter_segment_frames(path: Path, *, first_index: int = 0) -> Iterator[Session
                     pending[msg.log_time] = (img, meta)
                 # An image whose sidecar never comes (should not happen) is still a frame.
                 for t in [t for t in pending if t < msg.log_time and pending[t][0] is not None]:
-                    yield SessionFrame(index, path.name, t, pending.pop(t)[0], b"")
+                    orphan = pending.pop(t)[0]
+                    assert orphan is not None
+                    yield SessionFrame(index, path.name, t, orphan, b"")
                     index += 1
             for t in sorted(pending):
-                if pending[t][0] is not None:
-                    yield SessionFrame(index, path.name, t, pending[t][0], b"")
+                orphan = pending[t][0]
+                if orphan is not None:
+                    yield SessionFrame(index, path.name, t, orphan, b"")
                     index += 1
     except McapFileError:
         raise

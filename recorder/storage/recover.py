@@ -18,7 +18,7 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 from mcap.data_stream import ReadDataStream
 from mcap.opcode import Opcode
@@ -79,8 +79,8 @@ def scan_records(stream: BinaryIO, size: int, path: str) -> Iterator[tuple[int, 
         pos += 9 + length
 
 
-def _parse(opcode: int, body: bytes):
-    reader = _READERS[opcode]
+def _parse(opcode: int, body: bytes) -> Any:
+    reader: Any = _READERS[Opcode(opcode)]
     return reader.read(ReadDataStream(io.BytesIO(body)))
 
 

@@ -17,7 +17,7 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
@@ -243,13 +243,15 @@ class SessionWriter:
 
     # -- writing -------------------------------------------------------------------------------
     def write_frame(self, log_time: int, image_parts: list[Any], sidecar_json: bytes,
-                    extra: list[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
-                    attachments: list[tuple[str, str, bytes]] = ()) -> None:
+                    extra: Sequence[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
+                    attachments: Sequence[tuple[str, str, bytes]] = ()) -> None:
         size = sum(memoryview(p).nbytes for p in image_parts) + len(sidecar_json)
         self._maybe_rotate(log_time, size)
+        writer = self._writer
+        assert writer is not None  # _maybe_rotate opened a segment
         for name, media_type, data in attachments:
             with self._writing():
-                self._writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
+                writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
         self._add(TOPIC_IMAGE, log_time, image_parts, token=token, sequence=sequence)
         self._add(TOPIC_METADATA, log_time, sidecar_json, sequence=sequence)
         for topic, payload in extra:

@@ -11,8 +11,10 @@ from alembic import op
 revision = "0003"
 down_revision = "0002"
 
-_COLUMNS = {"frames": [("sha256", sa.String(64)), ("sidecar_sha256", sa.String(64))],
-            "frame_blobs": [("crc32", sa.BigInteger())]}
+_COLUMNS: dict[str, list[tuple[str, sa.types.TypeEngine]]] = {
+    "frames": [("sha256", sa.String(64)), ("sidecar_sha256", sa.String(64))],
+    "frame_blobs": [("crc32", sa.BigInteger())],
+}
 
 
 def upgrade() -> None:

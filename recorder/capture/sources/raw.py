@@ -19,7 +19,7 @@ import os
 import sys
 import time
 from collections.abc import Iterator
-from typing import BinaryIO
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -107,7 +107,7 @@ class RawSource(FrameSource):
                 stream.close()
 
 
-def _read_exactly(stream: BinaryIO, view: memoryview) -> int:
+def _read_exactly(stream: Any, view: memoryview) -> int:
     """Fill ``view`` unless the stream ends; pipes deliver frames in pieces."""
     total = 0
     while total < view.nbytes:

@@ -177,7 +177,7 @@ class SimSource(FrameSource):
         if width < 16 or height < 16:
             raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
         self.width, self.height, self.fps = width, height, fps
-        self.model = LinearModel()
+        self.model: LinearModel = LinearModel()
         self.sensor = SensorInfo(model="thermcap simulator (Boson-like)", sensor_id=sensor_id,
                                  serial_number=f"SIM-{seed}", width=width, height=height,
                                  netd_mk=netd_mk, frame_rate_hz=fps)
@@ -213,7 +213,7 @@ class SimSource(FrameSource):
         n = width * height
         self._noise_pool = (rng.standard_normal(n * 3, dtype=np.float32) * np.float32(sigma_counts))
         # Dead (0) and hot (max) pixels, away from the borders.
-        self.bad_pixel_map = np.zeros((height, width), dtype=bool)
+        self.bad_pixel_map: np.ndarray = np.zeros((height, width), dtype=bool)
         ys = rng.integers(2, height - 2, size=bad_pixels)
         xs = rng.integers(2, width - 2, size=bad_pixels)
         self.bad_pixel_map[ys, xs] = True
