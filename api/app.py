@@ -14,8 +14,9 @@ from fastapi.responses import JSONResponse
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from api.db import make_engine, migrate
+from api.exceptions import FrameNotFound, FrameUnavailable
 from api.indexing import index_root
-from api.reading.frames import FrameNotFound, FrameReader, FrameUnavailable
+from api.reading.frames import FrameReader
 from api.security import AuthGate
 from api.settings import Settings
 from api.storage import make_store

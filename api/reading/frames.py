@@ -30,6 +30,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from api import db
+from api.exceptions import FrameNotFound, FrameUnavailable
 from api.storage import BlobStore
 from archive.codecs import get_codec
 from archive.formats import get_format
@@ -42,8 +43,6 @@ __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "F
 log = logging.getLogger("thermcap.api")
 
 
-class FrameNotFound(LookupError):
-    pass
 
 
 class BlobFile(io.RawIOBase):
@@ -76,8 +75,6 @@ class BlobFile(io.RawIOBase):
         return len(data)
 
 
-class FrameUnavailable(LookupError):
-    """Every copy of a frame is missing or damaged (each was checked against the manifest)."""
 
 
 @dataclass
