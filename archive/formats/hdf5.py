@@ -20,7 +20,9 @@ from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 from recorder.storage.reader import SessionFrame
 
-__all__ = ["Hdf5"]
+__all__ = ["LIBVER", "Hdf5"]
+
+LIBVER = ("earliest", "v110")
 
 
 def _szip_encoder_available() -> bool:
@@ -52,7 +54,10 @@ class Hdf5(ArchiveFormat):
         if n_total is None:
             raise ArchiveError("hdf5 needs the frame count up front")
         n = 0
-        with h5py.File(out_dir / rel, "w-", libver="latest") as f:
+        # The oldest file-format bounds that hold what we use (chunks, SZIP, variable-length UTF-8):
+        # "latest" from the HDF5 2.x inside h5py's wheel is unreadable to HDF5 1.10 tools (h5dump,
+        # GDAL and MATLAB builds of that era).
+        with h5py.File(out_dir / rel, "w-", libver=LIBVER) as f:
             dset: Any = None
             times: Any = None
             meta: Any = None
