@@ -47,4 +47,6 @@ def test_docker_compose_config_where_the_cli_exists(tmp_path):
 
 def test_dockerfile_installs_the_package_and_runs_unprivileged():
     text = (ROOT / "Dockerfile").read_text()
-    assert "pip install ." in text and "USER thermcap" in text and 'ENTRYPOINT ["thermcap"]' in text
+    assert "pip install ." in text
+    assert "USER thermcap" in text
+    assert 'ENTRYPOINT ["thermcap"]' in text

@@ -39,7 +39,8 @@ def test_health_and_ready(client):
 def test_sessions_list_filters_and_cursor(client):
     items = client.get("/api/v1/sessions").json()["items"]
     assert [s["id"] for s in items] == ["s-mcap-only", "s-crossover", "s-archived"]  # newest first
-    assert items[0]["start"].endswith("Z") and len(items[0]["start"].split(".")[1]) == 10  # ns + Z
+    assert items[0]["start"].endswith("Z")
+    assert len(items[0]["start"].split(".")[1]) == 10  # ns + Z
     assert next(s["id"] for s in client.get("/api/v1/sessions",
                                             params={"sort": "start"}).json()["items"]) == "s-archived"
     crossover = client.get("/api/v1/sessions", params={"max_grade": 0.3}).json()["items"]
@@ -62,25 +63,32 @@ def test_sessions_list_filters_and_cursor(client):
 
 def test_page_size_is_capped(client):
     r = client.get("/api/v1/sessions/s-crossover/frames", params={"limit": 100000})
-    assert r.status_code == 200 and len(r.json()["items"]) == 120  # cap is 1000 > 120 frames
+    assert r.status_code == 200
+    assert len(r.json()["items"]) == 120  # cap is 1000 > 120 frames
 
 
 def test_session_detail_has_archives_and_coverage(client):
     d = client.get("/api/v1/sessions/s-archived").json()
-    assert d["frames"] == 60 and d["width"] == W and d["height"] == H
+    assert d["frames"] == 60
+    assert d["width"] == W
+    assert d["height"] == H
     fmts = {a["format"]: a for a in d["archives"]}
-    assert set(fmts) == {"png16", "hdf5", "jxl"} and all(a["verified"] for a in fmts.values())
+    assert set(fmts) == {"png16", "hdf5", "jxl"}
+    assert all(a["verified"] for a in fmts.values())
     assert fmts["png16"]["files"][0]["url"].endswith("/archives/png16/0000.zip")
-    assert len(d["coverage"]) == 1 and d["gaps"] == []
+    assert len(d["coverage"]) == 1
+    assert d["gaps"] == []
     assert [s["name"] for s in d["segments"]] == ["0000.mcap", "0001.mcap"]
 
 
 def test_frame_list_filters(client):
     low = client.get("/api/v1/sessions/s-crossover/frames", params={"max_grade": 0.3}).json()["items"]
-    assert low and all(f["thermal_contrast_grade"] <= 0.3 for f in low)
+    assert low
+    assert all(f["thermal_contrast_grade"] <= 0.3 for f in low)
     assert 15 < len(low) < 120
     page = client.get("/api/v1/sessions/s-archived/frames", params={"limit": 25}).json()
-    assert len(page["items"]) == 25 and page["next_cursor"]
+    assert len(page["items"]) == 25
+    assert page["next_cursor"]
     nxt = client.get("/api/v1/sessions/s-archived/frames", params={"limit": 25, "cursor": page["next_cursor"]}).json()
     assert nxt["items"][0]["index"] == 25
 
@@ -95,7 +103,8 @@ def test_frames_are_bit_exact_in_every_format(client, source, sid):
         png = client.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "png16"})
         assert png.headers["content-type"] == "image/png"
         dec = imagecodecs.png_decode(png.content)
-        assert dec.dtype == np.uint16 and np.array_equal(dec, exp)
+        assert dec.dtype == np.uint16
+        assert np.array_equal(dec, exp)
         tif = client.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "tiff"})
         assert np.array_equal(tifffile.imread(io.BytesIO(tif.content)), exp)
 
@@ -114,7 +123,8 @@ def test_celsius_tiff_and_temperature_use_the_model(client, source):
     assert t.dtype == np.float32
     assert np.allclose(t, exp * 0.036 - 40, atol=1e-4)
     p = client.get("/api/v1/sessions/s-archived/frames/5/temperature", params={"x": 10, "y": 20}).json()
-    assert p["counts"] == int(exp[20, 10]) and p["celsius"] == pytest.approx(exp[20, 10] * 0.036 - 40, abs=1e-3)
+    assert p["counts"] == int(exp[20, 10])
+    assert p["celsius"] == pytest.approx(exp[20, 10] * 0.036 - 40, abs=1e-3)
 
 
 @pytest.mark.parametrize("palette", ["ironbow", "gray", "turbo"])
@@ -122,7 +132,8 @@ def test_preview_is_8_bit_colour(client, palette):
     r = client.get("/api/v1/sessions/s-archived/frames/0",
                    params={"format": "preview", "palette": palette, "min": 0, "max": 50})
     img = imagecodecs.png_decode(r.content)
-    assert img.dtype == np.uint8 and img.shape == (H, W, 3)
+    assert img.dtype == np.uint8
+    assert img.shape == (H, W, 3)
     assert (palette == "gray") == bool(np.all(img[..., 0] == img[..., 1]))
 
 
@@ -136,21 +147,29 @@ def test_archive_download_range_etag_cors(client, data_root):
     whole = path.read_bytes()
     url = "/api/v1/sessions/s-archived/archives/png16/0001.zip"
     r = client.get(url, headers={"Origin": "https://app.foxglove.dev"})
-    assert r.status_code == 200 and r.content == whole
-    assert r.headers["accept-ranges"] == "bytes" and r.headers["content-length"] == str(len(whole))
+    assert r.status_code == 200
+    assert r.content == whole
+    assert r.headers["accept-ranges"] == "bytes"
+    assert r.headers["content-length"] == str(len(whole))
     etag = r.headers["etag"]
-    assert etag.startswith('"') and len(etag) == 66
+    assert etag.startswith('"')
+    assert len(etag) == 66
     exposed = r.headers["access-control-expose-headers"].lower()
-    assert "content-range" in exposed and "etag" in exposed and "accept-ranges" in exposed
+    assert "content-range" in exposed
+    assert "etag" in exposed
+    assert "accept-ranges" in exposed
     r = client.get(url, headers={"Range": "bytes=100-199"})
-    assert r.status_code == 206 and r.content == whole[100:200]
+    assert r.status_code == 206
+    assert r.content == whole[100:200]
     assert r.headers["content-range"] == f"bytes 100-199/{len(whole)}"
     r = client.get(url, headers={"Range": "bytes=-50"})
-    assert r.status_code == 206 and r.content == whole[-50:]
+    assert r.status_code == 206
+    assert r.content == whole[-50:]
     r = client.get(url, headers={"Range": f"bytes={len(whole) - 10}-"})
     assert r.content == whole[-10:]
     r = client.get(url, headers={"Range": f"bytes={len(whole)}-"})
-    assert r.status_code == 416 and r.headers["content-range"] == f"bytes */{len(whole)}"
+    assert r.status_code == 416
+    assert r.headers["content-range"] == f"bytes */{len(whole)}"
     assert client.get(url, headers={"If-None-Match": etag}).status_code == 304
     assert client.head(url).headers["content-length"] == str(len(whole))
     listing = client.get("/api/v1/sessions/s-archived/archives/png16").json()
@@ -166,7 +185,8 @@ def test_export_mcap_range_and_topics(client, source):
     assert r.status_code == 200
     reader = make_reader(io.BytesIO(r.content))
     summary = reader.get_summary()
-    assert summary.chunk_indexes and summary.statistics.message_count > 0
+    assert summary.chunk_indexes
+    assert summary.statistics.message_count > 0
     imgs = [(m.log_time, decode_image(m.data)[1]) for _, _, m in reader.iter_messages(topics=["/thermal/image"])]
     assert [t for t, _ in imgs] == [f.log_time for f in frames[10:40]]
     assert all(np.array_equal(px, f.pixels) for (_, px), f in zip(imgs, frames[10:40], strict=True))
@@ -208,7 +228,8 @@ def test_bad_requests_get_json_4xx(client, path, status):
 def test_paths_never_escape_the_root(client, path):
     r = client.get(path)
     assert r.status_code in (400, 404)
-    assert b"root:" not in r.content and b"session_id" not in r.content
+    assert b"root:" not in r.content
+    assert b"session_id" not in r.content
 
 
 def test_symlink_planted_in_an_archive_is_not_served(client, data_root):
@@ -230,4 +251,5 @@ def test_browser_pages_are_served(client):
     assert "thermcap sessions" in client.get("/").text
     assert "contrast grade over the session" in client.get("/ui/sessions/s-archived").text
     t = client.get("/api/v1/sessions/s-crossover/timeline", params={"bins": 10}).json()
-    assert len(t["bins"]) == 10 and min(b["min"] for b in t["bins"]) < 0.3
+    assert len(t["bins"]) == 10
+    assert min(b["min"] for b in t["bins"]) < 0.3

@@ -38,7 +38,8 @@ def test_session_page_renders_in_headless_chromium(server, tmp_path):
         dom = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--dump-dom", url],
                              capture_output=True, text=True, timeout=120).stdout
     assert 'data-ready="1"' in dom, dom[-2000:]
-    assert "frame 0 / 59" in dom and "s-archived" in dom
+    assert "frame 0 / 59" in dom
+    assert "s-archived" in dom
     assert "/frames/0?format=celsius-tiff" in dom  # per-frame links
     assert "?format=dji-rjpeg" not in dom  # not a DJI session
     assert 'src="blob:' in dom  # the colour preview was fetched and shown
@@ -46,12 +47,14 @@ def test_session_page_renders_in_headless_chromium(server, tmp_path):
     with tempfile.TemporaryDirectory() as profile:
         subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--screenshot={out}", url],
                        capture_output=True, timeout=120)
-    assert out.is_file() and out.stat().st_size > 10_000
+    assert out.is_file()
+    assert out.stat().st_size > 10_000
     import imagecodecs
     import numpy as np
 
     img = imagecodecs.png_decode(out.read_bytes())
-    assert img.shape[0] >= 800 and img.shape[1] >= 1200
+    assert img.shape[0] >= 800
+    assert img.shape[1] >= 1200
     assert len(np.unique(img.reshape(-1, img.shape[-1])[:, :3],
                          axis=0)) > 50  # a rendered thermal image, not a blank page
 
@@ -61,4 +64,5 @@ def test_sessions_page_lists_sessions_in_chromium(server):
     with tempfile.TemporaryDirectory() as profile:
         dom = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", "--dump-dom", server.url + "/"],
                              capture_output=True, text=True, timeout=120).stdout
-    assert "/ui/sessions/s-crossover" in dom and "/ui/sessions/s-mcap-only" in dom
+    assert "/ui/sessions/s-crossover" in dom
+    assert "/ui/sessions/s-mcap-only" in dom

@@ -31,22 +31,26 @@ def locked_server(data_root, tmp_path_factory):
 
 def test_tokens_guard_every_route_but_health(locked_server):
     with httpx.Client(base_url=locked_server.url) as c:
-        assert c.get("/healthz").status_code == 200 and c.get("/readyz").status_code == 200
+        assert c.get("/healthz").status_code == 200
+        assert c.get("/readyz").status_code == 200
         for path in ("/api/v1/sessions", "/api/v1/sessions/s-archived/frames/0", "/metrics", "/api/v1/audit",
                      "/api/v1/sessions/s-archived/archives/png16/0000.zip"):
             r = c.get(path)
-            assert r.status_code == 401 and r.headers["www-authenticate"] == "Bearer", path
+            assert r.status_code == 401, path
+            assert r.headers["www-authenticate"] == "Bearer", path
             assert c.get(path, headers={"Authorization": "Bearer wrong-token-000"}).status_code == 401
             assert c.get(path, headers={"Authorization": f"Bearer {READ}"}).status_code == 200, path
         assert c.post("/api/v1/index", headers={"Authorization": f"Bearer {READ}"}).status_code == 403
         r = c.post("/api/v1/index", headers={"Authorization": f"Bearer {WRITE}"})
-        assert r.status_code == 200 and r.json()["unchanged"]
+        assert r.status_code == 200
+        assert r.json()["unchanged"]
 
 
 def test_tokens_are_never_logged_or_echoed(locked_server):
     with httpx.Client(base_url=locked_server.url) as c:
         r = c.get("/api/v1/sessions", headers={"Authorization": "Bearer wrong-token-000"})
-    assert "wrong-token" not in r.text and READ not in r.text
+    assert "wrong-token" not in r.text
+    assert READ not in r.text
 
 
 def test_serve_binds_loopback_by_default():
@@ -72,7 +76,8 @@ def test_indexing_is_idempotent_and_picks_up_new_archives(data_root, tmp_path):
 
     before = snapshot()
     again = index_root(engine, root)
-    assert again["indexed"] == [] and snapshot() == before
+    assert again["indexed"] == []
+    assert snapshot() == before
     # archived while the service was down: the next scan sees it
     r = run_cli("archive", str(root / "sessions" / "s-crossover"), "--formats", "png16", "--root", str(root),
                 env={"THERMCAP_DATABASE_URL": f"sqlite:///{tmp_path / 'other.sqlite'}"})
@@ -135,12 +140,15 @@ def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url
             assert np.array_equal(imagecodecs.png_decode(png.content), expected[7])
             url = "/api/v1/sessions/s-archived/archives/png16/0001.zip"
             r = c.get(url, headers={"Range": "bytes=1000-1999"})
-            assert r.status_code == 206 and r.content == whole[1000:2000]
+            assert r.status_code == 206
+            assert r.content == whole[1000:2000]
             assert c.get(url).content == whole
             redirect = c.get(url, params={"redirect": True}, follow_redirects=False)
-            assert redirect.status_code == 307 and seaweedfs["endpoint"] in redirect.headers["location"]
+            assert redirect.status_code == 307
+            assert seaweedfs["endpoint"] in redirect.headers["location"]
             assert httpx.get(redirect.headers["location"]).content == whole
     finally:
         server.stop()
     log_text = (server.proc.stderr.read() or b"").decode()
-    assert seaweedfs["AWS_SECRET_ACCESS_KEY"] not in log_text and "thermcap-test-secret" not in log_text
+    assert seaweedfs["AWS_SECRET_ACCESS_KEY"] not in log_text
+    assert "thermcap-test-secret" not in log_text

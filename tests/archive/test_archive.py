@@ -67,9 +67,12 @@ def test_manifest_records_every_format_verified(archived):
     assert m["frames"]["sha256"] == [frame_sha256(f) for f in frames]
     for fid in ALL:
         e = m["formats"][fid]
-        assert e["verified"] is True and "bit-exact" in e["verification"]
+        assert e["verified"] is True
+        assert "bit-exact" in e["verification"]
         assert e["bytes"] == sum(f["bytes"] for f in e["files"])
-        assert e["compression_ratio"] > 1.5 and e["encode_fps"] > 0 and e["decode_fps"] > 0
+        assert e["compression_ratio"] > 1.5
+        assert e["encode_fps"] > 0
+        assert e["decode_fps"] > 0
         assert "imagecodecs" in e["library_versions"]
         assert sum(e["frames_per_file"]) == 48
     assert m["formats"]["png16"]["objects"] == 4  # one ZIP per segment, 4 segments
@@ -87,11 +90,13 @@ def test_png16_zip_is_stored_icd_pairs_readable_by_zipfile(archived):
             infos = zf.infolist()
             assert all(x.compress_type == zipfile.ZIP_STORED for x in infos)
             names = [x.filename for x in infos]
-            assert names[0].startswith("thermal_") and names[0].endswith("Z_SIM640_N40_P550.png")
+            assert names[0].startswith("thermal_")
+            assert names[0].endswith("Z_SIM640_N40_P550.png")
             assert names[1] == names[0][:-4] + ".json"
             for png, js in zip(names[::2], names[1::2], strict=True):
                 img = imagecodecs.png_decode(zf.read(png))
-                assert img.dtype == np.uint16 and np.array_equal(img, frames[i])
+                assert img.dtype == np.uint16
+                assert np.array_equal(img, frames[i])
                 assert json.loads(zf.read(js)) == meta[i]
                 i += 1
     assert i == 48
@@ -114,13 +119,21 @@ def test_tiff_has_icd_tags_lzw_predictor_and_sidecars(archived):
             assert tif.byteorder == "<"
             for page in tif.pages:
                 tags = {tag.code: tag.value for tag in page.tags}
-                assert tags[256] == W and tags[257] == H and tags[258] == 16 and tags[277] == 1
-                assert tags[259] == 5 and tags[317] == 2  # LZW, horizontal predictor
-                assert tags[262] == 1 and 273 in tags and 278 in tags
+                assert tags[256] == W
+                assert tags[257] == H
+                assert tags[258] == 16
+                assert tags[277] == 1
+                assert tags[259] == 5
+                assert tags[317] == 2  # LZW, horizontal predictor
+                assert tags[262] == 1
+                assert 273 in tags
+                assert 278 in tags
                 # 284 PlanarConfiguration and 339 SampleFormat: tifffile leaves them at the TIFF 6.0
                 # defaults, which are the ICD's values (1 and 1).
-                assert tags.get(284, 1) == 1 and tags.get(339, 1) == 1
-                assert page.planarconfig == 1 and page.sampleformat == 1
+                assert tags.get(284, 1) == 1
+                assert tags.get(339, 1) == 1
+                assert page.planarconfig == 1
+                assert page.sampleformat == 1
                 assert json.loads(page.description)["capture"]["frame_index"] == i
                 assert np.array_equal(page.asarray(), frames[i])
                 i += 1
@@ -132,11 +145,14 @@ def test_hdf5_layout(archived):
     (h5,) = list((archived / "archive" / "hdf5").glob("*.h5"))
     with h5py.File(h5, "r") as f:
         d = f["frames"]
-        assert d.shape == (48, H, W) and d.dtype == np.uint16 and d.chunks == (1, H, W)
+        assert d.shape == (48, H, W)
+        assert d.dtype == np.uint16
+        assert d.chunks == (1, H, W)
         assert d.compression in ("szip", "gzip")
         assert np.array_equal(d[:], np.stack(frames))
         ts = f["timestamps_ns"][:]
-        assert ts.dtype == np.int64 and np.all(np.diff(ts) > 0)
+        assert ts.dtype == np.int64
+        assert np.all(np.diff(ts) > 0)
         meta = [json.loads(s) for s in f["metadata"].asstr()[:]]
         assert meta[5]["capture"]["frame_index"] == 5
         assert json.loads(f.attrs["radiometric_model"])["kind"] == "linear"
@@ -164,7 +180,8 @@ def test_verify_after_delete_source_uses_manifest_alone(session):
     assert not list(session.glob("*.mcap"))
     assert load_manifest(session)["source"]["deleted"] is True
     report = verify_session(session)
-    assert all(r["ok"] for r in report.values()) and set(report) == {"png16", "hdf5", "extras"}
+    assert all(r["ok"] for r in report.values())
+    assert set(report) == {"png16", "hdf5", "extras"}
     assert report["png16"]["frames"] == report["hdf5"]["frames"] == 48
 
 
@@ -196,7 +213,8 @@ def test_delete_source_refused_when_verification_fails(session):
     assert not (session / "archive" / "broken-test").exists()
     assert not list((session / "archive").glob("*.partial"))
     m = load_manifest(session)
-    assert m["formats"]["png16"]["verified"] and not m["formats"]["broken-test"]["verified"]
+    assert m["formats"]["png16"]["verified"]
+    assert not m["formats"]["broken-test"]["verified"]
 
 
 def test_rerun_skips_verified_formats(session):
@@ -241,7 +259,8 @@ def test_archive_refuses_a_session_being_recorded(session):
 
 def test_unknown_format_is_a_clear_cli_error(session):
     r = run_cli("archive", str(session), "--formats", "png16,gif")
-    assert r.returncode != 0 and "unknown format(s) gif" in r.stderr
+    assert r.returncode != 0
+    assert "unknown format(s) gif" in r.stderr
 
 
 def test_audit_reports_costs_and_recommends_the_smallest_verified(archived, tmp_path):
@@ -263,7 +282,8 @@ def test_audit_reports_costs_and_recommends_the_smallest_verified(archived, tmp_
     assert rep2["formats"]["png16"]["cost"]["s3-standard"]["storage_per_month"] == pytest.approx(
         fmts["png16"]["bytes"] / 1024**3, rel=1e-3)
     md = run_cli("audit", str(archived), "--markdown").stdout
-    assert "| png16 |" in md and "recommended format" in md
+    assert "| png16 |" in md
+    assert "recommended format" in md
 
 
 @pytest.mark.parametrize("width,height", [(1280, 1024), (97, 61)])
@@ -280,7 +300,8 @@ def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path)
     picks = [str(samples / "flir" / "FLIR_E40.jpg"), str(samples / "dji" / "DJI_H20T.jpg"),
              str(next((samples / "terraref").glob("*_ir.bin"))), str(samples / "flir" / "example_radiometric.tiff")]
     report = import_paths(picks, tmp_path, analysis=False)
-    assert not report.failed and len(report.sessions) == 4
+    assert not report.failed
+    assert len(report.sessions) == 4
     for res in report.sessions:
         m = archive_session(res.session_dir, ALL)
         assert all(m["formats"][f]["verified"] for f in ALL), res.session_id
@@ -295,21 +316,26 @@ def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(se
     from recorder.storage.reader import session_segments
 
     before = summarize_mcap(session_segments(session))
-    assert before["attachments"] and "/recorder/stats" in before["topics"]
+    assert before["attachments"]
+    assert "/recorder/stats" in before["topics"]
     archive_session(session, ["png16"], delete_source=True)
     extras = session / "archive" / "extras.mcap"
     entry = load_manifest(session)["extras"]
-    assert entry["verified"] and entry["attachments"] == before["attachments"] and entry["topics"] == before["topics"]
+    assert entry["verified"]
+    assert entry["attachments"] == before["attachments"]
+    assert entry["topics"] == before["topics"]
     with open(extras, "rb") as f:
         reader = make_reader(f)
         assert "/thermal/image" not in {c.topic for c in reader.get_summary().channels.values()}
         names = [r.name for r in reader.iter_metadata()]
     from recorder.storage.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
 
-    assert names.count(SESSION_METADATA) == 4 and names.count(SEGMENT_STATS_METADATA) == 4  # each segment's own
+    assert names.count(SESSION_METADATA) == 4
+    assert names.count(SEGMENT_STATS_METADATA) == 4  # each segment's own
     assert verify_session(session)["extras"]["ok"]
     data = bytearray(extras.read_bytes())  # damage it: verify names it
     data[len(data) // 2] ^= 0xFF
     extras.write_bytes(bytes(data))
     r = verify_session(session)["extras"]
-    assert not r["ok"] and "sha256 differs" in r["problems"][0]
+    assert not r["ok"]
+    assert "sha256 differs" in r["problems"][0]

@@ -28,7 +28,8 @@ def _frames():
 @pytest.mark.parametrize("name,frame", list(_frames()), ids=lambda x: x if isinstance(x, str) else "")
 def test_roundtrip_is_bit_exact(codec, name, frame):
     out = codec.decode(codec.encode(frame))
-    assert out.dtype == np.uint16 and out.shape == frame.shape
+    assert out.dtype == np.uint16
+    assert out.shape == frame.shape
     assert np.array_equal(out, frame)
 
 

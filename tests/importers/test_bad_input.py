@@ -41,7 +41,8 @@ def test_truncated_and_bit_flipped_samples_fail_cleanly(samples, tmp_path, name)
         p.write_bytes(bytes(buf))
         frames = _try(p)
         for f in frames or []:
-            assert f.pixels.dtype == np.uint16 and f.pixels.ndim == 2
+            assert f.pixels.dtype == np.uint16
+            assert f.pixels.ndim == 2
     assert time.monotonic() - t0 < 60, "a corrupt file must not hang the importer"
 
 
@@ -74,7 +75,9 @@ def test_icd_raw_needs_the_right_size_and_a_sidecar(tmp_path):
         read_file(raw)
     raw.with_suffix(".json").write_text(json.dumps(ICD_EXAMPLE))
     (f,) = read_file(raw)
-    assert f.pixels.shape == (512, 640) and f.model.scale_c_per_count == 0.036 and f.sensor_id == "BOSON640"
+    assert f.pixels.shape == (512, 640)
+    assert f.model.scale_c_per_count == 0.036
+    assert f.sensor_id == "BOSON640"
     raw.write_bytes(b"\x00" * 1000)
     with pytest.raises(ImportError_, match="1000 bytes, but the sidecar's 640x512 Gray16 frame needs 655360"):
         read_file(raw)
@@ -91,7 +94,8 @@ def test_seq_walks_records_not_magic_strings(samples, tmp_path):
     seq = tmp_path / "flight.seq"
     seq.write_bytes(one + bytes(trap) + one)
     frames = read_file(seq)
-    assert len(frames) == 3 and all(f.format == "flir-seq" for f in frames)
+    assert len(frames) == 3
+    assert all(f.format == "flir-seq" for f in frames)
     assert np.array_equal(frames[0].pixels, frames[2].pixels)
     assert not np.array_equal(frames[0].pixels, frames[1].pixels)  # the trap is data, not a header
 
@@ -104,7 +108,8 @@ def test_import_cli_keeps_going_and_reports(samples, tmp_path):
     assert r.returncode == 1
     out = json.loads(r.stdout)
     assert [f["path"] for f in out["failed"]] == [str(bad / "cut.jpg")]
-    assert len(out["files"]) == 5 and all(s["ok"] for s in out["sessions"])
+    assert len(out["files"]) == 5
+    assert all(s["ok"] for s in out["sessions"])
     assert not list((tmp_path / "root").rglob("*.active"))
 
 

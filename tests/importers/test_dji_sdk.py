@@ -36,8 +36,10 @@ def test_table_from_measurement_is_exact_and_refuses_what_it_does_not_know():
     with pytest.raises(TemperatureUnavailable, match="count 8 is not in the sdk 1 table"):
         m.to_celsius(np.array([7, 8], np.uint16))
     again = model_from_dict(json.loads(json.dumps(m.to_dict())))
-    assert again == m and again.to_dict() == m.to_dict()
-    assert m.summary()["entries"] == 4 and "counts" not in m.summary()
+    assert again == m
+    assert again.to_dict() == m.to_dict()
+    assert m.summary()["entries"] == 4
+    assert "counts" not in m.summary()
 
 
 def test_table_refuses_a_vendor_output_that_is_not_a_per_count_curve():
@@ -72,7 +74,9 @@ def test_import_cli_names_a_bad_sdk_path_and_writes_nothing(samples, tmp_path):
     root = tmp_path / "r"
     r = run_cli("import", str(samples / "dji" / "DJI_H20T.jpg"), "--root", str(root), "--dji-sdk",
                 str(tmp_path / "nope.so"))
-    assert r.returncode == 1 and "nope.so" in r.stderr and "no such DJI SDK" in r.stderr
+    assert r.returncode == 1
+    assert "nope.so" in r.stderr
+    assert "no such DJI SDK" in r.stderr
     assert not (root / "sessions").exists() or not any((root / "sessions").iterdir())
 
 
@@ -92,7 +96,8 @@ def test_dji_thermal_cli_matches_the_sdk_reference_through_import_archive_and_ap
     for name, rf in ref.items():
         f, tr = by_name[name], rf["temperature_reference"]
         assert f["raw_sha256"] == rf["raw_sha256"], name  # the counts never change
-        assert f["model"]["kind"] == "lookup_table" and f["model"]["derived_from"]["layout"] == rf["layout"]
+        assert f["model"]["kind"] == "lookup_table"
+        assert f["model"]["derived_from"]["layout"] == rf["layout"]
         for ours, theirs in ((f["celsius"]["min"], tr["min_C"]), (f["celsius"]["max"], tr["max_C"]),
                              (f["celsius"]["mean"], tr["mean_C"])):
             assert abs(ours - theirs) < 0.1, (name, ours, theirs)
@@ -111,7 +116,8 @@ def test_dji_thermal_cli_matches_the_sdk_reference_through_import_archive_and_ap
                     assert abs(float(t[y, x]) - v) < 0.1, (name, y, x, float(t[y, x]), v)
                 y, x, v = rf["temperature_reference"]["pixels_row_col_C"][1]
                 px = c.get(f"/api/v1/sessions/{sid}/frames/0/temperature", params={"x": x, "y": y}).json()
-                assert abs(px["celsius"] - v) < 0.1 and px["approximate"] is False
+                assert abs(px["celsius"] - v) < 0.1
+                assert px["approximate"] is False
     finally:
         server.stop()
 
@@ -139,7 +145,9 @@ def test_without_an_sdk_dirp_has_no_temperature_and_says_why(samples, tmp_path):
                 "--no-analysis", "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     (f,) = json.loads(r.stdout)["files"]
-    assert f["celsius"] is None and "DJI Thermal SDK" in f["celsius_unavailable"] and f["model"]["kind"] == "dji"
+    assert f["celsius"] is None
+    assert "DJI Thermal SDK" in f["celsius_unavailable"]
+    assert f["model"]["kind"] == "dji"
 
 
 # -- libdirp through ctypes, against a stand-in built from DJI's published header ---------------
@@ -187,7 +195,9 @@ def test_libdirp_binding_passes_the_buffer_and_frees_every_handle(samples, fake_
     sdk = LibDirp(str(fake_libdirp))
     path = str(samples / "dji" / "DJI_H20T.jpg")
     out = sdk.measure([path, path])
-    assert out[path].shape == (512, 640) and out[path].dtype == np.float32 and np.all(out[path] == 21.5)
+    assert out[path].shape == (512, 640)
+    assert out[path].dtype == np.float32
+    assert np.all(out[path] == 21.5)
     assert ctypes.CDLL(str(fake_libdirp)).fake_live_handles() == 0
     text = str(samples / "flir" / "FLIR_E40.exiftool.txt")  # not a JPEG: the SDK refuses, we say so
     assert "dirp_create_from_rjpeg returned -2" in sdk.measure([text])[text]
@@ -199,20 +209,23 @@ def test_import_with_libdirp_path_uses_it_and_reports_its_refusals(samples, fake
                 str(fake_libdirp))
     assert r.returncode == 0, r.stderr
     (f,) = json.loads(r.stdout)["files"]
-    assert f["celsius"] == {"min": 21.5, "max": 21.5, "mean": 21.5} and "libdirp" in f["model"]["source"]
+    assert f["celsius"] == {"min": 21.5, "max": 21.5, "mean": 21.5}
+    assert "libdirp" in f["model"]["source"]
     # the SDK refuses the file: imported all the same (the counts are fine), without a temperature
     r = run_cli("import", h20t, "--root", str(tmp_path / "b"), "--json", "--no-analysis", "--dji-sdk",
                 str(fake_libdirp),
                 env={"FAKE_DIRP_REJECT": "1"})
     assert r.returncode == 0, r.stderr
     (f,) = json.loads(r.stdout)["files"]
-    assert f["celsius"] is None and "returned -9" in f["dji_sdk_error"]
+    assert f["celsius"] is None
+    assert "returned -9" in f["dji_sdk_error"]
     # an output that is not a function of the count is not turned into a table
     r = run_cli("import", h20t, "--root", str(tmp_path / "c"), "--json", "--no-analysis", "--dji-sdk",
                 str(fake_libdirp),
                 env={"FAKE_DIRP_NOISY": "1"})
     (f,) = json.loads(r.stdout)["files"]
-    assert f["celsius"] is None and "not a per-count curve" in f["dji_sdk_error"]
+    assert f["celsius"] is None
+    assert "not a per-count curve" in f["dji_sdk_error"]
 
 
 @needs_cli
@@ -242,19 +255,24 @@ def test_api_lists_a_table_by_identity_and_serves_it_whole_on_the_session(sample
         with httpx.Client(base_url=server.url, timeout=30) as c:
             (item,) = c.get("/api/v1/sessions").json()["items"]
             listed = item["radiometric_model"]
-            assert listed["kind"] == "lookup_table" and "counts" not in listed and listed["entries"] > 100
+            assert listed["kind"] == "lookup_table"
+            assert "counts" not in listed
+            assert listed["entries"] > 100
             assert listed["derived_from"]["layout"] == "girp"
             full = c.get("/api/v1/sessions/girp").json()["radiometric_model"]
-            assert len(full["counts"]) == listed["entries"] and set(full["celsius"]) == {21.5}
+            assert len(full["counts"]) == listed["entries"]
+            assert set(full["celsius"]) == {21.5}
             px = c.get("/api/v1/sessions/girp/frames/0/temperature", params={"x": 5, "y": 7}).json()
-            assert px["celsius"] == 21.5 and px["model"]["table_sha256"] == listed["table_sha256"]
+            assert px["celsius"] == 21.5
+            assert px["model"]["table_sha256"] == listed["table_sha256"]
         chromium = shutil.which("chromium") or shutil.which("chromium-browser")
         if chromium:  # the browser view names the table instead of printing it
             from tests.api.test_schema_and_browser import CHROMIUM_FLAGS
 
             dom = subprocess.run([chromium, *CHROMIUM_FLAGS, f"--user-data-dir={tmp_path / 'profile'}", "--dump-dom",
                                   f"{server.url}/ui/sessions/girp"], capture_output=True, text=True, timeout=120).stdout
-            assert 'data-ready="1"' in dom and f"lookup table, {listed['entries']} counts" in dom, dom[-1500:]
+            assert 'data-ready="1"' in dom, dom[-1500:]
+            assert f"lookup table, {listed['entries']} counts" in dom, dom[-1500:]
             assert "/frames/0?format=dji-rjpeg" in dom  # a DJI session offers the rebuilt R-JPEG
     finally:
         server.stop()
@@ -284,7 +302,8 @@ def test_rebuilt_rjpegs_carry_the_frame_and_every_segment_bit_exact(samples, tmp
         (orig,) = read_file(samples / "dji" / name)
         (again,) = read_file(out / name)
         assert hashlib.sha256(again.pixels.astype("<u2").tobytes()).hexdigest() == f["raw_sha256"]
-        assert again.layout == orig.layout and again.blobs == orig.blobs  # APP4, APP5, EXIF, XMP, APP7 ...
+        assert again.layout == orig.layout
+        assert again.blobs == orig.blobs  # APP4, APP5, EXIF, XMP, APP7 ...
         assert SEGMENTS_BLOB in again.blobs
 
 
@@ -314,15 +333,18 @@ def test_api_serves_the_rebuilt_rjpeg_after_the_mcap_source_is_deleted(samples, 
         with httpx.Client(base_url=server.url, timeout=30) as c:
             for name, f in files.items():
                 resp = c.get(f"/api/v1/sessions/{f['session_id']}/frames/0", params={"format": "dji-rjpeg"})
-                assert resp.status_code == 200 and name in resp.headers["content-disposition"]
+                assert resp.status_code == 200
+                assert name in resp.headers["content-disposition"]
                 assert resp.content == (rebuilt / name).read_bytes()  # the same file export wrote
                 out = tmp_path / name
                 out.write_bytes(resp.content)
                 (again,) = read_file(out)
                 (orig,) = read_file(samples / "dji" / name)
-                assert np.array_equal(again.pixels, orig.pixels) and again.blobs == orig.blobs
+                assert np.array_equal(again.pixels, orig.pixels)
+                assert again.blobs == orig.blobs
             r = c.get("/api/v1/sessions/flir/frames/0", params={"format": "dji-rjpeg"})
-            assert r.status_code == 404 and "dji_rjpeg_segments.bin" in r.json()["error"]
+            assert r.status_code == 404
+            assert "dji_rjpeg_segments.bin" in r.json()["error"]
     finally:
         server.stop()
 

@@ -48,22 +48,27 @@ def _exif(ifd0: dict[int, bytes], exif: dict[int, bytes] | None = None, gps: dic
 def test_offset_time_original_gives_utc():
     app1 = _exif({0x010F: b"DJI"}, {0x9003: b"2024:11:22 18:33:03", 0x9011: b"+08:00", 0x9291: b"25"})
     fields = exif_fields([app1])
-    assert fields["Make"] == "DJI" and fields["OffsetTimeOriginal"] == "+08:00"
+    assert fields["Make"] == "DJI"
+    assert fields["OffsetTimeOriginal"] == "+08:00"
     ns, basis = capture_time(fields)
-    assert iso_utc(ns).startswith("2024-11-22T10:33:03.25") and "offset +08:00" in basis
+    assert iso_utc(ns).startswith("2024-11-22T10:33:03.25")
+    assert "offset +08:00" in basis
 
 
 def test_gps_date_and_time_are_utc_when_no_offset_is_given():
     app1 = _exif({}, {0x9003: b"2024:11:22 18:33:03"}, {0x001D: b"2024:11:22", 0x0007: (10.0, 33.0, 3.5)})
     ns, basis = capture_time(exif_fields([app1]))
-    assert iso_utc(ns).startswith("2024-11-22T10:33:03.5") and basis == "utc: exif GPS date and time"
+    assert iso_utc(ns).startswith("2024-11-22T10:33:03.5")
+    assert basis == "utc: exif GPS date and time"
 
 
 def test_xmp_utc_wins_and_a_bare_local_time_says_its_zone_is_unknown():
     fields = exif_fields([_exif({}, {0x9003: b"2021:05:28 10:33:46"})])
     for stamp in ("2021-05-28T02:33:46.120000", "2021:05:28 02:33:46.120"):  # as DJI writes it; EXIF-style
         ns, basis = capture_time(fields, {"UTCAtExposure": stamp})
-        assert iso_utc(ns).startswith("2021-05-28T02:33:46.12") and basis == "utc: drone-dji UTCAtExposure"
+        assert iso_utc(ns).startswith("2021-05-28T02:33:46.12")
+        assert basis == "utc: drone-dji UTCAtExposure"
     ns, basis = capture_time(fields)
-    assert iso_utc(ns).startswith("2021-05-28T10:33:46") and "zone unknown" in basis
+    assert iso_utc(ns).startswith("2021-05-28T10:33:46")
+    assert "zone unknown" in basis
     assert capture_time({}) == (None, "none stated (file modification time used)")

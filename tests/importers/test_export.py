@@ -35,11 +35,13 @@ def test_celsius_and_kelvin_tiffs_follow_the_model(session, tmp_path):
     assert len(c) == len(k) == 5
     assert c[0].name.startswith("thermal_20270115T080000.000000000Z_SIM640_N40_P550")
     tc, tk = tifffile.imread(c[2]), tifffile.imread(k[2])
-    assert tc.dtype == np.float32 and np.allclose(tc, frames[2].pixels * 0.036 - 40, atol=1e-4)
+    assert tc.dtype == np.float32
+    assert np.allclose(tc, frames[2].pixels * 0.036 - 40, atol=1e-4)
     assert np.allclose(tk, tc + 273.15, atol=1e-3)
     with open(tmp_path / "c" / "summary.csv") as fh:
         rows = list(csv.DictReader(fh))
-    assert len(rows) == 5 and float(rows[2]["surface_temperature_max"]) == pytest.approx(float(tc.max()), abs=1e-3)
+    assert len(rows) == 5
+    assert float(rows[2]["surface_temperature_max"]) == pytest.approx(float(tc.max()), abs=1e-3)
     assert float(rows[2]["surface_temperature_p50"]) == pytest.approx(float(np.percentile(tc, 50)), abs=1e-3)
 
 
@@ -49,18 +51,22 @@ def test_icd_pairs_are_uncompressed_with_sidecars(session, tmp_path):
     tiffs = sorted((tmp_path / "i").glob("*.tiff"))
     with tifffile.TiffFile(tiffs[1]) as t:
         page = t.pages[0]
-        assert page.compression == 1 and t.byteorder == "<" and page.rowsperstrip == 64
+        assert page.compression == 1
+        assert t.byteorder == "<"
+        assert page.rowsperstrip == 64
         assert np.array_equal(page.asarray(), frames[1].pixels)
     validate_sidecar(json.loads(tiffs[1].with_suffix(".json").read_text()))
     summary = json.loads((tmp_path / "i" / "summary.json").read_text())
-    assert summary["standard_name"] == "surface_temperature" and len(summary["frames"]) == 5
+    assert summary["standard_name"] == "surface_temperature"
+    assert len(summary["frames"]) == 5
 
 
 def test_heatmaps_share_one_scale(session, tmp_path):
     export_session(session, "heatmap-png", tmp_path / "h", palette_name="turbo")
     pngs = sorted((tmp_path / "h").glob("*.png"))
     img = imagecodecs.png_decode(pngs[0].read_bytes())
-    assert img.dtype == np.uint8 and img.shape == (64, 96, 3)
+    assert img.dtype == np.uint8
+    assert img.shape == (64, 96, 3)
 
 
 def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
@@ -70,7 +76,8 @@ def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
                 "--dji-sdk", "off")
     assert r.returncode == 0, r.stderr
     r = run_cli("export", "h20t", "--root", str(root), "--to", "celsius-tiff")
-    assert r.returncode == 1 and "DJI Thermal SDK" in r.stderr
+    assert r.returncode == 1
+    assert "DJI Thermal SDK" in r.stderr
     r = run_cli("export", "h20t", "--root", str(root), "--to", "icd")
     assert r.returncode == 0, r.stderr
 
@@ -90,13 +97,17 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
     h20t = root / "sessions" / files["DJI_H20T.jpg"]["session_id"]
     (pos,) = _positions(h20t).values()
     tags = geotiff_tags(pos, (512, 640))
-    assert tags and tags[0][0] == 33922 and tags[0][3][:2] == (320.0, 256.0)
-    assert abs(tags[0][3][4] - float(pos["latitude"])) < 1e-9 and 4326 in tags[1][3]
+    assert tags
+    assert tags[0][0] == 33922
+    assert tags[0][3][:2] == (320.0, 256.0)
+    assert abs(tags[0][3][4] - float(pos["latitude"])) < 1e-9
+    assert 4326 in tags[1][3]
     out = tmp_path / "geo.tiff"
     tifffile.imwrite(out, np.zeros((512, 640), np.float32), extratags=tags, metadata=None)
     with tifffile.TiffFile(out) as t:
         geo = t.pages[0].geotiff_tags
-        assert geo["GeographicTypeGeoKey"] == 4326 and geo["ModelTiepoint"][4] == pytest.approx(float(pos["latitude"]))
+        assert geo["GeographicTypeGeoKey"] == 4326
+        assert geo["ModelTiepoint"][4] == pytest.approx(float(pos["latitude"]))
     m2ea = root / "sessions" / files["M2EA_DJI_0001_R.JPG"]["session_id"]
     assert _positions(m2ea) == {}
     res = export_session(m2ea, "celsius-tiff", tmp_path / "m")

@@ -23,7 +23,8 @@ def test_samples_import_archive_and_serve(samples, tmp_path):
     by_name = {f["path"].rsplit("/", 1)[-1]: f for f in out["files"]}
     for name, ref in {**ref_flir, **ref_dji}.items():
         assert by_name[name]["raw_sha256"] == ref["raw_sha256"], name
-    assert by_name["DJI_H20T.jpg"]["celsius"] is None and "SDK" in by_name["DJI_H20T.jpg"]["celsius_unavailable"]
+    assert by_name["DJI_H20T.jpg"]["celsius"] is None
+    assert "SDK" in by_name["DJI_H20T.jpg"]["celsius_unavailable"]
     assert by_name["M2EA_DJI_0001_R.JPG"]["celsius"]["approximate"] is True
     # calibration blobs ride along as attachments, bit-exact
     h20t = by_name["DJI_H20T.jpg"]["session_id"]
@@ -48,7 +49,8 @@ def test_samples_import_archive_and_serve(samples, tmp_path):
 
             assert hashlib.sha256(raw).hexdigest() == ref_dji["DJI_H20T.jpg"]["raw_sha256"]
             r = c.get(f"/api/v1/sessions/{h20t}/frames/0", params={"format": "celsius-tiff"})
-            assert r.status_code == 409 and "DJI Thermal SDK" in r.json()["error"]
+            assert r.status_code == 409
+            assert "DJI Thermal SDK" in r.json()["error"]
             assert c.get(f"/api/v1/sessions/{h20t}/frames/0", params={"format": "preview"}).status_code == 200
     finally:
         server.stop()

@@ -32,7 +32,8 @@ def test_flir_raw_and_temperatures_within_0_01_c(samples):
         tr = r["temperature_reference"]
         for y, x, v in tr["pixels_row_col_C"]:
             assert abs(t[y, x] - v) < 0.01, (name, y, x)
-        assert abs(t.min() - tr["min_C"]) < 0.01 and abs(t.max() - tr["max_C"]) < 0.01
+        assert abs(t.min() - tr["min_C"]) < 0.01
+        assert abs(t.max() - tr["max_C"]) < 0.01
         assert abs(t.mean() - tr["mean_C"]) < 0.01
         cp = r["camera_params"]
         assert f.model.emissivity == pytest.approx(cp["E"], abs=1e-5)
@@ -53,7 +54,8 @@ def test_dji_raw_bit_exact_layouts_and_blobs(samples):
     for name, r in ref.items():
         path = samples / "dji" / name
         (f,) = read_file(path)
-        assert f.layout == r["layout"] and f.pixels.shape == (r["height"], r["width"]), name
+        assert f.layout == r["layout"], name
+        assert f.pixels.shape == (r["height"], r["width"]), name
         assert _sha(f.pixels) == r["raw_sha256"], name
         segs = app_segments(str(path), path.read_bytes())
         assert f.blobs["dji_app4_params.bin"] == concat_app(segs, 0xE4)
@@ -71,8 +73,10 @@ def test_dji_iirp_is_exactly_the_uncorrected_formula_and_labelled(samples):
             t = f.model.to_celsius(f.pixels)
             assert np.array_equal(t, (f.pixels >> 2) * 0.0625 - 273.15)
             u = r["uncorrected_formula_C"]
-            assert round(float(t.min()), 3) == u["min_C"] and round(float(t.max()), 3) == u["max_C"]
-            assert f.model.approximate and "approximate" in f.model.to_dict()["temperature"]
+            assert round(float(t.min()), 3) == u["min_C"]
+            assert round(float(t.max()), 3) == u["max_C"]
+            assert f.model.approximate
+            assert "approximate" in f.model.to_dict()["temperature"]
         else:
             with pytest.raises(TemperatureUnavailable, match="DJI Thermal SDK"):
                 f.model.to_celsius(f.pixels)
@@ -86,7 +90,8 @@ def test_m30t_frame_size_comes_from_the_thermal_header_not_the_jpeg(samples):
 def test_terraref_pipeline_and_physical_variants(samples):
     ref = json.loads((samples / "terraref" / "reference_temperatures_derived.json").read_text())
     (f,) = read_file(next((samples / "terraref").glob("*_ir.bin")))
-    assert _sha(f.pixels) == ref["raw"]["sha256"] and f.pixels.shape == (480, 640)
+    assert _sha(f.pixels) == ref["raw"]["sha256"]
+    assert f.pixels.shape == (480, 640)
     pipe = ref["terraref_Get_FLIR_2017_as_implemented (T=22C,D=2.5m,E=0.98,H=0.1; forward-model bug kept)"]
     t = f.model.to_celsius(f.pixels)
     assert f.model.variant == "pipeline"
@@ -97,7 +102,8 @@ def test_terraref_pipeline_and_physical_variants(samples):
     params = {k: v for k, v in f.model.to_dict().items() if k not in ("kind", "variant")}
     phys = TerraRefPlanckModel(**params, variant="physical").to_celsius(f.pixels)
     ref_phys = ref["physically_inverted_same_constants (T=22C,D=2.5,E=0.98,H=0.1)"]
-    assert abs(phys.mean() - ref_phys["mean"]) < 0.01 and abs(phys[0, 0] - ref_phys["pixel_row0_col0"]) < 0.01
+    assert abs(phys.mean() - ref_phys["mean"]) < 0.01
+    assert abs(phys[0, 0] - ref_phys["pixel_row0_col0"]) < 0.01
     plain = TerraRefPlanckModel(**params, variant="plain").to_celsius(f.pixels)
     assert abs(plain.mean() - ref["plain_planck_E1_tau1: B/ln(R*J1/(raw-J0)+F)-273.15"]["mean"]) < 0.01
     assert f.vendor_metadata["position_m"]["x"] == "5.7185"
@@ -126,6 +132,7 @@ def test_flir_capture_times_agree_with_exiftool(samples):
         (f,) = read_file(samples / "flir" / name)
         times = _exiftool_flir_times(samples / "flir" / (name.rsplit(".", 1)[0] + ".exiftool.txt"))
         assert times, name
-        assert f.timestamp_ns == times[0] and f.vendor_metadata["time_basis"].startswith("utc: FLIR"), name
+        assert f.timestamp_ns == times[0], name
+        assert f.vendor_metadata["time_basis"].startswith("utc: FLIR"), name
         checked += 1
     assert checked == 4

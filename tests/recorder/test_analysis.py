@@ -27,7 +27,8 @@ def test_flat_noisy_scene_has_no_detection():
     for seed in range(5):
         dets, analysis = det.detect(_flat(seed=seed))
         assert dets == []
-        assert analysis["thermal_contrast_grade"] == 0.0 and analysis["max_target_temp_c"] is None
+        assert analysis["thermal_contrast_grade"] == 0.0
+        assert analysis["max_target_temp_c"] is None
 
 
 def test_hand_placed_target_found_with_exact_box_and_icd_metrics():
@@ -39,7 +40,8 @@ def test_hand_placed_target_found_with_exact_box_and_icd_metrics():
     assert d.centroid == pytest.approx([73.5, 42.5], abs=0.01)
     assert d.max_temp_c == pytest.approx(35.0, abs=0.04)
     assert analysis["delta_t_deg_c"] == pytest.approx(15.0, abs=0.08)
-    assert analysis["thermal_contrast_grade"] == 1.0 and analysis["source"] == "detector"
+    assert analysis["thermal_contrast_grade"] == 1.0
+    assert analysis["source"] == "detector"
 
 
 def test_below_the_5k_threshold_is_not_a_target():
@@ -58,7 +60,8 @@ def test_simulated_targets_found_within_one_pixel():
         assert (tp, fp, fn) == (3, 0, 0)
         for t in truth:
             d = max(dets, key=lambda d: iou(d.bbox, t["bbox"]))
-            assert abs(d.centroid[0] - t["centroid"][0]) <= 1 and abs(d.centroid[1] - t["centroid"][1]) <= 1
+            assert abs(d.centroid[0] - t["centroid"][0]) <= 1
+            assert abs(d.centroid[1] - t["centroid"][1]) <= 1
 
 
 def test_bad_pixels_are_not_targets():
@@ -72,7 +75,8 @@ def test_tracking_ids_are_stable_across_frames():
     src = SimSource(frames=60, paced=False, seed=2, start_time_ns=0)
     det = HotSpotDetector(src.model, bad_pixel_map=src.bad_pixel_map)
     ids = [tuple(sorted(d.target_id for d in det.detect(f.pixels)[0])) for f in src.frames()]
-    assert len(set(ids)) == 1 and len(ids[0]) == 3
+    assert len(set(ids)) == 1
+    assert len(ids[0]) == 3
 
 
 def test_a_target_fades_through_crossover():
@@ -82,8 +86,11 @@ def test_a_target_fades_through_crossover():
     out = [det.detect(f.pixels) for f in src.frames()]
     counts = [len(d) for d, _ in out]
     grades = [a["thermal_contrast_grade"] for _, a in out]
-    assert counts[0] == 1 and counts[-1] == 1 and counts[90] == 0
-    assert grades[0] == 1.0 and grades[90] < 0.3
+    assert counts[0] == 1
+    assert counts[-1] == 1
+    assert counts[90] == 0
+    assert grades[0] == 1.0
+    assert grades[90] < 0.3
 
 
 def test_event_builder_finds_crossover_and_slew_spans():
@@ -138,7 +145,8 @@ def test_analysis_falling_behind_skips_and_says_so(tmp_path):
     rec = Recorder(MemorySource(sim, frames, 300), tmp_path, session_id="b", queue_frames=300, analysis_queue=1,
                    analysis_max_fps=10_000, analysis_wait_s=0.0)
     res = rec.run()
-    assert res.frames_written == 300 and res.frames_dropped == 0  # capture never waited for analysis
+    assert res.frames_written == 300
+    assert res.frames_dropped == 0  # capture never waited for analysis
     assert res.analysis_skipped > 0
     side = [f.sidecar_dict()["thermal_analysis"]["source"] for f in iter_session_frames(tmp_path / "sessions" / "b")]
     assert side.count("skipped") == res.analysis_skipped
@@ -152,7 +160,8 @@ def test_analyze_is_idempotent_and_matches_the_recorder(tmp_path):
     body = (d / "analysis.jsonl").read_bytes()
     events = (d / "events.json").read_bytes()
     analyze_session(d)
-    assert (d / "analysis.jsonl").read_bytes() == body and (d / "events.json").read_bytes() == events
+    assert (d / "analysis.jsonl").read_bytes() == body
+    assert (d / "events.json").read_bytes() == events
     rows = [json.loads(line) for line in body.splitlines()]
     assert len(rows) == 60 == first["frames"]
     assert all(r["thermal_analysis"]["source"] == "detector" and len(r["targets"]) == 3 for r in rows)

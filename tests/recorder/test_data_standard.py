@@ -212,6 +212,7 @@ def test_bad_pixels_replaced_by_median_of_good_neighbours():
     bpm = np.zeros((5, 5), bool)
     bpm[2, 2] = bpm[2, 3] = True
     fixed = correct_bad_pixels(frame, bpm)
-    assert fixed[2, 2] == 100 and fixed[2, 3] == 100
+    assert fixed[2, 2] == 100
+    assert fixed[2, 3] == 100
     assert fixed[1, 1] == 90  # a good pixel is never touched
     assert frame[2, 2] == 16383  # the input (the recorded counts) is never altered

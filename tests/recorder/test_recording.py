@@ -54,15 +54,19 @@ def _read_all(session_dir: Path):
 
 def test_recorded_session_reads_back_bit_exact(tmp_path):
     res = Recorder(_sim(frames=90, seed=5), tmp_path, session_id="s1").run()
-    assert res.ok and res.frames_written == 90 and res.frames_dropped == 0
+    assert res.ok
+    assert res.frames_written == 90
+    assert res.frames_dropped == 0
     data = _read_all(tmp_path / "sessions" / "s1")
     expected = list(_sim(frames=90, seed=5).frames())
     assert len(data["frames"]) == 90 == len(data["meta"])
     for (t, px), exp in zip(data["frames"], expected, strict=True):
         assert t == exp.timestamp_ns
-        assert px.dtype == np.dtype("<u2") and np.array_equal(px, exp.pixels)
+        assert px.dtype == np.dtype("<u2")
+        assert np.array_equal(px, exp.pixels)
     times = [t for t, _ in data["frames"]]
-    assert times == sorted(times) and len(set(times)) == len(times)
+    assert times == sorted(times)
+    assert len(set(times)) == len(times)
     # the sidecar has the frame's log time and validates
     for (t_img, _), (t_meta, meta) in zip(data["frames"], data["meta"], strict=True):
         assert t_img == t_meta
@@ -73,8 +77,10 @@ def test_recorded_session_reads_back_bit_exact(tmp_path):
     session_meta = dict(data["metadata"])["thermcap.session"]
     assert json.loads(session_meta["radiometric_model"]) == {"kind": "linear", "scale_c_per_count": 0.036,
                                                               "offset_c": -40.0, "bit_depth": 14}
-    assert session_meta["software_version"] and session_meta["host"]
-    assert data["truth"] and data["stats"]
+    assert session_meta["software_version"]
+    assert session_meta["host"]
+    assert data["truth"]
+    assert data["stats"]
 
 
 def test_image_decodes_with_the_ros2_decoder(tmp_path):
@@ -134,9 +140,11 @@ def test_slow_writer_drops_are_counted_never_silent(tmp_path):
     assert len(data["frames"]) == res.frames_written
     last = data["stats"][-1]
     assert last["dropped"]["/thermal/image"] == res.frames_dropped
-    assert last["frames_captured"] == 200 and last["frames_written"] == res.frames_written
+    assert last["frames_captured"] == 200
+    assert last["frames_written"] == res.frames_written
     summary = json.loads((tmp_path / "sessions" / "d" / "session.json").read_text())
-    assert summary["frames_dropped"] == res.frames_dropped and summary["status"] == "complete"
+    assert summary["frames_dropped"] == res.frames_dropped
+    assert summary["status"] == "complete"
 
 
 def test_info_reports_the_session(tmp_path):
@@ -144,8 +152,11 @@ def test_info_reports_the_session(tmp_path):
 
     Recorder(_sim(frames=60, fps=60), tmp_path, session_id="i", policy=SegmentPolicy(max_duration_s=0.5)).run()
     d = info(tmp_path / "sessions" / "i")
-    assert d["frames"] == 60 and len(d["segments"]) == 2
+    assert d["frames"] == 60
+    assert len(d["segments"]) == 2
     assert d["effective_fps"] == pytest.approx(60.0, rel=1e-3)
     assert d["topics"]["/thermal/image"]["bytes"] == 60 * (W * H * 2 + 52)  # pixels + 52-byte CDR prefix
-    assert d["chunk_compression"] == ["zstd"] and d["compression_ratio"] > 1.2
-    assert d["status"] == "complete" and d["frames_dropped"] == 0
+    assert d["chunk_compression"] == ["zstd"]
+    assert d["compression_ratio"] > 1.2
+    assert d["status"] == "complete"
+    assert d["frames_dropped"] == 0

@@ -16,7 +16,8 @@ def test_same_seed_same_frames_bit_for_bit():
     b = _frames(frames=20, seed=7, width=160, height=128)
     for fa, fb in zip(a, b, strict=True):
         assert np.array_equal(fa.pixels, fb.pixels)
-        assert fa.sidecar == fb.sidecar and fa.messages == fb.messages
+        assert fa.sidecar == fb.sidecar
+        assert fa.messages == fb.messages
 
 
 def test_different_seed_different_frames():
@@ -29,7 +30,9 @@ def test_frames_are_14_bit_gray16_with_the_listed_bad_pixels():
     src = SimSource(paced=False, frames=3, width=640, height=512)
     frames = list(src.frames())
     f = frames[0].pixels
-    assert f.dtype == np.uint16 and f.shape == (512, 640) and f.max() <= 16383
+    assert f.dtype == np.uint16
+    assert f.shape == (512, 640)
+    assert f.max() <= 16383
     bad = src.bad_pixel_map
     assert bad.sum() > 0
     assert set(np.unique(f[bad])) <= {0, 16383}
@@ -59,7 +62,8 @@ def test_targets_are_warm_and_truth_matches_pixels():
 def test_crossover_fades_contrast_below_0_3_and_back():
     frames = _frames(frames=240, fps=60, crossover=True, width=160, height=128)
     grades = [f.sidecar["thermal_analysis"]["thermal_contrast_grade"] for f in frames]
-    assert grades[0] == 1.0 and grades[-1] == 1.0
+    assert grades[0] == 1.0
+    assert grades[-1] == 1.0
     assert min(grades) < 0.3
     assert sum(g < 0.3 for g in grades) > 30  # a span, not a blip
 
@@ -70,9 +74,11 @@ def test_slew_to_cue_walks_the_state_machine():
     seen = [s for i, s in enumerate(states) if i == 0 or states[i - 1] != s]
     assert seen == ["idle", "slew", "search", "lock", "handoff", "idle"]
     cues = [m for f in frames for t, m in f.messages if t == "/radar/cue"]
-    assert cues and cues[0]["target_id"] == "TRK001"
+    assert cues
+    assert cues[0]["target_id"] == "TRK001"
     active = [f.sidecar["slew_to_cue"]["slew_to_cue_active"] for f in frames]
-    assert active[states.index("search")] and not active[0]
+    assert active[states.index("search")]
+    assert not active[0]
     search = [f.sidecar["slew_to_cue"] for f in frames if f.sidecar["slew_to_cue"]["state"] == "search"]
     assert all(s["search_pattern_active"] for s in search)
     assert all(abs(s["turret_pan_deg"] - s["radar_azimuth_deg"]) <= 2.01 for s in search)

@@ -63,7 +63,8 @@ def test_raw_source_any_length(n_bytes):
             got += 1
             assert f.pixels.shape == (1, 96)
     except TruncatedFrameError as exc:
-        assert n_bytes % frame_bytes and exc.got == n_bytes % frame_bytes
+        assert n_bytes % frame_bytes
+        assert exc.got == n_bytes % frame_bytes
     assert got == n_bytes // frame_bytes
 
 
@@ -91,6 +92,7 @@ def test_importers_on_mutated_samples(samples, tmp_path, name):
             assert str(p) in str(exc)
             return
         for f in frames:
-            assert f.pixels.dtype == np.uint16 and f.pixels.ndim == 2
+            assert f.pixels.dtype == np.uint16
+            assert f.pixels.ndim == 2
 
     run()

@@ -11,11 +11,15 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from archive.verify import verify_session
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
 from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
+
+pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
 
 def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
@@ -55,6 +59,8 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
     # "a" unless a killed run had already finished everything before its kill landed
     assert json.loads(r.stdout)["archived"] in (["a"], [])
     m = json.loads((session / "archive" / "manifest.json").read_text())
-    assert m["upload"]["complete"] and m["source"]["deleted"]
-    assert not list(session.glob("*.mcap")) and not list((session / "archive").glob("*.partial"))
+    assert m["upload"]["complete"]
+    assert m["source"]["deleted"]
+    assert not list(session.glob("*.mcap"))
+    assert not list((session / "archive").glob("*.partial"))
     assert all(v["ok"] for v in verify_session(session).values())

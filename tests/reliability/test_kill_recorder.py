@@ -16,11 +16,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from recorder.capture.sources.sim import SimSource
 from recorder.icd.topics import decode_image
 from tests.conftest import run_cli, wait_for
+
+pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
 W, H, FPS = 320, 256, 60
 
@@ -44,8 +47,17 @@ def test_kill_9_at_random_moments(tmp_path):
         proc.wait()
         killed_at = time.time_ns()
         closed_before = {p.name: p.read_bytes() for p in session.glob("*.mcap")}
+        for seg in closed_before:  # every closed segment is finished and indexed
+            with open(session / seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+            assert summary is not None
+            assert summary.statistics.channel_message_counts
+        (active,) = list(session.glob("*.mcap.active"))
         r = run_cli("recover", str(session), "--json")
         assert r.returncode == 0, r.stderr
+        (res,) = json.loads(r.stdout)
+        assert Path(res["output"]).name == active.name[: -len(".active")]
+        assert not active.exists()
         for name, data in closed_before.items():  # recovery never touches a closed segment
             assert (session / name).read_bytes() == data
         got = []
@@ -54,6 +66,10 @@ def test_kill_9_at_random_moments(tmp_path):
                 for _, _, msg in make_reader(f).iter_messages(topics=["/thermal/image"]):
                     got.append((msg.log_time, decode_image(msg.data)[1].copy()))
         assert got, "nothing recovered"
+        assert [t for t, _ in got] == sorted(t for t, _ in got)
+        info = json.loads(run_cli("info", str(session), "--json").stdout)
+        assert info["status"] == "recovered"
+        assert info["frames"] == len(got)
         expected = SimSource(width=W, height=H, fps=FPS, seed=k, paced=False, frames=len(got)).frames()
         for (_t, px), exp in zip(got, expected, strict=True):
             assert np.array_equal(px, exp.pixels)  # bit-exact, in order, no gaps

@@ -24,11 +24,14 @@ from pathlib import Path
 
 import httpx
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 
 from recorder.capture.sources.sim import SimSource
 from recorder.icd.topics import decode_image
 from tests.conftest import ApiServer, run_cli, wait_for
+
+pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
 W, H, FPS = 96, 64, 60
 FORMATS = ("png16", "tiff-lzw", "hdf5", "jxl")

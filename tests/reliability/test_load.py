@@ -10,9 +10,12 @@ import threading
 import time
 
 import httpx
+import pytest
 
 from tests.api.conftest import make_root
 from tests.conftest import ApiServer
+
+pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
 
 def test_mixed_load_while_indexing(tmp_path):

@@ -39,7 +39,8 @@ def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweed
     assert sorted(archived) == ["s0", "s1", "s2"], results
     for i in range(3):
         m = json.loads((root / "sessions" / f"s{i}" / "archive" / "manifest.json").read_text())
-        assert m["upload"]["complete"] and all(e["verified"] for e in m["formats"].values())
+        assert m["upload"]["complete"]
+        assert all(e["verified"] for e in m["formats"].values())
     again = run_cli("worker", "--root", str(root), "--once", "--json", "--formats", "png16,hdf5", env=env)
     assert json.loads(again.stdout)["archived"] == []  # nothing left to do
     server = ApiServer(root, env=env)
@@ -74,7 +75,8 @@ def test_gc_frees_local_disk_and_the_bucket_keeps_serving_dji_frames(postgres_ur
     assert r.returncode == 0, r.stderr
     rebuilt = (tmp_path / "rebuilt" / "DJI_H20T.jpg").read_bytes()
     r = run_cli("worker", "--root", str(root), "--once", "--json", "--formats", "png16", env=env)
-    assert r.returncode == 0 and json.loads(r.stdout)["archived"] == ["h20t"], r.stderr
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["archived"] == ["h20t"], r.stderr
     r = run_cli("gc", "--root", str(root), "--keep-days", "0", "--json", env=env)
     assert r.returncode == 0, r.stderr
     assert not (root / "sessions" / "h20t").exists()
