@@ -43,8 +43,8 @@ INDEX_RULES_VERSION = 2  # 2: frames with no graded target have no grade
 
 def fingerprint(session_dir: Path) -> str:
     h = hashlib.sha256(f"rules:{INDEX_RULES_VERSION}".encode())
-    for p in [session_dir / "session.json", session_dir / "archive" / "manifest.json", session_dir / "events.json",
-              session_dir / "analysis.jsonl",
+    layout = SessionLayout.of(session_dir)
+    for p in [layout.session_json, layout.manifest, layout.events_json, layout.analysis_jsonl,
               *session_segments(session_dir)]:
         try:
             st = p.stat()
@@ -57,7 +57,7 @@ def fingerprint(session_dir: Path) -> str:
 
 def _load_manifest(session_dir: Path) -> dict[str, Any] | None:
     try:
-        return json.loads((session_dir / "archive" / "manifest.json").read_text())
+        return json.loads(SessionLayout.of(session_dir).manifest.read_text())
     except (FileNotFoundError, ValueError):
         return None
 
@@ -80,7 +80,7 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]],
     sidecars, blobs = [], []
     idx = 0
     for rec in files:
-        path = session_dir / "archive" / fmt / rec["path"]
+        path = SessionLayout.of(session_dir).format_dir(fmt) / rec["path"]
         entries = list(zip_entries(path))
         with open(path, "rb") as f:
             for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2], strict=True):
@@ -147,12 +147,13 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
     verified = {f: e for f, e in (manifest or {}).get("formats",
                                                       {}).items() if e.get("verified") and not e.get("damaged")}
-    zipped = next((f for f in ZIPPED_FORMATS if f in verified and (session_dir / "archive" / f).is_dir()), None)
+    layout = SessionLayout.of(session_dir)
+    zipped = next((f for f in ZIPPED_FORMATS if f in verified and layout.format_dir(f).is_dir()), None)
     blobs: list[dict[str, Any]] = []
     if zipped:
         sidecars, blobs = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
         for other in ZIPPED_FORMATS:
-            if other != zipped and other in verified and (session_dir / "archive" / other).is_dir():
+            if other != zipped and other in verified and layout.format_dir(other).is_dir():
                 blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"], read_sidecars=False)[1]
         segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
         times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
@@ -169,7 +170,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         segs = frames_meta.get("segments") or [None] * len(times)
         if len(sidecars) != len(times):
             sidecars = (sidecars + [{}] * len(times))[: len(times)]
-    analysed = session_dir / "analysis.jsonl"
+    analysed = SessionLayout.of(session_dir).analysis_jsonl
     if analysed.is_file():  # `thermcap analyze` results take precedence over the recorded sidecars
         by_index = {}
         with open(analysed) as f:
@@ -220,7 +221,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
                   "verified": bool(e.get("verified")) and not e.get("damaged")}
                  for f, e in (manifest or {}).get("formats", {}).items()]
     event_rows = []
-    events_path = session_dir / "events.json"
+    events_path = SessionLayout.of(session_dir).events_json
     if events_path.is_file():
         try:
             for i, ev in enumerate(json.loads(events_path.read_text()).get("events", [])):
@@ -249,7 +250,8 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     failed: dict[str, str] = {}
     present = set()
     for d in list_sessions(root):
-        if list(d.glob("*.active")) or (not (d / "session.json").exists() and not (d / "archive").exists()):
+        layout = SessionLayout.of(d)
+        if layout.active_segments() or (not layout.session_json.exists() and not layout.archive.exists()):
             continue
         meta = read_session_meta(d)
         present.add(meta.get("session_id") or d.name)

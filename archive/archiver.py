@@ -34,6 +34,7 @@ from archive.manifest import (
 )
 from archive.source_checks import channel_problems
 from recorder.icd.topics import TOPIC_METADATA
+from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
@@ -41,7 +42,6 @@ from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
 
 DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
-PARTIAL_SUFFIX = ".partial"
 
 
 @dataclass
@@ -286,7 +286,7 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     if delete_source:
         not_ok = [f for f in formats if not manifest["formats"].get(f, {}).get("verified")]
         if not manifest.get("extras", {}).get("verified"):
-            not_ok.append("extras.mcap")
+            not_ok.append(EXTRAS_MCAP)
         if not_ok:
             raise ArchiveError(f"refusing to delete the source: {', '.join(not_ok)} not verified")
         for seg in segments:

@@ -13,6 +13,8 @@ from typing import Any
 import obstore
 from obstore.store import LocalStore, S3Store
 
+from recorder.storage.layout import SessionLayout
+
 __all__ = ["BlobStore", "open_store", "upload_archive"]
 
 
@@ -106,7 +108,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         groups.append(("", [{"path": extras["path"], "bytes": extras["bytes"]}]))
     for fmt, files in groups:
         for rec in files:
-            path = session_dir / "archive" / fmt / rec["path"]
+            path = SessionLayout.of(session_dir).format_dir(fmt) / rec["path"]
             key = path.resolve().relative_to(root.resolve()).as_posix()
             head = store.head(key)
             if head is None:
@@ -121,6 +123,6 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
             keys.append(key)
     manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
     save_manifest(session_dir, manifest)
-    manifest_path = session_dir / "archive" / "manifest.json"
+    manifest_path = SessionLayout.of(session_dir).manifest
     store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)
     return keys

@@ -11,6 +11,7 @@ import click
 from archive.archiver import DEFAULT_FORMATS
 from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
+from recorder.storage.layout import SessionLayout
 
 __all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
 
@@ -47,7 +48,7 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
         fmts = _formats(formats)
         dirs = [resolve_session(s, root) for s in sessions]
         if all_sessions:
-            dirs += [d for d in list_sessions(root) if not (d / "archive" / "manifest.json").exists()
+            dirs += [d for d in list_sessions(root) if not SessionLayout.of(d).manifest.exists()
                      and not list(d.glob("*.active"))]
     except (ThermcapError, click.BadParameter) as exc:
         fail(str(exc))
@@ -163,7 +164,7 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
                        prefix=os.environ.get("THERMCAP_S3_PREFIX", "")) if bucket else None
     try:
         dirs = [resolve_session(s, base) for s in sessions] if sessions else \
-            [d for d in list_sessions(base) if (d / "archive" / "manifest.json").is_file()]
+            [d for d in list_sessions(base) if SessionLayout.of(d).manifest.is_file()]
     except ThermcapError as exc:
         fail(str(exc))
     report = ScrubReport()
@@ -215,7 +216,7 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
     try:
         table = load_prices(prices)
         dirs = [resolve_session(s, root) for s in sessions] or \
-            [d for d in list_sessions(root) if (d / "archive" / "manifest.json").exists()]
+            [d for d in list_sessions(root) if SessionLayout.of(d).manifest.exists()]
         if not dirs:
             fail(f"no archived sessions under {root} (run `thermcap archive` first)")
         report = audit_sessions(dirs, table)

@@ -20,11 +20,12 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from recorder.icd.topics import TOPIC_IMAGE
+from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.reader import session_segments
 
 __all__ = ["EXTRAS_NAME", "summarize_mcap", "write_extras"]
 
-EXTRAS_NAME = "extras.mcap"
+EXTRAS_NAME = EXTRAS_MCAP
 
 
 def _extra_records(path: Path) -> Iterator[tuple[str, Any]]:
@@ -67,7 +68,7 @@ def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
     identical to the source); returns its manifest entry."""
     segments = session_segments(session_dir)
     final = archive_folder / EXTRAS_NAME
-    partial = archive_folder / (EXTRAS_NAME + ".partial")
+    partial = archive_folder / (EXTRAS_NAME + PARTIAL_SUFFIX)
     expected = summarize_mcap(segments)
     channels: dict[tuple, int] = {}
     schemas: dict[tuple, int] = {}

@@ -17,6 +17,7 @@ from typing import Any, Literal, overload
 import numpy as np
 
 from archive.exceptions import ManifestError
+from recorder.storage.layout import MANIFEST_JSON, SessionLayout
 from recorder.storage.segments import write_json_atomic
 
 __all__ = [
@@ -31,7 +32,7 @@ __all__ = [
     "sidecar_sha256",
 ]
 
-MANIFEST_NAME = "manifest.json"
+MANIFEST_NAME = MANIFEST_JSON
 MANIFEST_VERSION = 1
 
 
@@ -40,7 +41,7 @@ def iso_now() -> str:
 
 
 def archive_dir(session_dir: Path) -> Path:
-    return Path(session_dir) / "archive"
+    return SessionLayout.of(session_dir).archive
 
 
 def manifest_path(session_dir: Path) -> Path:

@@ -29,6 +29,7 @@ from archive.archiver import archive_session
 from archive.manifest import load_manifest
 from archive.scrub import ScrubReport, scrub_session
 from recorder.exceptions import ThermcapError
+from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import is_locked
 from recorder.storage.reader import list_sessions, read_session_meta
 
@@ -117,7 +118,7 @@ class Worker:
         re-index the sessions where anything was found, so the API stops offering damage at once."""
         report = ScrubReport()
         for d in list_sessions(self.root):
-            if not (d / "archive" / "manifest.json").is_file():
+            if not SessionLayout.of(d).manifest.is_file():
                 continue
             before = len(report.findings)
             try:

@@ -9,6 +9,7 @@ from sqlalchemy import func, select
 from api import db
 from api.indexing import index_root
 from api.security import require
+from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions
 
 router = APIRouter()
@@ -47,7 +48,7 @@ def audit(request: Request, prices: str | None = None) -> dict:
 
     if prices is not None:
         raise HTTPException(400, "custom price tables are set on the server (thermcap audit --prices), not per request")
-    dirs = [d for d in list_sessions(request.app.state.settings.root) if (d / "archive" / "manifest.json").exists()]
+    dirs = [d for d in list_sessions(request.app.state.settings.root) if SessionLayout.of(d).manifest.exists()]
     return audit_sessions(dirs, load_prices(None))
 
 

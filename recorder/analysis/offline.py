@@ -18,15 +18,15 @@ from typing import Any
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
 from recorder.exceptions import McapFileError
 from recorder.radiometry import model_from_dict
-from recorder.storage.layout import SessionLayout
+from recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON, SessionLayout
 from recorder.storage.lock import session_locked
 from recorder.storage.reader import frame_files, iter_session_frames, read_session_meta
 from recorder.storage.segments import write_json_atomic
 
 __all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
 
-ANALYSIS_FILE = "analysis.jsonl"
-EVENTS_FILE = "events.json"
+ANALYSIS_FILE = ANALYSIS_JSONL
+EVENTS_FILE = EVENTS_JSON
 
 
 def _bad_pixel_map(session_dir: Path):

@@ -34,6 +34,7 @@ from recorder.icd.names import FORMAT_VERSION, iso_utc
 from recorder.icd.sidecar import SidecarEncoder
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
 from recorder.radiometry import LinearModel, describe_model
+from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import lock_session
 from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 
@@ -172,7 +173,7 @@ class Recorder:
         started_ns = time.time_ns()
         meta = self._session_meta(started_ns)
         try:
-            write_json_atomic(self.session_dir / "session.json", {**meta, "status": "recording"})
+            write_json_atomic(SessionLayout.of(self.session_dir).session_json, {**meta, "status": "recording"})
         except OSError as exc:
             lock.release()
             raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
@@ -205,7 +206,8 @@ class Recorder:
         error = self._writer_error or self._source_error
         events = self._events.finish()
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
-            write_json_atomic(self.session_dir / "events.json", {"session_id": self.session_id, "events": events})
+            write_json_atomic(SessionLayout.of(self.session_dir).events_json,
+                              {"session_id": self.session_id, "events": events})
         result = RecordingResult(
             session_id=self.session_id, session_dir=self.session_dir,
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
@@ -215,7 +217,7 @@ class Recorder:
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
         try:
-            write_json_atomic(self.session_dir / "session.json", summary)
+            write_json_atomic(SessionLayout.of(self.session_dir).session_json, summary)
         except OSError as exc:
             result.error = result.error or f"cannot write session summary: {exc.strerror or exc}"
         lock.release()

@@ -90,9 +90,9 @@ def session_info(path: str | Path) -> dict[str, Any]:
     segments = sorted(p for p in path.glob("[0-9][0-9][0-9][0-9].mcap"))
     active = sorted(p.name for p in path.glob(f"*.mcap{ACTIVE_SUFFIX}"))
     meta: dict[str, Any] = {}
-    if (path / "session.json").is_file():
+    if SessionLayout.of(path).session_json.is_file():
         try:
-            meta = json.loads((path / "session.json").read_text())
+            meta = json.loads(SessionLayout.of(path).session_json.read_text())
         except ValueError as exc:
             raise McapFileError(f"{path / 'session.json'}: not valid JSON ({exc})") from exc
     if not segments and not meta:

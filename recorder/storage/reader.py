@@ -53,7 +53,7 @@ def session_segments(session_dir: str | Path) -> list[Path]:
 
 
 def read_session_meta(session_dir: str | Path) -> dict[str, Any]:
-    path = Path(session_dir) / "session.json"
+    path = SessionLayout.of(Path(session_dir)).session_json
     try:
         return json.loads(path.read_text())
     except FileNotFoundError:

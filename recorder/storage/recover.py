@@ -27,6 +27,7 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import breakup_chunk
 
 from recorder.exceptions import McapFileError
+from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
@@ -309,7 +310,7 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
 
 
 def _mark_session(session_dir: Path) -> None:
-    meta_path = session_dir / "session.json"
+    meta_path = SessionLayout.of(session_dir).session_json
     try:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError):

@@ -37,12 +37,12 @@ from recorder.icd.topics import (
     TOPIC_METADATA,
     TOPIC_STATS,
 )
+from recorder.storage.layout import ACTIVE_SUFFIX
 from recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir", "segment_name",
            "write_json_atomic"]
 
-ACTIVE_SUFFIX = ".active"
 SEGMENT_STATS_METADATA = "thermcap.segment"
 SESSION_METADATA = "thermcap.session"
 
