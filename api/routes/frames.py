@@ -5,17 +5,21 @@ from __future__ import annotations
 from typing import Literal
 from urllib.parse import quote
 
+import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
 from api.routes.common import session_row
 from api.security import require
-from recorder.exports.render import celsius, celsius_tiff, png16, preview_png, session_model, tiff16
+from archive.codecs import get_codec
+from recorder.exports.render import celsius, celsius_tiff, preview_png, session_model, tiff16
 from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.radiometry import describe_model
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],
                    dependencies=[Depends(require("read"))])
 
+# The archive's own PNG16 writer (Up filter + libdeflate, read by libpng, Pillow and browsers).
+_PNG16 = get_codec("png16")
 _CACHE = {"Cache-Control": "public, max-age=31536000, immutable"}  # a recorded frame never changes
 
 
@@ -35,7 +39,7 @@ def get_frame(request: Request, session_id: str, n: int,
     reader = request.app.state.frames
     if format == "png16":
         stored = reader.encoded(session_id, n, "png16")
-        body = stored if stored is not None else png16(reader.pixels(session_id, n))
+        body = stored if stored is not None else _PNG16.encode(np.asarray(reader.pixels(session_id, n)))
         return Response(body, media_type="image/png", headers=_CACHE)
     frame = reader.pixels(session_id, n)
     h, w = frame.shape

@@ -25,7 +25,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 from recorder.exports.render import palette
-from recorder.icd.names import format_name
+from recorder.icd.names import format_name, iso_utc
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
 from recorder.storage.reader import iter_session_frames, read_session_meta
 
@@ -126,7 +126,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         written.append(path.name)
         if temps is not None and summary:
             pct = np.percentile(temps, PERCENTILES)
-            stats.append({"frame_index": f.index, "time": desc.get("time") or _iso(f.log_time), "file": path.name,
+            stats.append({"frame_index": f.index, "time": desc.get("time") or iso_utc(f.log_time), "file": path.name,
                           "surface_temperature_mean": round(float(temps.mean()), 4),
                           "surface_temperature_min": round(float(temps.min()), 4),
                           "surface_temperature_max": round(float(temps.max()), 4),
@@ -195,12 +195,6 @@ def _has_temps(model) -> bool:
         return True
     except TemperatureUnavailable:
         return False
-
-
-def _iso(ns: int) -> str:
-    from recorder.icd.names import iso_utc
-
-    return iso_utc(ns)
 
 
 def _write_summary(out: Path, fmt: str, stats: list[dict[str, Any]], meta: dict[str, Any]) -> None:

@@ -13,7 +13,7 @@ import tifffile
 
 from recorder.radiometry import RadiometricModel, model_from_dict
 
-__all__ = ["PALETTES", "celsius", "celsius_tiff", "palette", "png16", "preview_png", "session_model", "tiff16"]
+__all__ = ["PALETTES", "celsius", "celsius_tiff", "palette", "preview_png", "session_model", "tiff16"]
 
 PALETTES = ("ironbow", "gray", "turbo")
 
@@ -70,10 +70,6 @@ def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = 
         hi = lo + 1e-3
     idx = np.clip((temps - lo) * (255.0 / (hi - lo)), 0, 255).astype(np.uint8)
     return cast(bytes, imagecodecs.png_encode(palette(palette_name)[idx], level=1))
-
-
-def png16(frame: np.ndarray) -> bytes:
-    return cast(bytes, imagecodecs.png_encode(np.ascontiguousarray(frame, dtype=np.uint16), level=1))
 
 
 def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
