@@ -20,6 +20,7 @@ import imagecodecs
 import numpy as np
 
 from archive.exceptions import UnknownCodecError
+from recorder.registry import Registry
 
 __all__ = [
     "FrameCodec",
@@ -167,28 +168,16 @@ class JpegLs(FrameCodec):
 
 _OJPH_LOCK = threading.Lock()
 
-codec_registry: dict[str, type[FrameCodec]] = {}
+codec_registry: Registry[FrameCodec] = Registry("codec", UnknownCodecError)
 
 
 def register_codec(cls: type[FrameCodec], codec_id: str | None = None) -> type[FrameCodec]:
-    codec_registry[codec_id or cls.codec_id] = cls
+    codec_registry.register(codec_id or cls.codec_id, cls)
     return cls
 
 
-def build_from_config(registry: dict[str, Any], config: dict[str, Any] | str) -> Any:
-    """``registry[config["id"]](**rest)``; a bare string is an id with default settings. Shared by
-    the codec and the format registries."""
-    config = {"id": config} if isinstance(config, str) else dict(config)
-    key = config.pop("id", None)
-    try:
-        factory = registry[key]
-    except KeyError:
-        raise UnknownCodecError(str(key), list(registry)) from None
-    return factory(**config)
-
-
 def get_codec(config: dict[str, Any] | str) -> FrameCodec:
-    return build_from_config(codec_registry, config)
+    return codec_registry.build(config)
 
 
 for _cls in (Png16, JpegXl, Htj2k, JpegLs):

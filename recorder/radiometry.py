@@ -18,6 +18,7 @@ from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 import numpy as np
 
 from recorder.icd.names import BIT_DEPTH, MAX_COUNT
+from recorder.registry import Registry
 
 T = TypeVar("T", bound=type)
 __all__ = [
@@ -45,12 +46,13 @@ class RadiometricModel(Protocol):
     def to_dict(self) -> dict[str, Any]: ...
 
 
-_MODELS: dict[str, type] = {}
+_MODELS: Registry[Any] = Registry("radiometric model kind", lambda kind, known: ValueError(
+    f"unknown radiometric model kind {kind!r}; known: {known}"))
 
 
 def register_model(cls: T) -> T:
     """Class decorator: make a model kind rebuildable from session metadata."""
-    _MODELS[cls.kind] = cls  # type: ignore[attr-defined]
+    _MODELS.register(cls.kind, cls)  # type: ignore[attr-defined]
     return cls
 
 
@@ -59,10 +61,7 @@ def model_from_dict(data: dict[str, Any]) -> RadiometricModel:
     if not isinstance(data, dict) or "kind" not in data:
         raise ValueError(f"radiometric model must be an object with a 'kind', got {data!r}")
     kind = data["kind"]
-    try:
-        cls = _MODELS[kind]
-    except KeyError:
-        raise ValueError(f"unknown radiometric model kind {kind!r}; known: {sorted(_MODELS)}") from None
+    cls: Any = _MODELS.factory(kind)
     params = {k: v for k, v in data.items() if k not in ("kind", "temperature")}
     known = {f.name for f in fields(cls)}
     unknown = set(params) - known

@@ -20,9 +20,10 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from archive.codecs import build_from_config
+from archive.exceptions import UnknownCodecError
 from recorder.icd.names import format_name
 from recorder.radiometry import LinearModel, model_from_dict
+from recorder.registry import Registry
 from recorder.storage.reader import SessionFrame
 
 __all__ = [
@@ -140,15 +141,15 @@ def locate(files: list[dict[str, Any]], index: int) -> tuple[str, int]:
     raise IndexError("frame beyond the archive's files")
 
 
-format_registry: dict[str, Callable[..., ArchiveFormat]] = {}
+format_registry: Registry[ArchiveFormat] = Registry("format", UnknownCodecError)
 
 
 def register_format(format_id: str, factory: Callable[..., ArchiveFormat]) -> None:
-    format_registry[format_id] = factory
+    format_registry.register(format_id, factory)
 
 
 def get_format(config: dict[str, Any] | str) -> ArchiveFormat:
-    return build_from_config(format_registry, config)
+    return format_registry.build(config)
 
 
 def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, window: int | None = None) -> Iterator[R]:
