@@ -13,7 +13,7 @@ from __future__ import annotations
 import os
 import shutil
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -32,6 +32,7 @@ from archive.manifest import (
     save_manifest,
     sidecar_sha256,
 )
+from archive.manifest_types import FileEntry, FormatEntry, Manifest
 from archive.source_checks import channel_problems
 from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
@@ -94,7 +95,7 @@ def _fsync_tree(path: Path) -> None:
     fsync_dir(path)
 
 
-def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, Any]],
+def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping[str, Any]],
                       expected: list[str], *, where: str, sidecars: list[str] | None = None,
                       times: list[int] | None = None) -> tuple[list[str], float]:
     """Decode every file with the format's reader and compare each frame's pixels, sidecar and
@@ -141,7 +142,7 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: list[dict[str, A
 
 
 def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
-                 manifest: dict[str, Any], meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
+                 manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
                  on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
     """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
     manifest's hashes, and only then take the final name (replacing an older copy only now) and
@@ -171,7 +172,8 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
         p = partial / rec.path
         rec.bytes = p.stat().st_size
         rec.sha256 = file_sha256(p)
-    files = [rec.__dict__.copy() for rec in records]
+    files: list[FileEntry] = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, "sha256": r.sha256}
+                              for r in records]
     if on_progress:
         on_progress(f"verifying {fid}", 0, len(expected))
     problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid,
@@ -179,7 +181,7 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
                                            times=manifest["frames"]["timestamps_ns"])
     total_bytes = sum(r.bytes for r in records)
     raw = manifest["source"]["raw_bytes"]
-    entry = {
+    entry: FormatEntry = {
         "config": fmt.get_config(), "description": fmt.description, "files": files,
         "frames_per_file": [r.frames for r in records], "objects": len(records), "bytes": total_bytes,
         "compression_ratio": round(raw / total_bytes, 4) if total_bytes else None,
@@ -214,7 +216,7 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
 
 def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,
                     delete_source: bool = False, workers: int = 2, force: bool = False,
-                    on_progress: Callable[[str, int, int], None] | None = None) -> dict[str, Any]:
+                    on_progress: Callable[[str, int, int], None] | None = None) -> Manifest:
     """Archive one session; returns the manifest. Raises VerificationError if any format fails."""
     session_dir = Path(session_dir)
     if not session_dir.is_dir():
@@ -233,7 +235,7 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
 
 
 def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int, force: bool,
-                    on_progress: Callable[[str, int, int], None] | None) -> dict[str, Any]:
+                    on_progress: Callable[[str, int, int], None] | None) -> Manifest:
     meta = read_session_meta(session_dir)
     session_id = meta.get("session_id", session_dir.name)
     manifest = load_manifest(session_dir, required=False) or new_manifest(session_id, meta)

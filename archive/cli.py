@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import click
 
@@ -54,7 +55,8 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
         fail(str(exc))
     if not dirs:
         fail("no session given (pass SESSION paths or ids, or --all)")
-    results, failed = [], False
+    results: list[dict[str, Any]] = []
+    failed = False
     show = not as_json and sys.stderr.isatty()
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
                   disable=not show, transient=True) as bar:

@@ -78,7 +78,7 @@ def _session_row(session_dir: Path, prices: dict[str, dict[str, Any]]) -> dict[s
     fps = (m.get("session", {}).get("sensor") or {}).get("frame_rate_hz") or 60.0
     hours = ((frames[-1] - frames[0]) / 1e9 + 1 / fps) / 3600 if len(frames) > 1 else len(frames) / fps / 3600
     raw = src.get("raw_bytes", 0)
-    formats = {}
+    formats: dict[str, dict[str, Any]] = {}
     for fid, e in m["formats"].items():
         formats[fid] = {"bytes": e["bytes"], "objects": e["objects"], "compression_ratio": e.get("compression_ratio"),
                         "bytes_per_hour": round(e["bytes"] / hours) if hours else None, "verified": e["verified"],

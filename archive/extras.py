@@ -19,6 +19,7 @@ from typing import Any
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
+from archive.manifest_types import ExtrasEntry
 from recorder.icd.topics import TOPIC_IMAGE
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.reader import session_segments
@@ -63,7 +64,7 @@ def summarize_mcap(paths: list[Path]) -> dict[str, Any]:
             "attachments": attachments, "metadata": metadata}
 
 
-def write_extras(session_dir: Path, archive_folder: Path) -> dict[str, Any]:
+def write_extras(session_dir: Path, archive_folder: Path) -> ExtrasEntry:
     """Write ``extras.mcap`` beside the formats (``.partial`` first, renamed once it re-reads
     identical to the source); returns its manifest entry."""
     segments = session_segments(session_dir)

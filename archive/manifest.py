@@ -12,11 +12,12 @@ import hashlib
 import json
 import time
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import Any, Literal, cast, overload
 
 import numpy as np
 
 from archive.exceptions import ManifestError
+from archive.manifest_types import Manifest
 from recorder.storage.layout import MANIFEST_JSON, SessionLayout
 from recorder.storage.segments import write_json_atomic
 
@@ -67,7 +68,7 @@ def file_sha256(path: Path) -> str:
     return h.hexdigest()
 
 
-def new_manifest(session_id: str, session_meta: dict[str, Any]) -> dict[str, Any]:
+def new_manifest(session_id: str, session_meta: dict[str, Any]) -> Manifest:
     keep = ("sensor", "radiometric_model", "source", "started", "software_version", "format_version")
     return {"manifest_version": MANIFEST_VERSION, "session_id": session_id, "created": iso_now(),
             "session": {k: session_meta[k] for k in keep if k in session_meta}, "source": {}, "frames": {},
@@ -75,10 +76,10 @@ def new_manifest(session_id: str, session_meta: dict[str, Any]) -> dict[str, Any
 
 
 @overload
-def load_manifest(session_dir: Path, *, required: Literal[True] = True) -> dict[str, Any]: ...
+def load_manifest(session_dir: Path, *, required: Literal[True] = True) -> Manifest: ...
 @overload
-def load_manifest(session_dir: Path, *, required: bool) -> dict[str, Any] | None: ...
-def load_manifest(session_dir: Path, *, required: bool = True) -> dict[str, Any] | None:
+def load_manifest(session_dir: Path, *, required: bool) -> Manifest | None: ...
+def load_manifest(session_dir: Path, *, required: bool = True) -> Manifest | None:
     path = manifest_path(session_dir)
     try:
         data = json.loads(path.read_text())
@@ -90,9 +91,9 @@ def load_manifest(session_dir: Path, *, required: bool = True) -> dict[str, Any]
         raise ManifestError(f"{path}: unreadable manifest ({exc})") from exc
     if not isinstance(data, dict) or data.get("manifest_version") != MANIFEST_VERSION:
         raise ManifestError(f"{path}: not a thermcap manifest (version {data.get('manifest_version')!r})")
-    return data
+    return cast(Manifest, data)
 
 
-def save_manifest(session_dir: Path, manifest: dict[str, Any]) -> None:
+def save_manifest(session_dir: Path, manifest: Manifest) -> None:
     manifest["updated"] = iso_now()
     write_json_atomic(manifest_path(session_dir), manifest)

@@ -11,11 +11,11 @@ from __future__ import annotations
 
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
 
 from archive.exceptions import ManifestError
 from archive.formats import get_format
 from archive.manifest import load_manifest
+from archive.manifest_types import Manifest
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import SessionFrame
 
@@ -25,7 +25,7 @@ __all__ = ["READ_PREFERENCE", "archived_frames", "frames_from_format", "verified
 READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")
 
 
-def verified_formats(manifest: dict[str, Any], layout: SessionLayout) -> list[str]:
+def verified_formats(manifest: Manifest, layout: SessionLayout) -> list[str]:
     """Verified formats whose folder is on disk, in reading preference."""
     fmts = [f for f, e in manifest.get("formats", {}).items() if e.get("verified") and e.get("files")
             and layout.format_dir(f).is_dir()]
@@ -47,7 +47,7 @@ def archived_frames(session_dir: Path) -> Iterator[SessionFrame] | None:
     return frames_from_format(manifest, layout, fmts[0])
 
 
-def frames_from_format(manifest: dict[str, Any], layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
+def frames_from_format(manifest: Manifest, layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
     """The session's frames as format ``fid`` gives them back (with the manifest's segment names)."""
     entry = manifest["formats"][fid]
     fmt = get_format(entry.get("config") or fid)

@@ -28,6 +28,7 @@ from archive.exceptions import ArchiveError
 from archive.extras import write_extras
 from archive.formats import get_format
 from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
 from archive.reading import READ_PREFERENCE, frames_from_format
 from archive.verify import _verify_extras
 from recorder.storage.layout import SessionLayout
@@ -138,14 +139,14 @@ def _scrub_locked(d: Path, repair: bool, store: BlobStore | None, root: Path, wo
     report.findings += findings
 
 
-def _mark(entry: dict[str, Any], problems: list[str]) -> None:
+def _mark(entry: FormatEntry | ExtrasEntry, problems: list[str]) -> None:
     if problems:
         entry["damaged"] = {"at": iso_now(), "problems": problems[:20]}
     else:
         entry.pop("damaged", None)
 
 
-def _check_format(layout: SessionLayout, fid: str, entry: dict[str, Any], frames: dict[str, Any]) -> list[str]:
+def _check_format(layout: SessionLayout, fid: str, entry: FormatEntry, frames: FramesBlock) -> list[str]:
     try:
         fmt = get_format(entry.get("config") or fid)
     except ArchiveError as exc:
@@ -155,7 +156,7 @@ def _check_format(layout: SessionLayout, fid: str, entry: dict[str, Any], frames
     return problems
 
 
-def _uploaded_hashes(m: dict[str, Any], d: Path, root: Path) -> dict[str, str]:
+def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, str]:
     """Object key -> the sha256 the manifest recorded for that file."""
     rel = d.resolve().relative_to(root.resolve()).as_posix()
     out = {}
@@ -181,13 +182,13 @@ def _check_object(store: BlobStore, key: str, sha256: str) -> str | None:
     return None if h.hexdigest() == sha256 else "sha256 differs from the manifest"
 
 
-def _good_formats(m: dict[str, Any], layout: SessionLayout, but: str) -> list[str]:
+def _good_formats(m: Manifest, layout: SessionLayout, but: str) -> list[str]:
     fmts = [f for f, e in m.get("formats", {}).items() if f != but and e.get("verified") and not e.get("damaged")
             and layout.format_dir(f).is_dir()]
     return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
 
 
-def _repair(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, store: BlobStore | None,
+def _repair(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, store: BlobStore | None,
             root: Path, workers: int) -> None:
     try:
         if finding.copy == "extras":
@@ -200,7 +201,7 @@ def _repair(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFin
         finding.repair_error = f"{type(exc).__name__}: {exc}"
 
 
-def _repair_format(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, workers: int) -> None:
+def _repair_format(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, workers: int) -> None:
     fid = finding.copy
     if session_segments(d):
         source, frames = "mcap source", iter_session_frames(d)
@@ -222,7 +223,7 @@ def _repair_format(d: Path, layout: SessionLayout, m: dict[str, Any], finding: S
     finding.repaired, finding.repaired_from = not again, source
 
 
-def _repair_extras(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding, store: BlobStore | None,
+def _repair_extras(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, store: BlobStore | None,
                    root: Path) -> None:
     extras = m["extras"]
     if session_segments(d):
@@ -246,7 +247,7 @@ def _repair_extras(d: Path, layout: SessionLayout, m: dict[str, Any], finding: S
     finding.repair_error = "no MCAP source and no verified bucket copy to rebuild extras.mcap from"
 
 
-def _repair_object(d: Path, layout: SessionLayout, m: dict[str, Any], finding: ScrubFinding,
+def _repair_object(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding,
                    store: BlobStore | None, root: Path) -> None:
     assert store is not None
     key = finding.copy[len("store:"):]

@@ -8,6 +8,7 @@ from typing import Any
 from archive.archiver import verify_format_dir
 from archive.formats import get_format
 from archive.manifest import archive_dir, file_sha256, load_manifest
+from archive.manifest_types import ExtrasEntry
 
 __all__ = ["verify_session"]
 
@@ -39,7 +40,7 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
     return report
 
 
-def _verify_extras(adir: Path, entry: dict[str, Any]) -> dict[str, Any]:
+def _verify_extras(adir: Path, entry: ExtrasEntry) -> dict[str, Any]:
     """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
     from archive.extras import summarize_mcap
 

@@ -22,6 +22,7 @@ from typing import Any
 from api.storage import BlobStore
 from archive.archiver import DEFAULT_FORMATS
 from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from archive.manifest_types import Manifest
 from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
@@ -61,7 +62,7 @@ class GcResult:
                 "kept_unverified": [d.session for d in self.decisions if d.action == "keep"]}
 
 
-def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], str | None]:
+def _local_cover(layout: SessionLayout, m: Manifest) -> tuple[list[str], str | None]:
     """(what the source's deletion relies on, or why it cannot go): every requested format and
     extras verified, and their files on disk hash as the manifest says."""
     requested = m.get("requested_formats") or list(DEFAULT_FORMATS)
@@ -83,7 +84,7 @@ def _local_cover(layout: SessionLayout, m: dict[str, Any]) -> tuple[list[str], s
     return relies, None
 
 
-def _bucket_cover(m: dict[str, Any], store: BlobStore | None) -> tuple[list[str], str | None]:
+def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str | None]:
     up = m.get("upload") or {}
     if not up.get("complete"):
         return [], "not uploaded to the object store"
