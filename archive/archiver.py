@@ -10,8 +10,10 @@ formats already verified are skipped, so re-running finishes the job. The MCAP s
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import shutil
+import threading
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -21,6 +23,7 @@ from typing import Any
 from archive.codecs import library_versions
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
 from archive.extras import EXTRAS_NAME, write_extras
+from archive.fanout import fan_out
 from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from archive.manifest import (
     archive_dir,
@@ -141,6 +144,10 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping
     return problems, decode_s
 
 
+#: Formats are written on parallel threads (see fan_out); they share the manifest and its file.
+_MANIFEST_LOCK = threading.Lock()
+
+
 def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
                  manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
                  on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
@@ -194,9 +201,10 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
     }
     if problems:
         shutil.rmtree(partial)  # a failed archive never takes the final name
-        if not manifest["formats"].get(fid, {}).get("verified"):
-            manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
-            save_manifest(session_dir, manifest)
+        with _MANIFEST_LOCK:
+            if not manifest["formats"].get(fid, {}).get("verified"):
+                manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
+                save_manifest(session_dir, manifest)
         return problems
     _fsync_tree(partial)
     if final.exists():  # replace the old copy (--force, or a damaged one) only now that the new one verified
@@ -209,8 +217,9 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
     else:
         os.replace(partial, final)
     fsync_dir(adir)
-    manifest["formats"][fid] = entry
-    save_manifest(session_dir, manifest)
+    with _MANIFEST_LOCK:
+        manifest["formats"][fid] = entry
+        save_manifest(session_dir, manifest)
     return []
 
 
@@ -269,11 +278,23 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             save_manifest(session_dir, manifest)
     failures: list[str] = []
 
-    for fid in todo:
-        problems = build_format(session_dir, fid, fmts[fid], iter_session_frames(session_dir), manifest, meta,
-                                per_segment, workers=workers, on_progress=on_progress)
-        if problems:
-            failures.append(f"{fid}: " + "; ".join(problems[:5]))
+    # The source is decoded once and teed to every format's writer (each on its own thread);
+    # each format is still verified on its own, by its own reader, before it takes its name.
+    def writer_for(fid: str) -> Callable[[Iterable[SessionFrame]], list[str]]:
+        def write(frames: Iterable[SessionFrame]) -> list[str]:
+            return build_format(session_dir, fid, fmts[fid], frames, manifest, meta, per_segment,
+                                workers=workers, on_progress=on_progress)
+        return write
+
+    outcomes = fan_out(iter_session_frames(session_dir), [writer_for(fid) for fid in todo],
+                       copy=dataclasses.replace) if todo else []
+    for fid, outcome in zip(todo, outcomes, strict=True):
+        if isinstance(outcome, ArchiveError | OSError):
+            failures.append(f"{fid}: {outcome}")
+        elif isinstance(outcome, BaseException):
+            raise outcome
+        elif outcome:
+            failures.append(f"{fid}: " + "; ".join(outcome[:5]))
 
     if segments and not source_gone and (force or todo or not manifest.get("extras", {}).get("verified")
                                          or not (adir / EXTRAS_NAME).is_file()):
