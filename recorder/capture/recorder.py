@@ -1,8 +1,9 @@
 """The real-time recorder: a capture thread, a bounded queue, a writer thread.
 
-Capture never waits on compression or disk: it hands each frame to a bounded queue with
+A live camera never waits on compression or disk: each frame goes to a bounded queue with
 ``put_nowait``; when the queue is full the frame is dropped *and counted* per topic (stats
-channel, session summary, exit report). The writer thread builds and validates the ICD sidecar,
+channel, session summary, exit report). A source that can wait (a file, a pipe, an importer)
+blocks on the queue instead and loses nothing. The writer thread builds and validates the ICD sidecar,
 encodes the image, and feeds the segment writer, whose chunks compress on a thread pool. Memory
 is bounded by the queue length plus the chunks in flight, however long the session runs.
 """
