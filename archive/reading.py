@@ -12,9 +12,9 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from archive.exceptions import ManifestError
+from archive.exceptions import ManifestError, VerificationError
 from archive.formats import get_format
-from archive.manifest import load_manifest
+from archive.manifest import frame_sha256, load_manifest, sidecar_sha256
 from archive.manifest_types import Manifest
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import SessionFrame
@@ -25,10 +25,11 @@ __all__ = ["READ_PREFERENCE", "archived_frames", "frames_from_format", "verified
 READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")
 
 
-def verified_formats(manifest: Manifest, layout: SessionLayout) -> list[str]:
-    """Verified formats whose folder is on disk, in reading preference."""
-    fmts = [f for f, e in manifest.get("formats", {}).items() if e.get("verified") and e.get("files")
-            and layout.format_dir(f).is_dir()]
+def verified_formats(manifest: Manifest, layout: SessionLayout, *, but: str | None = None) -> list[str]:
+    """Verified formats that scrub has not marked damaged and whose folder is on disk (other than
+    ``but``), in reading preference: the copies any reader, or a repair, may take frames from."""
+    fmts = [f for f, e in manifest.get("formats", {}).items() if f != but and e.get("verified") and e.get("files")
+            and not e.get("damaged") and layout.format_dir(f).is_dir()]
     return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
 
 
@@ -48,13 +49,23 @@ def archived_frames(session_dir: Path) -> Iterator[SessionFrame] | None:
 
 
 def frames_from_format(manifest: Manifest, layout: SessionLayout, fid: str) -> Iterator[SessionFrame]:
-    """The session's frames as format ``fid`` gives them back (with the manifest's segment names)."""
+    """The session's frames as format ``fid`` gives them back (with the manifest's segment names).
+
+    Each frame's pixels and sidecar are checked against the manifest's hashes as they are read: a
+    copy damaged since scrub last looked raises here, naming the frame, instead of handing damaged
+    counts to an analysis or an export."""
     entry = manifest["formats"][fid]
     fmt = get_format(entry.get("config") or fid)
     frames = manifest.get("frames", {})
     segments = frames.get("segments") or []
     times = frames.get("timestamps_ns") or []
+    hashes = frames.get("sha256") or []
+    sidecar_hashes = frames.get("sidecar_sha256") or []
     for i, decoded in enumerate(fmt.read(layout.format_dir(fid), [r["path"] for r in entry["files"]])):
+        if (i < len(hashes) and frame_sha256(decoded.pixels) != hashes[i]) or \
+                (i < len(sidecar_hashes) and sidecar_sha256(decoded.sidecar) != sidecar_hashes[i]):
+            raise VerificationError(f"{layout.format_dir(fid)}: frame {i} differs from the manifest; "
+                                    f"run `thermcap scrub {layout.dir.parents[1]} --repair`")
         log_time = decoded.log_time if decoded.log_time is not None else (times[i] if i < len(times) else 0)
         segment = segments[i] if i < len(segments) else ""
         yield SessionFrame(i, segment, log_time, decoded.pixels, decoded.sidecar)

@@ -22,15 +22,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from archive.archiver import build_format, verify_format_dir
+from archive.archiver import build_format
 from archive.blobs import BlobStore
 from archive.exceptions import ArchiveError
 from archive.extras import write_extras
 from archive.formats import get_format
 from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
 from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
-from archive.reading import READ_PREFERENCE, frames_from_format
-from archive.verify import _verify_extras
+from archive.reading import frames_from_format, verified_formats
+from archive.verify import verify_extras, verify_format
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
@@ -110,14 +110,14 @@ def _scrub_locked(d: Path, repair: bool, store: BlobStore | None, root: Path, wo
         if not entry.get("verified"):
             continue
         report.copies_checked += 1
-        problems = _check_format(layout, fid, entry, frames)
+        problems = _format_problems(layout, fid, entry, frames)
         _mark(entry, problems)
         if problems:
             findings.append(ScrubFinding(str(d), fid, problems[:20]))
     extras = m.get("extras") or {}
     if extras.get("verified"):
         report.copies_checked += 1
-        problems = _verify_extras(layout.archive, extras)["problems"]
+        problems = verify_extras(layout.archive, extras)["problems"]
         _mark(extras, problems)
         if problems:
             findings.append(ScrubFinding(str(d), "extras", problems[:20]))
@@ -139,21 +139,18 @@ def _scrub_locked(d: Path, repair: bool, store: BlobStore | None, root: Path, wo
     report.findings += findings
 
 
+def _format_problems(layout: SessionLayout, fid: str, entry: FormatEntry, frames: FramesBlock) -> list[str]:
+    try:
+        return verify_format(layout.dir, fid, entry, frames)
+    except ArchiveError as exc:  # a format id this version cannot read is reported, not fatal
+        return [str(exc)]
+
+
 def _mark(entry: FormatEntry | ExtrasEntry, problems: list[str]) -> None:
     if problems:
         entry["damaged"] = {"at": iso_now(), "problems": problems[:20]}
     else:
         entry.pop("damaged", None)
-
-
-def _check_format(layout: SessionLayout, fid: str, entry: FormatEntry, frames: FramesBlock) -> list[str]:
-    try:
-        fmt = get_format(entry.get("config") or fid)
-    except ArchiveError as exc:
-        return [str(exc)]
-    problems, _ = verify_format_dir(fmt, layout.format_dir(fid), entry.get("files", []), frames.get("sha256", []),
-                                    where=fid, sidecars=frames.get("sidecar_sha256"), times=frames.get("timestamps_ns"))
-    return problems
 
 
 def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, str]:
@@ -182,12 +179,6 @@ def _check_object(store: BlobStore, key: str, sha256: str) -> str | None:
     return None if h.hexdigest() == sha256 else "sha256 differs from the manifest"
 
 
-def _good_formats(m: Manifest, layout: SessionLayout, but: str) -> list[str]:
-    fmts = [f for f, e in m.get("formats", {}).items() if f != but and e.get("verified") and not e.get("damaged")
-            and layout.format_dir(f).is_dir()]
-    return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
-
-
 def _repair(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, store: BlobStore | None,
             root: Path, workers: int) -> None:
     try:
@@ -206,7 +197,7 @@ def _repair_format(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
     if session_segments(d):
         source, frames = "mcap source", iter_session_frames(d)
     else:
-        good = _good_formats(m, layout, fid)
+        good = verified_formats(m, layout, but=fid)
         if not good:
             finding.repair_error = "no other verified copy to rebuild it from"
             return
@@ -218,7 +209,7 @@ def _repair_format(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
     if problems:
         finding.repair_error = "; ".join(problems[:5])
         return
-    again = _check_format(layout, fid, m["formats"][fid], m["frames"])  # verified again, as the issue asks
+    again = _format_problems(layout, fid, m["formats"][fid], m["frames"])  # verified again, as the issue asks
     _mark(m["formats"][fid], again)
     finding.repaired, finding.repaired_from = not again, source
 
@@ -240,7 +231,7 @@ def _repair_extras(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
             tmp.flush()
             os.fsync(tmp.fileno())
         os.replace(tmp.name, layout.extras)
-        problems = _verify_extras(layout.archive, extras)["problems"]
+        problems = verify_extras(layout.archive, extras)["problems"]
         _mark(extras, problems)
         finding.repaired, finding.repaired_from = not problems, "store"
         return

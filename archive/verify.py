@@ -8,9 +8,9 @@ from typing import Any
 from archive.archiver import verify_format_dir
 from archive.formats import get_format
 from archive.manifest import archive_dir, file_sha256, load_manifest
-from archive.manifest_types import ExtrasEntry
+from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock
 
-__all__ = ["verify_session"]
+__all__ = ["verify_extras", "verify_format", "verify_session"]
 
 
 def verify_session(session_dir: str | Path, formats: list[str] | None = None) -> dict[str, Any]:
@@ -26,21 +26,28 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
         if not entry.get("verified"):
             report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: never verified when archived"]}
             continue
-        fmt = get_format(entry["config"]) if "config" in entry else get_format(fid)
-        problems, _ = verify_format_dir(fmt, adir / fid, entry["files"], expected, where=fid,
-                                        sidecars=manifest["frames"].get("sidecar_sha256"),
-                                        times=manifest["frames"].get("timestamps_ns"))
+        problems = verify_format(session_dir, fid, entry, manifest["frames"])
         report[fid] = {"ok": not problems, "frames": len(expected), "problems": problems}
     extras = manifest.get("extras")
     if extras and not formats:
-        report["extras"] = _verify_extras(adir, extras)
+        report["extras"] = verify_extras(adir, extras)
     for fid in formats or []:
         if fid not in report:
             report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: not in the manifest"]}
     return report
 
 
-def _verify_extras(adir: Path, entry: ExtrasEntry) -> dict[str, Any]:
+def verify_format(session_dir: Path, fid: str, entry: FormatEntry, frames: FramesBlock) -> list[str]:
+    """Every frame of one archived format decoded by its reader and compared with the manifest's
+    pixel and sidecar hashes and times; the problems, or [] (thermcap verify and scrub)."""
+    fmt = get_format(entry.get("config") or fid)
+    problems, _ = verify_format_dir(fmt, archive_dir(session_dir) / fid, entry.get("files", []),
+                                    frames.get("sha256", []), where=fid, sidecars=frames.get("sidecar_sha256"),
+                                    times=frames.get("timestamps_ns"))
+    return problems
+
+
+def verify_extras(adir: Path, entry: ExtrasEntry) -> dict[str, Any]:
     """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
     from archive.extras import summarize_mcap
 

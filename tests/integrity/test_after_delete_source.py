@@ -95,3 +95,26 @@ def test_analyze_refuses_to_empty_events_when_no_frame_can_be_read(tmp_path):
         analyze_session(session)
     assert "frames" in str(exc.value)
     assert (session / "events.json").read_bytes() == events
+
+
+def test_frames_read_back_from_an_archive_are_checked_and_skip_copies_marked_damaged(tmp_path):
+    """Reading a session whose source is gone must never hand on damaged counts: a copy scrub
+    marked damaged is passed over for a good one, and damage scrub has not seen yet is an error."""
+    from archive.exceptions import VerificationError
+    from archive.manifest import load_manifest, save_manifest
+
+    session = _record(tmp_path)
+    truth = [np.array(f.pixels) for f in iter_session_frames(session)]
+    archive_session(session, ["hdf5", "png16"], delete_source=True)
+    import h5py
+
+    with h5py.File(session / "archive" / "hdf5" / "s.h5", "r+") as f:  # a silent change: one count, still valid
+        f["frames"][5, 0, 0] ^= 1
+    with pytest.raises(VerificationError, match="frame 5"):
+        list(iter_session_frames(session))  # hdf5 is read first, and its damage is caught
+    m = load_manifest(session)
+    m["formats"]["hdf5"]["damaged"] = {"at": "now", "problems": ["frame 5"]}
+    save_manifest(session, m)
+    again = [np.array(f.pixels) for f in iter_session_frames(session)]  # png16 serves instead
+    assert len(again) == len(truth)
+    assert all(np.array_equal(a, b) for a, b in zip(again, truth, strict=True))
