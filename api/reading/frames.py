@@ -9,7 +9,6 @@ against the manifest's hashes before it is used; a damaged one is reported and s
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import logging
@@ -35,7 +34,7 @@ from api.storage import BlobStore
 from archive.codecs import get_codec
 from archive.formats import get_format
 from archive.formats.base import locate
-from archive.manifest import frame_sha256
+from archive.manifest import frame_sha256, sidecar_sha256
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
@@ -170,24 +169,28 @@ class FrameReader:
 
         return open_file
 
-    def _copies(self, session_id: str, idx: int, row: dict[str, Any]) -> Iterator[tuple[str,
-                                                                                        Callable[[], tuple[Any, Any]]]]:
-        """(name, read) for every copy of the frame; read() gives (pixels, sidecar bytes)."""
+    def _copies(self, session_id: str, idx: int, row: dict[str, Any],
+                part: str) -> Iterator[tuple[str, Callable[[], Any]]]:
+        """(name, read) for every copy of the frame; read() gives its ``part`` ("pixels" or
+        "sidecar" bytes). A ZIP entry is read for that part alone: a sidecar request never decodes
+        the image."""
+        pixels = part == "pixels"
         blobs = self._ordered_blobs(session_id, idx)
         for blob in blobs:
-            def read_blob(blob: dict[str, Any] = blob) -> tuple[Any, Any]:
+            def read_blob(blob: dict[str, Any] = blob) -> Any:
                 key = self._key(session_id, blob)
+                if not pixels:
+                    return self.store.get_range(key, blob["sidecar_offset"],
+                                                blob["sidecar_offset"] + blob["sidecar_length"])
                 data = self.store.get_range(key, blob["offset"], blob["offset"] + blob["length"])
-                side = self.store.get_range(key, blob["sidecar_offset"],
-                                            blob["sidecar_offset"] + blob["sidecar_length"])
-                return get_codec(blob["format"]).decode(data), side
+                return get_codec(blob["format"]).decode(data)
             yield f"{blob['format']}:{blob['file']}", read_blob
         if row["segment"]:
-            yield f"mcap:{row['segment']}", lambda: self._from_mcap(session_id, row)
+            yield f"mcap:{row['segment']}", lambda: self._from_mcap(session_id, row)[0 if pixels else 1]
         for fmt, files in self._other_formats(session_id, {b["format"] for b in blobs}):
-            def read_other(fmt: str = fmt, files: list[dict[str, Any]] = files) -> tuple[Any, Any]:
+            def read_other(fmt: str = fmt, files: list[dict[str, Any]] = files) -> Any:
                 frame = get_format(fmt).read_frame(self._open(session_id, fmt), files, idx)
-                return frame.pixels, frame.sidecar
+                return frame.pixels if pixels else frame.sidecar
             yield f"{fmt}:{locate(files, idx)[0]}", read_other
 
     def _verified(self, session_id: str, idx: int, part: str) -> Any:
@@ -195,18 +198,17 @@ class FrameReader:
         row = self._frame_row(session_id, idx)
         want = row.get("sha256") if part == "pixels" else row.get("sidecar_sha256")
         missing = []
-        for name, read in self._copies(session_id, idx, row):
+        for name, read in self._copies(session_id, idx, row, part):
             try:
-                pixels, sidecar = read()
+                value = read()
             except (FrameNotFound, FileNotFoundError) as exc:
                 missing.append(f"{name}: {exc}")
                 continue
             except Exception as exc:  # a damaged file may fail anywhere inside a decoder
                 self.damage.report(Damage(session_id, idx, name, f"unreadable ({type(exc).__name__}: {exc})"))
                 continue
-            value = pixels if part == "pixels" else sidecar
             if want:
-                got = frame_sha256(value) if part == "pixels" else hashlib.sha256(value).hexdigest()
+                got = frame_sha256(value) if part == "pixels" else sidecar_sha256(value)
                 if got != want:
                     self.damage.report(Damage(session_id, idx, name, f"{part} sha256 differs from the manifest"))
                     continue

@@ -74,3 +74,22 @@ def test_when_every_copy_is_damaged_the_answer_is_503_not_bad_bytes(root):
         for fmt in ("png16", "raw"):
             assert c.get("/api/v1/sessions/s/frames/2", params={"format": fmt}).status_code == 503
         assert c.get("/api/v1/sessions/s/frames/1", params={"format": "raw"}).status_code == 200
+
+
+def test_a_damaged_sidecar_entry_is_never_served_and_another_copy_is(root):
+    session = root / "sessions" / "s"
+    truth = [f.sidecar_dict() for f in iter_session_frames(session)]
+    archive_session(session, ["png16", "hdf5"], delete_source=True)
+    zpath = session / "archive" / "png16" / "0000.zip"
+    with zipfile.ZipFile(zpath) as zf:
+        info = [i for i in zf.infolist() if i.filename.endswith(".json")][4]
+    data = bytearray(zpath.read_bytes())
+    start = info.header_offset + 30 + len(info.filename.encode()) + len(info.extra)
+    at = data.index(b'"frame_index"', start)  # change a key the sidecar must keep
+    data[at + 2] ^= 0x01
+    zpath.write_bytes(bytes(data))
+    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
+        r = c.get("/api/v1/sessions/s/frames/4/metadata")
+        assert r.status_code == 200
+        assert r.json() == truth[4]
+        assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
