@@ -97,30 +97,25 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
     """
     from obstore.exceptions import AlreadyExistsError
 
-    from archive.manifest import iso_now, load_manifest, save_manifest
+    from archive.manifest import archived_files, iso_now, load_manifest, save_manifest
     from recorder.exceptions import ThermcapError
 
     manifest = load_manifest(session_dir)
     keys = []
-    extras = manifest.get("extras") or {}
-    groups = [(fmt, entry["files"]) for fmt, entry in manifest["formats"].items() if entry.get("verified")]
-    if extras.get("verified"):  # attachments and vendor metadata travel with the frames
-        groups.append(("", [{"path": extras["path"], "bytes": extras["bytes"]}]))
-    for fmt, files in groups:
-        for rec in files:
-            path = SessionLayout.of(session_dir).format_dir(fmt) / rec["path"]
-            key = path.resolve().relative_to(root.resolve()).as_posix()
-            head = store.head(key)
-            if head is None:
-                try:
-                    with open(path, "rb") as f:
-                        obstore.put(store.store, store._key(key), f, mode="create")
-                except AlreadyExistsError:
-                    head = store.head(key)
-            if head is not None and head["size"] != rec["bytes"]:
-                raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
-                                    f"expected {rec['bytes']}); refusing to overwrite")
-            keys.append(key)
+    for rec in archived_files(manifest):
+        path = SessionLayout.of(session_dir).archive / rec.rel
+        key = path.resolve().relative_to(root.resolve()).as_posix()
+        head = store.head(key)
+        if head is None:
+            try:
+                with open(path, "rb") as f:
+                    obstore.put(store.store, store._key(key), f, mode="create")
+            except AlreadyExistsError:
+                head = store.head(key)
+        if head is not None and head["size"] != rec.bytes:
+            raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
+                                f"expected {rec.bytes}); refusing to overwrite")
+        keys.append(key)
     manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
     save_manifest(session_dir, manifest)
     manifest_path = SessionLayout.of(session_dir).manifest

@@ -11,6 +11,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, cast, overload
 
@@ -92,6 +93,27 @@ def load_manifest(session_dir: Path, *, required: bool = True) -> Manifest | Non
     if not isinstance(data, dict) or data.get("manifest_version") != MANIFEST_VERSION:
         raise ManifestError(f"{path}: not a thermcap manifest (version {data.get('manifest_version')!r})")
     return cast(Manifest, data)
+
+
+@dataclass(frozen=True)
+class ArchivedFile:
+    """One verified file of the archive: its path under ``archive/``, size and sha256."""
+
+    rel: str  # "png16/0000.zip", "extras.mcap"
+    bytes: int
+    sha256: str
+
+
+def archived_files(manifest: Manifest) -> list[ArchivedFile]:
+    """Every file of every verified format, and extras.mcap: what is uploaded, and what the
+    bucket must hold for gc and scrub. One list, so the three never disagree."""
+    out = [ArchivedFile(f"{fid}/{rec['path']}", rec["bytes"], rec["sha256"])
+           for fid, entry in manifest.get("formats", {}).items() if entry.get("verified")
+           for rec in entry.get("files", [])]
+    extras = manifest.get("extras") or {}
+    if extras.get("verified"):  # attachments and vendor metadata travel with the frames
+        out.append(ArchivedFile(extras["path"], extras["bytes"], extras["sha256"]))
+    return out
 
 
 def save_manifest(session_dir: Path, manifest: Manifest) -> None:

@@ -27,7 +27,7 @@ from archive.blobs import BlobStore
 from archive.exceptions import ArchiveError
 from archive.extras import write_extras
 from archive.formats import get_format
-from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
 from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
 from archive.reading import frames_from_format, verified_formats
 from archive.verify import verify_extras, verify_format
@@ -156,13 +156,7 @@ def _mark(entry: FormatEntry | ExtrasEntry, problems: list[str]) -> None:
 def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, str]:
     """Object key -> the sha256 the manifest recorded for that file."""
     rel = d.resolve().relative_to(root.resolve()).as_posix()
-    out = {}
-    for fid, entry in m.get("formats", {}).items():
-        for rec in entry.get("files", []) if entry.get("verified") else []:
-            out[f"{rel}/archive/{fid}/{rec['path']}"] = rec["sha256"]
-    extras = m.get("extras") or {}
-    if extras.get("verified"):
-        out[f"{rel}/archive/{extras['path']}"] = extras["sha256"]
+    out = {f"{rel}/archive/{f.rel}": f.sha256 for f in archived_files(m)}
     uploaded = set((m.get("upload") or {}).get("keys", []))
     return {k: v for k, v in out.items() if k in uploaded}
 

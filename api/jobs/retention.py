@@ -21,7 +21,7 @@ from typing import Any
 
 from api.storage import BlobStore
 from archive.archiver import DEFAULT_FORMATS
-from archive.manifest import file_sha256, iso_now, load_manifest, save_manifest
+from archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
 from archive.manifest_types import Manifest
 from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
@@ -90,12 +90,7 @@ def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str 
         return [], "not uploaded to the object store"
     if store is None:
         return [f"upload recorded complete {up.get('at')} ({len(up.get('keys', []))} objects)"], None
-    sizes = {}
-    for fid, entry in m.get("formats", {}).items():
-        for rec in entry.get("files", []) if entry.get("verified") else []:
-            sizes[f"{fid}/{rec['path']}"] = rec["bytes"]
-    if (m.get("extras") or {}).get("verified"):
-        sizes[m["extras"]["path"]] = m["extras"]["bytes"]
+    sizes = {f.rel: f.bytes for f in archived_files(m)}
     for key in up.get("keys", []):
         rel = key.split("/archive/", 1)[-1]
         head = store.head(key)

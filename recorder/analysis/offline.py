@@ -18,9 +18,9 @@ from typing import Any
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
 from recorder.exceptions import McapFileError
 from recorder.radiometry import model_from_dict
-from recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON, SessionLayout
+from recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON
 from recorder.storage.lock import session_locked
-from recorder.storage.reader import frame_files, iter_session_frames, read_session_meta
+from recorder.storage.reader import archived_frame_count, frame_files, iter_session_frames, read_session_meta
 from recorder.storage.segments import write_json_atomic
 
 __all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
@@ -58,11 +58,9 @@ def analyze_session(session_dir: str | Path, *, threshold_k: float = 5.0, min_ar
 
 
 def _expected_frames(session_dir: Path, meta: dict[str, Any]) -> int | None:
-    try:
-        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
-        return int(manifest["source"]["frames"])
-    except (OSError, ValueError, KeyError, TypeError):
-        pass
+    archived = archived_frame_count(session_dir)
+    if archived is not None:
+        return archived
     n = meta.get("frames_written")
     return int(n) if isinstance(n, int) else None
 

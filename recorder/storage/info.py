@@ -17,6 +17,7 @@ from recorder.icd.names import iso_utc
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_STATS
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import session_status
+from recorder.storage.reader import archived_frame_count
 from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
 
 __all__ = ["info", "segment_info", "session_info"]
@@ -99,9 +100,9 @@ def session_info(path: str | Path) -> dict[str, Any]:
         raise McapFileError(f"{path}: not a thermcap session (no NNNN.mcap segments, no session.json)")
     segs = [segment_info(p) for p in segments]
     frames = sum(s["frames"] for s in segs)
-    archived = _archived_counts(path) if not segments else None
+    archived = archived_frame_count(path) if not segments else None
     if archived is not None:  # the source was deleted after archiving: the archive holds the frames
-        frames = archived["frames"]
+        frames = archived
     start = min((s["start_ns"] for s in segs if s["messages"]), default=None)
     end = max((s["end_ns"] for s in segs if s["messages"]), default=None)
     span = (end - start) / 1e9 if start is not None and end is not None else 0.0
@@ -144,15 +145,6 @@ def session_info(path: str | Path) -> dict[str, Any]:
         "error": meta.get("error"),
         "frames_from": "archive" if archived is not None else "segments",
     }
-
-
-def _archived_counts(session_dir: Path) -> dict[str, Any] | None:
-    """Frame count and span from the archive manifest, for a session whose source was deleted."""
-    try:
-        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
-        return {"frames": int(manifest["source"]["frames"])}
-    except (OSError, ValueError, KeyError, TypeError):
-        return None
 
 
 def info(path: str | Path) -> dict[str, Any]:

@@ -49,7 +49,17 @@ def session_segments(session_dir: str | Path) -> list[Path]:
     d = Path(session_dir)
     if not d.is_dir():
         raise McapFileError(f"{d}: no such session folder")
-    return sorted(p for p in d.glob("[0-9][0-9][0-9][0-9].mcap"))
+    return SessionLayout.of(d).segments()
+
+
+def archived_frame_count(session_dir: str | Path) -> int | None:
+    """How many frames the archive manifest says the session holds (its count survives
+    ``--delete-source``); None where there is no readable manifest."""
+    try:
+        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        return int(manifest["source"]["frames"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
 
 
 def read_session_meta(session_dir: str | Path) -> dict[str, Any]:

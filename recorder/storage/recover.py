@@ -10,6 +10,7 @@ it takes the final name, and only then is the ``.active`` file removed.
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -29,6 +30,7 @@ from mcap.stream_reader import breakup_chunk
 from recorder.exceptions import McapFileError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
+from recorder.storage.reader import count_frames
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
@@ -319,14 +321,9 @@ def _mark_session(session_dir: Path) -> None:
         # The recorder died before its summary: the counts come from what the segments now hold,
         # so session.json, `info` and the catalog agree.
         meta["status"] = "recovered"
-        frames = 0
-        for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
-            with open(seg, "rb") as f:
-                summary = make_reader(f).get_summary()
-            if summary and summary.statistics:
-                ids = [c.id for c in summary.channels.values() if c.topic == "/thermal/image"]
-                frames += sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
-        meta["frames_written"] = frames
+        # a finished segment with no readable summary: `info` names it; no count is made up
+        with contextlib.suppress(McapFileError):
+            meta["frames_written"] = sum(count_frames(session_dir).values())
         meta["recovered_ns"] = time.time_ns()
         write_json_atomic(meta_path, meta)
 
