@@ -76,13 +76,13 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     except SQLAlchemyError as exc:
         fail(index_db_problem(settings, exc))
     if as_json:
-        click.echo(json.dumps(result, indent=2))
+        click.echo(json.dumps(result.to_dict(), indent=2))
     else:
-        click.echo(f"indexed {len(result['indexed'])}, unchanged {len(result['unchanged'])}, "
-                   f"removed {len(result['removed'])}, failed {len(result['failed'])}")
-        for name, err in result["failed"].items():
+        click.echo(f"indexed {len(result.indexed)}, unchanged {len(result.unchanged)}, "
+                   f"removed {len(result.removed)}, failed {len(result.failed)}")
+        for name, err in result.failed.items():
             click.echo(f"  {name}: {err}", err=True)
-    if result["failed"]:
+    if result.failed:
         sys.exit(1)
 
 
@@ -176,8 +176,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
     if once:
         res = w.run_once()
         if as_json:
-            click.echo(json.dumps(res, indent=2))
-        sys.exit(1 if res["failed"] else 0)
+            click.echo(json.dumps(res.to_dict(), indent=2))
+        sys.exit(1 if res.failed else 0)
     w.run_forever(interval, scrub_interval)
 
 

@@ -17,6 +17,7 @@ import struct
 import time
 import zipfile
 from collections.abc import Iterator
+from dataclasses import asdict, dataclass, field
 from datetime import UTC
 from itertools import pairwise
 from pathlib import Path
@@ -31,7 +32,20 @@ from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
-__all__ = ["ZIPPED_FORMATS", "fingerprint", "index_root", "index_session"]
+__all__ = ["ZIPPED_FORMATS", "IndexReport", "fingerprint", "index_root", "index_session"]
+
+
+@dataclass
+class IndexReport:
+    """What one pass over ROOT did, by session folder name (``removed`` by session id)."""
+
+    indexed: list[str] = field(default_factory=list)
+    unchanged: list[str] = field(default_factory=list)
+    removed: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)  # folder -> the error, so one bad session is visible
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
 
 ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
 _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
@@ -241,13 +255,11 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
     return True
 
 
-def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> dict[str, Any]:
+def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> IndexReport:
     """Index every session under ROOT; drop sessions whose folder is gone, unless ``store`` is an
     object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
     bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
-    done: list[str] = []
-    unchanged: list[str] = []
-    failed: dict[str, str] = {}
+    report = IndexReport()
     present = set()
     for d in list_sessions(root):
         layout = SessionLayout.of(d)
@@ -256,9 +268,9 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
         meta = read_session_meta(d)
         present.add(meta.get("session_id") or d.name)
         try:
-            (done if index_session(engine, d, force=force) else unchanged).append(d.name)
+            (report.indexed if index_session(engine, d, force=force) else report.unchanged).append(d.name)
         except Exception as exc:  # one broken session must not stop the others
-            failed[d.name] = f"{type(exc).__name__}: {exc}"
+            report.failed[d.name] = f"{type(exc).__name__}: {exc}"
     with engine.begin() as conn:
         known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
         gone = sorted(known - present)
@@ -269,4 +281,5 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
             for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
                 conn.execute(delete(table).where(table.c.session_id == sid))
             conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
-    return {"indexed": done, "unchanged": unchanged, "removed": gone, "failed": failed}
+    report.removed = gone
+    return report

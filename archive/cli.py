@@ -112,10 +112,11 @@ def _run_hooks(session_dir: Path, root: str) -> None:
 @json_option
 def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: bool) -> None:
     """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
-    from archive.verify import verify_session
+    from archive.verify import CopyCheck, verify_session
     from recorder.storage.reader import resolve_session
 
-    out, bad = {}, False
+    out: dict[str, dict[str, CopyCheck]] = {}
+    bad = False
     for s in sessions:
         try:
             d = resolve_session(s, root)
@@ -123,16 +124,17 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
         except (ThermcapError, click.BadParameter) as exc:
             fail(str(exc))
         out[str(d)] = report
-        bad |= any(not r["ok"] for r in report.values())
+        bad |= any(not r.ok for r in report.values())
     if as_json:
-        click.echo(json.dumps(out, indent=2))
+        click.echo(json.dumps({name: {fid: r.to_dict() for fid, r in rep.items()} for name, rep in out.items()},
+                              indent=2))
     else:
         for name, report in out.items():
             for fid, r in report.items():
                 what = ("attachments, metadata and other topics intact" if fid == "extras"
-                        else f"{r['frames']} frames bit-exact")
-                click.echo(f"{name} {fid}: {'ok, ' + what if r['ok'] else 'FAILED'}")
-                for p in r["problems"]:
+                        else f"{r.frames} frames bit-exact")
+                click.echo(f"{name} {fid}: {'ok, ' + what if r.ok else 'FAILED'}")
+                for p in r.problems:
                     click.echo(f"  {p}")
     if bad:
         sys.exit(1)

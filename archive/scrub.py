@@ -117,7 +117,7 @@ def _scrub_locked(d: Path, repair: bool, store: BlobStore | None, root: Path, wo
     extras = m.get("extras") or {}
     if extras.get("verified"):
         report.copies_checked += 1
-        problems = verify_extras(layout.archive, extras)["problems"]
+        problems = verify_extras(layout.archive, extras).problems
         _mark(extras, problems)
         if problems:
             findings.append(ScrubFinding(str(d), "extras", problems[:20]))
@@ -225,7 +225,7 @@ def _repair_extras(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
             tmp.flush()
             os.fsync(tmp.fileno())
         os.replace(tmp.name, layout.extras)
-        problems = verify_extras(layout.archive, extras)["problems"]
+        problems = verify_extras(layout.archive, extras).problems
         _mark(extras, problems)
         finding.repaired, finding.repaired_from = not problems, "store"
         return

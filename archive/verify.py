@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -10,30 +11,46 @@ from archive.formats import get_format
 from archive.manifest import archive_dir, file_sha256, load_manifest
 from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock
 
-__all__ = ["verify_extras", "verify_format", "verify_session"]
+__all__ = ["CopyCheck", "verify_extras", "verify_format", "verify_session"]
 
 
-def verify_session(session_dir: str | Path, formats: list[str] | None = None) -> dict[str, Any]:
-    """Returns {format: {"ok": bool, "problems": [...], "frames": n}}; names every bad frame and file."""
+@dataclass(frozen=True)
+class CopyCheck:
+    """One archived copy (a format, or extras) checked against the manifest."""
+
+    frames: int
+    problems: list[str] = field(default_factory=list)  # each names the frame or file and what differs
+
+    @property
+    def ok(self) -> bool:
+        return not self.problems
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"ok": self.ok, **asdict(self)}
+
+
+def verify_session(session_dir: str | Path, formats: list[str] | None = None) -> dict[str, CopyCheck]:
+    """Each requested copy by id ("extras" for extras.mcap); a copy never verified or not in the
+    manifest is a problem, not a skip, so a script cannot read silence as success."""
     session_dir = Path(session_dir)
     manifest = load_manifest(session_dir)
     expected = manifest["frames"].get("sha256", [])
     adir = archive_dir(session_dir)
-    report: dict[str, Any] = {}
+    report: dict[str, CopyCheck] = {}
     for fid, entry in manifest["formats"].items():
         if formats and fid not in formats:
             continue
         if not entry.get("verified"):
-            report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: never verified when archived"]}
+            report[fid] = CopyCheck(0, [f"{fid}: never verified when archived"])
             continue
         problems = verify_format(session_dir, fid, entry, manifest["frames"])
-        report[fid] = {"ok": not problems, "frames": len(expected), "problems": problems}
+        report[fid] = CopyCheck(len(expected), problems)
     extras = manifest.get("extras")
     if extras and not formats:
         report["extras"] = verify_extras(adir, extras)
     for fid in formats or []:
         if fid not in report:
-            report[fid] = {"ok": False, "frames": 0, "problems": [f"{fid}: not in the manifest"]}
+            report[fid] = CopyCheck(0, [f"{fid}: not in the manifest"])
     return report
 
 
@@ -47,15 +64,15 @@ def verify_format(session_dir: Path, fid: str, entry: FormatEntry, frames: Frame
     return problems
 
 
-def verify_extras(adir: Path, entry: ExtrasEntry) -> dict[str, Any]:
+def verify_extras(adir: Path, entry: ExtrasEntry) -> CopyCheck:
     """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
     from archive.extras import summarize_mcap
 
     path = adir / entry["path"]
     if not entry.get("verified"):
-        return {"ok": False, "frames": 0, "problems": ["extras: never verified when archived"]}
+        return CopyCheck(0, ["extras: never verified when archived"])
     if not path.is_file():
-        return {"ok": False, "frames": 0, "problems": [f"extras: {path} is missing"]}
+        return CopyCheck(0, [f"extras: {path} is missing"])
     problems = []
     if file_sha256(path) != entry["sha256"]:
         problems.append(f"extras: {path} sha256 differs from the manifest")
@@ -63,4 +80,4 @@ def verify_extras(adir: Path, entry: ExtrasEntry) -> dict[str, Any]:
         got = summarize_mcap([path])
         if got["topics"] != entry["topics"] or got["attachments"] != entry["attachments"]:
             problems.append(f"extras: {path} content differs from what the manifest recorded")
-    return {"ok": not problems, "frames": 0, "problems": problems}
+    return CopyCheck(0, problems)

@@ -1,4 +1,13 @@
-"""Shared fixtures: sample folders, and a helper to run the real ``thermcap`` command."""
+"""Shared fixtures: sample folders, and a helper to run the real ``thermcap`` command.
+
+Tiers are folders, and each test is marked with its folder's name, so ``pytest tests/unit`` and
+``pytest -m unit`` select the same tests:
+
+  unit/         in-process (TestClient, CliRunner, real MCAP files in tmp); the whole tier < 60 s
+  integration/  real processes of ours: the ``thermcap`` CLI, ``thermcap serve`` over HTTP, h5dump
+  system/       real services: PostgreSQL, SeaweedFS, Chromium, the DJI SDK, the deployment files
+  reliability/  kill loops, soaks, fuzzing: marked ``slow`` as well, short forms in CI
+"""
 
 from __future__ import annotations
 
@@ -12,6 +21,17 @@ import urllib.request as _urlreq
 from pathlib import Path
 
 import pytest
+
+pytest_plugins = ["tests.support.api_data", "tests.support.archive_sessions"]
+TIERS = ("unit", "integration", "system", "reliability")
+
+
+def pytest_collection_modifyitems(config, items):
+    for item in items:
+        parts = Path(str(item.fspath)).relative_to(Path(__file__).parent).parts
+        if parts and parts[0] in TIERS:
+            item.add_marker(parts[0])
+
 
 SAMPLES = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
 

@@ -15,6 +15,7 @@ import socket
 import time
 import uuid
 from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -79,6 +80,18 @@ def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
     return store is not None and not m.get("upload", {}).get("complete")
 
 
+@dataclass
+class WorkerPass:
+    """One pass over ROOT, by session id."""
+
+    archived: list[str] = field(default_factory=list)
+    leased_elsewhere: list[str] = field(default_factory=list)  # another worker holds the lease
+    failed: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
 class Worker:
     def __init__(self, root: Path, engine: Engine, *, formats: list[str], store: BlobStore | None = None,
                  delete_source: bool = False, lease_ttl_s: float = 600.0, owner: str | None = None,
@@ -88,14 +101,14 @@ class Worker:
         self.owner = owner or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}"
         self.log = log
 
-    def run_once(self) -> dict[str, Any]:
-        done, skipped, failed = [], [], {}
+    def run_once(self) -> WorkerPass:
+        result = WorkerPass()
         for d in finished_sessions(self.root):
             if not _needs_work(d, self.formats, self.store):
                 continue
             sid = read_session_meta(d).get("session_id", d.name)
             if not acquire_lease(self.engine, sid, self.owner, self.lease_ttl_s):
-                skipped.append(sid)
+                result.leased_elsewhere.append(sid)
                 continue
             try:
                 archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
@@ -104,16 +117,16 @@ class Worker:
                     if self.delete_source:
                         archive_session(d, self.formats, delete_source=True)
                 index_session(self.engine, d)
-                done.append(sid)
+                result.archived.append(sid)
                 self.log(f"archived {sid}")
             except ThermcapError as exc:
-                failed[sid] = str(exc)
+                result.failed[sid] = str(exc)
                 self.log(f"error: {sid}: {exc}")
             finally:
                 release_lease(self.engine, sid, self.owner)
-        return {"archived": done, "leased_elsewhere": skipped, "failed": failed}
+        return result
 
-    def scrub(self, repair: bool = True) -> dict[str, Any]:
+    def scrub(self, repair: bool = True) -> ScrubReport:
         """Re-verify every archived copy (and the bucket's), repair what another copy covers, and
         re-index the sessions where anything was found, so the API stops offering damage at once."""
         report = ScrubReport()
@@ -131,7 +144,7 @@ class Worker:
         for f in report.findings:
             self.log(f"scrub: {f.session}: {f.copy} damaged ({f.problems[0]}); "
                      + (f"repaired from {f.repaired_from}" if f.repaired else f"not repaired: {f.repair_error}"))
-        return report.to_dict()
+        return report
 
     def run_forever(self, interval_s: float = 5.0, scrub_interval_s: float = 86400.0) -> None:
         next_scrub = time.monotonic() + scrub_interval_s if scrub_interval_s > 0 else None

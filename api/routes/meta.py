@@ -7,7 +7,7 @@ from prometheus_client import generate_latest
 from sqlalchemy import func, select
 
 from api import db
-from api.indexing import index_root
+from api.indexing import IndexReport, index_root
 from api.security import require
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions
@@ -53,6 +53,6 @@ def audit(request: Request, prices: str | None = None) -> dict:
 
 
 @router.post("/api/v1/index", tags=["meta"], dependencies=[Depends(require("write"))])
-def reindex(request: Request, force: bool = False) -> dict:
+def reindex(request: Request, force: bool = False) -> IndexReport:
     return index_root(request.app.state.engine, request.app.state.settings.root, force=force,
                       store=request.app.state.store)

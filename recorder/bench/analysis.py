@@ -149,7 +149,7 @@ def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str
     """The detector on real files: hot spots per image, with an overlay PNG of each."""
     import os
 
-    from recorder.importers import ImportError_, read_file
+    from recorder.importers import ImportFileError, read_file
     from recorder.radiometry import TemperatureUnavailable
 
     rows = []
@@ -160,7 +160,7 @@ def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str
             path = os.path.join(dirpath, name)
             try:
                 (f,) = read_file(path)[:1]
-            except ImportError_:
+            except ImportFileError:
                 continue
             try:
                 temps = np.asarray(f.model.to_celsius(f.pixels), dtype=np.float32)

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from recorder.importers import ImportError_, read_file
+from recorder.importers import ImportFileError, read_file
 from recorder.importers.dji_sdk import DjiBackend
 
 __all__ = ["bench_import", "print_table"]
@@ -40,7 +40,7 @@ def _sample_corpus(samples: Path, folder: Path, copies: int) -> dict[str, list[P
     for path in sorted(p for p in samples.rglob("*") if p.is_file()):
         try:
             fmt = read_file(path)[0].format
-        except ImportError_:
+        except ImportFileError:
             continue  # notes, sidecars, references
         for i in range(copies):
             dst = folder / fmt / f"c{i}"
@@ -64,7 +64,7 @@ def _measure(name: str, files: list[Path], folder: Path, dji_sdk: DjiBackend | N
     report = import_paths([str(f) for f in files], folder / f"root-{name}", analysis=False, dji_sdk=dji_sdk)
     took = time.perf_counter() - t0
     if report.failed:
-        raise ImportError_(f"bench corpus {name}: {report.failed[0]['error']}")
+        raise ImportFileError(f"bench corpus {name}: {report.failed[0]['error']}")
     extra = {}
     if dji_sdk is not None:  # the SDK alone on the same files: what the import adds on top of it
         t0 = time.perf_counter()

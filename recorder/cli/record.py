@@ -5,13 +5,16 @@ from __future__ import annotations
 import json
 import signal
 import sys
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import click
 
 from recorder.cli.options import fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
+
+if TYPE_CHECKING:
+    from recorder.storage.info import SegmentInfo, SessionInfo
 
 
 # -- record ---------------------------------------------------------------------------------
@@ -149,40 +152,43 @@ def info(paths: tuple[str, ...], as_json: bool) -> None:
     except ThermcapError as exc:
         fail(str(exc))
     if as_json:
-        click.echo(json.dumps(data[0] if len(data) == 1 else data, indent=2))
+        docs = [d.to_dict() for d in data]
+        click.echo(json.dumps(docs[0] if len(docs) == 1 else docs, indent=2))
         return
     for d in data:
         _print_info(d)
 
 
-def _print_info(d: dict[str, Any]) -> None:
+def _print_info(d: SegmentInfo | SessionInfo) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from recorder.storage.info import SessionInfo
+
     con = Console()
-    con.print(f"[bold]{d.get('session_id') or d['path']}[/bold]  ({d['path']})")
-    if "status" in d:
-        con.print(f"status: {d['status']}   sensor: {d.get('sensor')}   segments: {len(d['segments'])}"
-                  + (f"   unfinished: {', '.join(d['active_segments'])}" if d["active_segments"] else ""))
-        if d.get("hint"):
-            con.print(f"[yellow]{d['hint']}[/yellow]")
-    con.print(f"frames: {d['frames']}   span: {d['start']} .. {d['end']} ({d['duration_s']:.3f} s)   "
-              f"effective fps: {d['effective_fps']}")
-    if d.get("time_basis"):
-        late = d.get("frames_late") or 0
-        con.print(f"timestamps: {d['time_basis']}   declared fps: {d.get('declared_fps')}   "
-                  f"source achieved: {d.get('achieved_fps')} fps   "
+    con.print(f"[bold]{d.session_id or d.path}[/bold]  ({d.path})")
+    if isinstance(d, SessionInfo):
+        con.print(f"status: {d.status}   sensor: {d.sensor}   segments: {len(d.segments)}"
+                  + (f"   unfinished: {', '.join(d.active_segments)}" if d.active_segments else ""))
+        if d.hint:
+            con.print(f"[yellow]{d.hint}[/yellow]")
+    con.print(f"frames: {d.frames}   span: {d.start} .. {d.end} ({d.duration_s:.3f} s)   "
+              f"effective fps: {d.effective_fps}")
+    if isinstance(d, SessionInfo) and d.time_basis:
+        late = d.frames_late or 0
+        con.print(f"timestamps: {d.time_basis}   declared fps: {d.declared_fps}   "
+                  f"source achieved: {d.achieved_fps} fps   "
                   + (f"[yellow]{late} frames late[/yellow]" if late else "0 frames late"))
-    dropped = d.get("dropped") or {}
+    dropped = d.dropped or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
-    con.print(f"bytes: {d['bytes']:,}   chunk compression: {', '.join(d['chunk_compression'])}   "
-              f"ratio: {d['compression_ratio']}")
+    con.print(f"bytes: {d.bytes:,}   chunk compression: {', '.join(d.chunk_compression)}   "
+              f"ratio: {d.compression_ratio}")
     t = Table("topic", "messages", "bytes (uncompressed)")
-    for topic, v in d["topics"].items():
-        t.add_row(topic, str(v["messages"]), f"{v['bytes']:,}" if v["bytes"] is not None else "?")
+    for topic, v in d.topics.items():
+        t.add_row(topic, str(v.messages), f"{v.bytes:,}" if v.bytes is not None else "?")
     con.print(t)
-    if d.get("error"):
-        con.print(f"[red]error during recording: {d['error']}[/red]")
+    if isinstance(d, SessionInfo) and d.error:
+        con.print(f"[red]error during recording: {d.error}[/red]")
 
 
 @cli.command()

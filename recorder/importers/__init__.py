@@ -1,7 +1,7 @@
 """Importers: real thermal files into frames with their radiometric models, by content.
 
 ``read_file(path)`` detects the format from the bytes (never the extension alone), and returns
-the frames or raises ImportError_ naming the file and the problem. Formats: FLIR radiometric
+the frames or raises ImportFileError naming the file and the problem. Formats: FLIR radiometric
 JPEG / FFF / SEQ / CSQ, DJI R-JPEG (iirp, dirp, girp, hirp), TERRA-REF ``_ir.bin``, ICD TIFF
 and raw Gray16 with their JSON sidecars.
 """
@@ -12,14 +12,15 @@ import mmap
 from collections.abc import Iterator
 from pathlib import Path
 
-from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError
+from recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
 from recorder.importers.dji import is_dji, read_dji
 from recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
 from recorder.importers.jpeg import app_segments
 from recorder.importers.terraref import metadata_for, read_terraref
 
-__all__ = ["MAX_FILE_BYTES", "ImportError_", "ImportedFrame", "TruncatedImageError", "detect", "iter_file", "read_file"]
+__all__ = ["MAX_FILE_BYTES", "ImportFileError", "ImportedFrame", "TruncatedImageError", "detect", "iter_file",
+           "read_file"]
 
 MAX_FILE_BYTES = 4 * 1024**3
 
@@ -31,7 +32,7 @@ def detect(path: str, data: bytes) -> str:
             return "flir-rjpeg"
         if is_dji(segments):
             return "dji-rjpeg"
-        raise ImportError_(f"{path}: a JPEG with no thermal data (neither FLIR nor DJI radiometric)")
+        raise ImportFileError(f"{path}: a JPEG with no thermal data (neither FLIR nor DJI radiometric)")
     if data[:4] in (b"FFF\x00", b"AFF\x00"):
         return "flir-fff"
     if data[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
@@ -41,8 +42,8 @@ def detect(path: str, data: bytes) -> str:
     if sidecar_for(path) is not None and Path(path).suffix.lower() in (".raw", ".gray16", ".bin"):
         return "icd-raw"
     if data[:8] == b"\x89PNG\r\n\x1a\n":
-        raise ImportError_(f"{path}: a PNG image; thermcap imports radiometric files (FLIR, DJI, TERRA-REF, ICD)")
-    raise ImportError_(f"{path}: unrecognised file (not a FLIR/DJI radiometric JPEG, FFF/SEQ/CSQ, TIFF, "
+        raise ImportFileError(f"{path}: a PNG image; thermcap imports radiometric files (FLIR, DJI, TERRA-REF, ICD)")
+    raise ImportFileError(f"{path}: unrecognised file (not a FLIR/DJI radiometric JPEG, FFF/SEQ/CSQ, TIFF, "
                        "TERRA-REF _ir.bin or ICD raw with a .json sidecar)")
 
 
@@ -53,12 +54,12 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
     try:
         size = Path(path).stat().st_size
         if size > MAX_FILE_BYTES:
-            raise ImportError_(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} an importer reads")
+            raise ImportFileError(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} an importer reads")
         data = Path(path).read_bytes()
     except OSError as exc:
-        raise ImportError_(f"{path}: cannot read ({exc.strerror or exc})") from None
+        raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     if not data:
-        raise ImportError_(f"{path}: empty file")
+        raise ImportFileError(f"{path}: empty file")
     kind = detect(path, data)
     try:
         if kind == "flir-rjpeg":
@@ -72,16 +73,16 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
         if kind == "terraref-bin":
             return read_terraref(path, data, variant=terraref_variant)
         return read_icd_raw(path, data)
-    except ImportError_:
+    except ImportFileError:
         raise
     except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
-        raise ImportError_(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None
+        raise ImportFileError(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None
 
 
 def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Iterator[ImportedFrame]:
     """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are memory-mapped and decoded
     image by image, so an hours-long SEQ costs one frame of memory, not the file; the other
-    formats hold one frame a file anyway. A corrupt image mid-file raises ImportError_ there
+    formats hold one frame a file anyway. A corrupt image mid-file raises ImportFileError there
     (the frames before it were already yielded: callers that must not half-import keep track)."""
     path = str(path)
     try:
@@ -94,9 +95,9 @@ def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Iterat
             with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
                 try:
                     yield from iter_fff_file(path, data)
-                except ImportError_:
+                except ImportFileError:
                     raise
                 except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
-                    raise ImportError_(f"{path}: corrupt flir-fff file ({type(exc).__name__}: {exc})") from None
+                    raise ImportFileError(f"{path}: corrupt flir-fff file ({type(exc).__name__}: {exc})") from None
     except OSError as exc:
-        raise ImportError_(f"{path}: cannot read ({exc.strerror or exc})") from None
+        raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None

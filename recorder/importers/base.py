@@ -7,24 +7,10 @@ from typing import Any
 
 import numpy as np
 
-from recorder.exceptions import SourceError
+from recorder.exceptions import ImportFileError, TruncatedImageError
 from recorder.radiometry import RadiometricModel
 
-__all__ = ["ImportError_", "ImportedFrame", "read_exact"]
-
-
-class ImportError_(SourceError):
-    """A file could not be imported; the message names the file and the problem."""
-
-
-class TruncatedImageError(ImportError_):
-    """A multi-image file (SEQ, CSQ) ends inside an image: the images before it are complete and
-    are imported; this one is reported by its byte count, as the raw source reports a cut frame."""
-
-    def __init__(self, path: str, image: int, at_byte: int, got: int, expected: int) -> None:
-        self.path, self.image, self.at_byte, self.got, self.expected = path, image, at_byte, got, expected
-        super().__init__(f"{path}: image {image} at byte {at_byte} is cut: {got} of its {expected} bytes are there "
-                         f"({image} complete images before it were imported)")
+__all__ = ["ImportFileError", "ImportedFrame", "TruncatedImageError", "read_exact"]
 
 
 @dataclass
@@ -44,5 +30,6 @@ class ImportedFrame:
 
 def read_exact(path: str, data: bytes, offset: int, length: int, what: str) -> bytes:
     if offset < 0 or offset + length > len(data):
-        raise ImportError_(f"{path}: truncated {what} (needs bytes {offset}..{offset + length}, file has {len(data)})")
+        raise ImportFileError(f"{path}: truncated {what} (needs bytes {offset}..{offset + length}, "
+                              f"file has {len(data)})")
     return data[offset:offset + length]

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.importers.base import ImportedFrame, ImportFileError
 from recorder.importers.exif import capture_time, exif_fields, xmp_fields
 from recorder.importers.jpeg import app_segments, concat_app
 from recorder.radiometry import DjiModel
@@ -68,18 +68,18 @@ def dji_layout(model: str, app3: bytes, app4: bytes) -> str:
         if tag in ("iirp", "girp", "hirp", "dirp"):
             layout = tag
     if layout is None:
-        raise ImportError_(f"unsupported DJI thermal layout (EXIF model {model!r}, APP4 starts {app4[:12]!r})")
+        raise ImportFileError(f"unsupported DJI thermal layout (EXIF model {model!r}, APP4 starts {app4[:12]!r})")
     return layout
 
 
 def _size(path: str, layout: str, model: str, app4: bytes) -> tuple[int, int]:
     if layout == "iirp" and app4[:4] == _MAGIC:
         if len(app4) < 0xA1:
-            raise ImportError_(f"{path}: DJI iirp parameter block too short ({len(app4)} bytes)")
+            raise ImportFileError(f"{path}: DJI iirp parameter block too short ({len(app4)} bytes)")
         return struct.unpack("<HH", app4[0x9D:0xA1])
     if layout == "hirp":
         if len(app4) < 0x30:
-            raise ImportError_(f"{path}: DJI hirp parameter block too short ({len(app4)} bytes)")
+            raise ImportFileError(f"{path}: DJI hirp parameter block too short ({len(app4)} bytes)")
         return struct.unpack("<II", app4[0x28:0x30])
     return 640, 512
 
@@ -122,13 +122,13 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
     app3, app4, app5 = concat_app(segments, 0xE3), concat_app(segments, 0xE4), concat_app(segments, 0xE5)
     try:
         layout = dji_layout(model, app3, app4)
-    except ImportError_ as exc:
-        raise ImportError_(f"{path}: {exc}") from None
+    except ImportFileError as exc:
+        raise ImportFileError(f"{path}: {exc}") from None
     xt_s = layout == "dirp" and model == "XT S"
     w, h = _size(path, layout, model, app4)
     payload = app4 if xt_s else app3
     if len(payload) != w * h * 2:
-        raise ImportError_(f"{path}: DJI {layout} raw payload is {len(payload)} bytes, "
+        raise ImportFileError(f"{path}: DJI {layout} raw payload is {len(payload)} bytes, "
                            f"expected {w}x{h}x2 = {w * h * 2}")
     # Signed layouts (girp, XT S) keep their int16 bit pattern in the uint16 container: bit-exact.
     pixels = np.frombuffer(payload, dtype="<u2").reshape(h, w).copy()

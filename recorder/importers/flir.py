@@ -9,7 +9,7 @@ from collections.abc import Iterator
 import imagecodecs
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportError_, TruncatedImageError, read_exact
+from recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError, read_exact
 from recorder.importers.jpeg import app_segments
 from recorder.radiometry import FlirPlanckModel
 
@@ -29,21 +29,21 @@ def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
     if not chunks:
         return None
     if last is None:
-        raise ImportError_(f"{path}: FLIR APP1 chunks carry no chunk count (damaged file?)")
+        raise ImportFileError(f"{path}: FLIR APP1 chunks carry no chunk count (damaged file?)")
     missing = [i for i in range(last + 1) if i not in chunks] if last is not None else []
     if missing:
-        raise ImportError_(f"{path}: FLIR APP1 chunks {missing} of 0..{last} are missing (truncated file?)")
+        raise ImportFileError(f"{path}: FLIR APP1 chunks {missing} of 0..{last} are missing (truncated file?)")
     return b"".join(chunks[i] for i in range(last + 1))
 
 
 def _byteorder(path: str, fff: bytes) -> str:
     if fff[:4] not in (b"FFF\x00", b"AFF\x00"):
-        raise ImportError_(f"{path}: not a FLIR FFF record (magic {fff[:4]!r})")
+        raise ImportFileError(f"{path}: not a FLIR FFF record (magic {fff[:4]!r})")
     for order in (">", "<"):
         (version,) = struct.unpack(order + "I", read_exact(path, fff, 0x14, 4, "FFF header"))
         if 100 <= version < 200:
             return order
-    raise ImportError_(f"{path}: FFF header version not in 100..199 in either byte order")
+    raise ImportFileError(f"{path}: FFF header version not in 100..199 in either byte order")
 
 
 def parse_fff(path: str, fff: bytes) -> dict[int, tuple[int, bytes]]:
@@ -51,7 +51,7 @@ def parse_fff(path: str, fff: bytes) -> dict[int, tuple[int, bytes]]:
     order = _byteorder(path, fff)
     dir_off, count = struct.unpack(order + "II", read_exact(path, fff, 0x18, 8, "FFF header"))
     if count > 10_000:
-        raise ImportError_(f"{path}: FFF directory claims {count} entries")
+        raise ImportFileError(f"{path}: FFF directory claims {count} entries")
     records: dict[int, tuple[int, bytes]] = {}
     for i in range(count):
         e = read_exact(path, fff, dir_off + 32 * i, 32, "FFF directory")
@@ -70,14 +70,14 @@ def _rec_order(rec: bytes, default: str) -> str:
 def _raw_frame(path: str, sub: int, rec: bytes, order: str) -> np.ndarray:
     o = _rec_order(rec, order)
     if len(rec) < 0x20:
-        raise ImportError_(f"{path}: FLIR raw record too short ({len(rec)} bytes)")
+        raise ImportFileError(f"{path}: FLIR raw record too short ({len(rec)} bytes)")
     _, w, h = struct.unpack(o + "HHH", rec[:6])
     body = rec[0x20:]
     if w == 0 or h == 0 or w * h > 50_000_000:
-        raise ImportError_(f"{path}: FLIR raw record has an impossible size {w}x{h}")
+        raise ImportFileError(f"{path}: FLIR raw record has an impossible size {w}x{h}")
     if sub in (1, 2):
         if len(body) < w * h * 2:
-            raise ImportError_(f"{path}: FLIR raw data truncated: {len(body)} bytes for {w}x{h}x2")
+            raise ImportFileError(f"{path}: FLIR raw data truncated: {len(body)} bytes for {w}x{h}x2")
         return np.frombuffer(body[: w * h * 2], dtype=">u2" if sub == 1 else "<u2").reshape(h, w).astype("<u2")
     try:
         if sub == 3:
@@ -87,13 +87,13 @@ def _raw_frame(path: str, sub: int, rec: bytes, order: str) -> np.ndarray:
         elif sub == 4:
             img = imagecodecs.jpegls_decode(body).astype(np.uint16)
         else:
-            raise ImportError_(f"{path}: unknown FLIR raw data subtype {sub}")
-    except ImportError_:
+            raise ImportFileError(f"{path}: unknown FLIR raw data subtype {sub}")
+    except ImportFileError:
         raise
     except Exception as exc:
-        raise ImportError_(f"{path}: FLIR raw image does not decode ({type(exc).__name__}: {exc})") from exc
+        raise ImportFileError(f"{path}: FLIR raw image does not decode ({type(exc).__name__}: {exc})") from exc
     if img.shape != (h, w):
-        raise ImportError_(f"{path}: FLIR raw image is {img.shape[1]}x{img.shape[0]}, header says {w}x{h}")
+        raise ImportFileError(f"{path}: FLIR raw image is {img.shape[1]}x{img.shape[0]}, header says {w}x{h}")
     return img
 
 
@@ -103,7 +103,7 @@ def _f(rec: bytes, o: str, off: int) -> float:
 
 def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, dict]:
     if len(rec) < 0x310:
-        raise ImportError_(f"{path}: FLIR CameraInfo record too short ({len(rec)} bytes)")
+        raise ImportFileError(f"{path}: FLIR CameraInfo record too short ({len(rec)} bytes)")
     o = _rec_order(rec, order)
     k = 273.15
     rh = _f(rec, o, 0x3C)
@@ -119,7 +119,7 @@ def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, di
     meta = {"camera_model": text(0xD4, 0xF4), "part_number": text(0xF4, 0x104), "serial": text(0x104, 0x114),
             "lens_model": text(0x170, 0x180)}
     if model.emissivity <= 0 or model.planck_r1 == 0:
-        raise ImportError_(f"{path}: FLIR CameraInfo has no usable Planck constants")
+        raise ImportFileError(f"{path}: FLIR CameraInfo has no usable Planck constants")
     if len(rec) >= 0x38E:  # DateTimeOriginal: u32 UTC seconds, u32 ms (low 16 bits), s16 minutes west of UTC
         seconds, millis, west = struct.unpack(o + "IIh", rec[0x384:0x38E])
         if 946684800 <= seconds < 4102444800:  # 2000..2100: anything else is an unset clock
@@ -132,9 +132,9 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
     order = _byteorder(path, fff)
     records = parse_fff(path, fff)
     if RAW not in records:
-        raise ImportError_(f"{path}: FLIR file has no raw thermal data record")
+        raise ImportFileError(f"{path}: FLIR file has no raw thermal data record")
     if CAMERA_INFO not in records:
-        raise ImportError_(f"{path}: FLIR file has no CameraInfo record (no Planck constants)")
+        raise ImportFileError(f"{path}: FLIR file has no CameraInfo record (no Planck constants)")
     sub, raw = records[RAW]
     pixels = _raw_frame(path, sub, raw, order)
     model, meta = _camera_info(path, records[CAMERA_INFO][1], order)
@@ -155,7 +155,7 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
 
     fff = flir_jpeg_payload(path, data)
     if fff is None:
-        raise ImportError_(f"{path}: a JPEG with no FLIR thermal data")
+        raise ImportFileError(f"{path}: a JPEG with no FLIR thermal data")
     frame = frame_from_fff(path, fff, "flir-rjpeg")
     app1 = [p for m, p in app_segments(path, data) if m == 0xE1]
     exif = exif_fields(app1)
@@ -216,7 +216,7 @@ def iter_fff_file(path: str, data: bytes | mmap.mmap) -> Iterator[ImportedFrame]
     records = iter_fff_records(path, data)
     first = next(records, None)
     if first is None:
-        raise ImportError_(f"{path}: no FFF image in the file")
+        raise ImportFileError(f"{path}: no FFF image in the file")
     second = next(records, None)
     multi = second is not None
 

@@ -12,7 +12,7 @@ import tifffile
 
 from recorder.icd.names import parse_name
 from recorder.icd.sidecar import validate_sidecar
-from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.importers.base import ImportedFrame, ImportFileError
 from recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
 
 __all__ = ["read_icd_raw", "read_icd_tiff", "sidecar_for"]
@@ -27,16 +27,16 @@ def _sidecar(path: str, required: bool) -> dict | None:
     sc = sidecar_for(path)
     if sc is None:
         if required:
-            raise ImportError_(f"{path}: the ICD sidecar {Path(path).with_suffix('.json').name} is missing")
+            raise ImportFileError(f"{path}: the ICD sidecar {Path(path).with_suffix('.json').name} is missing")
         return None
     try:
         doc = json.loads(sc.read_text())
     except ValueError as exc:
-        raise ImportError_(f"{sc}: not valid JSON ({exc})") from None
+        raise ImportFileError(f"{sc}: not valid JSON ({exc})") from None
     try:
         validate_sidecar(doc)
     except Exception as exc:
-        raise ImportError_(f"{sc}: {exc}") from None
+        raise ImportFileError(f"{sc}: {exc}") from None
     return doc
 
 
@@ -71,17 +71,17 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
             page = tif.pages[0]
             assert isinstance(page, tifffile.TiffPage)  # the first page is always a full page
             if page.dtype != np.uint16 or page.samplesperpixel != 1:
-                raise ImportError_(f"{path}: not a single-channel 16-bit TIFF "
+                raise ImportFileError(f"{path}: not a single-channel 16-bit TIFF "
                                    f"({page.dtype}, {page.samplesperpixel} samples)")
             pixels = page.asarray()
             software = (page.software or "")
             if pixels.ndim != 2 or pixels.shape != (page.imagelength, page.imagewidth) or pixels.size == 0:
-                raise ImportError_(f"{path}: TIFF image data is damaged (decoded {pixels.shape}, "
+                raise ImportFileError(f"{path}: TIFF image data is damaged (decoded {pixels.shape}, "
                                    f"header says {page.imagewidth}x{page.imagelength})")
-    except ImportError_:
+    except ImportFileError:
         raise
     except Exception as exc:
-        raise ImportError_(f"{path}: unreadable TIFF ({type(exc).__name__}: {exc})") from None
+        raise ImportFileError(f"{path}: unreadable TIFF ({type(exc).__name__}: {exc})") from None
     doc = _sidecar(path, required=False)
     model = _model(doc)
     note = None
@@ -103,7 +103,7 @@ def read_icd_raw(path: str, data: bytes) -> list[ImportedFrame]:
     res = doc["sensor"]["resolution"]
     w, h = res["width"], res["height"]
     if len(data) != w * h * 2:
-        raise ImportError_(f"{path}: {len(data)} bytes, but the sidecar's {w}x{h} Gray16 frame needs {w * h * 2}")
+        raise ImportFileError(f"{path}: {len(data)} bytes, but the sidecar's {w}x{h} Gray16 frame needs {w * h * 2}")
     return [ImportedFrame(path=path, format="icd-raw", layout=None,
                           pixels=np.frombuffer(data, dtype="<u2").reshape(h, w).copy(),
                           model=_model(doc) or LinearModel(),

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import struct
 
-from recorder.importers.base import ImportError_
+from recorder.importers.base import ImportFileError
 
 __all__ = ["app_segments", "concat_app"]
 
@@ -13,13 +13,13 @@ __all__ = ["app_segments", "concat_app"]
 def app_segments(path: str, data: bytes) -> list[tuple[int, bytes]]:
     """[(marker, payload)] for every segment from SOI up to SOS, in file order."""
     if data[:2] != b"\xff\xd8":
-        raise ImportError_(f"{path}: not a JPEG (no SOI marker)")
+        raise ImportFileError(f"{path}: not a JPEG (no SOI marker)")
     out: list[tuple[int, bytes]] = []
     pos = 2
     n = len(data)
     while pos + 4 <= n:
         if data[pos] != 0xFF:
-            raise ImportError_(f"{path}: corrupt JPEG: expected a marker at byte {pos}")
+            raise ImportFileError(f"{path}: corrupt JPEG: expected a marker at byte {pos}")
         marker = data[pos + 1]
         if marker == 0xFF:  # fill byte
             pos += 1
@@ -33,11 +33,11 @@ def app_segments(path: str, data: bytes) -> list[tuple[int, bytes]]:
             return out
         (length,) = struct.unpack(">H", data[pos + 2:pos + 4])
         if length < 2 or pos + 2 + length > n:
-            raise ImportError_(f"{path}: truncated JPEG segment 0x{marker:02X} at byte {pos} "
+            raise ImportFileError(f"{path}: truncated JPEG segment 0x{marker:02X} at byte {pos} "
                                f"(length {length}, file has {n} bytes)")
         out.append((marker, data[pos + 4:pos + 2 + length]))
         pos += 2 + length
-    raise ImportError_(f"{path}: truncated JPEG (no start-of-scan marker)")
+    raise ImportFileError(f"{path}: truncated JPEG (no start-of-scan marker)")
 
 
 def concat_app(segments: list[tuple[int, bytes]], marker: int) -> bytes:

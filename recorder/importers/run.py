@@ -26,7 +26,7 @@ import numpy as np
 
 from recorder.capture.recorder import Recorder, RecordingResult, new_session_id
 from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
-from recorder.importers import ImportedFrame, ImportError_, TruncatedImageError, iter_file
+from recorder.importers import ImportedFrame, ImportFileError, TruncatedImageError, iter_file
 from recorder.importers.dji_sdk import DjiBackend
 from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
 
@@ -142,7 +142,7 @@ class _FrameCursor:
         while True:
             f = next(self.frames, None)
             if f is None:
-                raise ImportError_(f"{path}: has no frame {k} any more (changed since it was checked)")
+                raise ImportFileError(f"{path}: has no frame {k} any more (changed since it was checked)")
             self.next_k += 1
             if self.next_k > k:
                 return f
@@ -243,13 +243,13 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
             else:  # the complete images before the cut are kept; the cut one is reported
                 truncated.append({"path": path, "error": str(exc), "kept_images": exc.image, "at_byte": exc.at_byte,
                                   "got_bytes": exc.got, "expected_bytes": exc.expected})
-        except (ImportError_, OSError) as exc:
+        except (ImportFileError, OSError) as exc:
             # nothing of a file that failed part-way is recorded: take back what it gave
             waiting[:] = [e for e in waiting if e.path != path]
             for members in groups.values():
                 members[:] = [e for e in members if e.path != path]
             files[:] = [fs for fs in files if fs["path"] != path]
-            reason = str(exc) if isinstance(exc, ImportError_) else f"{path}: cannot read ({exc.strerror or exc})"
+            reason = str(exc) if isinstance(exc, ImportFileError) else f"{path}: cannot read ({exc.strerror or exc})"
             failed.append({"path": path, "error": reason})
         if on_file:
             on_file(path)

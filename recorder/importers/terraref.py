@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportError_
+from recorder.importers.base import ImportedFrame, ImportFileError
 from recorder.radiometry import RadiometricModel, ScaledKelvinModel, TerraRefPlanckModel
 
 __all__ = ["metadata_for", "read_terraref"]
@@ -34,20 +34,20 @@ def _num(d: dict, key: str, path: str) -> float:
     try:
         return float(d[key])
     except (KeyError, TypeError, ValueError):
-        raise ImportError_(f"{path}: metadata field {key!r} is missing or not a number") from None
+        raise ImportFileError(f"{path}: metadata field {key!r} is missing or not a number") from None
 
 
 def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[ImportedFrame]:
     if len(data) != ROWS * COLS * 2:
-        raise ImportError_(f"{path}: a TERRA-REF _ir.bin is {ROWS}x{COLS}x2 = {ROWS * COLS * 2} bytes, "
+        raise ImportFileError(f"{path}: a TERRA-REF _ir.bin is {ROWS}x{COLS}x2 = {ROWS * COLS * 2} bytes, "
                            f"this one is {len(data)}")
     meta_path = metadata_for(path)
     if meta_path is None:
-        raise ImportError_(f"{path}: the TERRA-REF metadata file <uuid>_metadata.json is missing beside it")
+        raise ImportFileError(f"{path}: the TERRA-REF metadata file <uuid>_metadata.json is missing beside it")
     try:
         meta = json.loads(meta_path.read_text())["lemnatec_measurement_metadata"]
     except (ValueError, KeyError) as exc:
-        raise ImportError_(f"{meta_path}: not a LemnaTec metadata file ({exc})") from None
+        raise ImportFileError(f"{meta_path}: not a LemnaTec metadata file ({exc})") from None
     fixed = meta.get("sensor_fixed_metadata", {})
     var = meta.get("sensor_variable_metadata", {})
     gantry = meta.get("gantry_system_variable_metadata", {})

@@ -7,6 +7,7 @@ each segment; for MCAP files written by other tools they are counted by reading 
 from __future__ import annotations
 
 import json
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -20,10 +21,81 @@ from recorder.storage.lock import session_status
 from recorder.storage.reader import archived_frame_count
 from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
 
-__all__ = ["info", "segment_info", "session_info"]
+__all__ = ["SegmentInfo", "SessionInfo", "TopicUsage", "info", "segment_info", "session_info"]
 
 
-def segment_info(path: str | Path) -> dict[str, Any]:
+@dataclass(frozen=True)
+class TopicUsage:
+    messages: int
+    bytes: int | None  # uncompressed message bytes; None when a segment did not say and was not counted
+
+
+@dataclass(frozen=True)
+class SegmentInfo:
+    """One finished segment, as its summary section and our ``thermcap.segment`` record tell it."""
+
+    path: str
+    frames: int
+    messages: int
+    start: str | None
+    end: str | None
+    start_ns: int
+    end_ns: int
+    duration_s: float
+    effective_fps: float | None
+    chunks: int
+    chunk_compression: list[str]
+    bytes: int
+    compressed_bytes: int
+    uncompressed_bytes: int
+    compression_ratio: float | None
+    topics: dict[str, TopicUsage]
+    attachments: list[str]
+    dropped: dict[str, int] = field(default_factory=dict)  # from the segment's last stats message
+    write_latency_ms: dict[str, Any] | None = None
+    session_id: str | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+@dataclass(frozen=True)
+class SessionInfo:
+    """A session folder: its segments summed, its status from the lock, its timing from session.json."""
+
+    path: str
+    session_id: str
+    status: str
+    hint: str | None
+    time_basis: str | None
+    declared_fps: float | None
+    achieved_fps: float | None
+    frames_late: int | None
+    sensor: str | None
+    radiometric_model: Any
+    frames: int
+    frames_captured: int | None
+    frames_dropped: int
+    dropped: dict[str, int]
+    start: str | None
+    end: str | None
+    duration_s: float
+    effective_fps: float | None
+    segments: list[SegmentInfo]
+    active_segments: list[str]
+    bytes: int
+    compression_ratio: float | None
+    chunk_compression: list[str]
+    topics: dict[str, TopicUsage]
+    write_latency_ms: Any
+    error: str | None
+    frames_from: str  # "segments", or "archive" once the source was deleted after archiving
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def segment_info(path: str | Path) -> SegmentInfo:
     path = Path(path)
     try:
         with open(path, "rb") as f:
@@ -57,36 +129,32 @@ def segment_info(path: str | Path) -> dict[str, Any]:
     counts = {topics[cid]: n for cid, n in stats.channel_message_counts.items() if cid in topics}
     frames = counts.get(TOPIC_IMAGE, 0)
     span_s = (stats.message_end_time - stats.message_start_time) / 1e9 if stats.message_count else 0.0
-    out: dict[str, Any] = {
-        "path": str(path),
-        "frames": frames,
-        "messages": stats.message_count,
-        "start": iso_utc(stats.message_start_time) if stats.message_count else None,
-        "end": iso_utc(stats.message_end_time) if stats.message_count else None,
-        "start_ns": stats.message_start_time,
-        "end_ns": stats.message_end_time,
-        "duration_s": round(span_s, 6),
-        "effective_fps": round((frames - 1) / span_s, 3) if frames > 1 and span_s > 0 else None,
-        "chunks": len(chunks),
-        "chunk_compression": compressions,
-        "bytes": path.stat().st_size,
-        "compressed_bytes": comp,
-        "uncompressed_bytes": uncomp,
-        "compression_ratio": round(uncomp / comp, 3) if comp else None,
-        "topics": {t: {"messages": counts.get(t, 0),
-                       "bytes": topic_bytes.get(t)} for t in sorted(set(counts) | set(topic_bytes))},
-        "attachments": [a.name for a in summary.attachment_indexes],
-    }
-    if last_stats is not None:
-        s = json.loads(last_stats)
-        out["dropped"] = s.get("dropped", {})
-        out["write_latency_ms"] = s.get("write_latency_ms", {}).get("session")
-    if SESSION_METADATA in meta:
-        out["session_id"] = meta[SESSION_METADATA].get("session_id")
-    return out
+    last = json.loads(last_stats) if last_stats is not None else {}
+    return SegmentInfo(
+        path=str(path),
+        frames=frames,
+        messages=stats.message_count,
+        start=iso_utc(stats.message_start_time) if stats.message_count else None,
+        end=iso_utc(stats.message_end_time) if stats.message_count else None,
+        start_ns=stats.message_start_time,
+        end_ns=stats.message_end_time,
+        duration_s=round(span_s, 6),
+        effective_fps=round((frames - 1) / span_s, 3) if frames > 1 and span_s > 0 else None,
+        chunks=len(chunks),
+        chunk_compression=compressions,
+        bytes=path.stat().st_size,
+        compressed_bytes=comp,
+        uncompressed_bytes=uncomp,
+        compression_ratio=round(uncomp / comp, 3) if comp else None,
+        topics={t: TopicUsage(counts.get(t, 0), topic_bytes.get(t)) for t in sorted(set(counts) | set(topic_bytes))},
+        attachments=[a.name for a in summary.attachment_indexes],
+        dropped=last.get("dropped", {}),
+        write_latency_ms=last.get("write_latency_ms", {}).get("session"),
+        session_id=meta[SESSION_METADATA].get("session_id") if SESSION_METADATA in meta else None,
+    )
 
 
-def session_info(path: str | Path) -> dict[str, Any]:
+def session_info(path: str | Path) -> SessionInfo:
     path = Path(path)
     segments = sorted(p for p in path.glob("[0-9][0-9][0-9][0-9].mcap"))
     active = sorted(p.name for p in path.glob(f"*.mcap{ACTIVE_SUFFIX}"))
@@ -99,55 +167,55 @@ def session_info(path: str | Path) -> dict[str, Any]:
     if not segments and not meta:
         raise McapFileError(f"{path}: not a thermcap session (no NNNN.mcap segments, no session.json)")
     segs = [segment_info(p) for p in segments]
-    frames = sum(s["frames"] for s in segs)
+    frames = sum(s.frames for s in segs)
     archived = archived_frame_count(path) if not segments else None
     if archived is not None:  # the source was deleted after archiving: the archive holds the frames
         frames = archived
-    start = min((s["start_ns"] for s in segs if s["messages"]), default=None)
-    end = max((s["end_ns"] for s in segs if s["messages"]), default=None)
+    start = min((s.start_ns for s in segs if s.messages), default=None)
+    end = max((s.end_ns for s in segs if s.messages), default=None)
     span = (end - start) / 1e9 if start is not None and end is not None else 0.0
-    topics: dict[str, dict[str, Any]] = {}
+    topics: dict[str, TopicUsage] = {}
     for s in segs:
-        for t, v in s["topics"].items():
-            agg = topics.setdefault(t, {"messages": 0, "bytes": 0})
-            agg["messages"] += v["messages"]
-            agg["bytes"] = None if v["bytes"] is None or agg["bytes"] is None else agg["bytes"] + v["bytes"]
-    comp = sum(s["compressed_bytes"] for s in segs)
-    uncomp = sum(s["uncompressed_bytes"] for s in segs)
+        for t, v in s.topics.items():
+            agg = topics.get(t, TopicUsage(0, 0))
+            nbytes = None if v.bytes is None or agg.bytes is None else agg.bytes + v.bytes
+            topics[t] = TopicUsage(agg.messages + v.messages, nbytes)
+    comp = sum(s.compressed_bytes for s in segs)
+    uncomp = sum(s.uncompressed_bytes for s in segs)
     status, hint = session_status(path, meta.get("status"))
     timing = meta.get("timing") or {}
-    return {
-        "path": str(path),
-        "session_id": meta.get("session_id", path.name),
-        "status": status,
-        "hint": hint,
-        "time_basis": timing.get("time_basis") or (meta.get("source") or {}).get("time_basis"),
-        "declared_fps": timing.get("declared_fps"),
-        "achieved_fps": timing.get("achieved_fps"),
-        "frames_late": timing.get("frames_late"),
-        "sensor": meta.get("sensor", {}).get("model"),
-        "radiometric_model": meta.get("radiometric_model"),
-        "frames": frames,
-        "frames_captured": meta.get("frames_captured"),
-        "frames_dropped": meta.get("frames_dropped", 0),
-        "dropped": meta.get("dropped", {}),
-        "start": iso_utc(start) if start is not None else None,
-        "end": iso_utc(end) if end is not None else None,
-        "duration_s": round(span, 6),
-        "effective_fps": round((frames - 1) / span, 3) if frames > 1 and span > 0 else None,
-        "segments": segs,
-        "active_segments": active,
-        "bytes": sum(s["bytes"] for s in segs),
-        "compression_ratio": round(uncomp / comp, 3) if comp else None,
-        "chunk_compression": sorted({c for s in segs for c in s["chunk_compression"]}),
-        "topics": topics,
-        "write_latency_ms": meta.get("write_latency_ms"),
-        "error": meta.get("error"),
-        "frames_from": "archive" if archived is not None else "segments",
-    }
+    return SessionInfo(
+        path=str(path),
+        session_id=meta.get("session_id", path.name),
+        status=status,
+        hint=hint,
+        time_basis=timing.get("time_basis") or (meta.get("source") or {}).get("time_basis"),
+        declared_fps=timing.get("declared_fps"),
+        achieved_fps=timing.get("achieved_fps"),
+        frames_late=timing.get("frames_late"),
+        sensor=meta.get("sensor", {}).get("model"),
+        radiometric_model=meta.get("radiometric_model"),
+        frames=frames,
+        frames_captured=meta.get("frames_captured"),
+        frames_dropped=meta.get("frames_dropped", 0),
+        dropped=meta.get("dropped", {}),
+        start=iso_utc(start) if start is not None else None,
+        end=iso_utc(end) if end is not None else None,
+        duration_s=round(span, 6),
+        effective_fps=round((frames - 1) / span, 3) if frames > 1 and span > 0 else None,
+        segments=segs,
+        active_segments=active,
+        bytes=sum(s.bytes for s in segs),
+        compression_ratio=round(uncomp / comp, 3) if comp else None,
+        chunk_compression=sorted({c for s in segs for c in s.chunk_compression}),
+        topics=topics,
+        write_latency_ms=meta.get("write_latency_ms"),
+        error=meta.get("error"),
+        frames_from="archive" if archived is not None else "segments",
+    )
 
 
-def info(path: str | Path) -> dict[str, Any]:
+def info(path: str | Path) -> SegmentInfo | SessionInfo:
     p = Path(path)
     if p.is_dir():
         return session_info(p)

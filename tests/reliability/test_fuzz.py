@@ -16,7 +16,7 @@ from recorder.capture.recorder import Recorder
 from recorder.capture.sources.raw import RawSource
 from recorder.capture.sources.sim import SimSource
 from recorder.exceptions import McapFileError, TruncatedFrameError
-from recorder.importers import ImportError_, read_file
+from recorder.importers import ImportFileError, read_file
 from recorder.storage.recover import recover_segment
 
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
@@ -88,7 +88,7 @@ def test_importers_on_mutated_samples(samples, tmp_path, name):
         p.write_bytes(bytes(buf[:cut]))
         try:
             frames = read_file(p)
-        except ImportError_ as exc:
+        except ImportFileError as exc:
             assert str(p) in str(exc)
             return
         for f in frames:

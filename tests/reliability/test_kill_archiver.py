@@ -48,7 +48,7 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
                 # A final name only for a complete archive that verified. (A kill between the
                 # rename and the manifest update leaves a verified folder the manifest does not
                 # list yet; the rerun writes it again and records it.)
-                assert verify_session(session, [fmt])[fmt]["ok"]
+                assert verify_session(session, [fmt])[fmt].ok
         if not (manifest and manifest.get("source", {}).get("deleted")):
             assert sorted(p.name for p in session.glob("*.mcap")) == segments  # the source is whole
     # A killed worker's lease outlives it until its TTL: wait that out, then a fresh run finishes.
@@ -63,4 +63,4 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
     assert m["source"]["deleted"]
     assert not list(session.glob("*.mcap"))
     assert not list((session / "archive").glob("*.partial"))
-    assert all(v["ok"] for v in verify_session(session).values())
+    assert all(v.ok for v in verify_session(session).values())

@@ -12,8 +12,8 @@ import time
 import httpx
 import pytest
 
-from tests.api.conftest import make_root
 from tests.conftest import ApiServer
+from tests.support.api_data import make_root
 
 pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
