@@ -8,6 +8,7 @@ session's p99 costs the same memory as a second's.
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -60,10 +61,14 @@ class RecorderCounters:
     frames_written: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
     analysis_skipped: int = 0
+    disk_dropped: int = 0  # frames the writer let go because the ring could not free space
+    _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
     def drop(self, topics: list[str]) -> None:
-        for t in topics:
-            self.dropped[t] = self.dropped.get(t, 0) + 1
+        # capture (queue full) and the writer (ring blocked) may both drop: one lock for the dict
+        with self._lock:
+            for t in topics:
+                self.dropped[t] = self.dropped.get(t, 0) + 1
 
     @property
     def frames_dropped(self) -> int:

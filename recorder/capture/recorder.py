@@ -30,13 +30,15 @@ from recorder import __version__
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
 from recorder.capture.counters import LatencyHistogram, RecorderCounters
 from recorder.capture.sources.base import CapturedFrame, FrameSource
+from recorder.capture.triggers import TriggerPolicy, TriggerWatch
 from recorder.exceptions import RecordingError, ThermcapError
 from recorder.icd.names import FORMAT_VERSION, iso_utc
 from recorder.icd.sidecar import SidecarEncoder
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from recorder.icd.topics import TOPIC_EVENTS, TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
 from recorder.radiometry import LinearModel, describe_model
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import lock_session
+from recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
 from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 
 __all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
@@ -70,6 +72,9 @@ class RecordingResult:
     analysis_skipped: int = 0
     events: int = 0
     timing: dict[str, Any] = field(default_factory=dict)
+    frames_paused: int = 0  # not recorded on purpose (`thermcap ctl pause`); not drops
+    evicted_segments: int = 0
+    evicted_bytes: int = 0
 
     @property
     def ok(self) -> bool:
@@ -99,7 +104,9 @@ class RecordingResult:
                 "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
                 "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
                 "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
-                "analysis_skipped": self.analysis_skipped, "events": self.events, "timing": self.timing}
+                "analysis_skipped": self.analysis_skipped, "events": self.events, "timing": self.timing,
+                "frames_paused": self.frames_paused, "evicted_segments": self.evicted_segments,
+                "evicted_bytes": self.evicted_bytes}
 
 
 class Recorder:
@@ -118,7 +125,8 @@ class Recorder:
                  policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
                  writer_delay_s: float = 0.0, recover_leftovers: bool = True, analysis: bool = True,
                  analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None,
-                 wait_when_full: bool = False) -> None:
+                 wait_when_full: bool = False, ring: RingPolicy | None = None,
+                 triggers: TriggerPolicy | None = None, stall_s: float = 5.0) -> None:
         self.source = source
         self.root = Path(root)
         self.session_id = session_id or new_session_id(source.sensor.sensor_id)
@@ -151,8 +159,89 @@ class Recorder:
         self.analysis_wait_s = analysis_wait_s
         self._analysis_period_ns = int(1e9 / (analysis_max_fps or source.sensor.frame_rate_hz or 60.0))
         self._next_analysis_ns = 0
+        # Control while recording (thermcap ctl): requests are queued to the writer thread, which
+        # acts on them between two frames, so a split or a mark never loses or repeats a frame.
+        self.ring = ring
+        self.stall_s = stall_s
+        self._requests: queue.SimpleQueue = queue.SimpleQueue()
+        self._paused = threading.Event()
+        self._pauses: list[list[int | None]] = []  # [first paused frame's time, first recorded after]
+        self._frames_paused = 0
+        self._recorder_events: list[dict[str, Any]] = []
+        self._triggers = TriggerWatch(triggers) if triggers is not None else None
+        self._book: ProtectionBook | None = None
+        self._evictor: Evictor | None = None
+        self._last_capture_wall = time.monotonic()
+        self.started = threading.Event()
 
     # -- public -----------------------------------------------------------------------------
+    def request_split(self) -> None:
+        """Close the open segment after the frame being written; the next frame opens a new one."""
+        self._requests.put(("split", ""))
+
+    def pause(self) -> bool:
+        """Stop recording frames (capture goes on reading the source, so a camera never backs up);
+        the gap is recorded as a pause. False if already paused."""
+        if self._paused.is_set():
+            return False
+        self._paused.set()
+        self._requests.put(("pause", ""))
+        return True
+
+    def resume(self) -> bool:
+        if not self._paused.is_set():
+            return False
+        self._paused.clear()
+        self._requests.put(("resume", ""))
+        return True
+
+    def mark(self, note: str = "", reason: str = "manual") -> None:
+        """An event at the current frame, on the events topic and in events.json; with --ring its
+        window (pre/post) is protected from eviction."""
+        self._requests.put(("mark", f"{reason}\0{note}"))
+
+    @property
+    def paused(self) -> bool:
+        return self._paused.is_set()
+
+    def status(self) -> dict[str, Any]:
+        c = self.counters
+        seg = self._session.segments[-1].name if self._session and self._session.segments else None
+        out: dict[str, Any] = {
+            "session_id": self.session_id, "session_dir": str(self.session_dir), "paused": self.paused,
+            "frames_captured": c.frames_captured, "frames_written": c.frames_written,
+            "frames_paused": self._frames_paused, "dropped": dict(c.dropped),
+            "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize, "segment": seg,
+            "segments": len(self._session.segments) if self._session else 0,
+            "write_latency_ms": self.latency.summary_ms(), "events": len(self._recorder_events),
+            "last_event": self._recorder_events[-1] if self._recorder_events else None,
+            "seconds_since_last_frame": round(time.monotonic() - self._last_capture_wall, 3),
+        }
+        if self._evictor is not None:
+            st = self._evictor.state
+            out["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
+                           "blocked": st.blocked, "blocked_reason": st.blocked_reason,
+                           "protected_windows": len(self._book.windows) if self._book else 0}
+        healthy, reasons = self.health()
+        out["healthy"], out["problems"] = healthy, reasons
+        return out
+
+    def health(self, max_dropped: int = 0) -> tuple[bool, list[str]]:
+        """Unhealthy when frames stop arriving (and we are not paused), when drops exceed
+        ``max_dropped``, when the writer failed, or when the ring cannot free space."""
+        reasons = []
+        quiet = time.monotonic() - self._last_capture_wall
+        if not self.paused and self.started.is_set() and quiet > self.stall_s:
+            reasons.append(f"no frame from the source for {quiet:.1f} s")
+        dropped = self.counters.dropped.get(TOPIC_IMAGE, 0)
+        if dropped > max_dropped:
+            reasons.append(f"{dropped} frames dropped")
+        if self._writer_error:
+            reasons.append(self._writer_error)
+        if self._evictor is not None and self._evictor.state.blocked:
+            reasons.append(f"ring cannot free space: {self._evictor.state.blocked_reason}")
+        return not reasons, reasons
+
     def stop(self) -> None:
         """Ask for a clean stop (Ctrl-C): capture ends, queued frames are written, segments close."""
         self._stop.set()
@@ -180,7 +269,12 @@ class Recorder:
             raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
         self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=self.source.extra_topics,
                                       bad_pixel_map=self.source.bad_pixel_map, policy=self.policy,
-                                      on_chunk_written=self._chunk_written)
+                                      on_chunk_written=self._chunk_written, on_segment_closed=self._segment_closed)
+        if self.ring is not None:
+            self._book = ProtectionBook(self.session_dir)
+            self._evictor = Evictor(self.root, self.ring, {self.session_dir: self._book},
+                                    log=lambda m: print(f"thermcap: {m}", file=sys.stderr, flush=True))
+            self._evictor.start()
         t0 = time.monotonic()
         deadline = None if duration_s is None else t0 + duration_s
         analyst = None
@@ -192,6 +286,8 @@ class Recorder:
         previous = self._catch_signals()
         writer.start()
         capture.start()
+        self._last_capture_wall = time.monotonic()
+        self.started.set()
         try:
             while capture.is_alive() or writer.is_alive():
                 capture.join(0.25)
@@ -203,9 +299,11 @@ class Recorder:
                 analyst.join()
         finally:
             self._restore_signals(previous)
+            if self._evictor is not None:
+                self._evictor.stop()
         wall = time.monotonic() - t0
         error = self._writer_error or self._source_error
-        events = self._events.finish()
+        events = self._events.finish() + self._recorder_events
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
                               {"session_id": self.session_id, "events": events})
@@ -214,8 +312,12 @@ class Recorder:
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
             wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
-            analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing())
+            analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing(),
+            frames_paused=self._frames_paused,
+            evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
+            evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0)
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
+                   "pauses": self._pauses,
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
         try:
             write_json_atomic(SessionLayout.of(self.session_dir).session_json, summary)
@@ -271,6 +373,16 @@ class Recorder:
                 if self._first_capture_mono is None:
                     self._first_capture_mono = mono
                 self._last_capture_mono = mono
+                self._last_capture_wall = time.monotonic()
+                if self._paused.is_set():  # read and let go: a paused camera must not back up
+                    self._frames_paused += 1
+                    if not self._pauses or self._pauses[-1][1] is not None:
+                        self._pauses.append([frame.timestamp_ns, None])  # the gap, on the frames' clock
+                    if self._stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
+                        break
+                    continue
+                if self._pauses and self._pauses[-1][1] is None:
+                    self._pauses[-1][1] = frame.timestamp_ns
                 if self._aq is not None:
                     self._offer_analysis(frame)
                 try:
@@ -332,11 +444,18 @@ class Recorder:
                     item = None
                 if item is _STOP:
                     self._stop_seen = True
+                    self._handle_requests()
                     break
+                self._handle_requests()
                 if item is not None:
                     if self.writer_delay_s:
                         time.sleep(self.writer_delay_s)
-                    self._write_frame(item)
+                    if self._evictor is not None and self._evictor.state.blocked:
+                        # nothing left to evict: drop and count rather than fill the disk
+                        self.counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in item.messages])
+                        self.counters.disk_dropped += 1
+                    else:
+                        self._write_frame(item)
                 if time.monotonic() >= next_stats:
                     self._write_stats()
                     next_stats += self.stats_interval_s
@@ -364,11 +483,58 @@ class Recorder:
                 return
             self.counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in item.messages])
 
+    def _handle_requests(self) -> None:
+        """On the writer thread, between frames: splits, pauses, marks."""
+        while True:
+            try:
+                kind, arg = self._requests.get_nowait()
+            except queue.Empty:
+                return
+            at = self._last_frame_ns if self._last_frame_ns is not None else time.time_ns()
+            if kind == "split":
+                assert self._session is not None
+                if self._session.current is not None:
+                    self._session.close_segment()
+                self._record_event({"kind": "split", "at_ns": at})
+            elif kind == "pause":
+                self._record_event({"kind": "pause", "at_ns": at})
+            elif kind == "resume":
+                self._record_event({"kind": "resume", "at_ns": at, "frames_paused": self._frames_paused})
+            elif kind == "mark":
+                reason, _, note = arg.partition("\0")
+                self._protect(at, "mark", reason, note)
+
+    def _protect(self, at: int, kind: str, reason: str, note: str = "") -> None:
+        ev: dict[str, Any] = {"kind": kind, "at_ns": at, "reason": reason, "note": note,
+                              "protect_start_ns": None, "protect_end_ns": None}
+        if self._book is not None and self.ring is not None:
+            w = Window(at - int(self.ring.pre_s * 1e9), at + int(self.ring.post_s * 1e9), reason, note)
+            self._book.add(w)
+            ev["protect_start_ns"], ev["protect_end_ns"] = w.start_ns, w.end_ns
+        self._record_event(ev)
+
+    def _record_event(self, ev: dict[str, Any]) -> None:
+        self._recorder_events.append({**ev, "start_ns": ev["at_ns"], "end_ns": ev.get("protect_end_ns") or ev["at_ns"]})
+        if self._session is not None:
+            self._session.write_message(TOPIC_EVENTS, ev["at_ns"], json.dumps(ev, separators=(",", ":")).encode())
+
+    def _segment_closed(self) -> None:
+        if self._evictor is not None:  # on the writer thread, between two segments
+            try:
+                self._evictor.evict_once()
+            except Exception as exc:  # eviction must never end a recording: it says so and goes on
+                self._evictor.state.blocked = True
+                self._evictor.state.blocked_reason = f"eviction failed: {type(exc).__name__}: {exc}"
+
     def _write_frame(self, frame: CapturedFrame) -> None:
         ts = frame.timestamp_ns
         blocks = self._sidecar_blocks(frame)
         payload = self._sidecars.encode(blocks)
         self._events.add(ts, blocks)
+        if self._triggers is not None:
+            for reason in self._triggers.check(blocks):
+                self._last_frame_ns = ts
+                self._protect(ts, "trigger", reason)
         extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
         assert self._session is not None
         self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
@@ -394,7 +560,13 @@ class Recorder:
             "analysis_skipped": c.analysis_skipped,
             "timing": self.timing(),
             "segment": self._session.segments[-1].index if self._session and self._session.segments else 0,
+            "frames_paused": self._frames_paused,
         }
+        if self._evictor is not None:
+            st = self._evictor.state
+            stats["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
+                             "blocked": st.blocked, "blocked_reason": st.blocked_reason,
+                             "frames_dropped_for_disk": c.disk_dropped}
         self._interval_latency = LatencyHistogram()
         assert self._session is not None
         # On the frames' clock (a replayed or simulated session may not be "now"), never before them.
@@ -436,6 +608,9 @@ class Recorder:
             "source": self.source.describe(),
             "software_version": __version__,
             "format_version": FORMAT_VERSION,
+            **({"ring": {"max_disk": self.ring.max_disk, "min_free": self.ring.min_free,
+                         "min_free_percent": self.ring.min_free_percent, "pre_s": self.ring.pre_s,
+                         "post_s": self.ring.post_s}} if self.ring is not None else {}),
         }
 
 

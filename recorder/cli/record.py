@@ -48,16 +48,43 @@ if TYPE_CHECKING:
               help="Capture queue capacity in frames.")
 @click.option("--analysis/--no-analysis", default=True, show_default=True,
               help="Run the hot-spot detector beside recording (fills sidecar targets and contrast grade).")
+@click.option("--ring", is_flag=True,
+              help="Always on: record until stopped, deleting the oldest unprotected segments to stay within "
+                   "--max-disk and --min-free (logged to ROOT/eviction.log).")
+@click.option("--max-disk", default=None, metavar="SIZE", help="With --ring: the most the data root may hold (20G).")
+@click.option("--min-free", default=None, metavar="SIZE|PCT",
+              help="With --ring: keep this much free on the data root's disk (5G or 10%).")
+@click.option("--pre", "pre_s", type=float, default=30.0, show_default=True,
+              help="Seconds kept before a trigger or mark.")
+@click.option("--post", "post_s", type=float, default=30.0, show_default=True,
+              help="Seconds kept after a trigger or mark.")
+@click.option("--trigger-hot", type=float, default=None, metavar="DEGC",
+              help="Trigger when a target at or above this temperature appears.")
+@click.option("--trigger-target-count", is_flag=True, help="Trigger when the number of targets changes.")
+@click.option("--control", "control", is_flag=True,
+              help="Serve the control endpoint (thermcap ctl; /status, /metrics, /healthz) on 127.0.0.1.")
+@click.option("--control-port", type=int, default=0, show_default=True, help="Its port (0: any free port).")
+@click.option("--control-token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
+              help="Bearer token every control route but /healthz requires (set it in the environment).")
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
 def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
            root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool,
            cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
-           analysis: bool, debug_writer_delay: float, as_json: bool) -> None:
-    """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments."""
+           analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float,
+           trigger_hot: float | None, trigger_target_count: bool, control: bool, control_port: int,
+           control_token: str | None, debug_writer_delay: float, as_json: bool) -> None:
+    """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments.
+
+    With --ring it records until stopped within a disk budget; triggers (--trigger-*, the contrast
+    grade under 0.3, radar cues, `thermcap ctl mark`, SIGUSR1) protect --pre/--post seconds around them.
+    """
+    from recorder.capture.control import ControlServer
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources import make_source
+    from recorder.capture.triggers import TriggerPolicy
+    from recorder.storage.ring import RingPolicy
     from recorder.storage.segments import SegmentPolicy, auto_compression
     from recorder.storage.writer import Compression
 
@@ -79,8 +106,17 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
         policy = SegmentPolicy(max_duration_s=segment_duration or None,
                                max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
                                compression=comp, compression_level=default_level if level is None else level)
+        if (max_disk or min_free) and not ring:
+            raise click.BadParameter("--max-disk and --min-free need --ring")
+        ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s) if ring else None
+        if ring and ring_policy is not None and ring_policy.max_disk is None and ring_policy.min_free is None \
+                and ring_policy.min_free_percent is None:
+            raise click.BadParameter("--ring needs --max-disk and/or --min-free")
         rec = Recorder(src, root, session_id=session_id, policy=policy, queue_frames=queue_frames,
-                       writer_delay_s=debug_writer_delay, analysis=analysis)
+                       writer_delay_s=debug_writer_delay, analysis=analysis, ring=ring_policy,
+                       triggers=TriggerPolicy(hot_spot_c=trigger_hot, target_count=trigger_target_count))
+    except click.BadParameter as exc:
+        fail(str(exc.message))
     except ThermcapError as exc:
         fail(str(exc))
     except (ValueError, OSError) as exc:
@@ -89,11 +125,25 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
     if not as_json:
         click.echo(f"session {rec.session_id} -> {rec.session_dir}")
     signal.signal(signal.SIGTERM, lambda *_: rec.stop())
+    signal.signal(signal.SIGUSR1, lambda *_: rec.mark("SIGUSR1", reason="signal"))
+    server = None
+    if control:
+        try:
+            server = ControlServer(rec, port=control_port, token=control_token)
+        except OSError as exc:
+            fail(f"control endpoint on 127.0.0.1:{control_port}: {exc.strerror or exc}")
     progress = None if as_json or not sys.stderr.isatty() else _progress_line()
     try:
+        if server is not None:
+            server.start()
+            if not as_json:
+                click.echo(f"control: {server.url}  (thermcap ctl status --root {root})")
         result = rec.run(duration_s=None if is_sim else duration, progress=progress)
     except ThermcapError as exc:
         fail(str(exc))
+    finally:
+        if server is not None:
+            server.stop()
     if progress is not None:
         click.echo("", err=True)
     if as_json:
@@ -118,6 +168,63 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
                        f"{result.analysis_skipped} skipped; {result.events} events")
     if result.error:
         fail(result.error)
+
+
+# -- ctl ------------------------------------------------------------------------------------
+@cli.command()
+@click.argument("action", type=click.Choice(["status", "split", "pause", "resume", "mark", "snapshot", "metrics",
+                                             "health"]))
+@click.option("--note", default="", help="mark/snapshot: what happened.")
+@root_option
+@click.option("--session", "session_id", default=None, help="Which recorder, when several run under ROOT.")
+@click.option("--url", default=None, help="The control endpoint (default: found under ROOT/run/).")
+@click.option("--token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
+              help="The recorder's control token.")
+@json_option
+def ctl(action: str, note: str, root: str, session_id: str | None, url: str | None, token: str | None,
+        as_json: bool) -> None:
+    """Control a running recorder: status, split (a new segment, no frame lost), pause/resume (a
+    recorded gap), mark/snapshot (an event whose window is kept), metrics, health."""
+    import urllib.error
+    import urllib.request
+
+    from recorder.capture.control import find_control
+
+    try:
+        base = url or find_control(root, session_id)["url"]
+    except ThermcapError as exc:
+        fail(str(exc))
+    route = {"health": "/healthz"}.get(action, f"/{action}")
+    method = "POST" if action in ("split", "pause", "resume", "mark", "snapshot") else "GET"
+    body = json.dumps({"note": note}).encode() if method == "POST" else None
+    req = urllib.request.Request(base + route, data=body, method=method,
+                                 headers={"Content-Type": "application/json",
+                                          **({"Authorization": f"Bearer {token}"} if token else {})})
+    try:
+        with urllib.request.urlopen(req, timeout=10) as r:
+            code, text = r.status, r.read().decode()
+    except urllib.error.HTTPError as exc:
+        code, text = exc.code, exc.read().decode()
+    except OSError as exc:
+        fail(f"{base}: {exc}")
+    if action == "metrics":
+        click.echo(text, nl=False)
+    elif as_json or action != "status":
+        click.echo(text)
+    else:
+        st = json.loads(text)
+        click.echo(f"{st['session_id']}: {'paused' if st['paused'] else 'recording'}, "
+                   f"{'healthy' if st['healthy'] else 'UNHEALTHY: ' + '; '.join(st['problems'])}")
+        click.echo(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
+                   f"{sum(st['dropped'].values()) if st['dropped'] else 0} dropped, {st['frames_paused']} paused; "
+                   f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
+        if st.get("ring"):
+            r = st["ring"]
+            click.echo(f"ring: {r['evicted_segments']} segments ({r['evicted_bytes']:,} bytes) evicted, "
+                       f"{r['protected_windows']} windows protected" + (f"; BLOCKED: {r['blocked_reason']}"
+                                                                        if r["blocked"] else ""))
+    if code >= 400:
+        sys.exit(1)
 
 
 def _progress_line():
@@ -181,6 +288,12 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
                   + (f"[yellow]{late} frames late[/yellow]" if late else "0 frames late"))
     dropped = d.dropped or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
+    if isinstance(d, SessionInfo) and d.pauses:
+        con.print(f"paused {len(d.pauses)} times, {d.frames_paused} frames not recorded: "
+                  + ", ".join(f"{(b - a) / 1e9:.1f} s" if a is not None and b is not None else "to the end"
+                              for a, b in d.pauses))
+    if isinstance(d, SessionInfo) and d.ring:
+        con.print(f"ring: {d.evicted_segments} segments evicted (ROOT/eviction.log says when and why)")
     con.print(f"bytes: {d.bytes:,}   chunk compression: {', '.join(d.chunk_compression)}   "
               f"ratio: {d.compression_ratio}")
     t = Table("topic", "messages", "bytes (uncompressed)")

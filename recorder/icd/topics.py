@@ -14,11 +14,13 @@ from typing import Any
 import numpy as np
 
 __all__ = [
+    "EVENT_SCHEMA",
     "GROUND_TRUTH_SCHEMA",
     "IMAGE_SCHEMA_NAME",
     "IMAGE_SCHEMA_TEXT",
     "RADAR_CUE_SCHEMA",
     "STATS_SCHEMA",
+    "TOPIC_EVENTS",
     "TOPIC_GROUND_TRUTH",
     "TOPIC_IMAGE",
     "TOPIC_METADATA",
@@ -33,6 +35,7 @@ TOPIC_IMAGE = "/thermal/image"
 TOPIC_METADATA = "/thermal/metadata"
 TOPIC_RADAR_CUE = "/radar/cue"
 TOPIC_STATS = "/recorder/stats"
+TOPIC_EVENTS = "/recorder/events"  # marks, triggers, pauses and splits while recording
 TOPIC_GROUND_TRUTH = "/sim/ground_truth"
 
 IMAGE_SCHEMA_NAME = "sensor_msgs/msg/Image"
@@ -147,6 +150,24 @@ RADAR_CUE_SCHEMA: dict[str, Any] = {
         "uncertainty_m": {"type": "number"},
     },
     "required": ["timestamp", "target_id", "azimuth_deg", "elevation_deg", "range_m"],
+}
+
+EVENT_SCHEMA: dict[str, Any] = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "thermcap.RecorderEvent",
+    "description": "Something that happened while recording: a mark, a trigger (and the window it protects), "
+                   "a pause or resume, a split",
+    "type": "object",
+    "properties": {
+        "kind": {"type": "string", "enum": ["mark", "trigger", "pause", "resume", "split"]},
+        "reason": {"type": "string"},
+        "note": {"type": "string"},
+        "at_ns": {"type": "integer"},
+        "protect_start_ns": {"type": ["integer", "null"]},
+        "protect_end_ns": {"type": ["integer", "null"]},
+        "frames_paused": {"type": ["integer", "null"]},
+    },
+    "required": ["kind", "at_ns"],
 }
 
 STATS_SCHEMA: dict[str, Any] = {

@@ -90,6 +90,10 @@ class SessionInfo:
     write_latency_ms: Any
     error: str | None
     frames_from: str  # "segments", or "archive" once the source was deleted after archiving
+    pauses: list[list[int | None]] = field(default_factory=list)  # [start_ns, end_ns] of `ctl pause` gaps
+    frames_paused: int = 0
+    ring: dict[str, Any] | None = None  # the --ring budget the session was recorded under
+    evicted_segments: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -212,6 +216,10 @@ def session_info(path: str | Path) -> SessionInfo:
         write_latency_ms=meta.get("write_latency_ms"),
         error=meta.get("error"),
         frames_from="archive" if archived is not None else "segments",
+        pauses=meta.get("pauses") or [],
+        frames_paused=meta.get("frames_paused") or 0,
+        ring=meta.get("ring"),
+        evicted_segments=meta.get("evicted_segments") or 0,
     )
 
 

@@ -16,10 +16,12 @@ __all__ = [
     "ANALYSIS_JSONL",
     "ARCHIVE_DIR",
     "EVENTS_JSON",
+    "EVICTION_LOG",
     "EXTRAS_MCAP",
     "LOCK_FILE",
     "MANIFEST_JSON",
     "PARTIAL_SUFFIX",
+    "PROTECTED_JSON",
     "SESSION_JSON",
     "SessionLayout",
 ]
@@ -33,6 +35,8 @@ ARCHIVE_DIR = "archive"
 MANIFEST_JSON = "manifest.json"
 EXTRAS_MCAP = "extras.mcap"
 LOCK_FILE = ".lock"
+PROTECTED_JSON = "protected.json"  # event windows eviction, gc and the archiver keep
+EVICTION_LOG = "eviction.log"  # ROOT/eviction.log: one JSON line per deleted segment, with why
 
 
 @dataclass(frozen=True)
@@ -56,6 +60,10 @@ class SessionLayout:
     @property
     def analysis_jsonl(self) -> Path:
         return self.dir / ANALYSIS_JSONL
+
+    @property
+    def protected_json(self) -> Path:
+        return self.dir / PROTECTED_JSON
 
     @property
     def lock(self) -> Path:

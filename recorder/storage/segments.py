@@ -30,9 +30,11 @@ from recorder import __version__
 from recorder.exceptions import RecordingError
 from recorder.icd.sidecar import sidecar_schema_bytes
 from recorder.icd.topics import (
+    EVENT_SCHEMA,
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
     STATS_SCHEMA,
+    TOPIC_EVENTS,
     TOPIC_IMAGE,
     TOPIC_METADATA,
     TOPIC_STATS,
@@ -142,8 +144,10 @@ class SessionWriter:
 
     def __init__(self, session_dir: Path, *, session_meta: dict[str, Any], extra_topics: dict[str, dict[str, Any]],
                  bad_pixel_map: np.ndarray | None = None, policy: SegmentPolicy | None = None,
-                 on_chunk_written: Callable[[list[Any]], None] | None = None) -> None:
+                 on_chunk_written: Callable[[list[Any]], None] | None = None,
+                 on_segment_closed: Callable[[], None] | None = None) -> None:
         self.dir = Path(session_dir)
+        self.on_segment_closed = on_segment_closed
         self.policy = policy or SegmentPolicy()
         self.session_meta = session_meta
         self.extra_topics = extra_topics
@@ -186,7 +190,7 @@ class SessionWriter:
             channels[TOPIC_IMAGE] = writer.register_channel(TOPIC_IMAGE, "cdr", image_schema)
             meta_schema = writer.register_schema("thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes())
             channels[TOPIC_METADATA] = writer.register_channel(TOPIC_METADATA, "json", meta_schema)
-            for topic, schema in {**self.extra_topics, TOPIC_STATS: STATS_SCHEMA}.items():
+            for topic, schema in {**self.extra_topics, TOPIC_STATS: STATS_SCHEMA, TOPIC_EVENTS: EVENT_SCHEMA}.items():
                 sid = writer.register_schema(schema.get("title", topic), "jsonschema", json.dumps(schema).encode())
                 channels[topic] = writer.register_channel(topic, "json", sid)
             meta = {k: v if isinstance(v, str) else json.dumps(v) for k, v in self.session_meta.items()}
@@ -226,6 +230,8 @@ class SessionWriter:
             raise RecordingError(f"cannot close segment {self._path(info, True)}: {exc.strerror or exc}") from exc
         finally:
             self._writer = None
+        if self.on_segment_closed is not None:
+            self.on_segment_closed()
 
     def _maybe_rotate(self, log_time: int, incoming: int) -> None:
         info = self.current

@@ -1,0 +1,282 @@
+"""Always-on recording within a disk budget: the oldest unprotected segments of ring sessions are
+deleted, off the capture and writer threads, and every deletion is logged with its reason.
+
+A segment is protected when its time span overlaps an event window (``protected.json`` of its
+session: a trigger's ``pre`` seconds before to ``post`` seconds after). Only finished segments
+of sessions recorded with ``--ring`` are ever candidates, and never the open one. The recorder's
+writer thread evicts right after it closes a segment and before it opens the next (an unlink,
+never on the capture thread), so the root stays within the budget plus the open segment however
+fast frames come; this thread also watches for space taken by anything else. When nothing
+can be deleted and the budget is still exceeded, the evictor says so (``blocked``) and the
+recorder drops and counts frames rather than fill the disk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from mcap.reader import make_reader
+
+from recorder.icd.names import iso_utc
+from recorder.storage.layout import EVICTION_LOG, SessionLayout
+from recorder.storage.segments import fsync_dir, write_json_atomic
+
+__all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
+
+
+def parse_size(text: str) -> int:
+    """``500M``, ``2G``, ``1.5T``, ``123456`` (bytes): the sizes a user types."""
+    t = str(text).strip().upper().removesuffix("B").removesuffix("I")
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+    try:
+        if t and t[-1] in units:
+            return int(float(t[:-1]) * units[t[-1]])
+        return int(t)
+    except ValueError:
+        raise ValueError(f"{text!r} is not a size (for example 500M, 20G, 123456)") from None
+
+
+@dataclass(frozen=True)
+class RingPolicy:
+    max_disk: int | None = None  # bytes the data root may hold
+    min_free: int | None = None  # bytes that must stay free on its filesystem
+    min_free_percent: float | None = None  # or this share of the filesystem
+    pre_s: float = 30.0  # kept before a trigger
+    post_s: float = 30.0  # kept after it
+    interval_s: float = 1.0  # how often the evictor looks, besides after every segment
+
+    @classmethod
+    def parse(cls, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float) -> RingPolicy:
+        pct = None
+        free = None
+        if min_free:
+            if min_free.strip().endswith("%"):
+                pct = float(min_free.strip()[:-1])
+            else:
+                free = parse_size(min_free)
+        return cls(parse_size(max_disk) if max_disk else None, free, pct, pre_s, post_s)
+
+
+@dataclass(frozen=True)
+class Window:
+    start_ns: int
+    end_ns: int
+    reason: str  # "manual", "signal", "hot_spot", "target_count", "crossover", "radar_cue"
+    note: str = ""
+
+    def overlaps(self, start_ns: int, end_ns: int) -> bool:
+        return self.start_ns <= end_ns and start_ns <= self.end_ns
+
+
+class ProtectionBook:
+    """A session's event windows: in memory for the evictor of this process (under one lock, so a
+    window added while a deletion is being decided is honoured), and in ``protected.json`` for
+    gc, the archiver and the next process."""
+
+    def __init__(self, session_dir: Path) -> None:
+        self.path = SessionLayout.of(session_dir).protected_json
+        self.lock = threading.Lock()
+        self.windows: list[Window] = load_windows(session_dir)
+
+    def add(self, window: Window) -> None:
+        with self.lock:
+            self.windows.append(window)
+            write_json_atomic(self.path, {"windows": [asdict(w) for w in self.windows]})
+
+    def protects(self, start_ns: int, end_ns: int) -> bool:
+        return any(w.overlaps(start_ns, end_ns) for w in self.windows)
+
+
+def load_windows(session_dir: Path) -> list[Window]:
+    path = SessionLayout.of(session_dir).protected_json
+    try:
+        return [Window(**w) for w in json.loads(path.read_text()).get("windows", [])]
+    except FileNotFoundError:
+        return []
+    except (ValueError, TypeError) as exc:  # unreadable: protect everything rather than guess
+        return [Window(0, 2**63 - 1, f"unreadable {path.name}: {exc}")]
+
+
+@dataclass
+class Eviction:
+    at: str
+    session: str
+    segment: str
+    bytes: int
+    frames: int
+    start: str | None
+    end: str | None
+    reason: str
+
+
+def disk_usage(root: Path) -> int:
+    total = 0
+    for dirpath, _dirs, names in os.walk(root):
+        for n in names:
+            try:
+                total += os.lstat(os.path.join(dirpath, n)).st_blocks * 512
+            except OSError:
+                continue  # deleted while we looked
+    return total
+
+
+def _segment_span(path: Path) -> tuple[int, int, int]:
+    """(start_ns, end_ns, frames) from the summary; a segment that cannot be read is never evicted."""
+    from recorder.icd.topics import TOPIC_IMAGE
+
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    if summary is None or summary.statistics is None:
+        raise ValueError("no summary")
+    st = summary.statistics
+    ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
+    return st.message_start_time, st.message_end_time, sum(st.channel_message_counts.get(i, 0) for i in ids)
+
+
+@dataclass
+class _Candidate:
+    path: Path
+    session_dir: Path
+    start_ns: int
+    end_ns: int
+    frames: int
+
+
+@dataclass
+class EvictorState:
+    evicted_bytes: int = 0
+    evicted_segments: int = 0
+    blocked: bool = False
+    blocked_reason: str | None = None
+    last: list[Eviction] = field(default_factory=list)
+
+
+class Evictor(threading.Thread):
+    """Keeps ROOT within the ring policy. ``books`` maps a ring session's folder to its
+    ProtectionBook (the live one for the session this process records)."""
+
+    def __init__(self, root: Path, policy: RingPolicy, books: dict[Path, ProtectionBook],
+                 log: Callable[[str], None] = lambda m: None) -> None:
+        super().__init__(name="thermcap-evictor", daemon=True)
+        self.root, self.policy, self.books, self.log = Path(root), policy, books, log
+        self.state = EvictorState()
+        self._wake = threading.Event()
+        self._halt = threading.Event()
+        self._spans: dict[Path, tuple[int, int, int]] = {}
+        self._busy = threading.Lock()  # the writer (after each segment) and this thread take turns
+
+    def wake(self) -> None:
+        self._wake.set()
+
+    def stop(self) -> None:
+        self._halt.set()
+        self._wake.set()
+        self.join()
+
+    def run(self) -> None:
+        while not self._halt.is_set():
+            try:
+                self.evict_once()
+            except Exception as exc:  # never take the recording down; say why on stats and in the log
+                self.state.blocked, self.state.blocked_reason = True, f"evictor failed: {type(exc).__name__}: {exc}"
+            self._wake.wait(self.policy.interval_s)
+            self._wake.clear()
+
+    # -- decisions ---------------------------------------------------------------------------------
+    def pressure(self) -> str | None:
+        """Why space must be freed now, or None."""
+        p = self.policy
+        if p.max_disk is not None:
+            used = disk_usage(self.root)
+            if used > p.max_disk:
+                return f"data root holds {used:,} bytes, over --max-disk {p.max_disk:,}"
+        if p.min_free is not None or p.min_free_percent is not None:
+            du = shutil.disk_usage(self.root)
+            if p.min_free is not None and du.free < p.min_free:
+                return f"{du.free:,} bytes free, under --min-free {p.min_free:,}"
+            if p.min_free_percent is not None and du.free / du.total * 100 < p.min_free_percent:
+                return f"{du.free / du.total * 100:.1f}% free, under --min-free {p.min_free_percent}%"
+        return None
+
+    def _candidates(self) -> list[_Candidate]:
+        out = []
+        for session_dir in self._ring_sessions():
+            for seg in SessionLayout.of(session_dir).segments():
+                if seg not in self._spans:
+                    try:
+                        self._spans[seg] = _segment_span(seg)
+                    except Exception:  # unreadable: never a candidate
+                        continue
+                start, end, frames = self._spans[seg]
+                out.append(_Candidate(seg, session_dir, start, end, frames))
+        return sorted(out, key=lambda c: (c.start_ns, str(c.path)))
+
+    def _ring_sessions(self) -> list[Path]:
+        found = set(self.books)
+        base = self.root / "sessions"
+        if base.is_dir():
+            for d in base.iterdir():
+                sj = SessionLayout.of(d).session_json
+                try:
+                    if json.loads(sj.read_text()).get("ring"):
+                        found.add(d)
+                except (OSError, ValueError):
+                    continue
+        return sorted(found)
+
+    def _book(self, session_dir: Path) -> ProtectionBook:
+        if session_dir not in self.books:
+            self.books[session_dir] = ProtectionBook(session_dir)
+        return self.books[session_dir]
+
+    def evict_once(self) -> list[Eviction]:
+        with self._busy:
+            return self._evict()
+
+    def _evict(self) -> list[Eviction]:
+        done: list[Eviction] = []
+        while (reason := self.pressure()) is not None:
+            victim = None
+            for c in self._candidates():
+                book = self._book(c.session_dir)
+                with book.lock:  # a window added now is seen before the file goes
+                    if book.protects(c.start_ns, c.end_ns):
+                        continue
+                    size = c.path.stat().st_size
+                    c.path.unlink()
+                victim = c
+                break
+            if victim is None:
+                if not self.state.blocked:
+                    self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
+                self.state.blocked, self.state.blocked_reason = True, reason
+                return done
+            self._spans.pop(victim.path, None)
+            fsync_dir(victim.session_dir)
+            ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
+                          bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
+                          end=iso_utc(victim.end_ns), reason=reason)
+            with open(self.root / EVICTION_LOG, "a") as f:
+                f.write(json.dumps(asdict(ev)) + "\n")
+            self.state.evicted_bytes += size
+            self.state.evicted_segments += 1
+            self.state.last = [*self.state.last[-9:], ev]
+            done.append(ev)
+            self.log(f"ring: deleted {victim.session_dir.name}/{victim.path.name} ({size:,} bytes): {reason}")
+        self.state.blocked, self.state.blocked_reason = False, None
+        return done
+
+
+def read_eviction_log(root: Path) -> list[dict[str, Any]]:
+    path = Path(root) / EVICTION_LOG
+    if not path.is_file():
+        return []
+    return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
