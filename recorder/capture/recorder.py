@@ -533,7 +533,6 @@ class Recorder:
         self._events.add(ts, blocks)
         if self._triggers is not None:
             for reason in self._triggers.check(blocks):
-                self._last_frame_ns = ts
                 self._protect(ts, "trigger", reason)
         extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
         assert self._session is not None

@@ -191,11 +191,12 @@ class Evictor(threading.Thread):
             self._wake.clear()
 
     # -- decisions ---------------------------------------------------------------------------------
-    def pressure(self) -> str | None:
-        """Why space must be freed now, or None."""
+    def pressure(self, used: int | None = None) -> str | None:
+        """Why space must be freed now, or None. ``used``: the data root's bytes, when the caller
+        already knows them (one walk of the tree per eviction pass, not one per deletion)."""
         p = self.policy
         if p.max_disk is not None:
-            used = disk_usage(self.root)
+            used = disk_usage(self.root) if used is None else used
             if used > p.max_disk:
                 return f"data root holds {used:,} bytes, over --max-disk {p.max_disk:,}"
         if p.min_free is not None or p.min_free_percent is not None:
@@ -242,37 +243,44 @@ class Evictor(threading.Thread):
             return self._evict()
 
     def _evict(self) -> list[Eviction]:
+        """Oldest first, skipping protected segments, until nothing presses; the tree is walked
+        and the candidates listed once per pass, and each deletion is subtracted."""
         done: list[Eviction] = []
-        while (reason := self.pressure()) is not None:
-            victim = None
-            for c in self._candidates():
-                book = self._book(c.session_dir)
-                with book.lock:  # a window added now is seen before the file goes
-                    if book.protects(c.start_ns, c.end_ns):
-                        continue
-                    size = c.path.stat().st_size
-                    c.path.unlink()
-                victim = c
-                break
-            if victim is None:
-                if not self.state.blocked:
-                    self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
-                self.state.blocked, self.state.blocked_reason = True, reason
+        used = disk_usage(self.root) if self.policy.max_disk is not None else None
+        if (reason := self.pressure(used)) is None:
+            self.state.blocked, self.state.blocked_reason = False, None
+            return done
+        for c in self._candidates():
+            book = self._book(c.session_dir)
+            with book.lock:  # a window added now is seen before the file goes
+                if book.protects(c.start_ns, c.end_ns):
+                    continue
+                st = c.path.stat()
+                c.path.unlink()
+            self._record_eviction(c, st.st_size, reason)
+            done.append(self.state.last[-1])
+            if used is not None:
+                used -= st.st_blocks * 512  # as disk_usage counts it
+            if (reason := self.pressure(used)) is None:
+                self.state.blocked, self.state.blocked_reason = False, None
                 return done
-            self._spans.pop(victim.path, None)
-            fsync_dir(victim.session_dir)
-            ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
-                          bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
-                          end=iso_utc(victim.end_ns), reason=reason)
-            with open(self.root / EVICTION_LOG, "a") as f:
-                f.write(json.dumps(asdict(ev)) + "\n")
-            self.state.evicted_bytes += size
-            self.state.evicted_segments += 1
-            self.state.last = [*self.state.last[-9:], ev]
-            done.append(ev)
-            self.log(f"ring: deleted {victim.session_dir.name}/{victim.path.name} ({size:,} bytes): {reason}")
-        self.state.blocked, self.state.blocked_reason = False, None
+        if not self.state.blocked:
+            self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
+        self.state.blocked, self.state.blocked_reason = True, reason
         return done
+
+    def _record_eviction(self, victim: _Candidate, size: int, reason: str) -> None:
+        self._spans.pop(victim.path, None)
+        fsync_dir(victim.session_dir)
+        ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
+                      bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
+                      end=iso_utc(victim.end_ns), reason=reason)
+        with open(self.root / EVICTION_LOG, "a") as f:
+            f.write(json.dumps(asdict(ev)) + "\n")
+        self.state.evicted_bytes += size
+        self.state.evicted_segments += 1
+        self.state.last = [*self.state.last[-9:], ev]
+        self.log(f"ring: deleted {victim.session_dir.name}/{victim.path.name} ({size:,} bytes): {reason}")
 
 
 def read_eviction_log(root: Path) -> list[dict[str, Any]]:
