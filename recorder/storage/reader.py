@@ -28,6 +28,7 @@ __all__ = [
     "list_sessions",
     "read_session_meta",
     "resolve_session",
+    "segment_span",
     "session_segments",
 ]
 
@@ -137,21 +138,25 @@ def frame_files(session_dir: str | Path) -> list[Path]:
     return [extras] if extras.is_file() else []
 
 
+def segment_span(seg: Path) -> tuple[int, int, int]:
+    """(first message time, last message time, frames) of a finished segment, from its summary
+    (no decompression); a cut or damaged file is an McapFileError naming it."""
+    try:
+        with open(seg, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception as exc:  # a cut or damaged file may fail anywhere inside the reader
+        raise McapFileError(f"{seg}: no readable summary ({type(exc).__name__}: {exc}); is it cut short? "
+                            f"`thermcap recover {seg}` keeps every complete chunk") from None
+    if summary is None or summary.statistics is None:
+        raise McapFileError(f"{seg}: no summary; is it a finished segment?")
+    st = summary.statistics
+    ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
+    return st.message_start_time, st.message_end_time, sum(st.channel_message_counts.get(i, 0) for i in ids)
+
+
 def count_frames(session_dir: str | Path) -> dict[str, int]:
     """Frames per segment, from the MCAP summaries (no decompression)."""
-    out = {}
-    for seg in session_segments(session_dir):
-        try:
-            with open(seg, "rb") as f:
-                summary = make_reader(f).get_summary()
-        except Exception as exc:  # a cut or damaged file may fail anywhere inside the reader
-            raise McapFileError(f"{seg}: no readable summary ({type(exc).__name__}: {exc}); is it cut short? "
-                                f"`thermcap recover {seg}` keeps every complete chunk") from None
-        if summary is None or summary.statistics is None:
-            raise McapFileError(f"{seg}: no summary; is it a finished segment?")
-        ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
-        out[seg.name] = sum(summary.statistics.channel_message_counts.get(i, 0) for i in ids)
-    return out
+    return {seg.name: segment_span(seg)[2] for seg in session_segments(session_dir)}
 
 
 def resolve_session(arg: str | Path, root: str | Path) -> Path:

@@ -23,10 +23,9 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.reader import make_reader
-
 from recorder.icd.names import iso_utc
 from recorder.storage.layout import EVICTION_LOG, SessionLayout
+from recorder.storage.reader import segment_span
 from recorder.storage.segments import fsync_dir, write_json_atomic
 
 __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
@@ -128,19 +127,6 @@ def disk_usage(root: Path) -> int:
     return total
 
 
-def _segment_span(path: Path) -> tuple[int, int, int]:
-    """(start_ns, end_ns, frames) from the summary; a segment that cannot be read is never evicted."""
-    from recorder.icd.topics import TOPIC_IMAGE
-
-    with open(path, "rb") as f:
-        summary = make_reader(f).get_summary()
-    if summary is None or summary.statistics is None:
-        raise ValueError("no summary")
-    st = summary.statistics
-    ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
-    return st.message_start_time, st.message_end_time, sum(st.channel_message_counts.get(i, 0) for i in ids)
-
-
 @dataclass
 class _Candidate:
     path: Path
@@ -213,7 +199,7 @@ class Evictor(threading.Thread):
             for seg in SessionLayout.of(session_dir).segments():
                 if seg not in self._spans:
                     try:
-                        self._spans[seg] = _segment_span(seg)
+                        self._spans[seg] = segment_span(seg)
                     except Exception:  # unreadable: never a candidate
                         continue
                 start, end, frames = self._spans[seg]
