@@ -1,8 +1,8 @@
 """Recorder counters and a constant-memory latency histogram.
 
-Counts are plain ints, each written by one thread only (capture: captured, dropped; writer:
-written), so they need no lock. The histogram has fixed log-spaced bins, so an hour-long
-session's p99 costs the same memory as a second's.
+Counts are plain ints, each written by one thread only (the writer: written, skipped), except
+those several capture threads share (captured, dropped), which take a lock. The histogram has
+fixed log-spaced bins, so an hour-long session's p99 costs the same memory as a second's.
 """
 
 from __future__ import annotations
@@ -64,6 +64,10 @@ class RecorderCounters:
     disk_dropped: int = 0  # frames the writer let go because the ring could not free space
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 
+    def captured(self) -> None:
+        with self._lock:  # one capture thread per camera
+            self.frames_captured += 1
+
     def drop(self, topics: list[str]) -> None:
         # capture (queue full) and the writer (ring blocked) may both drop: one lock for the dict
         with self._lock:
@@ -72,5 +76,6 @@ class RecorderCounters:
 
     @property
     def frames_dropped(self) -> int:
-        from recorder.icd.topics import TOPIC_IMAGE
-        return self.dropped.get(TOPIC_IMAGE, 0)
+        """Frames of every camera dropped (the image topics' drops)."""
+        from recorder.icd.topics import is_image_topic
+        return sum(n for t, n in self.dropped.items() if is_image_topic(t))

@@ -6,6 +6,11 @@ channel, session summary, exit report). A source that can wait (a file, a pipe, 
 blocks on the queue instead and loses nothing. The writer thread builds and validates the ICD sidecar,
 encodes the image, and feeds the segment writer, whose chunks compress on a thread pool. Memory
 is bounded by the queue length plus the chunks in flight, however long the session runs.
+
+Several cameras share one session and one clock: each has its own capture thread, detector,
+sidecar encoder and drop accounting (``CameraFeed``), and writes ``/thermal/<name>/...``; a
+camera that fails or ends is reported and the others go on. The live view (``recorder.live``)
+is offered each written frame without waiting; it drops its own frames, never ours.
 """
 
 from __future__ import annotations
@@ -19,12 +24,12 @@ import signal
 import sys
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from concurrent.futures import Future
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from recorder import __version__
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
@@ -34,14 +39,24 @@ from recorder.capture.triggers import TriggerPolicy, TriggerWatch
 from recorder.exceptions import RecordingError, ThermcapError
 from recorder.icd.names import FORMAT_VERSION, iso_utc
 from recorder.icd.sidecar import SidecarEncoder
-from recorder.icd.topics import TOPIC_EVENTS, TOPIC_IMAGE, TOPIC_METADATA, TOPIC_STATS, image_message_parts
+from recorder.icd.topics import (
+    TOPIC_EVENTS,
+    TOPIC_STATS,
+    CameraTopics,
+    camera_topics,
+    image_message_parts,
+    is_image_topic,
+)
 from recorder.radiometry import LinearModel, describe_model
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import lock_session
 from recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
 from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 
-__all__ = ["Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
+if TYPE_CHECKING:
+    from recorder.live.branch import LiveBranch
+
+__all__ = ["CameraFeed", "Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
 _STOP = object()
 
@@ -75,11 +90,14 @@ class RecordingResult:
     frames_paused: int = 0  # not recorded on purpose (`thermcap ctl pause`); not drops
     evicted_segments: int = 0
     evicted_bytes: int = 0
+    cameras: dict[str, dict[str, Any]] = field(default_factory=dict)  # a session of several cameras
+    live: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
         """True only when nothing went wrong and nothing was dropped or skipped."""
-        return self.error is None and not any(self.dropped.values()) and not self.analysis_skipped
+        return self.error is None and not any(self.dropped.values()) and not self.analysis_skipped \
+            and not any(c.get("error") for c in self.cameras.values())
 
     @property
     def problems(self) -> list[str]:
@@ -92,11 +110,14 @@ class RecordingResult:
         if late:
             out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "
                        f"of the declared {self.timing.get('declared_fps')}")
+        for name, cam in self.cameras.items():
+            if cam.get("error") and cam["error"] != self.error:
+                out.append(f"camera {name}: {cam['error']}")
         return out
 
     @property
     def frames_dropped(self) -> int:
-        return self.dropped.get(TOPIC_IMAGE, 0)
+        return sum(n for t, n in self.dropped.items() if is_image_topic(t))
 
     def to_dict(self) -> dict[str, Any]:
         return {"session_id": self.session_id, "session_dir": str(self.session_dir),
@@ -106,72 +127,145 @@ class RecordingResult:
                 "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
                 "analysis_skipped": self.analysis_skipped, "events": self.events, "timing": self.timing,
                 "frames_paused": self.frames_paused, "evicted_segments": self.evicted_segments,
-                "evicted_bytes": self.evicted_bytes}
+                "evicted_bytes": self.evicted_bytes,
+                **({"cameras": self.cameras} if self.cameras else {}),
+                **({"live": self.live} if self.live is not None else {})}
+
+
+@dataclass
+class CameraFeed:
+    """One camera of a session: its source, topics, sidecar encoder, detector, triggers and
+    counts. Its capture thread is the only writer of ``captured``/``paused``/the capture clock;
+    the writer thread the only writer of ``written``."""
+
+    topics: CameraTopics
+    source: FrameSource
+    sidecars: SidecarEncoder
+    can_wait: bool
+    detector: HotSpotDetector | None = None
+    aq: queue.Queue | None = None
+    analysis_period_ns: int = 0
+    next_analysis_ns: int = 0
+    events: EventBuilder = field(default_factory=EventBuilder)
+    triggers: TriggerWatch | None = None
+    captured: int = 0
+    written: int = 0
+    paused: int = 0
+    analysis_skipped: int = 0
+    pauses: list[list[int | None]] = field(default_factory=list)  # [first paused frame, first after]
+    first_mono: int | None = None
+    last_mono: int | None = None
+    last_wall: float = field(default_factory=time.monotonic)
+    error: str | None = None
+    ended: bool = False  # its capture thread finished: the input ended, a stop, or a failure
+    waiting: bool = False  # blocked on a full queue (a source that can wait), not stalled
+
+    @property
+    def name(self) -> str | None:
+        return self.topics.name
+
+    @property
+    def label(self) -> str:
+        return self.name or self.source.sensor.sensor_id
+
+    def message_topics(self, frame: CapturedFrame) -> list[str]:
+        return [self.topics.image, self.topics.metadata] + [self.topics.extra(t) for t, _ in frame.messages]
+
+    def timing(self) -> dict[str, Any]:
+        """How the frames were timed and whether the source kept its rate: never hidden."""
+        declared = float(self.source.sensor.frame_rate_hz or 0.0)
+        n, span = self.captured, None
+        if self.first_mono is not None and self.last_mono is not None and n > 1:
+            span = (self.last_mono - self.first_mono) / 1e9
+        achieved = round((n - 1) / span, 3) if span else None
+        return {"time_basis": getattr(self.source, "time_basis", "capture"), "declared_fps": declared,
+                "achieved_fps": achieved, "frames_late": int(getattr(self.source, "frames_late", 0))}
+
+    def summary(self, dropped: dict[str, int]) -> dict[str, Any]:
+        return {"sensor_id": self.source.sensor.sensor_id, "frames_captured": self.captured,
+                "frames_written": self.written, "frames_dropped": dropped.get(self.topics.image, 0),
+                "frames_paused": self.paused, "analysis_skipped": self.analysis_skipped,
+                "timing": self.timing(), "error": self.error, "ended": self.ended,
+                "seconds_since_last_frame": round(time.monotonic() - self.last_wall, 3)}
 
 
 class Recorder:
     """Record one session from ``source`` into ``<root>/sessions/<id>/``.
 
+    :param source: one source (the ``/thermal/image`` layout), or ``{name: source}`` for a session
+        of several cameras on one clock (``/thermal/<name>/image``, ...).
     :param queue_frames: capacity of the capture -> writer queue (about 2 s at 60 fps by default;
-        640x512 frames make that 79 MB at most).
+        640x512 frames make that 79 MB at most), shared by the cameras.
     :param writer_delay_s: an artificial pause per frame on the writer thread, for testing the
         drop accounting; never set it in production.
     :param wait_when_full: capture waits for the writer instead of dropping. Always on for a
         source that can wait (a file, a pipe, an importer: ``source.can_wait``), since nothing is
         lost by waiting; only a live camera, which cannot be paused, ever drops (counted).
+    :param live: the live view to offer each written frame to (it never makes us wait).
     """
 
-    def __init__(self, source: FrameSource, root: str | os.PathLike, *, session_id: str | None = None,
+    def __init__(self, source: FrameSource | Mapping[str, FrameSource], root: str | os.PathLike, *,
+                 session_id: str | None = None,
                  policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
                  writer_delay_s: float = 0.0, recover_leftovers: bool = True, analysis: bool = True,
                  analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None,
                  wait_when_full: bool = False, ring: RingPolicy | None = None,
-                 triggers: TriggerPolicy | None = None, stall_s: float = 5.0) -> None:
-        self.source = source
+                 triggers: TriggerPolicy | None = None, stall_s: float = 5.0,
+                 live: LiveBranch | None = None, stop_grace_s: float = 5.0) -> None:
+        sources: dict[str | None, FrameSource] = dict(source) if isinstance(source, Mapping) else {None: source}
+        if not sources:
+            raise RecordingError("no source to record")
+        self.multi = isinstance(source, Mapping)
+        self.source = next(iter(sources.values()))  # the first camera (the only one, usually)
         self.root = Path(root)
-        self.session_id = session_id or new_session_id(source.sensor.sensor_id)
+        label = "-".join(str(n) for n in sources)[:40] if self.multi else self.source.sensor.sensor_id
+        self.session_id = session_id or new_session_id(label)
         self.session_dir = sessions_dir(self.root) / self.session_id
         self.policy = policy or SegmentPolicy()
         self.queue: queue.Queue = queue.Queue(maxsize=max(1, queue_frames))
         self.stats_interval_s = stats_interval_s
         self.writer_delay_s = writer_delay_s
         self.recover_leftovers = recover_leftovers
-        self.wait_when_full = wait_when_full or bool(getattr(source, "can_wait", False))
         self.counters = RecorderCounters()
         self.latency = LatencyHistogram()
         self._interval_latency = LatencyHistogram()
         self._stop = threading.Event()
-        self._source_error: str | None = None
         self._writer_error: str | None = None
-        self._stop_seen = False  # the writer took the capture thread's stop token
+        self._stop_seen = False  # the writer took every capture thread's stop token
         self._signals = 0
-        self._first_capture_mono: int | None = None
-        self._last_capture_mono: int | None = None
         self._session: SessionWriter | None = None
         self._last_frame_ns: int | None = None
-        self._sidecars = SidecarEncoder(source.sensor.to_sidecar(), _radiometric_block(source.model))
-        self._events = EventBuilder()
-        # Analysis beside recording: its own thread and bounded queue; when it falls behind, frames
-        # go unanalysed (sidecar source "skipped", counted), capture never waits for it. It runs at
-        # most at the source's frame rate so an as-fast-as-possible import does not starve writing.
-        self._aq: queue.Queue | None = queue.Queue(maxsize=max(1, analysis_queue)) if analysis else None
-        self._detector = HotSpotDetector(source.model, bad_pixel_map=source.bad_pixel_map) if analysis else None
+        # Analysis beside recording: a thread and bounded queue per camera; when it falls behind,
+        # frames go unanalysed (sidecar source "skipped", counted), capture never waits for it. It
+        # runs at most at the source's frame rate so an as-fast-as-possible import does not starve
+        # writing.
+        self.feeds: list[CameraFeed] = []
+        for name, src in sources.items():
+            can_wait = wait_when_full or bool(getattr(src, "can_wait", False))
+            feed = CameraFeed(topics=camera_topics(name), source=src, can_wait=can_wait,
+                              sidecars=SidecarEncoder(src.sensor.to_sidecar(), _radiometric_block(src.model)),
+                              triggers=TriggerWatch(triggers) if triggers is not None else None)
+            if analysis:
+                feed.aq = queue.Queue(maxsize=max(1, analysis_queue))
+                feed.detector = HotSpotDetector(src.model, bad_pixel_map=src.bad_pixel_map)
+                feed.analysis_period_ns = int(1e9 / (analysis_max_fps or src.sensor.frame_rate_hz or 60.0))
+            self.feeds.append(feed)
+        self.wait_when_full = all(f.can_wait for f in self.feeds)
         self.analysis_wait_s = analysis_wait_s
-        self._analysis_period_ns = int(1e9 / (analysis_max_fps or source.sensor.frame_rate_hz or 60.0))
-        self._next_analysis_ns = 0
         # Control while recording (thermcap ctl): requests are queued to the writer thread, which
         # acts on them between two frames, so a split or a mark never loses or repeats a frame.
         self.ring = ring
         self.stall_s = stall_s
+        self.stop_grace_s = stop_grace_s
         self._requests: queue.SimpleQueue = queue.SimpleQueue()
         self._paused = threading.Event()
-        self._pauses: list[list[int | None]] = []  # [first paused frame's time, first recorded after]
-        self._frames_paused = 0
         self._recorder_events: list[dict[str, Any]] = []
-        self._triggers = TriggerWatch(triggers) if triggers is not None else None
         self._book: ProtectionBook | None = None
         self._evictor: Evictor | None = None
-        self._last_capture_wall = time.monotonic()
+        self.live = live
+        if live is not None:
+            for feed in self.feeds:
+                live.add_camera(feed.name, feed.source.model)
         self.started = threading.Event()
 
     # -- public -----------------------------------------------------------------------------
@@ -204,36 +298,52 @@ class Recorder:
     def paused(self) -> bool:
         return self._paused.is_set()
 
+    @property
+    def frames_paused(self) -> int:
+        return sum(f.paused for f in self.feeds)
+
+    @property
+    def _pauses(self) -> list[list[int | None]]:
+        """The session's pauses, on the frames' clock: the first camera's (all pause together)."""
+        return self.feeds[0].pauses
+
     def status(self) -> dict[str, Any]:
         c = self.counters
         seg = self._session.segments[-1].name if self._session and self._session.segments else None
         out: dict[str, Any] = {
             "session_id": self.session_id, "session_dir": str(self.session_dir), "paused": self.paused,
             "frames_captured": c.frames_captured, "frames_written": c.frames_written,
-            "frames_paused": self._frames_paused, "dropped": dict(c.dropped),
+            "frames_paused": self.frames_paused, "dropped": dict(c.dropped),
             "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize, "segment": seg,
             "segments": len(self._session.segments) if self._session else 0,
             "write_latency_ms": self.latency.summary_ms(), "events": len(self._recorder_events),
             "last_event": self._recorder_events[-1] if self._recorder_events else None,
-            "seconds_since_last_frame": round(time.monotonic() - self._last_capture_wall, 3),
+            "seconds_since_last_frame": round(time.monotonic() - max(f.last_wall for f in self.feeds), 3),
+            "cameras": {f.label: f.summary(c.dropped) for f in self.feeds},
         }
         if self._evictor is not None:
             st = self._evictor.state
             out["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
                            "blocked": st.blocked, "blocked_reason": st.blocked_reason,
                            "protected_windows": len(self._book.windows) if self._book else 0}
+        if self.live is not None:
+            out["live"] = {"url": self.live.url, **self.live.counters.to_dict()}
         healthy, reasons = self.health()
         out["healthy"], out["problems"] = healthy, reasons
         return out
 
     def health(self, max_dropped: int = 0) -> tuple[bool, list[str]]:
-        """Unhealthy when frames stop arriving (and we are not paused), when drops exceed
-        ``max_dropped``, when the writer failed, or when the ring cannot free space."""
+        """Unhealthy when a camera stops giving frames (and we are not paused), when drops exceed
+        ``max_dropped``, when a camera or the writer failed, or when the ring cannot free space."""
         reasons = []
-        quiet = time.monotonic() - self._last_capture_wall
-        if not self.paused and self.started.is_set() and quiet > self.stall_s:
-            reasons.append(f"no frame from the source for {quiet:.1f} s")
-        dropped = self.counters.dropped.get(TOPIC_IMAGE, 0)
+        for f in self.feeds:
+            who = f"camera {f.name}: " if self.multi else ""
+            quiet = time.monotonic() - f.last_wall
+            if f.error:
+                reasons.append(f"{who}{f.error}")
+            elif not self.paused and self.started.is_set() and quiet > self.stall_s:
+                reasons.append(f"{who}no frame from the source for {quiet:.1f} s")
+        dropped = self.counters.frames_dropped
         if dropped > max_dropped:
             reasons.append(f"{dropped} frames dropped")
         if self._writer_error:
@@ -245,7 +355,8 @@ class Recorder:
     def stop(self) -> None:
         """Ask for a clean stop (Ctrl-C): capture ends, queued frames are written, segments close."""
         self._stop.set()
-        self.source.stop()
+        for f in self.feeds:
+            f.source.stop()
 
     def run(self, duration_s: float | None = None,
             progress: Callable[[Recorder], None] | None = None) -> RecordingResult:
@@ -267,9 +378,14 @@ class Recorder:
         except OSError as exc:
             lock.release()
             raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
-        self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=self.source.extra_topics,
-                                      bad_pixel_map=self.source.bad_pixel_map, policy=self.policy,
-                                      on_chunk_written=self._chunk_written, on_segment_closed=self._segment_closed)
+        extra_topics = {f.topics.extra(t): schema for f in self.feeds for t, schema in f.source.extra_topics.items()}
+        bad_pixels: Any = self.source.bad_pixel_map
+        if self.multi:
+            bad_pixels = {f.name: f.source.bad_pixel_map for f in self.feeds if f.source.bad_pixel_map is not None}
+        self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=extra_topics,
+                                      bad_pixel_map=bad_pixels, policy=self.policy,
+                                      on_chunk_written=self._chunk_written, on_segment_closed=self._segment_closed,
+                                      cameras=[str(f.name) for f in self.feeds] if self.multi else None)
         if self.ring is not None:
             self._book = ProtectionBook(self.session_dir)
             self._evictor = Evictor(self.root, self.ring, {self.session_dir: self._book},
@@ -277,33 +393,45 @@ class Recorder:
             self._evictor.start()
         t0 = time.monotonic()
         deadline = None if duration_s is None else t0 + duration_s
-        analyst = None
-        if self._aq is not None:
-            analyst = threading.Thread(target=self._analysis_loop, name="thermcap-analysis", daemon=True)
-            analyst.start()
+        analysts = [threading.Thread(target=self._analysis_loop, args=(f,), name=f"thermcap-analysis-{f.label}",
+                                     daemon=True) for f in self.feeds if f.aq is not None]
+        for a in analysts:
+            a.start()
         writer = threading.Thread(target=self._writer_loop, name="thermcap-writer", daemon=True)
-        capture = threading.Thread(target=self._capture_loop, args=(deadline,), name="thermcap-capture", daemon=True)
+        captures = [threading.Thread(target=self._capture_loop, args=(f, deadline), name=f"thermcap-capture-{f.label}",
+                                     daemon=True) for f in self.feeds]
         previous = self._catch_signals()
         writer.start()
-        capture.start()
-        self._last_capture_wall = time.monotonic()
+        now = time.monotonic()
+        for f, c in zip(self.feeds, captures, strict=True):
+            f.last_wall = now
+            c.start()
         self.started.set()
+        stop_asked: float | None = None
         try:
-            while capture.is_alive() or writer.is_alive():
-                capture.join(0.25)
+            while writer.is_alive():
+                writer.join(0.25)
                 if progress is not None:
                     progress(self)
-                if not capture.is_alive():
-                    writer.join(0.25)
-            if analyst is not None:
-                analyst.join()
+                past_deadline = deadline is not None and time.monotonic() > deadline
+                if stop_asked is None and (self._stop.is_set() or past_deadline):
+                    stop_asked = time.monotonic()
+                if stop_asked is not None and time.monotonic() - stop_asked > self.stop_grace_s:
+                    self._abandon_stalled(captures)
+            for a in analysts:
+                a.join(timeout=self.stop_grace_s)
         finally:
             self._restore_signals(previous)
             if self._evictor is not None:
                 self._evictor.stop()
         wall = time.monotonic() - t0
-        error = self._writer_error or self._source_error
-        events = self._events.finish() + self._recorder_events
+        failed = [f for f in self.feeds if f.error]
+        source_error = None
+        if failed and len(failed) == len(self.feeds):  # with several cameras, one failing is not the session's end
+            source_error = failed[0].error if not self.multi else \
+                "every camera failed: " + "; ".join(f"{f.name}: {f.error}" for f in failed)
+        error = self._writer_error or source_error
+        events = [e for f in self.feeds for e in self._camera_events(f)] + self._recorder_events
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
                               {"session_id": self.session_id, "events": events})
@@ -313,12 +441,17 @@ class Recorder:
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
             wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
             analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing(),
-            frames_paused=self._frames_paused,
+            frames_paused=self.frames_paused,
             evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
-            evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0)
+            evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
+            cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
+            live=self.live.counters.to_dict() if self.live is not None else None)
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    "pauses": self._pauses,
-                   **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok")}}
+                   **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok", "live")}}
+        if self.multi:  # the per-camera figures beside the per-camera sensor and model
+            summary["cameras"] = {str(f.name): {**meta["cameras"][str(f.name)], **result.cameras[str(f.name)],
+                                                "pauses": f.pauses} for f in self.feeds}
         try:
             write_json_atomic(SessionLayout.of(self.session_dir).session_json, summary)
         except OSError as exc:
@@ -326,16 +459,28 @@ class Recorder:
         lock.release()
         return result
 
+    def _camera_events(self, feed: CameraFeed) -> list[dict[str, Any]]:
+        events = feed.events.finish()
+        return [{**e, "camera": feed.name} for e in events] if self.multi else events
+
+    def _abandon_stalled(self, captures: list[threading.Thread]) -> None:
+        """A camera that does not stop (a device stuck in a read) must not hold the session open:
+        once it has given nothing for the grace period after the stop, its stop token is given for
+        it and it is reported as stalled. A camera waiting for queue space is not stalled."""
+        for f, c in zip(self.feeds, captures, strict=True):
+            quiet = time.monotonic() - f.last_wall
+            if c.is_alive() and not f.ended and not f.waiting and quiet > self.stop_grace_s:
+                try:
+                    self.queue.put_nowait((f, _STOP))
+                except queue.Full:
+                    continue  # the next pass tries again
+                f.error = f.error or f"stalled: no frame and no stop for {quiet:.0f} s"
+                f.ended = True
+
     def timing(self) -> dict[str, Any]:
-        """How the frames were timed and whether the source kept its rate: never hidden."""
-        declared = float(self.source.sensor.frame_rate_hz or 0.0)
-        n = self.counters.frames_captured
-        span = None
-        if self._first_capture_mono is not None and self._last_capture_mono is not None and n > 1:
-            span = (self._last_capture_mono - self._first_capture_mono) / 1e9
-        achieved = round((n - 1) / span, 3) if span else None
-        return {"time_basis": getattr(self.source, "time_basis", "capture"), "declared_fps": declared,
-                "achieved_fps": achieved, "frames_late": int(getattr(self.source, "frames_late", 0))}
+        """How the frames were timed and whether the source kept its rate (the first camera's; each
+        camera's own is in ``cameras``)."""
+        return self.feeds[0].timing()
 
     # -- signals ---------------------------------------------------------------------------------
     def _catch_signals(self) -> Any:
@@ -364,70 +509,81 @@ class Recorder:
         return self.queue.qsize()
 
     # -- threads ------------------------------------------------------------------------------
-    def _capture_loop(self, deadline: float | None) -> None:
+    def _capture_loop(self, feed: CameraFeed, deadline: float | None) -> None:
         counters = self.counters
         try:
-            for frame in self.source.frames():
-                counters.frames_captured += 1
+            for frame in feed.source.frames():
+                if feed.ended:  # abandoned as stalled: whatever comes now is after the session's end
+                    return
+                counters.captured()
+                feed.captured += 1
                 mono = frame.capture_mono_ns or time.monotonic_ns()
-                if self._first_capture_mono is None:
-                    self._first_capture_mono = mono
-                self._last_capture_mono = mono
-                self._last_capture_wall = time.monotonic()
+                if feed.first_mono is None:
+                    feed.first_mono = mono
+                feed.last_mono = mono
+                feed.last_wall = time.monotonic()
                 if self._paused.is_set():  # read and let go: a paused camera must not back up
-                    self._frames_paused += 1
-                    if not self._pauses or self._pauses[-1][1] is not None:
-                        self._pauses.append([frame.timestamp_ns, None])  # the gap, on the frames' clock
+                    feed.paused += 1
+                    if not feed.pauses or feed.pauses[-1][1] is not None:
+                        feed.pauses.append([frame.timestamp_ns, None])  # the gap, on the frames' clock
                     if self._stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
                         break
                     continue
-                if self._pauses and self._pauses[-1][1] is None:
-                    self._pauses[-1][1] = frame.timestamp_ns
-                if self._aq is not None:
-                    self._offer_analysis(frame)
+                if feed.pauses and feed.pauses[-1][1] is None:
+                    feed.pauses[-1][1] = frame.timestamp_ns
+                if feed.aq is not None:
+                    self._offer_analysis(feed, frame)
                 try:
-                    self.queue.put(frame) if self.wait_when_full else self.queue.put_nowait(frame)
+                    if feed.can_wait:
+                        feed.waiting = True
+                        self.queue.put((feed, frame))
+                        feed.waiting = False
+                    else:
+                        self.queue.put_nowait((feed, frame))
                 except queue.Full:
-                    counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in frame.messages])
+                    counters.drop(feed.message_topics(frame))
                 if self._stop.is_set() or (deadline is not None and time.monotonic() >= deadline):
                     break
         except ThermcapError as exc:
-            self._source_error = str(exc)
+            feed.error = str(exc)
         except Exception as exc:  # a source bug must still end the session cleanly
-            self._source_error = f"source failed: {type(exc).__name__}: {exc}"
+            feed.error = f"source failed: {type(exc).__name__}: {exc}"
         finally:
-            self.source.close()
-            self.queue.put(_STOP)  # blocks only until the writer frees a slot
-            if self._aq is not None:
-                self._aq.put(_STOP)
+            with contextlib.suppress(Exception):
+                feed.source.close()
+            if not feed.ended:
+                feed.ended = True
+                self.queue.put((feed, _STOP))  # blocks only until the writer frees a slot
+            if feed.aq is not None:
+                feed.aq.put(_STOP)
 
-    def _offer_analysis(self, frame: CapturedFrame) -> None:
+    def _offer_analysis(self, feed: CameraFeed, frame: CapturedFrame) -> None:
         fut: Future = Future()
         frame.analysis = fut
-        assert self._aq is not None
-        if self.wait_when_full:  # not real time: every frame is analysed
-            self._aq.put((frame.pixels, fut))
+        assert feed.aq is not None
+        if feed.can_wait:  # not real time: every frame is analysed
+            feed.aq.put((frame.pixels, fut))
             return
         now = time.monotonic_ns()
-        if now < self._next_analysis_ns:
+        if now < feed.next_analysis_ns:
             fut.set_result(None)
             return
         try:
-            self._aq.put_nowait((frame.pixels, fut))
-            self._next_analysis_ns = max(self._next_analysis_ns + self._analysis_period_ns,
-                                         now - self._analysis_period_ns)
+            feed.aq.put_nowait((frame.pixels, fut))
+            feed.next_analysis_ns = max(feed.next_analysis_ns + feed.analysis_period_ns,
+                                        now - feed.analysis_period_ns)
         except queue.Full:
             fut.set_result(None)
 
-    def _analysis_loop(self) -> None:
-        assert self._aq is not None and self._detector is not None
+    def _analysis_loop(self, feed: CameraFeed) -> None:
+        assert feed.aq is not None and feed.detector is not None
         while True:
-            item = self._aq.get()
+            item = feed.aq.get()
             if item is _STOP:
                 return
             pixels, fut = item
             try:
-                fut.set_result(self._detector.detect(pixels))
+                fut.set_result(feed.detector.detect(pixels))
             except Exception:  # a detector failure must not stop recording: the frame says skipped
                 fut.set_result(None)
 
@@ -435,6 +591,7 @@ class Recorder:
         session = self._session
         assert session is not None
         next_stats = time.monotonic() + self.stats_interval_s
+        running = len(self.feeds)
         try:
             while True:
                 try:
@@ -442,20 +599,24 @@ class Recorder:
                 except queue.Empty:
                     session.poll()
                     item = None
-                if item is _STOP:
-                    self._stop_seen = True
-                    self._handle_requests()
-                    break
+                if item is not None and item[1] is _STOP:
+                    running -= 1
+                    if running == 0:
+                        self._stop_seen = True
+                        self._handle_requests()
+                        break
+                    item = None
                 self._handle_requests()
                 if item is not None:
+                    feed, frame = item
                     if self.writer_delay_s:
                         time.sleep(self.writer_delay_s)
                     if self._evictor is not None and self._evictor.state.blocked:
                         # nothing left to evict: drop and count rather than fill the disk
-                        self.counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in item.messages])
+                        self.counters.drop(feed.message_topics(frame))
                         self.counters.disk_dropped += 1
                     else:
-                        self._write_frame(item)
+                        self._write_frame(feed, frame)
                 if time.monotonic() >= next_stats:
                     self._write_stats()
                     next_stats += self.stats_interval_s
@@ -463,25 +624,26 @@ class Recorder:
             session.close()
         except RecordingError as exc:
             self._writer_error = str(exc)
-            self._abort(session)
+            self._abort(session, running)
         except Exception as exc:
             self._writer_error = f"writer failed: {type(exc).__name__}: {exc}"
-            self._abort(session)
+            self._abort(session, running)
 
-    def _abort(self, session: SessionWriter) -> None:
+    def _abort(self, session: SessionWriter, running: int) -> None:
         self.stop()
         session.abandon()
-        if self._stop_seen:  # the capture thread already finished (its stop token was taken)
-            return
-        # Let the capture thread finish its last put; what it captured is counted as dropped.
-        while True:
+        # Let the capture threads finish their last puts; what they captured is counted as dropped.
+        while running > 0:
             try:
-                item = self.queue.get(timeout=1.0)
+                feed, frame = self.queue.get(timeout=1.0)
             except queue.Empty:
+                if all(f.ended for f in self.feeds) and self.queue.empty():
+                    return
                 continue
-            if item is _STOP:
-                return
-            self.counters.drop([TOPIC_IMAGE, TOPIC_METADATA] + [t for t, _ in item.messages])
+            if frame is _STOP:
+                running -= 1
+                continue
+            self.counters.drop(feed.message_topics(frame))
 
     def _handle_requests(self) -> None:
         """On the writer thread, between frames: splits, pauses, marks."""
@@ -499,14 +661,16 @@ class Recorder:
             elif kind == "pause":
                 self._record_event({"kind": "pause", "at_ns": at})
             elif kind == "resume":
-                self._record_event({"kind": "resume", "at_ns": at, "frames_paused": self._frames_paused})
+                self._record_event({"kind": "resume", "at_ns": at, "frames_paused": self.frames_paused})
             elif kind == "mark":
                 reason, _, note = arg.partition("\0")
                 self._protect(at, "mark", reason, note)
 
-    def _protect(self, at: int, kind: str, reason: str, note: str = "") -> None:
+    def _protect(self, at: int, kind: str, reason: str, note: str = "", camera: str | None = None) -> None:
         ev: dict[str, Any] = {"kind": kind, "at_ns": at, "reason": reason, "note": note,
                               "protect_start_ns": None, "protect_end_ns": None}
+        if camera is not None:
+            ev["camera"] = camera
         if self._book is not None and self.ring is not None:
             w = Window(at - int(self.ring.pre_s * 1e9), at + int(self.ring.post_s * 1e9), reason, note)
             self._book.add(w)
@@ -517,6 +681,8 @@ class Recorder:
         self._recorder_events.append({**ev, "start_ns": ev["at_ns"], "end_ns": ev.get("protect_end_ns") or ev["at_ns"]})
         if self._session is not None:
             self._session.write_message(TOPIC_EVENTS, ev["at_ns"], json.dumps(ev, separators=(",", ":")).encode())
+        if self.live is not None:
+            self.live.offer_event(ev["at_ns"], ev)
 
     def _segment_closed(self) -> None:
         if self._evictor is not None:  # on the writer thread, between two segments
@@ -526,21 +692,27 @@ class Recorder:
                 self._evictor.state.blocked = True
                 self._evictor.state.blocked_reason = f"eviction failed: {type(exc).__name__}: {exc}"
 
-    def _write_frame(self, frame: CapturedFrame) -> None:
+    def _write_frame(self, feed: CameraFeed, frame: CapturedFrame) -> None:
         ts = frame.timestamp_ns
-        blocks = self._sidecar_blocks(frame)
-        payload = self._sidecars.encode(blocks)
-        self._events.add(ts, blocks)
-        if self._triggers is not None:
-            for reason in self._triggers.check(blocks):
-                self._protect(ts, "trigger", reason)
-        extra = [(topic, json.dumps(msg, separators=(",", ":")).encode()) for topic, msg in frame.messages]
+        blocks = self._sidecar_blocks(feed, frame)
+        payload = feed.sidecars.encode(blocks)
+        feed.events.add(ts, blocks)
+        if feed.triggers is not None:
+            for reason in feed.triggers.check(blocks):
+                self._protect(ts, "trigger", reason, camera=feed.name)
+        extra = [(feed.topics.extra(topic), json.dumps(msg, separators=(",", ":")).encode())
+                 for topic, msg in frame.messages]
+        attachments = frame.attachments if not self.multi else \
+            [(f"{feed.name}/{name}", media, data) for name, media, data in frame.attachments]
         assert self._session is not None
         self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
                                   token=frame.capture_mono_ns or None, sequence=frame.index,
-                                  attachments=frame.attachments)
+                                  attachments=attachments, camera=feed.name)
         self.counters.frames_written += 1
-        self._last_frame_ns = ts
+        feed.written += 1
+        self._last_frame_ns = ts if self._last_frame_ns is None else max(ts, self._last_frame_ns)
+        if self.live is not None:
+            self.live.offer(feed.name, ts, frame.pixels, frame.index, payload)
 
     def _chunk_written(self, tokens: list[Any]) -> None:
         now = time.monotonic_ns()
@@ -551,21 +723,26 @@ class Recorder:
 
     def _write_stats(self) -> None:
         c = self.counters
+        dropped = {t: 0 for f in self.feeds for t in (f.topics.image, f.topics.metadata)}
         stats = {
             "frames_captured": c.frames_captured, "frames_written": c.frames_written,
-            "dropped": {TOPIC_IMAGE: 0, TOPIC_METADATA: 0, **c.dropped},
+            "dropped": {**dropped, **c.dropped},
             "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize,
             "write_latency_ms": {"interval": self._interval_latency.summary_ms(), "session": self.latency.summary_ms()},
             "analysis_skipped": c.analysis_skipped,
             "timing": self.timing(),
             "segment": self._session.segments[-1].index if self._session and self._session.segments else 0,
-            "frames_paused": self._frames_paused,
+            "frames_paused": self.frames_paused,
         }
+        if self.multi:
+            stats["cameras"] = {str(f.name): f.summary(c.dropped) for f in self.feeds}
         if self._evictor is not None:
             st = self._evictor.state
             stats["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
                              "blocked": st.blocked, "blocked_reason": st.blocked_reason,
                              "frames_dropped_for_disk": c.disk_dropped}
+        if self.live is not None:
+            stats["live"] = self.live.counters.to_dict()
         self._interval_latency = LatencyHistogram()
         assert self._session is not None
         # On the frames' clock (a replayed or simulated session may not be "now"), never before them.
@@ -573,7 +750,7 @@ class Recorder:
         self._session.write_message(TOPIC_STATS, log_time, json.dumps(stats, separators=(",", ":")).encode())
 
     # -- sidecar ------------------------------------------------------------------------------
-    def _sidecar_blocks(self, frame: CapturedFrame) -> dict[str, Any]:
+    def _sidecar_blocks(self, feed: CameraFeed, frame: CapturedFrame) -> dict[str, Any]:
         """The per-frame sidecar blocks; the encoder adds the session's sensor and radiometric ones."""
         extra = frame.sidecar
         capture = {"timestamp": iso_utc(frame.timestamp_ns), "frame_index": frame.index}
@@ -581,11 +758,12 @@ class Recorder:
         analysis, targets = extra.get("thermal_analysis") or _NO_ANALYSIS, extra.get("targets", [])
         if frame.analysis is not None:
             try:
-                result = frame.analysis.result(timeout=None if self.wait_when_full else self.analysis_wait_s)
+                result = frame.analysis.result(timeout=None if feed.can_wait else self.analysis_wait_s)
             except FutureTimeout:
                 result = None
             if result is None:
                 self.counters.analysis_skipped += 1
+                feed.analysis_skipped += 1
                 analysis, targets = _SKIPPED, []
             else:
                 analysis, targets = result[1], [d.to_sidecar() for d in result[0]]
@@ -598,19 +776,23 @@ class Recorder:
         }
 
     def _session_meta(self, started_ns: int) -> dict[str, Any]:
-        return {
-            "session_id": self.session_id,
-            "started_ns": started_ns,
-            "started": iso_utc(started_ns),
-            "sensor": {**self.source.sensor.to_sidecar(), "sensor_id": self.source.sensor.sensor_id},
-            "radiometric_model": self.source.model.to_dict(),
-            "source": self.source.describe(),
-            "software_version": __version__,
-            "format_version": FORMAT_VERSION,
-            **({"ring": {"max_disk": self.ring.max_disk, "min_free": self.ring.min_free,
-                         "min_free_percent": self.ring.min_free_percent, "pre_s": self.ring.pre_s,
-                         "post_s": self.ring.post_s}} if self.ring is not None else {}),
-        }
+        def camera(src: FrameSource) -> dict[str, Any]:
+            return {"sensor": {**src.sensor.to_sidecar(), "sensor_id": src.sensor.sensor_id},
+                    "radiometric_model": src.model.to_dict(), "source": src.describe()}
+
+        meta: dict[str, Any] = {"session_id": self.session_id, "started_ns": started_ns,
+                                "started": iso_utc(started_ns)}
+        if self.multi:
+            meta["cameras"] = {str(f.name): {**camera(f.source), "image_topic": f.topics.image,
+                                             "metadata_topic": f.topics.metadata} for f in self.feeds}
+        else:
+            meta.update(camera(self.source))
+        meta.update(software_version=__version__, format_version=FORMAT_VERSION)
+        if self.ring is not None:
+            meta["ring"] = {"max_disk": self.ring.max_disk, "min_free": self.ring.min_free,
+                            "min_free_percent": self.ring.min_free_percent, "pre_s": self.ring.pre_s,
+                            "post_s": self.ring.post_s}
+        return meta
 
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,

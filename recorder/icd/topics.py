@@ -8,7 +8,9 @@ buffer travels as one piece, behind a 60-odd-byte prefix.
 
 from __future__ import annotations
 
+import re
 import struct
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -26,9 +28,13 @@ __all__ = [
     "TOPIC_METADATA",
     "TOPIC_RADAR_CUE",
     "TOPIC_STATS",
+    "CameraTopics",
+    "camera_topics",
+    "check_camera_name",
     "decode_image",
     "encode_image_prefix",
     "image_message_parts",
+    "is_image_topic",
 ]
 
 TOPIC_IMAGE = "/thermal/image"
@@ -37,6 +43,44 @@ TOPIC_RADAR_CUE = "/radar/cue"
 TOPIC_STATS = "/recorder/stats"
 TOPIC_EVENTS = "/recorder/events"  # marks, triggers, pauses and splits while recording
 TOPIC_GROUND_TRUTH = "/sim/ground_truth"
+
+_CAMERA_NAME = re.compile(r"[a-z0-9][a-z0-9_-]{0,31}")
+
+
+@dataclass(frozen=True)
+class CameraTopics:
+    """Where one camera's messages go. A single-camera session keeps the plain ``/thermal/image``
+    and ``/thermal/metadata``; in a session of several cameras everything a camera's source
+    emits lives under ``/thermal/<name>/`` (its radar cues too), so no two cameras share a topic."""
+
+    name: str | None
+    image: str
+    metadata: str
+
+    def extra(self, topic: str) -> str:
+        return topic if self.name is None else f"/thermal/{self.name}{topic}"
+
+
+def check_camera_name(name: str) -> str:
+    if not _CAMERA_NAME.fullmatch(name):
+        raise ValueError(f"camera name {name!r}: use 1-32 lower-case letters, digits, '-' or '_'")
+    return name
+
+
+def camera_topics(name: str | None = None) -> CameraTopics:
+    if name is None:
+        return CameraTopics(None, TOPIC_IMAGE, TOPIC_METADATA)
+    check_camera_name(name)
+    return CameraTopics(name, f"/thermal/{name}/image", f"/thermal/{name}/metadata")
+
+
+def is_image_topic(topic: str) -> bool:
+    """``/thermal/image`` or a named camera's ``/thermal/<name>/image``."""
+    if topic == TOPIC_IMAGE:
+        return True
+    parts = topic.split("/")
+    return len(parts) == 4 and parts[1] == "thermal" and parts[3] == "image" and bool(_CAMERA_NAME.fullmatch(parts[2]))
+
 
 IMAGE_SCHEMA_NAME = "sensor_msgs/msg/Image"
 IMAGE_SCHEMA_TEXT = """\

@@ -35,9 +35,8 @@ from recorder.icd.topics import (
     IMAGE_SCHEMA_TEXT,
     STATS_SCHEMA,
     TOPIC_EVENTS,
-    TOPIC_IMAGE,
-    TOPIC_METADATA,
     TOPIC_STATS,
+    camera_topics,
 )
 from recorder.storage.layout import ACTIVE_SUFFIX
 from recorder.storage.writer import ChunkedWriter, Compression
@@ -143,10 +142,15 @@ class SessionWriter:
     """Writes frames, sidecars and other messages of one session into rotating segments."""
 
     def __init__(self, session_dir: Path, *, session_meta: dict[str, Any], extra_topics: dict[str, dict[str, Any]],
-                 bad_pixel_map: np.ndarray | None = None, policy: SegmentPolicy | None = None,
+                 bad_pixel_map: np.ndarray | dict[str, np.ndarray] | None = None,
+                 policy: SegmentPolicy | None = None,
                  on_chunk_written: Callable[[list[Any]], None] | None = None,
-                 on_segment_closed: Callable[[], None] | None = None) -> None:
+                 on_segment_closed: Callable[[], None] | None = None,
+                 cameras: Sequence[str] | None = None) -> None:
+        """``cameras``: the names of a session of several cameras (``/thermal/<name>/...``);
+        None keeps the single-camera layout. ``bad_pixel_map`` is then one map per name."""
         self.dir = Path(session_dir)
+        self.cameras = {None: camera_topics(None)} if not cameras else {n: camera_topics(n) for n in cameras}
         self.on_segment_closed = on_segment_closed
         self.policy = policy or SegmentPolicy()
         self.session_meta = session_meta
@@ -187,21 +191,26 @@ class SessionWriter:
             writer.start(profile="ros2")
             channels: dict[str, int] = {}
             image_schema = writer.register_schema(IMAGE_SCHEMA_NAME, "ros2msg", IMAGE_SCHEMA_TEXT.encode())
-            channels[TOPIC_IMAGE] = writer.register_channel(TOPIC_IMAGE, "cdr", image_schema)
             meta_schema = writer.register_schema("thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes())
-            channels[TOPIC_METADATA] = writer.register_channel(TOPIC_METADATA, "json", meta_schema)
+            for topics in self.cameras.values():
+                channels[topics.image] = writer.register_channel(topics.image, "cdr", image_schema)
+                channels[topics.metadata] = writer.register_channel(topics.metadata, "json", meta_schema)
             for topic, schema in {**self.extra_topics, TOPIC_STATS: STATS_SCHEMA, TOPIC_EVENTS: EVENT_SCHEMA}.items():
                 sid = writer.register_schema(schema.get("title", topic), "jsonschema", json.dumps(schema).encode())
                 channels[topic] = writer.register_channel(topic, "json", sid)
             meta = {k: v if isinstance(v, str) else json.dumps(v) for k, v in self.session_meta.items()}
             meta.update(segment_index=str(info.index), software_version=__version__, host=socket.gethostname())
             writer.add_metadata(SESSION_METADATA, meta)
-            if self.bad_pixel_map is not None:
-                ys, xs = np.nonzero(self.bad_pixel_map)
-                bpm = {"width": int(self.bad_pixel_map.shape[1]), "height": int(self.bad_pixel_map.shape[0]),
+            maps = self.bad_pixel_map if isinstance(self.bad_pixel_map, dict) else {"": self.bad_pixel_map}
+            for camera, bad in maps.items():
+                if bad is None:
+                    continue
+                ys, xs = np.nonzero(bad)
+                bpm = {"width": int(bad.shape[1]), "height": int(bad.shape[0]),
                        "convention": "[x, y] of each defective pixel; correct by median of good neighbours (ICD 5.3)",
                        "pixels": [[int(x), int(y)] for y, x in zip(ys, xs, strict=True)]}
-                writer.add_attachment("bad_pixel_map.json", "application/json", json.dumps(bpm).encode(),
+                writer.add_attachment(f"{camera}/bad_pixel_map.json" if camera else "bad_pixel_map.json",
+                                      "application/json", json.dumps(bpm).encode(),
                                       log_time=time.time_ns(), create_time=time.time_ns())
         except OSError as exc:
             raise RecordingError(f"cannot start segment {path}: {exc.strerror or exc}") from exc
@@ -250,7 +259,7 @@ class SessionWriter:
     # -- writing -------------------------------------------------------------------------------
     def write_frame(self, log_time: int, image_parts: list[Any], sidecar_json: bytes,
                     extra: Sequence[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
-                    attachments: Sequence[tuple[str, str, bytes]] = ()) -> None:
+                    attachments: Sequence[tuple[str, str, bytes]] = (), camera: str | None = None) -> None:
         size = sum(memoryview(p).nbytes for p in image_parts) + len(sidecar_json)
         self._maybe_rotate(log_time, size)
         writer = self._writer
@@ -258,8 +267,9 @@ class SessionWriter:
         for name, media_type, data in attachments:
             with self._writing():
                 writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
-        self._add(TOPIC_IMAGE, log_time, image_parts, token=token, sequence=sequence)
-        self._add(TOPIC_METADATA, log_time, sidecar_json, sequence=sequence)
+        topics = self.cameras[camera]
+        self._add(topics.image, log_time, image_parts, token=token, sequence=sequence)
+        self._add(topics.metadata, log_time, sidecar_json, sequence=sequence)
         for topic, payload in extra:
             self._add(topic, log_time, payload)
         self.segments[-1].frames += 1

@@ -1,0 +1,199 @@
+"""Frames, sidecars, annotations and events as Foxglove messages on a WebSocket server.
+
+The server is the ``foxglove-sdk`` one (Rust, its own threads): each client has a bounded
+outgoing buffer whose oldest message is dropped when a viewer is slow, so a viewer can never
+push back on us. Images go out as ``foxglove.RawImage`` ``mono16``: the counts themselves,
+subsampled when a lower resolution is asked for, never rescaled, so a value read off the
+live picture is a real count of that pixel.
+"""
+
+from __future__ import annotations
+
+import json
+import threading
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from recorder.radiometry import RadiometricModel
+
+__all__ = ["CameraTopics", "LiveOptions", "LivePublisher", "subsample"]
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """What a viewer gets: at most ``max_fps`` frames per second per camera, subsampled so the
+    picture is at most ``max_width`` pixels wide (0: full resolution)."""
+
+    host: str = "127.0.0.1"
+    port: int = 8765
+    max_fps: float = 10.0
+    max_width: int = 0
+    name: str = "thermcap"
+    #: messages buffered per viewer before its oldest is dropped (the SDK's backlog)
+    backlog: int = 64
+
+
+@dataclass(frozen=True)
+class CameraTopics:
+    """A camera's live topics: ``/thermal/...`` for a single camera, ``/thermal/<name>/...``
+    when several share a session (the recorded layout)."""
+
+    image: str
+    metadata: str
+    annotations: str
+    temperature: str
+
+    @classmethod
+    def of(cls, camera: str | None) -> CameraTopics:
+        base = "/thermal" if not camera else f"/thermal/{camera}"
+        return cls(f"{base}/image", f"{base}/metadata", f"{base}/annotations", f"{base}/temperature")
+
+
+def subsample(pixels: np.ndarray, max_width: int) -> tuple[np.ndarray, int]:
+    """Every k-th pixel of every k-th row so the width is at most ``max_width``; (image, k)."""
+    if not max_width or pixels.shape[1] <= max_width:
+        return pixels, 1
+    k = -(-pixels.shape[1] // max_width)
+    return pixels[::k, ::k], k
+
+
+_TEMPERATURE_SCHEMA = {
+    "type": "object", "title": "thermcap.LiveTemperature",
+    "properties": {"min_c": {"type": ["number", "null"]}, "max_c": {"type": ["number", "null"]},
+                   "mean_c": {"type": ["number", "null"]}, "center_c": {"type": ["number", "null"]},
+                   "hottest_xy": {"type": "array", "items": {"type": "integer"}},
+                   "subsample": {"type": "integer"}, "frame_index": {"type": "integer"}},
+}
+
+
+class _Camera:
+    def __init__(self, topics: CameraTopics, model: RadiometricModel | None, context: Any) -> None:
+        from foxglove import Channel
+        from foxglove.channels import ImageAnnotationsChannel, RawImageChannel
+
+        self.topics = topics
+        self.model = model
+        self.image = RawImageChannel(topics.image, context=context)
+        self.metadata = Channel(topics.metadata, message_encoding="json", context=context)
+        self.annotations = ImageAnnotationsChannel(topics.annotations, context=context)
+        self.temperature = Channel(topics.temperature, schema=_TEMPERATURE_SCHEMA, context=context)
+
+
+class LivePublisher:
+    """One Foxglove WebSocket server and the channels of each camera on it."""
+
+    def __init__(self, options: LiveOptions | None = None) -> None:
+        import foxglove
+
+        self.options = options or LiveOptions()
+        self._context = foxglove.Context()  # our own, so two publishers in one process never mix
+        self._server = foxglove.start_server(name=self.options.name, host=self.options.host,
+                                             port=self.options.port, context=self._context,
+                                             message_backlog_size=self.options.backlog)
+        self._cameras: dict[str | None, _Camera] = {}
+        self._events = foxglove.Channel("/recorder/events", message_encoding="json", context=self._context)
+        self._lock = threading.Lock()
+        self.messages_sent = 0
+
+    @property
+    def port(self) -> int:
+        return int(self._server.port)
+
+    @property
+    def url(self) -> str:
+        return f"ws://{self.options.host}:{self.port}"
+
+    def add_camera(self, camera: str | None, model: RadiometricModel | None) -> CameraTopics:
+        with self._lock:
+            if camera not in self._cameras:
+                self._cameras[camera] = _Camera(CameraTopics.of(camera), model, self._context)
+            return self._cameras[camera].topics
+
+    def publish_frame(self, camera: str | None, timestamp_ns: int, pixels: np.ndarray, frame_index: int,
+                      sidecar: dict[str, Any] | bytes | None = None) -> None:
+        """One frame: its image (subsampled to the configured width), its sidecar as recorded,
+        boxes and labels for its targets, and its scene temperatures from the camera's model."""
+        from foxglove.messages import RawImage, Timestamp
+
+        cam = self._cameras.get(camera)
+        if cam is None:
+            self.add_camera(camera, None)
+            cam = self._cameras[camera]
+        img, k = subsample(pixels, self.options.max_width)
+        img = np.ascontiguousarray(img, dtype="<u2")
+        stamp = Timestamp(sec=timestamp_ns // 1_000_000_000, nsec=timestamp_ns % 1_000_000_000)
+        cam.image.log(RawImage(timestamp=stamp, frame_id=cam.topics.image.rsplit("/", 1)[0].lstrip("/") or "thermal",
+                               width=img.shape[1], height=img.shape[0], encoding="mono16",
+                               step=img.shape[1] * 2, data=img.tobytes()), log_time=timestamp_ns)
+        sent = 1
+        blocks: dict[str, Any] | None = None
+        if sidecar is not None:
+            raw = sidecar if isinstance(sidecar, bytes) else json.dumps(sidecar, separators=(",", ":")).encode()
+            cam.metadata.log(raw, log_time=timestamp_ns)
+            sent += 1
+            blocks = sidecar if isinstance(sidecar, dict) else _loads(raw)
+        if blocks is not None:
+            cam.annotations.log(_annotations(blocks.get("targets") or [], stamp, k), log_time=timestamp_ns)
+            sent += 1
+        if cam.model is not None:
+            cam.temperature.log(_temperatures(cam.model, img, k, frame_index), log_time=timestamp_ns)
+            sent += 1
+        self.messages_sent += sent
+
+    def publish_event(self, timestamp_ns: int, event: dict[str, Any]) -> None:
+        self._events.log(event, log_time=timestamp_ns)
+        self.messages_sent += 1
+
+    def close(self) -> None:
+        self._server.stop()
+
+
+def _loads(raw: bytes) -> dict[str, Any] | None:
+    try:
+        doc = json.loads(raw)
+    except ValueError:
+        return None
+    return doc if isinstance(doc, dict) else None
+
+
+def _temperatures(model: RadiometricModel, img: np.ndarray, k: int, frame_index: int) -> dict[str, Any]:
+    try:
+        c = np.asarray(model.to_celsius(img), dtype=np.float64)
+    except Exception:  # a model that cannot give temperatures (missing constants): say so, not fail
+        return {"min_c": None, "max_c": None, "mean_c": None, "center_c": None, "hottest_xy": [],
+                "subsample": k, "frame_index": frame_index}
+    hy, hx = np.unravel_index(int(np.argmax(c)), c.shape)
+    cy, cx = c.shape[0] // 2, c.shape[1] // 2
+    return {"min_c": round(float(c.min()), 3), "max_c": round(float(c.max()), 3),
+            "mean_c": round(float(c.mean()), 3), "center_c": round(float(c[cy, cx]), 3),
+            "hottest_xy": [int(hx) * k, int(hy) * k], "subsample": k, "frame_index": frame_index}
+
+
+def _annotations(targets: list[dict[str, Any]], stamp: Any, k: int) -> Any:
+    from foxglove.messages import (
+        Color,
+        ImageAnnotations,
+        Point2,
+        PointsAnnotation,
+        PointsAnnotationType,
+        TextAnnotation,
+    )
+
+    red, white, shade = Color(r=1.0, g=0.2, b=0.1, a=1.0), Color(r=1, g=1, b=1, a=1), Color(r=0, g=0, b=0, a=0.6)
+    boxes, labels = [], []
+    for t in targets:
+        bbox = t.get("bbox")
+        if not bbox or len(bbox) != 4:
+            continue
+        x0, y0, x1, y1 = (float(v) / k for v in bbox)
+        x1, y1 = x1 + 1.0 / k, y1 + 1.0 / k  # inclusive pixel boxes: the far edge of the last pixel
+        boxes.append(PointsAnnotation(timestamp=stamp, type=PointsAnnotationType.LineLoop,
+                                      points=[Point2(x=x0, y=y0), Point2(x=x1, y=y0), Point2(x=x1, y=y1),
+                                              Point2(x=x0, y=y1)],
+                                      outline_color=red, thickness=2.0))
+        label = f"#{t.get('target_id')} {t.get('max_temp_c')} °C"
+        labels.append(TextAnnotation(timestamp=stamp, position=Point2(x=x0, y=max(0.0, y0 - 2)), text=label,
+                                     font_size=12.0, text_color=white, background_color=shade))
+    return ImageAnnotations(timestamp=stamp, points=boxes, texts=labels)
