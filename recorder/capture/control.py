@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA
 from recorder.storage.segments import write_json_atomic
 
 if TYPE_CHECKING:
@@ -42,16 +41,20 @@ def metrics_text(rec: Recorder) -> str:
             lines.extend([f"# HELP {name} {help_}", f"# TYPE {name} {kind}"])
         lines.append(f"{name}{labels} {0 if value is None else value}")
 
-    cam = f'{{camera="{rec.source.sensor.sensor_id}"}}'
-    metric("thermcap_recorder_frames_captured_total", "counter", "Frames read from the source", st["frames_captured"],
-           cam)
-    metric("thermcap_recorder_frames_written_total", "counter", "Frames written to segments", st["frames_written"], cam)
-    metric("thermcap_recorder_frames_dropped_total", "counter", "Frames dropped (queue full or disk budget)",
-           st["dropped"].get(TOPIC_IMAGE, 0), cam)
+    for name, c in st["cameras"].items():  # the sensor id, or the camera's name in a session of several
+        cam = f'{{camera="{name}"}}'
+        metric("thermcap_recorder_frames_captured_total", "counter", "Frames read from the source",
+               c["frames_captured"], cam)
+        metric("thermcap_recorder_frames_written_total", "counter", "Frames written to segments",
+               c["frames_written"], cam)
+        metric("thermcap_recorder_frames_dropped_total", "counter", "Frames dropped (queue full or disk budget)",
+               c["frames_dropped"], cam)
+        metric("thermcap_recorder_frames_paused_total", "counter", "Frames not recorded while paused",
+               c["frames_paused"], cam)
+        metric("thermcap_recorder_camera_failed", "gauge", "1 when the camera failed or stalled",
+               int(bool(c["error"])), cam)
     metric("thermcap_recorder_sidecars_dropped_total", "counter", "Sidecars dropped",
-           st["dropped"].get(TOPIC_METADATA, 0), cam)
-    metric("thermcap_recorder_frames_paused_total", "counter", "Frames not recorded while paused",
-           st["frames_paused"], cam)
+           sum(n for t, n in st["dropped"].items() if t.endswith("/metadata")))
     metric("thermcap_recorder_queue_depth", "gauge", "Frames waiting for the writer", st["queue_depth"])
     metric("thermcap_recorder_queue_capacity", "gauge", "Capacity of the writer queue", st["queue_capacity"])
     metric("thermcap_recorder_write_latency_p99_seconds", "gauge", "p99 capture-to-disk latency",
@@ -73,6 +76,11 @@ def metrics_text(rec: Recorder) -> str:
     last = st.get("last_event") or {}
     metric("thermcap_recorder_last_event_timestamp_seconds", "gauge", "Time of the last event",
            (last.get("at_ns") or 0) / 1e9)
+    live = st.get("live")
+    if live is not None:
+        metric("thermcap_live_frames_published_total", "counter", "Frames sent to the live view", live["published"])
+        metric("thermcap_live_frames_dropped_total", "counter", "Frames the live view let go (the recording kept "
+               "them)", live["dropped"])
     return "\n".join(lines) + "\n"
 
 

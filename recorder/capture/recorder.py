@@ -212,7 +212,8 @@ class Recorder:
                  wait_when_full: bool = False, ring: RingPolicy | None = None,
                  triggers: TriggerPolicy | None = None, stall_s: float = 5.0,
                  live: LiveBranch | None = None, stop_grace_s: float = 5.0) -> None:
-        sources: dict[str | None, FrameSource] = dict(source) if isinstance(source, Mapping) else {None: source}
+        sources: dict[str | None, FrameSource] = {None: source} if not isinstance(source, Mapping) else \
+            {str(k): v for k, v in source.items()}
         if not sources:
             raise RecordingError("no source to record")
         self.multi = isinstance(source, Mapping)
@@ -327,7 +328,7 @@ class Recorder:
                            "blocked": st.blocked, "blocked_reason": st.blocked_reason,
                            "protected_windows": len(self._book.windows) if self._book else 0}
         if self.live is not None:
-            out["live"] = {"url": self.live.url, **self.live.counters.to_dict()}
+            out["live"] = {"url": self.live.url, **self.live.snapshot()}
         healthy, reasons = self.health()
         out["healthy"], out["problems"] = healthy, reasons
         return out
@@ -445,7 +446,7 @@ class Recorder:
             evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
             cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
-            live=self.live.counters.to_dict() if self.live is not None else None)
+            live=self.live.snapshot() if self.live is not None else None)
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    "pauses": self._pauses,
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok", "live")}}
@@ -742,7 +743,7 @@ class Recorder:
                              "blocked": st.blocked, "blocked_reason": st.blocked_reason,
                              "frames_dropped_for_disk": c.disk_dropped}
         if self.live is not None:
-            stats["live"] = self.live.counters.to_dict()
+            stats["live"] = self.live.snapshot()
         self._interval_latency = LatencyHistogram()
         assert self._session is not None
         # On the frames' clock (a replayed or simulated session may not be "now"), never before them.

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import signal
 import sys
@@ -19,7 +20,9 @@ if TYPE_CHECKING:
 
 # -- record ---------------------------------------------------------------------------------
 @cli.command()
-@click.option("--source", default="sim", show_default=True, help="sim, raw:PATH, or raw:- for stdin.")
+@click.option("--source", "sources", multiple=True, default=["sim"], show_default=True, metavar="[NAME=]SOURCE",
+              help="sim, raw:PATH, or raw:- for stdin; repeat with names for several cameras in one session "
+                   "(left=sim --source right=raw:/dev/stdin,width=320,height=256,fps=30).")
 @click.option("--duration", type=float, default=None,
               help="Seconds to record (default: until the input ends or Ctrl-C).")
 @click.option("--fps", type=float, default=60.0, show_default=True)
@@ -66,15 +69,23 @@ if TYPE_CHECKING:
 @click.option("--control-port", type=int, default=0, show_default=True, help="Its port (0: any free port).")
 @click.option("--control-token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
               help="Bearer token every control route but /healthz requires (set it in the environment).")
+@click.option("--live", is_flag=True, help="Serve a live view for Foxglove (Open connection: ws://HOST:PORT).")
+@click.option("--live-host", default="127.0.0.1", show_default=True,
+              help="Address of the live view (0.0.0.0 to let the vehicle network see it).")
+@click.option("--live-port", type=int, default=8765, show_default=True)
+@click.option("--live-fps", type=float, default=10.0, show_default=True, help="Most frames/s per camera it sends.")
+@click.option("--live-width", type=int, default=0, show_default=True,
+              help="Subsample the live picture to at most this width (0: full resolution).")
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
-def record(source: str, duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
+def record(sources: tuple[str, ...], duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
            root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool,
            cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float,
            trigger_hot: float | None, trigger_target_count: bool, control: bool, control_port: int,
-           control_token: str | None, debug_writer_delay: float, as_json: bool) -> None:
+           control_token: str | None, live: bool, live_host: str, live_port: int, live_fps: float,
+           live_width: int, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments.
 
     With --ring it records until stopped within a disk budget; triggers (--trigger-*, the contrast
@@ -83,24 +94,40 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
     from recorder.capture.control import ControlServer
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources import make_source
+    from recorder.capture.sources.spec import parse_source_spec
     from recorder.capture.triggers import TriggerPolicy
     from recorder.storage.ring import RingPolicy
     from recorder.storage.segments import SegmentPolicy, auto_compression
     from recorder.storage.writer import Compression
 
+    live_branch = None
     try:
-        is_sim = source == "sim"
-        src = make_source(source, width=width, height=height, fps=fps, seed=seed, crossover=crossover,
-                          cue_period_s=cue_period, paced=(is_sim if pace is None else pace),
-                          duration_s=duration if is_sim else None, sensor_id=sensor_id,
-                          timestamps=None if is_sim else timestamps)
-        remainder = getattr(src, "file_remainder", 0)
-        if remainder:
-            click.echo(f"warning: {source[4:]} is not a whole number of {width}x{height} Gray16 frames "
-                       f"({remainder} bytes left over); the last frame will be reported as truncated",
-                       err=True)
+        specs = [parse_source_spec(s) for s in sources]
+        if len(specs) > 1:
+            specs = [sp if sp.name else dataclasses.replace(sp, name=f"cam{i}") for i, sp in enumerate(specs)]
+            names = [sp.name for sp in specs]
+            if len(set(names)) != len(names):
+                raise click.BadParameter(f"camera names must differ: {', '.join(str(n) for n in names)}")
+        srcs = {}
+        pixel_rate = 0.0
+        for sp in specs:
+            o = {"width": width, "height": height, "fps": fps, "seed": seed, "sensor": sensor_id, "pace": pace,
+                 "timestamps": timestamps, "crossover": crossover, "cue-period": cue_period, **sp.options}
+            src = make_source(sp.kind, width=o["width"], height=o["height"], fps=o["fps"], seed=o["seed"],
+                              crossover=o["crossover"], cue_period_s=o["cue-period"],
+                              paced=(sp.is_sim if o["pace"] is None else o["pace"]),
+                              duration_s=duration if sp.is_sim else None, sensor_id=o["sensor"],
+                              timestamps=None if sp.is_sim else o["timestamps"])
+            remainder = getattr(src, "file_remainder", 0)
+            if remainder:
+                click.echo(f"warning: {sp.kind[4:]} is not a whole number of {o['width']}x{o['height']} Gray16 "
+                           f"frames ({remainder} bytes left over); the last frame will be reported as truncated",
+                           err=True)
+            srcs[sp.name] = src
+            pixel_rate += o["width"] * o["height"] * o["fps"]
+        is_sim = all(sp.is_sim for sp in specs)
         if compression == "auto":
-            comp, default_level = auto_compression(width, height, fps)
+            comp, default_level = auto_compression(int(pixel_rate), 1, 1.0)
         else:
             comp, default_level = Compression(compression), (1 if compression == "zstd" else 0)
         policy = SegmentPolicy(max_duration_s=segment_duration or None,
@@ -112,9 +139,22 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
         if ring and ring_policy is not None and ring_policy.max_disk is None and ring_policy.min_free is None \
                 and ring_policy.min_free_percent is None:
             raise click.BadParameter("--ring needs --max-disk and/or --min-free")
-        rec = Recorder(src, root, session_id=session_id, policy=policy, queue_frames=queue_frames,
+        if live:
+            from recorder.live.branch import LiveBranch
+            from recorder.live.publisher import LiveOptions
+
+            try:
+                live_branch = LiveBranch(LiveOptions(host=live_host, port=live_port, max_fps=live_fps,
+                                                     max_width=live_width))
+            except Exception as exc:  # the SDK raises its own error types for a busy port
+                raise ValueError(f"live view on {live_host}:{live_port}: {exc}") from None
+        single = srcs.get(None)
+        rec = Recorder(single if single is not None else {str(k): v for k, v in srcs.items()}, root,
+                       session_id=session_id, policy=policy,
+                       queue_frames=queue_frames,
                        writer_delay_s=debug_writer_delay, analysis=analysis, ring=ring_policy,
-                       triggers=TriggerPolicy(hot_spot_c=trigger_hot, target_count=trigger_target_count))
+                       triggers=TriggerPolicy(hot_spot_c=trigger_hot, target_count=trigger_target_count),
+                       live=live_branch)
     except click.BadParameter as exc:
         fail(str(exc.message))
     except ThermcapError as exc:
@@ -124,6 +164,8 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
 
     if not as_json:
         click.echo(f"session {rec.session_id} -> {rec.session_dir}")
+        if live_branch is not None:
+            click.echo(f"live view: {live_branch.url}  (Foxglove: Open connection -> Foxglove WebSocket)")
     signal.signal(signal.SIGTERM, lambda *_: rec.stop())
     signal.signal(signal.SIGUSR1, lambda *_: rec.mark("SIGUSR1", reason="signal"))
     server = None
@@ -144,6 +186,8 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
     finally:
         if server is not None:
             server.stop()
+        if live_branch is not None:
+            live_branch.close()
     if progress is not None:
         click.echo("", err=True)
     if as_json:
@@ -166,6 +210,13 @@ def record(source: str, duration: float | None, fps: float, width: int, height: 
         if analysis:
             click.echo(f"analysis: {result.frames_written - result.analysis_skipped} frames analysed, "
                        f"{result.analysis_skipped} skipped; {result.events} events")
+        for name, cam in result.cameras.items():
+            click.echo(f"camera {name}: {cam['frames_captured']} captured, {cam['frames_written']} written, "
+                       f"{cam['frames_dropped']} dropped" + (f"; {cam['error']}" if cam["error"] else ""))
+        if result.live is not None:
+            lv = result.live
+            click.echo(f"live view: {lv['published']} frames sent, {lv['skipped_for_rate']} above --live-fps, "
+                       f"{lv['dropped']} dropped by the view (never by the recording)")
     if result.error:
         fail(result.error)
 
@@ -288,6 +339,12 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
                   + (f"[yellow]{late} frames late[/yellow]" if late else "0 frames late"))
     dropped = d.dropped or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
+    if isinstance(d, SessionInfo) and d.cameras:
+        cams = Table("camera", "sensor", "frames", "captured", "dropped", "effective fps", "error")
+        for name, c in d.cameras.items():
+            cams.add_row(name, c.sensor or "?", str(c.frames), str(c.frames_captured), str(c.frames_dropped),
+                         str(c.effective_fps), c.error or "")
+        con.print(cams)
     if isinstance(d, SessionInfo) and d.pauses:
         con.print(f"paused {len(d.pauses)} times, {d.frames_paused} frames not recorded: "
                   + ", ".join(f"{(b - a) / 1e9:.1f} s" if a is not None and b is not None else "to the end"

@@ -46,8 +46,17 @@ class _PluginGroup(click.Group):
 @click.group(cls=_PluginGroup, entry_point_group="thermcap.commands",
              context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="thermcap")
-def cli() -> None:
+@click.option("--config", "config", envvar="THERMCAP_CONFIG", show_envvar=True, default=None, metavar="FILE",
+              type=click.Path(dir_okay=False),
+              help="A TOML file of defaults, a table per command ([record], [serve], ...); flags still win.")
+@click.pass_context
+def cli(ctx: click.Context, config: str | None) -> None:
     """Record, archive and serve radiometric thermal camera data (Gray16 on MCAP)."""
+    if config:
+        from recorder.cli.config import load_config
+
+        assert isinstance(ctx.command, click.Group)
+        ctx.default_map = load_config(config, ctx.command, ctx)
 
 
 @cli.group(cls=_PluginGroup, entry_point_group="thermcap.bench")

@@ -34,6 +34,8 @@ class LiveCounters:
     errors: int = 0
     last_error: str | None = None
 
+    viewers: int = 0
+
     def to_dict(self) -> dict[str, Any]:
         return dict(self.__dict__)
 
@@ -53,6 +55,11 @@ class LiveBranch:
     @property
     def url(self) -> str:
         return self.publisher.url
+
+    def snapshot(self) -> dict[str, Any]:
+        """The counters, with how many viewers are subscribed now."""
+        self.counters.viewers = self.publisher.viewers
+        return self.counters.to_dict()
 
     def add_camera(self, camera: str | None, model: RadiometricModel | None) -> None:
         self.publisher.add_camera(camera, model)

@@ -15,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from foxglove.websocket import ServerListener
 
 from recorder.radiometry import RadiometricModel
 
@@ -88,14 +89,22 @@ class LivePublisher:
         import foxglove
 
         self.options = options or LiveOptions()
+        self.subscribed = threading.Event()  # set once a viewer subscribes to anything
+        self._viewers: dict[int, int] = {}  # client id -> subscriptions
         self._context = foxglove.Context()  # our own, so two publishers in one process never mix
         self._server = foxglove.start_server(name=self.options.name, host=self.options.host,
                                              port=self.options.port, context=self._context,
-                                             message_backlog_size=self.options.backlog)
+                                             message_backlog_size=self.options.backlog,
+                                             server_listener=_Listener(self))
         self._cameras: dict[str | None, _Camera] = {}
         self._events = foxglove.Channel("/recorder/events", message_encoding="json", context=self._context)
         self._lock = threading.Lock()
         self.messages_sent = 0
+
+    @property
+    def viewers(self) -> int:
+        """Clients subscribed to at least one channel."""
+        return sum(1 for n in self._viewers.values() if n > 0)
 
     @property
     def port(self) -> int:
@@ -148,6 +157,22 @@ class LivePublisher:
 
     def close(self) -> None:
         self._server.stop()
+
+
+class _Listener(ServerListener):
+    """The SDK's callbacks (on its own threads): who is watching."""
+
+    def __init__(self, owner: LivePublisher) -> None:
+        self.owner = owner
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        v = self.owner._viewers
+        v[client.id] = v.get(client.id, 0) + 1
+        self.owner.subscribed.set()
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        v = self.owner._viewers
+        v[client.id] = max(0, v.get(client.id, 0) - 1)
 
 
 def _loads(raw: bytes) -> dict[str, Any] | None:

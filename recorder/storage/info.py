@@ -15,7 +15,7 @@ from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
 from recorder.icd.names import iso_utc
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_STATS
+from recorder.icd.topics import TOPIC_STATS, camera_topics, is_image_topic
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import session_status
 from recorder.storage.reader import archived_frame_count
@@ -60,6 +60,18 @@ class SegmentInfo:
 
 
 @dataclass(frozen=True)
+class CameraUsage:
+    """One camera of a session of several: its frames in the segments and what the recorder said."""
+
+    sensor: str | None
+    frames: int
+    frames_captured: int | None
+    frames_dropped: int
+    effective_fps: float | None
+    error: str | None
+
+
+@dataclass(frozen=True)
 class SessionInfo:
     """A session folder: its segments summed, its status from the lock, its timing from session.json."""
 
@@ -94,6 +106,7 @@ class SessionInfo:
     frames_paused: int = 0
     ring: dict[str, Any] | None = None  # the --ring budget the session was recorded under
     evicted_segments: int = 0
+    cameras: dict[str, CameraUsage] = field(default_factory=dict)  # a session of several cameras
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -131,7 +144,7 @@ def segment_info(path: str | Path) -> SegmentInfo:
     comp = sum(c.compressed_size for c in chunks)
     uncomp = sum(c.uncompressed_size for c in chunks)
     counts = {topics[cid]: n for cid, n in stats.channel_message_counts.items() if cid in topics}
-    frames = counts.get(TOPIC_IMAGE, 0)
+    frames = sum(n for t, n in counts.items() if is_image_topic(t))
     span_s = (stats.message_end_time - stats.message_start_time) / 1e9 if stats.message_count else 0.0
     last = json.loads(last_stats) if last_stats is not None else {}
     return SegmentInfo(
@@ -197,7 +210,8 @@ def session_info(path: str | Path) -> SessionInfo:
         declared_fps=timing.get("declared_fps"),
         achieved_fps=timing.get("achieved_fps"),
         frames_late=timing.get("frames_late"),
-        sensor=meta.get("sensor", {}).get("model"),
+        sensor=meta.get("sensor", {}).get("model") or (f"{len(meta['cameras'])} cameras" if meta.get("cameras")
+                                                        else None),
         radiometric_model=meta.get("radiometric_model"),
         frames=frames,
         frames_captured=meta.get("frames_captured"),
@@ -220,7 +234,20 @@ def session_info(path: str | Path) -> SessionInfo:
         frames_paused=meta.get("frames_paused") or 0,
         ring=meta.get("ring"),
         evicted_segments=meta.get("evicted_segments") or 0,
+        cameras=_cameras(meta, topics, span),
     )
+
+
+def _cameras(meta: dict[str, Any], topics: dict[str, TopicUsage], span: float) -> dict[str, CameraUsage]:
+    out = {}
+    for name, cam in sorted((meta.get("cameras") or {}).items()):
+        n = topics.get(camera_topics(name).image, TopicUsage(0, 0)).messages
+        out[name] = CameraUsage(sensor=(cam.get("sensor") or {}).get("model"), frames=n,
+                                frames_captured=cam.get("frames_captured"),
+                                frames_dropped=cam.get("frames_dropped") or 0,
+                                effective_fps=round((n - 1) / span, 3) if n > 1 and span > 0 else None,
+                                error=cam.get("error"))
+    return out
 
 
 def info(path: str | Path) -> SegmentInfo | SessionInfo:

@@ -17,7 +17,7 @@ import numpy as np
 from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
+from recorder.icd.topics import camera_topics, decode_image, is_image_topic
 from recorder.storage.layout import SessionLayout
 
 __all__ = [
@@ -29,6 +29,7 @@ __all__ = [
     "read_session_meta",
     "resolve_session",
     "segment_span",
+    "session_cameras",
     "session_segments",
 ]
 
@@ -73,16 +74,25 @@ def read_session_meta(session_dir: str | Path) -> dict[str, Any]:
         raise McapFileError(f"{path}: not valid JSON ({exc})") from exc
 
 
-def iter_segment_frames(path: Path, *, first_index: int = 0) -> Iterator[SessionFrame]:
-    """Frames of one segment; each image is paired with the sidecar that has its log time."""
+def session_cameras(session_dir: str | Path) -> list[str]:
+    """The camera names of a session of several cameras (``/thermal/<name>/...``); [] for the
+    single-camera layout."""
+    cams = read_session_meta(session_dir).get("cameras")
+    return sorted(cams) if isinstance(cams, dict) else []
+
+
+def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None = None) -> Iterator[SessionFrame]:
+    """Frames of one segment (of one named camera); each image is paired with the sidecar that
+    has its log time."""
+    topics = camera_topics(camera)
     try:
         with open(path, "rb") as f:
             reader = make_reader(f)
             pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
             index = first_index
-            for _, channel, msg in reader.iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA]):
+            for _, channel, msg in reader.iter_messages(topics=[topics.image, topics.metadata]):
                 img, meta = pending.get(msg.log_time, (None, None))
-                if channel.topic == TOPIC_IMAGE:
+                if channel.topic == topics.image:
                     img = decode_image(msg.data)[1]
                 else:
                     meta = bytes(msg.data)
@@ -109,15 +119,21 @@ def iter_segment_frames(path: Path, *, first_index: int = 0) -> Iterator[Session
         raise McapFileError(f"{path}: cannot read frames ({type(exc).__name__}: {exc})") from exc
 
 
-def iter_session_frames(session_dir: str | Path) -> Iterator[SessionFrame]:
-    """Every frame of a session, from its MCAP segments, or once they are deleted after archiving,
-    from the archive. The archive package registers that reader (entry-point group
-    ``thermcap.session_frames``), so the recorder reads archives without importing them."""
+def iter_session_frames(session_dir: str | Path, camera: str | None = None) -> Iterator[SessionFrame]:
+    """Every frame of a session (of one camera, in a session of several), from its MCAP
+    segments, or once they are deleted after archiving, from the archive. The archive package
+    registers that reader (entry-point group ``thermcap.session_frames``), so the recorder reads
+    archives without importing them."""
+    cameras = session_cameras(session_dir)
+    if camera is None and cameras:  # reading /thermal/image here would find nothing, silently
+        raise McapFileError(f"{session_dir}: a session of several cameras ({', '.join(cameras)}); name one")
+    if camera is not None and camera not in cameras:
+        raise McapFileError(f"{session_dir}: no camera {camera!r} (cameras: {', '.join(cameras) or 'one, unnamed'})")
     segments = session_segments(session_dir)
     if segments:
         index = 0
         for seg in segments:
-            for frame in iter_segment_frames(seg, first_index=index):
+            for frame in iter_segment_frames(seg, first_index=index, camera=camera):
                 yield frame
                 index = frame.index + 1
         return
@@ -138,9 +154,10 @@ def frame_files(session_dir: str | Path) -> list[Path]:
     return [extras] if extras.is_file() else []
 
 
-def segment_span(seg: Path) -> tuple[int, int, int]:
+def segment_span(seg: Path, camera: str | None = None) -> tuple[int, int, int]:
     """(first message time, last message time, frames) of a finished segment, from its summary
-    (no decompression); a cut or damaged file is an McapFileError naming it."""
+    (no decompression): frames of every camera, or of the one named. A cut or damaged file is an
+    McapFileError naming it."""
     try:
         with open(seg, "rb") as f:
             summary = make_reader(f).get_summary()
@@ -150,13 +167,14 @@ def segment_span(seg: Path) -> tuple[int, int, int]:
     if summary is None or summary.statistics is None:
         raise McapFileError(f"{seg}: no summary; is it a finished segment?")
     st = summary.statistics
-    ids = [c.id for c in summary.channels.values() if c.topic == TOPIC_IMAGE]
+    want = camera_topics(camera).image if camera is not None else None
+    ids = [c.id for c in summary.channels.values() if (c.topic == want if want else is_image_topic(c.topic))]
     return st.message_start_time, st.message_end_time, sum(st.channel_message_counts.get(i, 0) for i in ids)
 
 
-def count_frames(session_dir: str | Path) -> dict[str, int]:
-    """Frames per segment, from the MCAP summaries (no decompression)."""
-    return {seg.name: segment_span(seg)[2] for seg in session_segments(session_dir)}
+def count_frames(session_dir: str | Path, camera: str | None = None) -> dict[str, int]:
+    """Frames per segment (of every camera, or the one named), from the MCAP summaries."""
+    return {seg.name: segment_span(seg, camera)[2] for seg in session_segments(session_dir)}
 
 
 def resolve_session(arg: str | Path, root: str | Path) -> Path:

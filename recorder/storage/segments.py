@@ -36,6 +36,7 @@ from recorder.icd.topics import (
     STATS_SCHEMA,
     TOPIC_EVENTS,
     TOPIC_STATS,
+    CameraTopics,
     camera_topics,
 )
 from recorder.storage.layout import ACTIVE_SUFFIX
@@ -150,7 +151,8 @@ class SessionWriter:
         """``cameras``: the names of a session of several cameras (``/thermal/<name>/...``);
         None keeps the single-camera layout. ``bad_pixel_map`` is then one map per name."""
         self.dir = Path(session_dir)
-        self.cameras = {None: camera_topics(None)} if not cameras else {n: camera_topics(n) for n in cameras}
+        self.cameras: dict[str | None, CameraTopics] = {None: camera_topics(None)} if not cameras else \
+            {n: camera_topics(n) for n in cameras}
         self.on_segment_closed = on_segment_closed
         self.policy = policy or SegmentPolicy()
         self.session_meta = session_meta
@@ -282,8 +284,12 @@ class SessionWriter:
     def _add(self, topic: str, log_time: int, data: Any, token: Any = None, sequence: int = 0) -> None:
         assert self._writer is not None
         info = self.segments[-1]
+        channel = self._channels.get(topic)
+        if channel is None:  # a source's message on a topic it did not declare: kept, schemaless JSON
+            with self._writing():
+                channel = self._channels[topic] = self._writer.register_channel(topic, "json", 0)
         with self._writing():
-            self._writer.add_message(self._channels[topic], log_time, data, sequence=sequence, token=token)
+            self._writer.add_message(channel, log_time, data, sequence=sequence, token=token)
         n = sum(memoryview(p).nbytes for p in data) if isinstance(data, list) else len(data)
         info.messages += 1
         info.topic_bytes[topic] = info.topic_bytes.get(topic, 0) + n
