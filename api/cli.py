@@ -188,9 +188,11 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 @click.option("--require-upload/--no-require-upload", default=None,
               help="Only delete sessions already uploaded (default: on when a store is configured).")
 @click.option("--dry-run", is_flag=True, help="Print what would be deleted and the bytes freed.")
+@click.option("--include-protected", is_flag=True,
+              help="Also delete sessions whose event windows are protected (kept by default).")
 @json_option
 def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
-       as_json: bool) -> None:
+       include_protected: bool, as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
     from api.jobs.retention import gc_sessions
     from api.settings import Settings
@@ -212,7 +214,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
     store = make_store(settings) if settings.s3_bucket else None
     try:
         res = gc_sessions(settings.root, keep_days=keep_days, max_bytes=limit, require_upload=req, dry_run=dry_run,
-                          store=store)
+                          store=store, include_protected=include_protected)
     except OSError as exc:
         fail(f"{exc.filename or settings.root}: {exc.strerror or exc}")
     if as_json:

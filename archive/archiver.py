@@ -41,6 +41,7 @@ from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.storage.ring import load_windows
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
@@ -315,6 +316,11 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             not_ok.append(EXTRAS_MCAP)
         if not_ok:
             raise ArchiveError(f"refusing to delete the source: {', '.join(not_ok)} not verified")
+        windows = load_windows(session_dir)
+        if windows:  # an event window is kept as recorded, beside its verified archive
+            manifest["source"]["kept_because"] = f"{len(windows)} event windows are protected (protected.json)"
+            save_manifest(session_dir, manifest)
+            return manifest
         for seg in segments:
             seg.unlink()
         fsync_dir(session_dir)

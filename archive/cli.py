@@ -72,7 +72,8 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
                 results.append({"session": str(d), "ok": True, "formats": {
                     k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
                                           "decode_fps")} for k, v in m["formats"].items() if k in fmts},
-                    "source_deleted": m["source"].get("deleted", False)})
+                    "source_deleted": m["source"].get("deleted", False),
+                    "source_kept_because": m["source"].get("kept_because")})
                 _run_hooks(d, root)
             except ThermcapError as exc:
                 failed = True
@@ -85,7 +86,8 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
             if not r["ok"]:
                 click.echo(f"error: {r['error']}", err=True)
                 continue
-            click.echo(f"{r['session']}: archived" + (" (MCAP source deleted)" if r["source_deleted"] else ""))
+            kept = f" (MCAP source kept: {r['source_kept_because']})" if r["source_kept_because"] else ""
+            click.echo(f"{r['session']}: archived" + (" (MCAP source deleted)" if r["source_deleted"] else kept))
             for fid, f in r["formats"].items():
                 click.echo(f"  {fid:9} {'verified' if f['verified'] else 'FAILED':8} {f['bytes']:>14,} bytes  "
                            f"{f['objects']:>3} objects  ratio {f['compression_ratio']}  "

@@ -58,6 +58,7 @@ class SourceBlock(TypedDict, total=False):
     deleted: bool
     deleted_at: str
     deleted_by: str
+    kept_because: str  # why --delete-source left it (protected event windows)
 
 
 class ExtrasEntry(TypedDict, total=False):

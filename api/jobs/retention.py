@@ -7,7 +7,8 @@ What may go, per session, oldest first, by age and/or total size:
 - the whole local folder (archives included), only once the upload to the object store is
   complete and every uploaded object is there at its archived size (the bucket covers it).
 
-Each session is handled under its lock, so a session being recorded, recovered, archived or
+A session with protected event windows (``protected.json``: marks and triggers) is kept whole
+unless ``include_protected``. Each session is handled under its lock, so a session being recorded, recovered, archived or
 analysed is never touched. A dry run lists every deletion with what it relies on.
 """
 
@@ -27,6 +28,7 @@ from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import list_sessions, read_session_meta
+from recorder.storage.ring import load_windows
 
 __all__ = ["GcDecision", "GcResult", "gc_sessions"]
 
@@ -100,7 +102,7 @@ def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str 
 
 
 def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,
-                dry_run: bool, store: BlobStore | None = None) -> GcResult:
+                dry_run: bool, store: BlobStore | None = None, include_protected: bool = False) -> GcResult:
     sessions = []
     for d in list_sessions(root):
         meta = read_session_meta(d)
@@ -114,14 +116,14 @@ def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, r
         too_old = keep_days is not None and started < now - keep_days * 86400e9
         if not too_old and not (max_bytes is not None and total > max_bytes):
             continue
-        decision = _decide_and_act(d, started, size, require_upload, dry_run, store)
+        decision = _decide_and_act(d, started, size, require_upload, dry_run, store, include_protected)
         decisions.append(decision)
         total -= decision.frees
     return GcResult(dry_run, decisions, total)
 
 
 def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_run: bool,
-                    store: BlobStore | None) -> GcDecision:
+                    store: BlobStore | None, include_protected: bool) -> GcDecision:
     decision = GcDecision(str(d), started, size, "keep")
     lock = lock_session(d, "gc", wait_s=0.0)
     if lock is None:
@@ -131,6 +133,11 @@ def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_
         layout = SessionLayout.of(d)
         if layout.active_segments():
             decision.why_kept = "unfinished segments (*.active): run `thermcap recover`"
+            return decision
+        windows = load_windows(d)
+        if windows and not include_protected:
+            decision.why_kept = (f"{len(windows)} event windows are protected (protected.json); "
+                                 f"--include-protected lets them go")
             return decision
         try:
             m = load_manifest(d, required=False)
