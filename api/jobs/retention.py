@@ -8,8 +8,8 @@ What may go, per session, oldest first, by age and/or total size:
   complete and every uploaded object is there at its archived size (the bucket covers it).
 
 A session with protected event windows (``protected.json``: marks and triggers) is kept whole
-unless ``include_protected``. Each session is handled under its lock, so a session being recorded, recovered, archived or
-analysed is never touched. A dry run lists every deletion with what it relies on.
+unless ``include_protected``. Each session is handled under its lock, so a session being
+recorded, recovered, archived or analysed is never touched. A dry run lists every deletion with what it relies on.
 """
 
 from __future__ import annotations
