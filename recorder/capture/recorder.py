@@ -159,6 +159,7 @@ class CameraFeed:
     error: str | None = None
     ended: bool = False  # its capture thread finished: the input ended, a stop, or a failure
     waiting: bool = False  # blocked on a full queue (a source that can wait), not stalled
+    thread_ids: dict[str, int] = field(default_factory=dict)  # "capture"/"analysis" -> native id (CPU accounting)
 
     @property
     def name(self) -> str | None:
@@ -263,6 +264,7 @@ class Recorder:
         self._recorder_events: list[dict[str, Any]] = []
         self._book: ProtectionBook | None = None
         self._evictor: Evictor | None = None
+        self.writer_thread_id: int | None = None
         self.live = live
         if live is not None:
             for feed in self.feeds:
@@ -512,6 +514,7 @@ class Recorder:
     # -- threads ------------------------------------------------------------------------------
     def _capture_loop(self, feed: CameraFeed, deadline: float | None) -> None:
         counters = self.counters
+        feed.thread_ids["capture"] = threading.get_native_id()
         try:
             for frame in feed.source.frames():
                 if feed.ended:  # abandoned as stalled: whatever comes now is after the session's end
@@ -578,6 +581,7 @@ class Recorder:
 
     def _analysis_loop(self, feed: CameraFeed) -> None:
         assert feed.aq is not None and feed.detector is not None
+        feed.thread_ids["analysis"] = threading.get_native_id()
         while True:
             item = feed.aq.get()
             if item is _STOP:
@@ -591,6 +595,7 @@ class Recorder:
     def _writer_loop(self) -> None:
         session = self._session
         assert session is not None
+        self.writer_thread_id = threading.get_native_id()
         next_stats = time.monotonic() + self.stats_interval_s
         running = len(self.feeds)
         try:

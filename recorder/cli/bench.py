@@ -77,3 +77,40 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
                       if r["hot_spots"] is not None else r["note"]))
 
 
+
+
+@bench.command("cameras")
+@click.option("--seconds", type=float, default=10.0, show_default=True, help="Seconds per recording.")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None)
+@json_option
+def bench_cameras_cmd(seconds: float, workdir: str | None, as_json: bool) -> None:
+    """Two cameras at 640x512@60 and one at 320x256@30 in one process vs one camera alone:
+    drops and CPU per camera."""
+    from recorder.bench.cameras import bench_cameras, print_table
+
+    res = bench_cameras(seconds, workdir)
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+    if res["mix"]["frames_dropped"] or res["anchor"]["frames_dropped"]:
+        sys.exit(1)
+
+
+@bench.command("live")
+@click.option("--seconds", type=float, default=10.0, show_default=True, help="Seconds per recording.")
+@click.option("--viewers", type=int, default=2, show_default=True)
+@click.option("--live-fps", type=float, default=60.0, show_default=True)
+@click.option("--live-width", type=int, default=0, show_default=True, help="0: full resolution.")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None)
+@json_option
+def bench_live_cmd(seconds: float, viewers: int, live_fps: float, live_width: int, workdir: str | None,
+                   as_json: bool) -> None:
+    """Frames/s delivered to live viewers of a 640x512@60 recording, its drops, and the CPU with
+    and without viewers."""
+    from recorder.bench.live import bench_live, print_table
+
+    try:
+        res = bench_live(seconds, viewers, live_fps, live_width, workdir)
+    except RuntimeError as exc:
+        fail(str(exc))
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+    if res["with_viewers"]["frames_dropped"]:
+        sys.exit(1)

@@ -49,6 +49,7 @@ class LiveBranch:
         self._queue: queue.Queue = queue.Queue(maxsize=max(1, depth))
         self._period_ns = int(1e9 / self.options.max_fps) if self.options.max_fps > 0 else 0
         self._next_ns: dict[str | None, int] = {}
+        self.thread_id: int | None = None
         self._thread = threading.Thread(target=self._loop, name="thermcap-live", daemon=True)
         self._thread.start()
 
@@ -92,6 +93,7 @@ class LiveBranch:
         self.publisher.close()
 
     def _loop(self) -> None:
+        self.thread_id = threading.get_native_id()
         while True:
             item = self._queue.get()
             if item is _STOP:
