@@ -269,6 +269,14 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
         click.echo(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
                    f"{sum(st['dropped'].values()) if st['dropped'] else 0} dropped, {st['frames_paused']} paused; "
                    f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
+        if len(st.get("cameras") or {}) > 1:
+            for name, c in st["cameras"].items():
+                click.echo(f"  camera {name}: {c['frames_written']} written, {c['frames_dropped']} dropped"
+                           + (f"; {c['error']}" if c["error"] else ""))
+        if st.get("live"):
+            lv = st["live"]
+            click.echo(f"live view: {lv['url']}, {lv['viewers']} viewers, {lv['published']} frames sent, "
+                       f"{lv['dropped']} dropped by the view")
         if st.get("ring"):
             r = st["ring"]
             click.echo(f"ring: {r['evicted_segments']} segments ({r['evicted_bytes']:,} bytes) evicted, "
