@@ -21,7 +21,8 @@ def test_the_unit_runs_thermcap_record_with_the_config_from_its_environment():
     (cmd,) = re.findall(r"^ExecStart=/usr/bin/env thermcap (.*)$", unit, re.M)
     env = dict(line.split("=", 1) for line in (DEPLOY / "recorder.env.example").read_text().splitlines()
                if line and not line.startswith("#"))
-    assert env["THERMCAP_CONFIG"] == "/etc/thermcap/recorder.toml" and "EnvironmentFile=/etc/thermcap/recorder.env" in unit
+    assert env["THERMCAP_CONFIG"] == "/etc/thermcap/recorder.toml"
+    assert "EnvironmentFile=/etc/thermcap/recorder.env" in unit
     r = run_cli("--config", str(DEPLOY / "recorder.toml"), *cmd.split(), "--help")
     assert r.returncode == 0, r.stderr
 
