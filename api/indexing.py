@@ -43,6 +43,7 @@ class IndexReport:
     unchanged: list[str] = field(default_factory=list)
     removed: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)  # folder -> the error, so one bad session is visible
+    skipped: dict[str, str] = field(default_factory=dict)  # folder -> why it is not served as it is
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -266,6 +267,10 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
         if layout.active_segments() or (not layout.session_json.exists() and not layout.archive.exists()):
             continue
         meta = read_session_meta(d)
+        if isinstance(meta.get("cameras"), dict):  # read as one camera it would show no frame at all
+            report.skipped[d.name] = (f"a session of several cameras ({', '.join(sorted(meta['cameras']))}): "
+                                      f"served through its per-camera sessions (thermcap split-cameras)")
+            continue
         present.add(meta.get("session_id") or d.name)
         try:
             (report.indexed if index_session(engine, d, force=force) else report.unchanged).append(d.name)

@@ -247,9 +247,13 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
 def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int, force: bool,
                     on_progress: Callable[[str, int, int], None] | None) -> Manifest:
     meta = read_session_meta(session_dir)
-    if isinstance(meta.get("cameras"), dict):
-        raise ArchiveError(f"{session_dir}: a session of several cameras ({', '.join(sorted(meta['cameras']))}) "
-                           f"is not archived yet; its MCAP segments are kept as they are")
+    if isinstance(meta.get("cameras"), dict):  # read as one camera it would archive no frame at all
+        split = meta.get("split_into")
+        raise ArchiveError(
+            f"{session_dir}: a session of several cameras ({', '.join(sorted(meta['cameras']))}); "
+            + (f"it was split into {', '.join(sorted(split.values()))}: archive those" if split else
+               f"`thermcap split-cameras {session_dir}` makes one session per camera (bit-exact), which archive "
+               f"as any other; nothing was changed"))
     session_id = meta.get("session_id", session_dir.name)
     manifest = load_manifest(session_dir, required=False) or new_manifest(session_id, meta)
     # What the user asked for: gc and scrub count a session as covered only when all of it verified.

@@ -43,14 +43,15 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
 
     from archive.archiver import archive_session
-    from recorder.storage.reader import list_sessions, resolve_session
+    from recorder.storage.reader import list_sessions, read_session_meta, resolve_session
 
     try:
         fmts = _formats(formats)
         dirs = [resolve_session(s, root) for s in sessions]
         if all_sessions:
+            # a session of several cameras already split is archived through its per-camera sessions
             dirs += [d for d in list_sessions(root) if not SessionLayout.of(d).manifest.exists()
-                     and not list(d.glob("*.active"))]
+                     and not list(d.glob("*.active")) and not read_session_meta(d).get("split_into")]
     except (ThermcapError, click.BadParameter) as exc:
         fail(str(exc))
     if not dirs:

@@ -32,7 +32,8 @@ from archive.scrub import ScrubReport, scrub_session
 from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import is_locked
-from recorder.storage.reader import list_sessions, read_session_meta
+from recorder.storage.reader import list_sessions, read_session_meta, session_segments
+from recorder.storage.split import split_cameras
 
 __all__ = ["Worker", "acquire_lease", "finished_sessions", "release_lease"]
 
@@ -71,6 +72,8 @@ def finished_sessions(root: Path) -> list[Path]:
 
 
 def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
+    if isinstance(read_session_meta(d).get("cameras"), dict):
+        return False  # archived through its per-camera sessions
     try:
         m = load_manifest(d, required=False)
     except ThermcapError:
@@ -87,6 +90,7 @@ class WorkerPass:
     archived: list[str] = field(default_factory=list)
     leased_elsewhere: list[str] = field(default_factory=list)  # another worker holds the lease
     failed: dict[str, str] = field(default_factory=dict)
+    split: dict[str, list[str]] = field(default_factory=dict)  # a session of several cameras -> its per-camera ones
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -103,6 +107,7 @@ class Worker:
 
     def run_once(self) -> WorkerPass:
         result = WorkerPass()
+        self._split_camera_sessions(result)
         for d in finished_sessions(self.root):
             if not _needs_work(d, self.formats, self.store):
                 continue
@@ -125,6 +130,23 @@ class Worker:
             finally:
                 release_lease(self.engine, sid, self.owner)
         return result
+
+    def _split_camera_sessions(self, result: WorkerPass) -> None:
+        """A session of several cameras becomes one session per camera (bit-exact copies), which
+        this pass then archives like any other; its own segments go only with --delete-source,
+        once every copy compared equal."""
+        for d in finished_sessions(self.root):
+            meta = read_session_meta(d)
+            if not isinstance(meta.get("cameras"), dict) or (meta.get("split_into") and not (
+                    self.delete_source and session_segments(d))):
+                continue
+            try:
+                done = split_cameras(d, delete_source=self.delete_source)
+                result.split[meta.get("session_id", d.name)] = sorted(Path(p).name for p in done.cameras.values())
+                self.log(f"split {d.name} into {', '.join(sorted(done.cameras))}")
+            except ThermcapError as exc:
+                result.failed[meta.get("session_id", d.name)] = str(exc)
+                self.log(f"error: {d.name}: {exc}")
 
     def scrub(self, repair: bool = True) -> ScrubReport:
         """Re-verify every archived copy (and the bucket's), repair what another copy covers, and

@@ -369,6 +369,31 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
         con.print(f"[red]error during recording: {d.error}[/red]")
 
 
+@cli.command("split-cameras")
+@click.argument("session")
+@root_option
+@click.option("--delete-source", is_flag=True,
+              help="Delete the session's own segments once every camera's copy compared equal.")
+@json_option
+def split_cameras_cmd(session: str, root: str, delete_source: bool, as_json: bool) -> None:
+    """One single-camera session per camera of SESSION (ROOT/sessions/<id>.<camera>), bit-exact:
+    what the archiver, the index and the API take like any other session."""
+    from recorder.storage.reader import resolve_session
+    from recorder.storage.split import split_cameras
+
+    try:
+        res = split_cameras(resolve_session(session, root), delete_source=delete_source)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps(res.to_dict(), indent=2))
+        return
+    for cam, path in res.cameras.items():
+        click.echo(f"{cam}: {path} ({res.frames[cam]} frames{', made earlier' if cam in res.already else ''})")
+    if res.source_deleted:
+        click.echo("the session's own segments were deleted: every copy compared equal, frame by frame")
+
+
 @cli.command()
 @click.argument("path", type=click.Path())
 @click.option("--keep-original", is_flag=True, help="Keep the .active file after recovery.")

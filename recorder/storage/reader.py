@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
 from recorder.icd.topics import camera_topics, decode_image, is_image_topic
-from recorder.storage.layout import SessionLayout
+from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
 __all__ = [
     "SessionFrame",
@@ -189,5 +189,7 @@ def resolve_session(arg: str | Path, root: str | Path) -> Path:
 
 
 def list_sessions(root: str | Path) -> list[Path]:
+    """Session folders under ROOT/sessions; a ``.partial`` one (being made) is not a session yet."""
     base = Path(root) / "sessions"
-    return sorted(p for p in base.iterdir() if p.is_dir()) if base.is_dir() else []
+    return sorted(p for p in base.iterdir() if p.is_dir() and not p.name.endswith(PARTIAL_SUFFIX)) \
+        if base.is_dir() else []
