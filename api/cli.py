@@ -41,7 +41,11 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
 
         with TestClient(create_app(settings)) as client:
             r = client.get(get_path)
-        click.echo(r.text)
+        kind = r.headers.get("content-type", "")
+        if kind.startswith(("text/", "application/json")):
+            click.echo(r.text)
+        else:  # an image or raw counts: the bytes as they are, for a pipe or a file
+            click.echo(r.content, nl=False)
         sys.exit(0 if r.status_code == 200 else 1)
     if host not in ("127.0.0.1", "localhost", "::1") and not settings.tokens:
         click.secho(f"warning: serving on {host} with no tokens: anyone who can reach it can read every session",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 from typing import Literal
 from urllib.parse import quote
 
@@ -11,9 +12,10 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from api.routes.common import session_row
 from api.security import require
 from archive.codecs import get_codec
-from recorder.exports.render import celsius, celsius_tiff, preview_png, session_model, tiff16
+from recorder.exports.colorbar import TemperatureRange
+from recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, session_model, tiff16
 from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
-from recorder.radiometry import describe_model
+from recorder.radiometry import TemperatureUnavailable, describe_model
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],
                    dependencies=[Depends(require("read"))])
@@ -23,32 +25,51 @@ _PNG16 = get_codec("png16")
 _CACHE = {"Cache-Control": "public, max-age=31536000, immutable"}  # a recorded frame never changes
 
 
+def _send(request: Request, body: bytes, media_type: str, headers: dict[str, str]) -> Response:
+    """The body with a strong ETag (its own sha256, so any change of bytes changes it), a 304 when
+    the client holds it already, and only the headers for HEAD."""
+    etag = f'"{hashlib.sha256(body).hexdigest()[:40]}"'
+    headers = {**headers, "ETag": etag}
+    inm = request.headers.get("if-none-match")
+    if inm and (inm.strip() == "*" or etag in [t.strip() for t in inm.split(",")]):
+        return Response(status_code=304, headers=headers)
+    if request.method == "HEAD":
+        return Response(b"", media_type=media_type, headers={**headers, "Content-Length": str(len(body))})
+    return Response(body, media_type=media_type, headers=headers)
+
+
 def _check_index(row: dict, n: int) -> None:
     if n < 0 or n >= row["frames"]:
         raise HTTPException(404, f"session {row['id']} has frames 0..{row['frames'] - 1}, not {n}")
 
 
-@router.get("/{n}", responses={200: {"content": {"image/png": {}, "image/tiff": {}, "application/octet-stream": {}}}})
+@router.api_route("/{n}", methods=["GET", "HEAD"],
+                  responses={200: {"content": {"image/png": {}, "image/tiff": {}, "application/octet-stream": {}}},
+                             304: {"description": "If-None-Match matched the ETag"}})
 def get_frame(request: Request, session_id: str, n: int,
               format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",
               min: float | None = Query(None, ge=-273.15, le=5000),
-              max: float | None = Query(None, ge=-273.15, le=5000)) -> Response:
+              max: float | None = Query(None, ge=-273.15, le=5000),
+              range: Literal["frame", "session", "fixed"] | None = Query(
+                  None, description="preview scale: the frame's own (default), one for the whole session, or "
+                                    "fixed by min and max (the default when both are given)"),
+              colorbar: bool = Query(True, description="preview: draw the °C scale into the picture")) -> Response:
     row = session_row(request, session_id)
     _check_index(row, n)
     reader = request.app.state.frames
     if format == "png16":
         stored = reader.encoded(session_id, n, "png16")
         body = stored if stored is not None else _PNG16.encode(np.asarray(reader.pixels(session_id, n)))
-        return Response(body, media_type="image/png", headers=_CACHE)
+        return _send(request, body, "image/png", _CACHE)
     frame = reader.pixels(session_id, n)
     h, w = frame.shape
     dims = {"X-Width": str(w), "X-Height": str(h), **_CACHE}
     if format == "raw":
-        return Response(frame.astype("<u2", copy=False).tobytes(), media_type="application/octet-stream",
-                        headers={**dims, "X-Dtype": "uint16le"})
+        return _send(request, frame.astype("<u2", copy=False).tobytes(), "application/octet-stream",
+                     {**dims, "X-Dtype": "uint16le"})
     if format == "tiff":
-        return Response(tiff16(frame), media_type="image/tiff", headers=dims)
+        return _send(request, tiff16(frame), "image/tiff", dims)
     if format == "dji-rjpeg":  # for DJI's own tools: the R-JPEG rebuilt from the archive
         name, segments = reader.attachment(session_id, n, SEGMENTS_BLOB)
         disposition = f'attachment; filename="{quote(name or "frame.jpg")}"'
@@ -56,14 +77,35 @@ def get_frame(request: Request, session_id: str, n: int,
             body = rebuild_rjpeg(frame, segments)
         except ValueError as exc:
             raise HTTPException(409, f"frame {n}: {exc}") from None
-        return Response(body, media_type="image/jpeg",
-                        headers={**dims, "Content-Disposition": disposition})
+        return _send(request, body, "image/jpeg", {**dims, "Content-Disposition": disposition})
     model = session_model(row["radiometric_model"])
     if format == "celsius-tiff":
-        return Response(celsius_tiff(frame, model), media_type="image/tiff", headers=dims)
+        return _send(request, celsius_tiff(frame, model), "image/tiff", dims)
     if min is not None and max is not None and max <= min:
         raise HTTPException(400, "max must be greater than min")
-    return Response(preview_png(frame, model, palette, min, max), media_type="image/png", headers=dims)
+    mode = range or ("fixed" if min is not None and max is not None else "frame")
+    if mode == "fixed" and (min is None or max is None):
+        raise HTTPException(400, "range=fixed needs min and max (°C)")
+    fixed = (min, max) if mode == "fixed" else (None, None)
+    span = _session_range(request, row, model) if mode == "session" else None
+    png, rng = preview_png(frame, model, palette, *fixed, colorbar=colorbar, session_range=span)
+    return _send(request, png, "image/png", {**dims, **rng.headers()})
+
+
+def _session_range(request: Request, row: dict, model) -> TemperatureRange | None:
+    """One scale for a whole session: the widest 0.5..99.5 percentiles of 16 frames spread over
+    it, computed once per session and kept."""
+    cache = request.app.state.__dict__.setdefault("session_ranges", {})
+    key = (row["id"], row["frames"])
+    if key not in cache:
+        reader = request.app.state.frames
+        picks = sorted({int(i) for i in np.linspace(0, row["frames"] - 1, num=min(16, row["frames"]))})
+        try:
+            parts = [frame_range(celsius(reader.pixels(row["id"], i), model)) for i in picks]
+        except TemperatureUnavailable:
+            return None
+        cache[key] = TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session")
+    return cache[key]
 
 
 @router.get("/{n}/metadata")

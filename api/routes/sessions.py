@@ -97,7 +97,25 @@ def get_session(request: Request, session_id: str) -> dict:
         "segments": [{"name": s["name"], "frames": s["frames"], "bytes": s["bytes"]} for s in segments],
         "coverage": [{"start": iso(a), "end": iso(b), "start_ns": a, "end_ns": b} for a, b in coverage],
         "gaps": [{"start": iso(a), "end": iso(b), "seconds": (b - a) / 1e9} for a, b in gaps],
+        "temperature": _temperature_available(row["radiometric_model"]),
     }
+
+
+def _temperature_available(model_json: str | None) -> dict:
+    """Whether this server can give °C for the session, and if not why: the page greys out what
+    would only answer 409 (a DJI layout that needs DJI's SDK, not configured here)."""
+    import numpy as np
+
+    from recorder.exports.render import session_model
+    from recorder.radiometry import TemperatureUnavailable
+
+    try:
+        session_model(model_json).to_celsius(np.zeros((1, 1), np.uint16))
+    except TemperatureUnavailable as exc:
+        return {"available": False, "why": str(exc)}
+    except ValueError as exc:
+        return {"available": False, "why": f"the session's radiometric model is not usable: {exc}"}
+    return {"available": True, "why": None}
 
 
 @router.get("/sessions/{session_id}/frames")

@@ -1,9 +1,16 @@
-"""``hdf5``: one file per session for scientific users.
+"""``hdf5``: one file per session for scientific users, and a valid netCDF-4 file (CF-1.10).
 
 ``frames`` (N, H, W) uint16, one frame per chunk, SZIP (libaec, nearest-neighbour 32): ratio ~4
 at ~400 fps, and stock h5py reads it without plugins (falls back to shuffle + gzip where an
 h5py build lacks the SZIP encoder); ``timestamps_ns`` (N,) int64; ``metadata`` (N,) UTF-8 JSON
 sidecars; the radiometric model, sensor and session id as attributes.
+
+For netCDF and CF readers (xarray, netCDF-C, MATLAB's ncread, Panoply): ``time``, ``y`` and
+``x`` are dimension scales attached to every variable; ``time`` is in CF units (ns since the
+Unix epoch); a linear model is CF packing on ``frames`` (``scale_factor``, ``add_offset``,
+``units = "degC"``), so ``xarray.open_dataset(..., engine="h5netcdf")`` gives °C while the
+stored counts stay the recorded ones; any other model (Planck, a DJI lookup) is a
+``temperature_lut`` variable over a ``counts`` dimension, so ``lut[frames]`` is °C in any reader.
 """
 
 from __future__ import annotations
@@ -69,7 +76,6 @@ class Hdf5(ArchiveFormat):
                                             **self._filter_kwargs())
                     times = f.create_dataset("timestamps_ns", shape=(n_total,), dtype="<i8")
                     meta = f.create_dataset("metadata", shape=(n_total,), dtype=h5py.string_dtype("utf-8"))
-                    dset.attrs["units"] = "counts (raw sensor values; see radiometric_model)"
                 elif px.shape != dset.shape[1:]:
                     raise ArchiveError(f"frame {frame.index} is {px.shape}, the session's frames are {dset.shape[1:]}")
                 if n >= n_total:
@@ -86,6 +92,8 @@ class Hdf5(ArchiveFormat):
             f.attrs["radiometric_model"] = json.dumps(ctx.session_meta.get("radiometric_model"))
             f.attrs["sensor"] = json.dumps(ctx.session_meta.get("sensor"))
             f.attrs["format"] = "thermcap hdf5 archive 1"
+            if dset is not None:
+                _describe_for_netcdf(f, dset, times, meta, ctx.session_meta)
         return [FileRecord(rel, n)]
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
@@ -112,3 +120,53 @@ class Hdf5(ArchiveFormat):
                                         int(f["timestamps_ns"][k]))
             except (OSError, KeyError, ValueError) as exc:
                 raise ArchiveError(f"{rel}: not a readable HDF5 archive ({exc})") from exc
+
+
+def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, session_meta: dict[str, Any]) -> None:
+    """Dimension scales, CF attributes and the temperature mapping (see the module docstring)."""
+    from recorder.radiometry import LinearModel, model_from_dict
+
+    _, h, w = frames.shape
+    time = f.create_dataset("time", data=times[...], dtype="<i8")
+    time.attrs.update(units="nanoseconds since 1970-01-01T00:00:00Z", calendar="standard", standard_name="time",
+                      long_name="capture time (UTC)", axis="T")
+    y = f.create_dataset("y", data=np.arange(h, dtype="<i4"))
+    y.attrs.update(long_name="pixel row, from the top", units="1", axis="Y")
+    x = f.create_dataset("x", data=np.arange(w, dtype="<i4"))
+    x.attrs.update(long_name="pixel column, from the left", units="1", axis="X")
+    for scale, name in ((time, "time"), (y, "y"), (x, "x")):
+        scale.make_scale(name)
+    for i, scale in enumerate((time, y, x)):
+        frames.dims[i].attach_scale(scale)
+    times.dims[0].attach_scale(time)
+    meta.dims[0].attach_scale(time)
+    times.attrs.update(long_name="capture time, integer ns since the Unix epoch (as recorded)", units="ns")
+    meta.attrs["long_name"] = "ICD sidecar of each frame, JSON, exactly as recorded"
+    f.attrs.update(Conventions="CF-1.10", title=f"thermcap session {f.attrs['session_id']}",
+                   source="thermcap radiometric thermal recording",
+                   comment="frames holds the sensor counts bit-exact; temperature per the radiometric_model")
+    try:
+        model = model_from_dict(session_meta.get("radiometric_model") or {})
+    except (ValueError, TypeError, KeyError):
+        model = None
+    if isinstance(model, LinearModel):
+        # CF packing: unpacked = counts * scale_factor + add_offset, in degC
+        frames.attrs.update(scale_factor=np.float64(model.scale_c_per_count), add_offset=np.float64(model.offset_c),
+                            units="degC", long_name="apparent temperature (stored as sensor counts)")
+        return
+    frames.attrs.update(long_name="sensor counts (temperature: temperature_lut[frames])", units="1")
+    if model is None:
+        return
+    bits = int(getattr(model, "bit_depth", 16) or 16)
+    counts = np.arange(1 << min(bits, 16), dtype=np.uint16)
+    try:
+        lut = np.asarray(model.to_celsius(counts), dtype=np.float32)
+    except Exception:  # a model that cannot say (constants missing): no table rather than a wrong one
+        return
+    c = f.create_dataset("counts", data=counts.astype("<i4"))
+    c.attrs.update(long_name="sensor count", units="1")
+    c.make_scale("counts")
+    table = f.create_dataset("temperature_lut", data=np.where(np.isfinite(lut), lut, np.nan).astype("<f4"))
+    table.dims[0].attach_scale(c)
+    table.attrs.update(units="degC", long_name="apparent temperature of each sensor count",
+                       _FillValue=np.float32(np.nan))

@@ -9,7 +9,7 @@ target-free frames, and the detector's frames per second on one core.
 from __future__ import annotations
 
 import time
-from typing import Any, cast
+from typing import Any
 
 import numpy as np
 
@@ -130,19 +130,10 @@ def print_table(res: dict[str, Any]) -> str:
 
 
 def overlay_png(temps: np.ndarray, boxes: list[list[int]], palette_name: str = "ironbow") -> bytes:
-    """A heatmap of ``temps`` with each detection's box drawn in white."""
-    import imagecodecs
+    """A heatmap of ``temps`` with each detection's box drawn in white, and its °C scale."""
+    from recorder.exports.render import colour_png, frame_range
 
-    from recorder.exports.render import palette
-
-    lo, hi = np.percentile(temps, 0.5), np.percentile(temps, 99.5)
-    rgb = palette(palette_name)[np.clip((temps - lo) * (255.0 / max(hi - lo, 1e-6)), 0, 255).astype(np.uint8)].copy()
-    for x0, y0, x1, y1 in boxes:
-        x0, y0, x1, y1 = max(0, x0 - 1), max(0, y0 - 1), min(temps.shape[1] - 1,
-                                                             x1 + 1), min(temps.shape[0] - 1, y1 + 1)
-        rgb[y0, x0:x1 + 1] = rgb[y1, x0:x1 + 1] = 255
-        rgb[y0:y1 + 1, x0] = rgb[y0:y1 + 1, x1] = 255
-    return cast(bytes, imagecodecs.png_encode(rgb))
+    return colour_png(temps, frame_range(temps), palette_name, boxes=boxes, level=6)
 
 
 def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str, Any]]:

@@ -19,12 +19,12 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-import imagecodecs
 import numpy as np
 import tifffile
 
 from recorder.exceptions import ThermcapError
-from recorder.exports.render import palette
+from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
+from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
 from recorder.storage.reader import iter_session_frames, read_session_meta
@@ -72,7 +72,12 @@ def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
 
 
 def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
-                   palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None) -> dict[str, Any]:
+                   palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None,
+                   range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
+                   colorbar: bool = True) -> dict[str, Any]:
+    """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
+    (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
+    each PNG's text chunks either way."""
     if kind not in EXPORT_KINDS:
         raise ThermcapError(f"unknown export {kind!r}; use one of {', '.join(EXPORT_KINDS)}")
     session_dir, out = Path(session_dir), Path(out_dir)
@@ -84,14 +89,19 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
     positions = _positions(session_dir)
+    if range_mode not in RANGE_MODES:
+        raise ThermcapError(f"range must be one of {', '.join(RANGE_MODES)}, got {range_mode!r}")
+    if range_mode == "fixed" and (t_min is None or t_max is None or t_max <= t_min):
+        raise ThermcapError("a fixed range needs --min and --max, with max above min")
     frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
-    lo: float | None = None
-    hi: float | None = None
-    if frames is not None:  # one colour scale for the whole session
-        temps_all = [np.asarray(model.to_celsius(f.pixels)) for f in frames] if _has_temps(model) else []
-        if temps_all:
-            lo = float(min(np.percentile(t, 0.5) for t in temps_all))
-            hi = float(max(np.percentile(t, 99.5) for t in temps_all))
+    has_temps = _has_temps(model)
+    session_rng: TemperatureRange | None = None
+    if frames is not None and range_mode == "session":  # one colour scale for the whole session
+        parts = [frame_range(np.asarray(model.to_celsius(f.pixels)) if has_temps else f.pixels.astype(np.float32))
+                 for f in frames]
+        if parts:
+            session_rng = TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session",
+                                           "°C" if has_temps else "counts")
     written, stats, refused = [], [], []
     for f in frames if frames is not None else iter_session_frames(session_dir):
         name = format_name(f.log_time, sensor_id, *t_range)
@@ -112,12 +122,13 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                              description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}),
                              extratags=geotiff_tags(positions.get(f.log_time), data.shape))
         elif kind == "heatmap-png":
-            a, b = (lo, hi) if lo is not None and hi is not None else (float(f.pixels.min()),
-                                                                         float(f.pixels.max()) + 1)
             src = temps if temps is not None else f.pixels.astype(np.float32)
-            idx = np.clip((src - a) * (255.0 / max(b - a, 1e-6)), 0, 255).astype(np.uint8)
+            if range_mode == "fixed" and t_min is not None and t_max is not None:
+                rng = TemperatureRange(t_min, t_max, "fixed")
+            else:
+                rng = session_rng or frame_range(src, "frame", "°C" if temps is not None else "counts")
             path = out / f"{name}.png"
-            path.write_bytes(imagecodecs.png_encode(palette(palette_name)[idx]))
+            path.write_bytes(colour_png(src, rng, palette_name, colorbar=colorbar, level=6))
         else:
             path = out / f"{name}.tiff"
             tifffile.imwrite(path, np.ascontiguousarray(f.pixels, dtype=np.uint16), photometric="minisblack",

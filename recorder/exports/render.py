@@ -11,9 +11,11 @@ import imagecodecs
 import numpy as np
 import tifffile
 
+from recorder.exports.colorbar import TemperatureRange, add_colorbar, png_with_text
 from recorder.radiometry import RadiometricModel, model_from_dict
 
-__all__ = ["PALETTES", "celsius", "celsius_tiff", "palette", "preview_png", "session_model", "tiff16"]
+__all__ = ["PALETTES", "celsius", "celsius_tiff", "colour_png", "frame_range", "palette", "preview_png",
+           "session_model", "tiff16"]
 
 PALETTES = ("ironbow", "gray", "turbo")
 
@@ -54,22 +56,49 @@ def celsius(frame: np.ndarray, model: RadiometricModel) -> np.ndarray:
     return np.asarray(model.to_celsius(frame), dtype=np.float32)
 
 
+def frame_range(values: np.ndarray, mode: str = "frame", units: str = "°C") -> TemperatureRange:
+    """The 0.5..99.5 percentiles: a few hot or dead pixels do not wash out the picture."""
+    lo, hi = (float(v) for v in np.percentile(values, (0.5, 99.5)))
+    return TemperatureRange(lo, hi if hi > lo else lo + 1e-3, mode, units)
+
+
+def colour_png(values: np.ndarray, rng: TemperatureRange, palette_name: str = "ironbow", *,
+               colorbar: bool = True, level: int = 1, boxes: list[list[int]] | tuple = ()) -> bytes:
+    """Values (°C, or counts) as an 8-bit colour PNG on ``rng``, with ``boxes`` (inclusive pixel
+    boxes, e.g. detections) outlined in white: a colour bar drawn in, for people; always the
+    range in its text chunks, for programs."""
+    lut = palette(palette_name)
+    idx = np.clip((values - rng.lo) * (255.0 / max(rng.hi - rng.lo, 1e-6)), 0, 255).astype(np.uint8)
+    rgb = lut[idx]
+    h, w = values.shape
+    for x0, y0, x1, y1 in boxes:
+        x0, y0, x1, y1 = max(0, x0 - 1), max(0, y0 - 1), min(w - 1, x1 + 1), min(h - 1, y1 + 1)
+        rgb[y0, x0:x1 + 1] = rgb[y1, x0:x1 + 1] = 255
+        rgb[y0:y1 + 1, x0] = rgb[y0:y1 + 1, x1] = 255
+    if colorbar:
+        rgb = add_colorbar(rgb, rng, lut)
+    return png_with_text(cast(bytes, imagecodecs.png_encode(rgb, level=level)), rng.text())
+
+
 def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = "ironbow",
-                t_min: float | None = None, t_max: float | None = None) -> bytes:
-    """8-bit colour PNG; the range defaults to the frame's 0.5..99.5 percentiles in C. Where the
-    model cannot give temperatures (DJI layouts that need DJI's SDK) the counts are stretched."""
+                t_min: float | None = None, t_max: float | None = None, *, colorbar: bool = True,
+                session_range: TemperatureRange | None = None) -> tuple[bytes, TemperatureRange]:
+    """8-bit colour PNG and its scale: the frame's own range, ``session_range``, or the fixed
+    ``t_min``..``t_max`` (°C). Where the model cannot give temperatures (DJI layouts that need
+    DJI's SDK) the counts are stretched, and the scale says counts."""
     from recorder.radiometry import TemperatureUnavailable
 
     try:
-        temps = celsius(frame, model)
+        values, units = celsius(frame, model), "°C"
     except TemperatureUnavailable:
-        temps, t_min, t_max = frame.astype(np.float32), None, None
-    lo = float(np.percentile(temps, 0.5)) if t_min is None else t_min
-    hi = float(np.percentile(temps, 99.5)) if t_max is None else t_max
-    if hi <= lo:
-        hi = lo + 1e-3
-    idx = np.clip((temps - lo) * (255.0 / (hi - lo)), 0, 255).astype(np.uint8)
-    return cast(bytes, imagecodecs.png_encode(palette(palette_name)[idx], level=1))
+        values, units, t_min, t_max, session_range = frame.astype(np.float32), "counts", None, None, None
+    if t_min is not None and t_max is not None:
+        rng = TemperatureRange(t_min, t_max, "fixed", units)
+    elif session_range is not None:
+        rng = session_range
+    else:
+        rng = frame_range(values, "frame", units)
+    return colour_png(values, rng, palette_name, colorbar=colorbar), rng
 
 
 def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
