@@ -40,9 +40,10 @@ def _formats(value: str) -> list[str]:
 def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
             workers: int, as_json: bool) -> None:
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeRemainingColumn
+    from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
     from archive.archiver import archive_session
+    from recorder.cli.progress import progress
     from recorder.storage.reader import list_sessions, read_session_meta, resolve_session
 
     try:
@@ -58,18 +59,18 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
         fail("no session given (pass SESSION paths or ids, or --all)")
     results: list[dict[str, Any]] = []
     failed = False
-    show = not as_json and sys.stderr.isatty()
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
-                  disable=not show, transient=True) as bar:
-        for d in dirs:
+    with progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeRemainingColumn(),
+                  as_json=as_json) as bar:
+        for k, d in enumerate(dirs, 1):
             task = bar.add_task(d.name, total=None)
+            label = f"{d.name} ({k}/{len(dirs)})"
 
-            def progress(what: str, done: int, total: int, task=task, name=d.name) -> None:
+            def on_progress(what: str, done: int, total: int, task=task, name=label) -> None:
                 bar.update(task, description=f"{name}: {what}", completed=done, total=total)
 
             try:
                 m = archive_session(d, fmts, delete_source=delete_source, force=force, workers=workers,
-                                    on_progress=progress)
+                                    on_progress=on_progress)
                 results.append({"session": str(d), "ok": True, "formats": {
                     k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
                                           "decode_fps")} for k, v in m["formats"].items() if k in fmts},
@@ -80,21 +81,24 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
                 failed = True
                 results.append({"session": str(d), "ok": False, "error": str(exc)})
             bar.remove_task(task)
+            if not as_json:  # each session as it ends, not all at the end of a long run
+                _print_archived(results[-1])
     if as_json:
         click.echo(json.dumps(results, indent=2))
-    else:
-        for r in results:
-            if not r["ok"]:
-                click.echo(f"error: {r['error']}", err=True)
-                continue
-            kept = f" (MCAP source kept: {r['source_kept_because']})" if r["source_kept_because"] else ""
-            click.echo(f"{r['session']}: archived" + (" (MCAP source deleted)" if r["source_deleted"] else kept))
-            for fid, f in r["formats"].items():
-                click.echo(f"  {fid:9} {'verified' if f['verified'] else 'FAILED':8} {f['bytes']:>14,} bytes  "
-                           f"{f['objects']:>3} objects  ratio {f['compression_ratio']}  "
-                           f"encode {f['encode_fps']} fps  decode {f['decode_fps']} fps")
     if failed:
         sys.exit(1)
+
+
+def _print_archived(r: dict[str, Any]) -> None:
+    if not r["ok"]:
+        click.echo(f"error: {r['error']}", err=True)
+        return
+    kept = f" (MCAP source kept: {r['source_kept_because']})" if r["source_kept_because"] else ""
+    click.echo(f"{r['session']}: archived" + (" (MCAP source deleted)" if r["source_deleted"] else kept))
+    for fid, f in r["formats"].items():
+        click.echo(f"  {fid:9} {'verified' if f['verified'] else 'FAILED':8} {f['bytes']:>14,} bytes  "
+                   f"{f['objects']:>3} objects  ratio {f['compression_ratio']}  "
+                   f"encode {f['encode_fps']} fps  decode {f['decode_fps']} fps")
 
 
 def _run_hooks(session_dir: Path, root: str) -> None:
@@ -158,10 +162,9 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
     counts them; --repair rebuilds them from a verified copy. Exit 1 if damage remains."""
     import os
 
-    from rich.progress import Progress
-
     from archive.blobs import open_store
     from archive.scrub import ScrubReport, scrub_session
+    from recorder.cli.progress import progress
     from recorder.storage.reader import list_sessions, resolve_session
 
     base = Path(root_arg or root)
@@ -175,7 +178,7 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
     except ThermcapError as exc:
         fail(str(exc))
     report = ScrubReport()
-    with Progress(disable=as_json or not sys.stderr.isatty(), transient=True) as bar:
+    with progress(as_json=as_json) as bar:
         task = bar.add_task("scrubbing", total=len(dirs))
         for d in dirs:
             before = len(report.findings)

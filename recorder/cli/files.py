@@ -31,8 +31,7 @@ from recorder.exceptions import ThermcapError
 def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
                dji_sdk: str, terraref_variant: str, as_json: bool) -> None:
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
-    from rich.progress import Progress
-
+    from recorder.cli.progress import progress
     from recorder.importers.dji_sdk import find_backend
     from recorder.importers.run import import_paths
 
@@ -40,9 +39,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
     if backend is not None and not as_json:
         click.echo(f"DJI temperatures by {backend.name}", err=True)
 
-    show = not as_json and sys.stderr.isatty()
-    with Progress(disable=not show, transient=True) as bar:
-        task = bar.add_task("importing", total=None)
+    with progress(as_json=as_json) as bar:
+        task = bar.add_task("importing", total=len(paths))
         report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
                               analysis=analysis, dji_sdk=backend,
                               terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task))

@@ -174,7 +174,9 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             server = ControlServer(rec, port=control_port, token=control_token)
         except OSError as exc:
             fail(f"control endpoint on 127.0.0.1:{control_port}: {exc.strerror or exc}")
-    progress = None if as_json or not sys.stderr.isatty() else _progress_line()
+    from recorder.cli.progress import verbosity
+
+    progress = None if as_json or not sys.stderr.isatty() or verbosity() < 0 else _progress_line()
     try:
         if server is not None:
             server.start()
@@ -326,12 +328,14 @@ def info(paths: tuple[str, ...], as_json: bool) -> None:
 
 
 def _print_info(d: SegmentInfo | SessionInfo) -> None:
+    from rich import box
     from rich.console import Console
     from rich.table import Table
 
     from recorder.storage.info import SessionInfo
 
-    con = Console()
+    plain = not sys.stdout.isatty()  # a pipe or a file: no boxes, no wrapping
+    con = Console(width=10_000 if plain else None, soft_wrap=plain)
     con.print(f"[bold]{d.session_id or d.path}[/bold]  ({d.path})")
     if isinstance(d, SessionInfo):
         con.print(f"status: {d.status}   sensor: {d.sensor}   segments: {len(d.segments)}"
@@ -348,7 +352,8 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
     dropped = d.dropped or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
     if isinstance(d, SessionInfo) and d.cameras:
-        cams = Table("camera", "sensor", "frames", "captured", "dropped", "effective fps", "error")
+        cams = Table("camera", "sensor", "frames", "captured", "dropped", "effective fps", "error",
+                     box=None if plain else box.HEAVY_HEAD)
         for name, c in d.cameras.items():
             cams.add_row(name, c.sensor or "?", str(c.frames), str(c.frames_captured), str(c.frames_dropped),
                          str(c.effective_fps), c.error or "")
@@ -361,7 +366,7 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
         con.print(f"ring: {d.evicted_segments} segments evicted (ROOT/eviction.log says when and why)")
     con.print(f"bytes: {d.bytes:,}   chunk compression: {', '.join(d.chunk_compression)}   "
               f"ratio: {d.compression_ratio}")
-    t = Table("topic", "messages", "bytes (uncompressed)")
+    t = Table("topic", "messages", "bytes (uncompressed)", box=None if plain else box.HEAVY_HEAD)
     for topic, v in d.topics.items():
         t.add_row(topic, str(v.messages), f"{v.bytes:,}" if v.bytes is not None else "?")
     con.print(t)

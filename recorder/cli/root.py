@@ -49,9 +49,17 @@ class _PluginGroup(click.Group):
 @click.option("--config", "config", envvar="THERMCAP_CONFIG", show_envvar=True, default=None, metavar="FILE",
               type=click.Path(dir_okay=False),
               help="A TOML file of defaults, a table per command ([record], [serve], ...); flags still win.")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors and the results a script reads; no progress.")
+@click.option("-v", "--verbose", count=True, help="More detail (log messages at INFO; -vv: DEBUG).")
 @click.pass_context
-def cli(ctx: click.Context, config: str | None) -> None:
+def cli(ctx: click.Context, config: str | None, quiet: bool, verbose: int) -> None:
     """Record, archive and serve radiometric thermal camera data (Gray16 on MCAP)."""
+    import logging
+
+    ctx.obj = {"verbosity": -1 if quiet else verbose}
+    if verbose:
+        logging.basicConfig(level=logging.DEBUG if verbose > 1 else logging.INFO,
+                            format="%(asctime)s %(name)s %(levelname)s %(message)s")
     if config:
         from recorder.cli.config import load_config
 
