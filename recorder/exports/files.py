@@ -35,25 +35,56 @@ EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg"
 PERCENTILES = (5, 25, 50, 75, 95)
 
 
-def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
-    """Per log time: the position an importer recorded (DJI XMP GPS, TERRA-REF gantry)."""
+def _import_vendor(session_dir: Path) -> dict[int, dict[str, Any]]:
+    """Per log time: what an importer kept of the source file (``/import/source`` ``vendor``)."""
     from mcap.reader import make_reader
 
     out: dict[int, dict[str, Any]] = {}
     for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
         with open(seg, "rb") as f:
             for _, _, msg in make_reader(f).iter_messages(topics=["/import/source"]):
-                vendor = json.loads(msg.data).get("vendor", {})
-                xmp = vendor.get("xmp_drone_dji") or {}
-                if xmp.get("GpsLatitude") or xmp.get("GpsLongitude"):
-                    out[msg.log_time] = {"crs": "EPSG:4326", "latitude": xmp.get("GpsLatitude"),
-                                         "longitude": xmp.get("GpsLongitude") or xmp.get("GpsLongtitude"),
-                                         "absolute_altitude_m": xmp.get("AbsoluteAltitude"),
-                                         "relative_altitude_m": xmp.get("RelativeAltitude"),
-                                         "gimbal_yaw_deg": xmp.get("GimbalYawDegree")}
-                elif vendor.get("position_m"):
-                    out[msg.log_time] = {"crs": "TERRA-REF gantry (m)", **vendor["position_m"]}
+                out[msg.log_time] = json.loads(msg.data).get("vendor", {}) or {}
     return out
+
+
+def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
+    """Per log time: the position an importer recorded, where it recorded one."""
+    return {t: p for t, v in _import_vendor(session_dir).items() if (p := _position(v)) is not None}
+
+
+def _position(vendor: dict[str, Any]) -> dict[str, Any] | None:
+    """The position an importer recorded: DJI XMP GPS, FLIR's GPSInfo or EXIF GPS, TERRA-REF gantry."""
+    xmp = vendor.get("xmp_drone_dji") or {}
+    if xmp.get("GpsLatitude") or xmp.get("GpsLongitude"):
+        return {"crs": "EPSG:4326", "latitude": xmp.get("GpsLatitude"),
+                "longitude": xmp.get("GpsLongitude") or xmp.get("GpsLongtitude"),
+                "absolute_altitude_m": xmp.get("AbsoluteAltitude"),
+                "relative_altitude_m": xmp.get("RelativeAltitude"),
+                "gimbal_yaw_deg": xmp.get("GimbalYawDegree")}
+    gps = vendor.get("gps")
+    if gps and str(gps.get("datum", "WGS84")).upper().replace("-", "") in ("WGS84", ""):
+        return {"crs": "EPSG:4326", "latitude": gps["latitude"], "longitude": gps["longitude"],
+                "absolute_altitude_m": gps.get("altitude_m"), "source": gps.get("source")}
+    if vendor.get("position_m"):
+        return {"crs": "TERRA-REF gantry (m)", **vendor["position_m"]}
+    return None
+
+
+def _name_range(model: Any, vendor: dict[str, Any], temps: np.ndarray | None) -> tuple[float, float]:
+    """The scene range an ICD name carries (ICD 2.1): the camera's calibrated range where the file
+    says it (FLIR), a linear model's own range, a lookup table's, else the frame's own."""
+    from recorder.radiometry import LookupTableModel
+
+    if vendor.get("camera_range_c"):
+        lo, hi = vendor["camera_range_c"]
+        return float(lo), float(hi)
+    if isinstance(model, LinearModel):
+        return model.temp_min_c, model.temp_max_c
+    if isinstance(model, LookupTableModel):
+        return min(model.celsius), max(model.celsius)
+    if temps is not None and temps.size:
+        return float(np.floor(np.nanmin(temps))), float(np.ceil(np.nanmax(temps)))
+    return -40.0, 550.0  # no temperature at all (a DJI layout without the SDK): the ICD's widest
 
 
 def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
@@ -84,11 +115,11 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     meta = read_session_meta(session_dir)
     model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
     sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
-    t_range = (model.temp_min_c, model.temp_max_c) if isinstance(model, LinearModel) else (-40.0, 550.0)
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
-    positions = _positions(session_dir)
+    vendors = _import_vendor(session_dir)
+    positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
         raise ThermcapError(f"range must be one of {', '.join(RANGE_MODES)}, got {range_mode!r}")
     if range_mode == "fixed" and (t_min is None or t_max is None or t_max <= t_min):
@@ -104,7 +135,6 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                                            "°C" if has_temps else "counts")
     written, stats, refused = [], [], []
     for f in frames if frames is not None else iter_session_frames(session_dir):
-        name = format_name(f.log_time, sensor_id, *t_range)
         try:
             temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32) if kind != "icd" or summary else None
         except TemperatureUnavailable as exc:
@@ -112,6 +142,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                 refused.append(f"frame {f.index}: {exc}")
                 continue
             temps = None
+        name = format_name(f.log_time, sensor_id, *_name_range(model, vendors.get(f.log_time, {}), temps))
         desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
                 "position": positions.get(f.log_time)}
         if kind in ("celsius-tiff", "kelvin-tiff"):

@@ -75,7 +75,7 @@ def format_name(timestamp_ns: int, sensor_id: str, temp_min_c: float, temp_max_c
 
 def parse_name(name: str) -> IcdName:
     """Parse an ICD base name (an extension such as ``.tiff`` or ``.json`` is ignored)."""
-    base = re.sub(r"\.(tiff?|json|raw|gray16|png)$", "", name.rsplit("/", 1)[-1], flags=re.I)
+    base = re.sub(r"(\.(celsius|kelvin))?\.(tiff?|json|raw|gray16|png)$", "", name.rsplit("/", 1)[-1], flags=re.I)
     m = _NAME_RE.match(base)
     if not m:
         raise ValueError(

@@ -6,11 +6,13 @@ import re
 import struct
 from datetime import UTC, datetime
 
-__all__ = ["capture_time", "exif_fields", "exif_time_ns", "xmp_fields"]
+__all__ = ["capture_time", "exif_fields", "exif_position", "exif_time_ns", "xmp_fields"]
 
 _TAGS = {0x010F: "Make", 0x0110: "Model", 0x0132: "DateTime", 0x9003: "DateTimeOriginal", 0x8769: "ExifIFD",
          0x8825: "GPSIFD", 0x9010: "OffsetTime", 0x9011: "OffsetTimeOriginal", 0x9291: "SubSecTimeOriginal"}
-_GPS_TAGS = {0x0007: "GPSTimeStamp", 0x001D: "GPSDateStamp"}
+_GPS_TAGS = {0x0001: "GPSLatitudeRef", 0x0002: "GPSLatitude", 0x0003: "GPSLongitudeRef", 0x0004: "GPSLongitude",
+             0x0005: "GPSAltitudeRef", 0x0006: "GPSAltitude", 0x0007: "GPSTimeStamp", 0x0012: "GPSMapDatum",
+             0x001D: "GPSDateStamp"}
 
 
 def _walk_ifd(t: bytes, order: str, out: dict[str, object], offset: int, tags: dict[int, str],
@@ -30,10 +32,13 @@ def _walk_ifd(t: bytes, order: str, out: dict[str, object], offset: int, tags: d
             off = struct.unpack(order + "I", e[8:12])[0] if count > 4 else None
             raw = e[8:8 + count] if off is None else t[off:off + count]
             out[name] = raw.split(b"\x00")[0].decode("latin-1").strip()
-        elif typ == 5 and count == 3:  # RATIONAL x3: GPS hours, minutes, seconds
+        elif typ == 5 and count in (1, 3):  # RATIONAL: GPS degrees/minutes/seconds, a time, an altitude
             (off,) = struct.unpack(order + "I", e[8:12])
-            v = struct.unpack(order + "6I", t[off:off + 24])
-            out[name] = tuple(a / b if b else 0.0 for a, b in zip(v[::2], v[1::2], strict=True))
+            v = struct.unpack(order + f"{2 * count}I", t[off:off + 8 * count])
+            vals = tuple(a / b if b else 0.0 for a, b in zip(v[::2], v[1::2], strict=True))
+            out[name] = vals if count == 3 else vals[0]
+        elif typ == 1 and count == 1:  # BYTE: GPSAltitudeRef (1: below sea level)
+            out[name] = e[8]
 
 
 def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
@@ -53,6 +58,24 @@ def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:
         except (KeyError, struct.error, IndexError):
             return {}
     return {}
+
+
+def exif_position(exif: dict[str, object]) -> dict[str, object] | None:
+    """The EXIF GPS position as signed decimal degrees (and metres), or None without a fix."""
+    lat, lon = exif.get("GPSLatitude"), exif.get("GPSLongitude")
+    if not isinstance(lat, tuple) or not isinstance(lon, tuple) or len(lat) != 3 or len(lon) != 3:
+        return None
+    dec = lambda v: v[0] + v[1] / 60 + v[2] / 3600  # noqa: E731
+    la = dec(lat) * (-1 if exif.get("GPSLatitudeRef") == "S" else 1)
+    lo = dec(lon) * (-1 if exif.get("GPSLongitudeRef") == "W" else 1)
+    if la == 0 and lo == 0:
+        return None  # an empty fix, not the Gulf of Guinea
+    alt = exif.get("GPSAltitude")
+    out: dict[str, object] = {"latitude": la, "longitude": lo, "source": "EXIF GPS",
+                              "datum": exif.get("GPSMapDatum") or "WGS84"}
+    if isinstance(alt, float):
+        out["altitude_m"] = -alt if exif.get("GPSAltitudeRef") == 1 else alt
+    return out
 
 
 def xmp_fields(app1_payloads: list[bytes]) -> dict[str, str]:

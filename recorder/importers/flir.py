@@ -15,7 +15,7 @@ from recorder.radiometry import FlirPlanckModel
 
 __all__ = ["flir_jpeg_payload", "iter_fff_records", "parse_fff", "read_fff_file", "read_flir_jpeg"]
 
-RAW, CAMERA_INFO = 0x01, 0x20
+RAW, CAMERA_INFO, GPS_INFO = 0x01, 0x20, 0x2B
 
 
 def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
@@ -117,7 +117,9 @@ def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, di
         trans_x=_f(rec, o, 0x80))
     text = lambda a, b: rec[a:b].split(b"\x00")[0].decode("latin-1").strip()  # noqa: E731
     meta = {"camera_model": text(0xD4, 0xF4), "part_number": text(0xF4, 0x104), "serial": text(0x104, 0x114),
-            "lens_model": text(0x170, 0x180)}
+            "lens_model": text(0x170, 0x180),
+            # the calibrated measurement range (CameraTemperatureRangeMin/Max, Kelvin floats)
+            "camera_range_c": [round(_f(rec, o, 0x94) - k, 3), round(_f(rec, o, 0x90) - k, 3)]}
     if model.emissivity <= 0 or model.planck_r1 == 0:
         raise ImportFileError(f"{path}: FLIR CameraInfo has no usable Planck constants")
     if len(rec) >= 0x38E:  # DateTimeOriginal: u32 UTC seconds, u32 ms (low 16 bits), s16 minutes west of UTC
@@ -126,6 +128,36 @@ def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, di
             meta["capture_time_ns"] = seconds * 1_000_000_000 + (millis & 0xFFFF) * 1_000_000
             meta["capture_utc_offset_min"] = -west
     return model, meta
+
+
+def _gps_info(rec: bytes, order: str) -> dict | None:
+    """FLIR's GPSInfo record (ExifTool's FLIR GPSInfo table): valid flag, signed decimal degrees
+    as doubles, altitude as a float, the map datum; None when the camera had no fix."""
+    if len(rec) < 0x68:
+        return None
+    o = _rec_order(rec, order)
+    (valid,) = struct.unpack(o + "I", rec[:4])
+    if valid != 1:
+        return None
+    lat, lon = struct.unpack(o + "dd", rec[0x10:0x20])
+    (alt,) = struct.unpack(o + "f", rec[0x20:0x24])
+    ref_lat, ref_lon = rec[0x08:0x09].decode("latin-1"), rec[0x0A:0x0B].decode("latin-1")
+    lat = -abs(lat) if ref_lat == "S" else abs(lat) if ref_lat == "N" else lat
+    lon = -abs(lon) if ref_lon == "W" else abs(lon) if ref_lon == "E" else lon
+    if not (-90 <= lat <= 90 and -180 <= lon <= 180) or (lat == 0 and lon == 0):
+        return None
+    datum = rec[0x58:0x68].split(b"\x00")[0].decode("latin-1").strip() or "WGS84"
+    return {"latitude": lat, "longitude": lon, "altitude_m": round(float(alt), 3), "datum": datum,
+            "source": "FLIR GPSInfo"}
+
+
+def flir_sensor_id(camera_model: str) -> str:
+    """The camera model as an ICD-safe sensor id: 'FLIR T640' -> 'FLIR-T640', 'Duo Pro R' ->
+    'FLIR-Duo-Pro-R' (no '_', which separates the parts of an ICD file name)."""
+    import re
+
+    name = camera_model if camera_model.upper().startswith("FLIR") else f"FLIR {camera_model}"
+    return re.sub(r"[^A-Za-z0-9-]+", "-", name).strip("-")[:32] or "FLIR"
 
 
 def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedFrame:
@@ -140,18 +172,22 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
     model, meta = _camera_info(path, records[CAMERA_INFO][1], order)
     creator = fff[4:20].split(b"\x00")[0].decode("latin-1")
     meta.update(creator=creator, byte_order="big" if order == ">" else "little", raw_subtype=sub)
+    gps = _gps_info(records[GPS_INFO][1], order) if GPS_INFO in records else None
+    if gps is not None:
+        meta["gps"] = gps
     stamp = meta.pop("capture_time_ns", None)
     if stamp is not None:
         meta["time_basis"] = "utc: FLIR CameraInfo DateTimeOriginal"
     return ImportedFrame(path=path, format=fmt, layout={1: "raw-be", 2: "raw-le", 3: "png", 4: "jpeg-ls"}.get(sub),
                          pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model, timestamp_ns=stamp,
-                         sensor_model=meta["camera_model"] or creator or "FLIR", sensor_id="FLIR",
+                         sensor_model=meta["camera_model"] or creator or "FLIR",
+                         sensor_id=flir_sensor_id(meta["camera_model"]) if meta["camera_model"] else "FLIR",
                          vendor_metadata=meta, frame_index=index,
                          blobs={"flir_camera_info.bin": records[CAMERA_INFO][1]})
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
-    from recorder.importers.exif import capture_time, exif_fields, xmp_fields
+    from recorder.importers.exif import capture_time, exif_fields, exif_position, xmp_fields
 
     fff = flir_jpeg_payload(path, data)
     if fff is None:
@@ -170,6 +206,10 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
                                  exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
     if xmp:
         frame.vendor_metadata["xmp_drone_dji"] = xmp
+    if "gps" not in frame.vendor_metadata:  # FLIR's own record first, EXIF's GPS where that is absent
+        position = exif_position(exif)
+        if position is not None:
+            frame.vendor_metadata["gps"] = position
     return [frame]
 
 

@@ -12,6 +12,7 @@ import tifffile
 
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.exports.colorbar import png_text
 from recorder.exports.files import export_session
 from recorder.icd.sidecar import validate_sidecar
 from recorder.storage.reader import iter_session_frames
@@ -66,7 +67,9 @@ def test_heatmaps_share_one_scale(session, tmp_path):
     pngs = sorted((tmp_path / "h").glob("*.png"))
     img = imagecodecs.png_decode(pngs[0].read_bytes())
     assert img.dtype == np.uint8
-    assert img.shape == (64, 96, 3)
+    assert img.shape[0] == 64 and img.shape[1] > 96 and img.shape[2] == 3  # the picture, then its colour bar
+    scales = {tuple(sorted(png_text(p.read_bytes()).items())) for p in pngs}
+    assert len(scales) == 1  # one scale, written in every file
 
 
 def test_export_cli_refuses_temperatures_without_a_model(samples, tmp_path):
