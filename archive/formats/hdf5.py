@@ -130,8 +130,11 @@ def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, sessi
     time = f.create_dataset("time", data=times[...], dtype="<i8")
     time.attrs.update(units="nanoseconds since 1970-01-01T00:00:00Z", calendar="standard", standard_name="time",
                       long_name="capture time (UTC)", axis="T")
-    y = f.create_dataset("y", data=np.arange(h, dtype="<i4"))
-    y.attrs.update(long_name="pixel row, from the top", units="1", axis="Y")
+    # y counts up from the bottom row, so the first stored row (the top of the picture) has the
+    # highest y: GDAL/QGIS show it north-up without flipping, and xarray's plot() upright
+    y = f.create_dataset("y", data=np.arange(h, dtype="<i4")[::-1])
+    y.attrs.update(long_name="pixel row counted from the bottom (the first stored row is the top)", units="1",
+                   axis="Y")
     x = f.create_dataset("x", data=np.arange(w, dtype="<i4"))
     x.attrs.update(long_name="pixel column, from the left", units="1", axis="X")
     for scale, name in ((time, "time"), (y, "y"), (x, "x")):

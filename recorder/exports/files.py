@@ -24,6 +24,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
+from recorder.exports.geotiff import write_temperature_tiff
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
@@ -31,7 +32,7 @@ from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
 
-EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "heatmap-png", "icd", "dji-rjpeg")
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "heatmap-png", "icd", "dji-rjpeg")
 PERCENTILES = (5, 25, 50, 75, 95)
 
 
@@ -145,13 +146,18 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         name = format_name(f.log_time, sensor_id, *_name_range(model, vendors.get(f.log_time, {}), temps))
         desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
                 "position": positions.get(f.log_time)}
-        if kind in ("celsius-tiff", "kelvin-tiff"):
+        if kind in ("celsius-tiff", "kelvin-tiff", "celsius-cog"):
             assert temps is not None  # a missing temperature was refused above
-            data = temps if kind == "celsius-tiff" else temps + np.float32(273.15)
-            path = out / f"{name}.{'celsius' if kind == 'celsius-tiff' else 'kelvin'}.tiff"
-            tifffile.imwrite(path, data, photometric="minisblack", byteorder="<", metadata=None,
-                             description=json.dumps({**desc, "units": "degC" if kind == "celsius-tiff" else "K"}),
-                             extratags=geotiff_tags(positions.get(f.log_time), data.shape))
+            kelvin = kind == "kelvin-tiff"
+            data = temps + np.float32(273.15) if kelvin else temps
+            path = out / f"{name}.{'kelvin' if kelvin else 'celsius'}.{'cog.' if kind == 'celsius-cog' else ''}tiff"
+            units = "K" if kelvin else "degC"
+            pos = positions.get(f.log_time)
+            write_temperature_tiff(path, data, units=units, description=json.dumps({**desc, "units": units}),
+                                   metadata={"session_id": desc["session_id"], "frame_index": f.index,
+                                             "time": iso_utc(f.log_time),
+                                             "radiometric_model": desc["radiometric_model"]},
+                                   geo_tags=geotiff_tags(pos, data.shape), position=pos, cog=kind == "celsius-cog")
         elif kind == "heatmap-png":
             src = temps if temps is not None else f.pixels.astype(np.float32)
             if range_mode == "fixed" and t_min is not None and t_max is not None:

@@ -109,7 +109,10 @@ def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
 
 
 def celsius_tiff(frame: np.ndarray, model: RadiometricModel) -> bytes:
+    """A °C GeoTIFF of one frame (see ``recorder.exports.geotiff``)."""
+    from recorder.exports.geotiff import write_temperature_tiff
+
     buf = io.BytesIO()
-    tifffile.imwrite(buf, celsius(frame, model), byteorder="<", photometric="minisblack",
-                     description=json.dumps({"units": "degC", "radiometric_model": model.to_dict()}), metadata=None)
+    write_temperature_tiff(buf, celsius(frame, model), units="degC", metadata={"radiometric_model": model.to_dict()},
+                           description=json.dumps({"units": "degC", "radiometric_model": model.to_dict()}))
     return buf.getvalue()

@@ -1,0 +1,83 @@
+"""Temperature GeoTIFFs that GDAL, QGIS and rasterio read as what they are.
+
+Float32 °C (or K), with GDAL's own tags: ``GDAL_METADATA`` (the band's unit, the radiometric
+model, the session and frame) and ``GDAL_NODATA`` (NaN, where a model has no temperature);
+DEFLATE with the floating-point predictor, in 256x256 tiles; where the frame's position is
+known, the GeoTIFF keys of ``geotiff_tags``. ``cog=True`` writes a Cloud-Optimized GeoTIFF with
+GDAL's COG driver (through rasterio, the optional ``geo`` extra), same content.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+from xml.sax.saxutils import escape
+
+import numpy as np
+import tifffile
+
+from recorder.exceptions import ThermcapError
+
+__all__ = ["gdal_metadata_xml", "write_temperature_tiff"]
+
+GDAL_METADATA, GDAL_NODATA = 42112, 42113
+
+
+def gdal_metadata_xml(items: dict[str, Any], units: str) -> str:
+    rows = [f'<Item name="{escape(k)}">{escape(v if isinstance(v, str) else json.dumps(v))}</Item>'
+            for k, v in items.items() if v is not None]
+    rows.append(f'<Item name="UNITTYPE" sample="0" role="unittype">{escape(units)}</Item>')
+    return "<GDALMetadata>" + "".join(rows) + "</GDALMetadata>"
+
+
+def _tile(shape: tuple[int, ...]) -> tuple[int, int] | None:
+    h, w = shape
+    if h < 16 or w < 16:
+        return None  # too small to tile: one strip
+    return min(256, h // 16 * 16), min(256, w // 16 * 16)
+
+
+def write_temperature_tiff(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str,
+                           metadata: dict[str, Any], description: str | None = None,
+                           geo_tags: Sequence[tuple] = (), position: dict[str, Any] | None = None,
+                           cog: bool = False) -> None:
+    data = np.ascontiguousarray(data, dtype=np.float32)
+    if cog:
+        _write_cog(target, data, units=units, metadata=metadata, description=description, position=position)
+        return
+    extratags = [(GDAL_METADATA, "s", 0, gdal_metadata_xml(metadata, units), True),
+                 (GDAL_NODATA, "s", 0, "nan", True), *geo_tags]
+    tifffile.imwrite(target, data, photometric="minisblack", byteorder="<", metadata=None, description=description,
+                     compression="zlib", predictor=True, tile=_tile(data.shape), extratags=extratags)
+
+
+def _write_cog(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str, metadata: dict[str, Any],
+               description: str | None, position: dict[str, Any] | None) -> None:
+    try:
+        import rasterio
+        from rasterio.control import GroundControlPoint
+        from rasterio.crs import CRS
+    except ImportError:
+        raise ThermcapError("a Cloud-Optimized GeoTIFF needs rasterio (pip install 'thermcap[geo]')") from None
+    h, w = data.shape
+    profile: dict[str, Any] = {"driver": "COG", "width": w, "height": h, "count": 1, "dtype": "float32",
+                               "nodata": float("nan"), "compress": "DEFLATE", "predictor": 3,
+                               "blocksize": 256 if min(h, w) >= 256 else 128}
+    gcps = None
+    if position is not None and position.get("crs") == "EPSG:4326":
+        gcps = [GroundControlPoint(row=h / 2.0, col=w / 2.0, x=float(position["longitude"]),
+                                   y=float(position["latitude"]), z=float(position.get("absolute_altitude_m") or 0))]
+    if isinstance(target, io.BytesIO):
+        raise ThermcapError("a Cloud-Optimized GeoTIFF is written to a file, not to memory")
+    with rasterio.Env(), rasterio.open(str(target), "w", **profile) as dst:
+        dst.write(data, 1)
+        dst.update_tags(**{k: v if isinstance(v, str) else json.dumps(v) for k, v in metadata.items()
+                           if v is not None})
+        if description:
+            dst.update_tags(TIFFTAG_IMAGEDESCRIPTION=description)
+        dst.units = (units,)
+        if gcps:
+            dst.gcps = (gcps, CRS.from_epsg(4326))
