@@ -28,6 +28,7 @@ from sqlalchemy.engine import Engine
 
 from api import db
 from recorder.icd.quality import graded_contrast
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions, read_session_meta, session_segments
@@ -114,8 +115,8 @@ def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
     out, segs = [], []
     for seg in files:
         with open(seg, "rb") as f:
-            for _, _, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
-                out.append(json.loads(msg.data))
+            for _, ch, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
+                out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
                 segs.append(seg.name)
     return out, segs
 

@@ -10,6 +10,7 @@ formats already verified are skipped, so re-running finishes the job. The MCAP s
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import shutil
@@ -42,6 +43,7 @@ from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
 from recorder.storage.ring import load_windows
+from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
@@ -328,6 +330,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         for seg in segments:
             seg.unlink()
         fsync_dir(session_dir)
+        with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
+            write_bag_metadata(session_dir)
         manifest["source"]["deleted"] = True
         manifest["source"]["deleted_at"] = iso_now()
         save_manifest(session_dir, manifest)

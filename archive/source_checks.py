@@ -21,8 +21,10 @@ from recorder.storage.recover import scan_records
 
 __all__ = ["SIDECAR_SCHEMA_NAME", "channel_problems"]
 
-SIDECAR_SCHEMA_NAME = "thermcap.ThermalSidecar"
-_EXPECTED = {IMAGE_SCHEMA_NAME: TOPIC_IMAGE, SIDECAR_SCHEMA_NAME: TOPIC_METADATA}
+SIDECAR_SCHEMA_NAME = "thermcap_msgs/msg/ThermalSidecar"
+# the sidecar's schema since recordings are ROS 2 messages, and the JSON schema before
+_EXPECTED = {IMAGE_SCHEMA_NAME: TOPIC_IMAGE, SIDECAR_SCHEMA_NAME: TOPIC_METADATA,
+             "thermcap.ThermalSidecar": TOPIC_METADATA}
 
 
 def channel_problems(path: Path) -> list[str]:

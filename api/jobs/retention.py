@@ -14,6 +14,7 @@ recorded, recovered, archived or analysed is never touched. A dry run lists ever
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import time
 from dataclasses import dataclass, field
@@ -29,6 +30,7 @@ from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import list_sessions, read_session_meta
 from recorder.storage.ring import load_windows
+from recorder.storage.rosbag2 import write_bag_metadata
 
 __all__ = ["GcDecision", "GcResult", "gc_sessions"]
 
@@ -169,6 +171,8 @@ def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_
         if not dry_run:
             for seg in segments:
                 seg.unlink()
+            with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
+                write_bag_metadata(d)
             m["source"]["deleted"] = True
             m["source"]["deleted_at"] = iso_now()
             m["source"]["deleted_by"] = "gc"

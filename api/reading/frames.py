@@ -35,6 +35,7 @@ from archive.codecs import get_codec
 from archive.formats import get_format
 from archive.formats.base import locate
 from archive.manifest import frame_sha256, sidecar_sha256
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
@@ -283,7 +284,7 @@ class FrameReader:
                 if ch.topic == TOPIC_IMAGE:
                     pixels = decode_image(msg.data)[1].copy()
                 else:
-                    sidecar = bytes(msg.data)
+                    sidecar = json_payload(ch.message_encoding, msg.data)
         if pixels is None:
             raise FrameNotFound(f"frame {row['idx']} of {session_id} is not in {seg.name}")
         return pixels, sidecar or b""

@@ -23,7 +23,7 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import breakup_chunk
 
-from recorder.icd.sidecar import sidecar_schema_bytes
+from recorder.icd.rosmsg import SIDECAR
 from recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
@@ -219,13 +219,14 @@ def _extras_messages(writer: ChunkedWriter, reader: Any, topics: list[str] | Non
 
 def _frame_messages(writer: ChunkedWriter, frames, img: int | None, want_meta: bool) -> Iterator[tuple[int, int, Any]]:
     """Old archives without extras.mcap: images and sidecars both from the frames."""
-    meta = writer.register_channel(TOPIC_METADATA, "json", writer.register_schema(
-        "thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes())) if want_meta else None
+    meta = writer.register_channel(TOPIC_METADATA, "cdr", writer.register_schema(
+        SIDECAR.name, "ros2msg", SIDECAR.text.encode())) if want_meta else None
     for idx, t, pixels, sidecar in frames:
         if img is not None:
             yield t, 0, (idx, t, pixels)
         if meta is not None:
-            yield t, 1, (meta, _Msg(t, json.dumps(sidecar(), separators=(",", ":")).encode(), idx))
+            doc = sidecar()
+            yield t, 1, (meta, _Msg(t, SIDECAR.encode(doc, json.dumps(doc, separators=(",", ":")).encode()), idx))
 
 
 @dataclass

@@ -118,6 +118,24 @@ def _temperature_available(model_json: str | None) -> dict:
     return {"available": True, "why": None}
 
 
+@router.get("/sessions/{session_id}/foxglove-layout")
+def get_foxglove_layout(request: Request, session_id: str) -> dict:
+    """A Foxglove layout for this session: its colour range fits the session's counts (16 frames
+    spread over it), detections drawn over the image, the sidecar's numbers plotted. Import it
+    in Foxglove with Layouts -> Import from file."""
+    import numpy as np
+
+    from recorder.exports.foxglove_layout import layout_for, ranges_from_frames
+
+    row = session_row(request, session_id)
+    reader = request.app.state.frames
+    picks = sorted({int(i) for i in np.linspace(0, max(0, row["frames"] - 1), num=min(16, max(1, row["frames"])))})
+    ranges: dict[str | None, tuple[int, int]] = {None: (0, 16383)}
+    if row["frames"]:
+        ranges = ranges_from_frames((None, reader.pixels(session_id, i)) for i in picks)
+    return layout_for(ranges)
+
+
 @router.get("/sessions/{session_id}/frames")
 def list_frames(request: Request, session_id: str, start: str | None = None, end: str | None = None,
                 min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),

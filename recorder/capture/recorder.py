@@ -37,6 +37,7 @@ from recorder.capture.counters import LatencyHistogram, RecorderCounters
 from recorder.capture.sources.base import CapturedFrame, FrameSource
 from recorder.capture.triggers import TriggerPolicy, TriggerWatch
 from recorder.exceptions import RecordingError, ThermcapError
+from recorder.exports.foxglove_layout import CountsRange, write_layout
 from recorder.icd.names import FORMAT_VERSION, iso_utc
 from recorder.icd.sidecar import SidecarEncoder
 from recorder.icd.topics import (
@@ -159,6 +160,7 @@ class CameraFeed:
     error: str | None = None
     ended: bool = False  # its capture thread finished: the input ended, a stop, or a failure
     waiting: bool = False  # blocked on a full queue (a source that can wait), not stalled
+    counts_range: CountsRange = field(default_factory=CountsRange)  # for the session's Foxglove layout
     thread_ids: dict[str, int] = field(default_factory=dict)  # "capture"/"analysis" -> native id (CPU accounting)
 
     @property
@@ -438,6 +440,8 @@ class Recorder:
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
                               {"session_id": self.session_id, "events": events})
+        with contextlib.suppress(OSError):  # a full disk: `thermcap layout` writes it again
+            write_layout(self.session_dir, {f.name: f.counts_range.bounds() for f in self.feeds})
         result = RecordingResult(
             session_id=self.session_id, session_dir=self.session_dir,
             frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
@@ -713,8 +717,10 @@ class Recorder:
         assert self._session is not None
         self._session.write_frame(ts, image_message_parts(frame.pixels, ts), payload, extra,
                                   token=frame.capture_mono_ns or None, sequence=frame.index,
-                                  attachments=attachments, camera=feed.name)
+                                  attachments=attachments, camera=feed.name, sidecar_doc=blocks)
         self.counters.frames_written += 1
+        if feed.written % max(1, int(feed.source.sensor.frame_rate_hz or 1)) == 0:  # about one frame a second
+            feed.counts_range.add(frame.pixels)
         feed.written += 1
         self._last_frame_ns = ts if self._last_frame_ns is None else max(ts, self._last_frame_ns)
         if self.live is not None:

@@ -27,6 +27,7 @@ from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
 from recorder.exports.geotiff import write_temperature_tiff
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
+from recorder.icd.rosmsg import json_payload
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
 from recorder.storage.reader import iter_session_frames, read_session_meta
 
@@ -43,8 +44,8 @@ def _import_vendor(session_dir: Path) -> dict[int, dict[str, Any]]:
     out: dict[int, dict[str, Any]] = {}
     for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
         with open(seg, "rb") as f:
-            for _, _, msg in make_reader(f).iter_messages(topics=["/import/source"]):
-                out[msg.log_time] = json.loads(msg.data).get("vendor", {}) or {}
+            for _, ch, msg in make_reader(f).iter_messages(topics=["/import/source"]):
+                out[msg.log_time] = json.loads(json_payload(ch.message_encoding, msg.data)).get("vendor", {}) or {}
     return out
 
 

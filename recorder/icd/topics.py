@@ -22,6 +22,7 @@ __all__ = [
     "IMAGE_SCHEMA_TEXT",
     "RADAR_CUE_SCHEMA",
     "STATS_SCHEMA",
+    "TOPIC_ANNOTATIONS",
     "TOPIC_EVENTS",
     "TOPIC_GROUND_TRUTH",
     "TOPIC_IMAGE",
@@ -39,6 +40,7 @@ __all__ = [
 
 TOPIC_IMAGE = "/thermal/image"
 TOPIC_METADATA = "/thermal/metadata"
+TOPIC_ANNOTATIONS = "/thermal/annotations"  # detections as foxglove_msgs/msg/ImageAnnotations
 TOPIC_RADAR_CUE = "/radar/cue"
 TOPIC_STATS = "/recorder/stats"
 TOPIC_EVENTS = "/recorder/events"  # marks, triggers, pauses and splits while recording
@@ -56,6 +58,7 @@ class CameraTopics:
     name: str | None
     image: str
     metadata: str
+    annotations: str
 
     def extra(self, topic: str) -> str:
         return topic if self.name is None else f"/thermal/{self.name}{topic}"
@@ -69,9 +72,9 @@ def check_camera_name(name: str) -> str:
 
 def camera_topics(name: str | None = None) -> CameraTopics:
     if name is None:
-        return CameraTopics(None, TOPIC_IMAGE, TOPIC_METADATA)
+        return CameraTopics(None, TOPIC_IMAGE, TOPIC_METADATA, TOPIC_ANNOTATIONS)
     check_camera_name(name)
-    return CameraTopics(name, f"/thermal/{name}/image", f"/thermal/{name}/metadata")
+    return CameraTopics(name, f"/thermal/{name}/image", f"/thermal/{name}/metadata", f"/thermal/{name}/annotations")
 
 
 def is_image_topic(topic: str) -> bool:

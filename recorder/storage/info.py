@@ -15,6 +15,7 @@ from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
 from recorder.icd.names import iso_utc
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_STATS, camera_topics, is_image_topic
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import session_status
@@ -126,8 +127,8 @@ def segment_info(path: str | Path) -> SegmentInfo:
             for rec in reader.iter_metadata():
                 meta[rec.name] = rec.metadata
             last_stats = None
-            for _, _, msg in reader.iter_messages(topics=[TOPIC_STATS]):
-                last_stats = msg.data
+            for _, channel, msg in reader.iter_messages(topics=[TOPIC_STATS]):
+                last_stats = json_payload(channel.message_encoding, msg.data)
             topic_bytes: dict[str, int] = {}
             if SEGMENT_STATS_METADATA in meta:
                 topic_bytes = {t: 0 for t in topics.values()}

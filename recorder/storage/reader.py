@@ -17,6 +17,7 @@ import numpy as np
 from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import camera_topics, decode_image, is_image_topic
 from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
@@ -95,7 +96,7 @@ def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None 
                 if channel.topic == topics.image:
                     img = decode_image(msg.data)[1]
                 else:
-                    meta = bytes(msg.data)
+                    meta = json_payload(channel.message_encoding, msg.data)
                 if img is not None and meta is not None:
                     pending.pop(msg.log_time, None)
                     yield SessionFrame(index, path.name, msg.log_time, img, meta)

@@ -31,6 +31,7 @@ from recorder.exceptions import McapFileError
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import count_frames
+from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
@@ -306,6 +307,8 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
             for active in actives:
                 results.append(recover_segment(active, keep_original=keep_original))
             _mark_session(session)
+            with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
+                write_bag_metadata(session)
         finally:
             lock.release()
     return results

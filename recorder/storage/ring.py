@@ -13,6 +13,7 @@ recorder drops and counts frames rather than fill the disk.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
@@ -26,6 +27,7 @@ from typing import Any
 from recorder.icd.names import iso_utc
 from recorder.storage.layout import EVICTION_LOG, SessionLayout
 from recorder.storage.reader import segment_span
+from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import fsync_dir, write_json_atomic
 
 __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
@@ -258,6 +260,8 @@ class Evictor(threading.Thread):
     def _record_eviction(self, victim: _Candidate, size: int, reason: str) -> None:
         self._spans.pop(victim.path, None)
         fsync_dir(victim.session_dir)
+        with contextlib.suppress(OSError):  # derived data: the next change writes it again
+            write_bag_metadata(victim.session_dir)
         ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
                       bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
                       end=iso_utc(victim.end_ns), reason=reason)

@@ -28,18 +28,17 @@ import numpy as np
 
 from recorder import __version__
 from recorder.exceptions import RecordingError
-from recorder.icd.sidecar import sidecar_schema_bytes
+from recorder.icd.rosmsg import ANNOTATIONS, SIDECAR, annotations_message, message_for_topic
 from recorder.icd.topics import (
-    EVENT_SCHEMA,
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
-    STATS_SCHEMA,
     TOPIC_EVENTS,
     TOPIC_STATS,
     CameraTopics,
     camera_topics,
 )
 from recorder.storage.layout import ACTIVE_SUFFIX
+from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir", "segment_name",
@@ -139,6 +138,10 @@ class _Syncer(threading.Thread):
         self.join()
 
 
+def _as_message(topic: str, payload: bytes) -> bytes:
+    return message_for_topic(topic).encode(json.loads(payload), payload)
+
+
 class SessionWriter:
     """Writes frames, sidecars and other messages of one session into rotating segments."""
 
@@ -162,6 +165,7 @@ class SessionWriter:
         self.segments: list[SegmentInfo] = []
         self._writer: ChunkedWriter | None = None
         self._channels: dict[str, int] = {}
+        self._schema: Callable[[str, str], int] = lambda name, text: 0
         self._executor = ThreadPoolExecutor(self.policy.workers, thread_name_prefix="mcap-compress") \
             if self.policy.workers > 0 else None
         self._syncer = _Syncer(self.policy.fsync_interval_s) if self.policy.fsync_interval_s > 0 else None
@@ -192,14 +196,26 @@ class SessionWriter:
                                    executor=self._executor, on_chunk_written=self.on_chunk_written)
             writer.start(profile="ros2")
             channels: dict[str, int] = {}
-            image_schema = writer.register_schema(IMAGE_SCHEMA_NAME, "ros2msg", IMAGE_SCHEMA_TEXT.encode())
-            meta_schema = writer.register_schema("thermcap.ThermalSidecar", "jsonschema", sidecar_schema_bytes())
+            # Every topic is a ROS 2 message (ros2msg schema, CDR), so rosbags and ros2 bag read the
+            # segments as they are; see recorder.icd.rosmsg.
+            schemas: dict[str, int] = {}
+
+            def schema(msg_name: str, text: str) -> int:
+                if msg_name not in schemas:
+                    schemas[msg_name] = writer.register_schema(msg_name, "ros2msg", text.encode())
+                return schemas[msg_name]
+
             for topics in self.cameras.values():
-                channels[topics.image] = writer.register_channel(topics.image, "cdr", image_schema)
-                channels[topics.metadata] = writer.register_channel(topics.metadata, "json", meta_schema)
-            for topic, schema in {**self.extra_topics, TOPIC_STATS: STATS_SCHEMA, TOPIC_EVENTS: EVENT_SCHEMA}.items():
-                sid = writer.register_schema(schema.get("title", topic), "jsonschema", json.dumps(schema).encode())
-                channels[topic] = writer.register_channel(topic, "json", sid)
+                channels[topics.image] = writer.register_channel(topics.image, "cdr",
+                                                                 schema(IMAGE_SCHEMA_NAME, IMAGE_SCHEMA_TEXT))
+                channels[topics.metadata] = writer.register_channel(topics.metadata, "cdr",
+                                                                    schema(SIDECAR.name, SIDECAR.text))
+                channels[topics.annotations] = writer.register_channel(topics.annotations, "cdr",
+                                                                       schema(ANNOTATIONS.name, ANNOTATIONS.text))
+            for topic in [*self.extra_topics, TOPIC_STATS, TOPIC_EVENTS]:
+                m = message_for_topic(topic)
+                channels[topic] = writer.register_channel(topic, "cdr", schema(m.name, m.text))
+            self._schema = schema
             meta = {k: v if isinstance(v, str) else json.dumps(v) for k, v in self.session_meta.items()}
             meta.update(segment_index=str(info.index), software_version=__version__, host=socket.gethostname())
             writer.add_metadata(SESSION_METADATA, meta)
@@ -241,6 +257,8 @@ class SessionWriter:
             raise RecordingError(f"cannot close segment {self._path(info, True)}: {exc.strerror or exc}") from exc
         finally:
             self._writer = None
+        with suppress(OSError):  # the folder stays a rosbag2 bag of its finished segments (derived data)
+            write_bag_metadata(self.dir)
         if self.on_segment_closed is not None:
             self.on_segment_closed()
 
@@ -261,7 +279,11 @@ class SessionWriter:
     # -- writing -------------------------------------------------------------------------------
     def write_frame(self, log_time: int, image_parts: list[Any], sidecar_json: bytes,
                     extra: Sequence[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
-                    attachments: Sequence[tuple[str, str, bytes]] = (), camera: str | None = None) -> None:
+                    attachments: Sequence[tuple[str, str, bytes]] = (), camera: str | None = None,
+                    sidecar_doc: dict[str, Any] | None = None) -> None:
+        """One frame: its image, its sidecar (``sidecar_json`` kept byte for byte inside the ROS 2
+        message; ``sidecar_doc`` is the same document as a dict, when the caller has it), the
+        boxes of its targets for Foxglove, and the JSON messages that belong with it."""
         size = sum(memoryview(p).nbytes for p in image_parts) + len(sidecar_json)
         self._maybe_rotate(log_time, size)
         writer = self._writer
@@ -270,24 +292,30 @@ class SessionWriter:
             with self._writing():
                 writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
         topics = self.cameras[camera]
+        doc = sidecar_doc if sidecar_doc is not None else (json.loads(sidecar_json) if sidecar_json else {})
         self._add(topics.image, log_time, image_parts, token=token, sequence=sequence)
-        self._add(topics.metadata, log_time, sidecar_json, sequence=sequence)
+        self._add(topics.metadata, log_time, SIDECAR.encode(doc, sidecar_json), sequence=sequence)
+        self._add(topics.annotations, log_time, annotations_message(log_time, doc.get("targets") or []),
+                  sequence=sequence)
         for topic, payload in extra:
-            self._add(topic, log_time, payload)
+            self._add(topic, log_time, _as_message(topic, payload))
         self.segments[-1].frames += 1
 
     def write_message(self, topic: str, log_time: int, payload: bytes) -> None:
+        """A JSON document on ``topic``, as its ROS 2 message (the JSON kept inside it)."""
         if self._writer is None:
             self._maybe_rotate(log_time, len(payload))
-        self._add(topic, log_time, payload)
+        self._add(topic, log_time, _as_message(topic, payload))
 
     def _add(self, topic: str, log_time: int, data: Any, token: Any = None, sequence: int = 0) -> None:
         assert self._writer is not None
         info = self.segments[-1]
         channel = self._channels.get(topic)
-        if channel is None:  # a source's message on a topic it did not declare: kept, schemaless JSON
+        if channel is None:  # a source's message on a topic it did not declare: kept, as a JSON document
             with self._writing():
-                channel = self._channels[topic] = self._writer.register_channel(topic, "json", 0)
+                m = message_for_topic(topic)
+                channel = self._channels[topic] = self._writer.register_channel(topic, "cdr",
+                                                                                self._schema(m.name, m.text))
         with self._writing():
             self._writer.add_message(channel, log_time, data, sequence=sequence, token=token)
         n = sum(memoryview(p).nbytes for p in data) if isinstance(data, list) else len(data)

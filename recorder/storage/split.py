@@ -12,6 +12,7 @@ the index and the API handle it like any other session. The copy is written unde
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
@@ -27,6 +28,7 @@ from recorder.icd.topics import TOPIC_EVENTS, TOPIC_STATS, camera_topics
 from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import iter_session_frames, read_session_meta, session_cameras, session_segments
+from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import SESSION_METADATA, fsync_dir, write_json_atomic
 from recorder.storage.writer import ChunkedWriter, Compression
 
@@ -167,6 +169,8 @@ def _split_locked(session_dir: Path, cameras: list[str], delete_source: bool) ->
         if SessionLayout.of(session_dir).protected_json.is_file():
             shutil.copy2(SessionLayout.of(session_dir).protected_json, SessionLayout.of(tmp).protected_json)
         write_json_atomic(SessionLayout.of(tmp).session_json, cam_meta)
+        with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
+            write_bag_metadata(tmp)
         if _frame_hashes(tmp, None) != _frame_hashes(session_dir, cam):
             shutil.rmtree(tmp)
             raise ThermcapError(f"{session_dir}: the copy of camera {cam} does not read back as the source; "
@@ -184,6 +188,8 @@ def _split_locked(session_dir: Path, cameras: list[str], delete_source: bool) ->
         for seg in segments:
             seg.unlink()
         fsync_dir(session_dir)
+        with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
+            write_bag_metadata(session_dir)
         meta["split_source_deleted"] = True
         write_json_atomic(SessionLayout.of(session_dir).session_json, meta)
         result.source_deleted = True

@@ -10,6 +10,7 @@ from mcap.reader import make_reader
 
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import decode_image
 from tests.conftest import run_cli
 
@@ -93,8 +94,8 @@ def test_a_live_source_that_cannot_keep_its_rate_is_reported_not_hidden(tmp_path
     assert info["frames_late"] == timing["frames_late"]
     stats = []
     with open(next((tmp_path / "sessions" / "s").glob("*.mcap")), "rb") as f:
-        for _, _, msg in make_reader(f).iter_messages(topics=["/recorder/stats"]):
-            stats.append(json.loads(msg.data))
+        for _, ch, msg in make_reader(f).iter_messages(topics=["/recorder/stats"]):
+            stats.append(json.loads(json_payload(ch.message_encoding, msg.data)))
     assert stats[-1]["timing"]["frames_late"] == timing["frames_late"]
 
 

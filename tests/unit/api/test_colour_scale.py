@@ -4,6 +4,8 @@ same; the session page says when a session has no temperatures instead of failin
 
 from __future__ import annotations
 
+import json
+
 import imagecodecs
 import numpy as np
 import pytest
@@ -90,3 +92,16 @@ def test_the_bar_runs_from_the_coldest_colour_at_the_bottom_to_the_hottest_at_th
     assert coloured[0] == tuple(lut[255]) and coloured[-1] == tuple(lut[0])
     label_pixels = out[:, 320 + 6 + 12 + 6:]
     assert (label_pixels == 235).any()  # tick labels drawn
+
+
+def test_each_session_gets_a_foxglove_layout_that_fits_its_counts(client, root):
+    layout = client.get("/api/v1/sessions/s-archived/foxglove-layout").json()
+    image = layout["configById"]["Image!thermal"]["imageMode"]
+    frames = [f.pixels for f in iter_session_frames(root / "sessions" / "s-archived")]
+    lo, hi = int(np.percentile(np.stack(frames), 0.5)), int(np.percentile(np.stack(frames), 99.5))
+    assert abs(image["minValue"] - lo) < 60 and abs(image["maxValue"] - hi) < 60, (image, lo, hi)
+    assert image["maxValue"] < 4000  # not the washed-out 0..16383 of one fixed layout
+    assert image["annotations"] == {"/thermal/annotations": {"visible": True}}
+    written = json.loads((root / "sessions" / "s-archived" / "foxglove_layout.json").read_text())
+    w = written["configById"]["Image!thermal"]["imageMode"]
+    assert abs(w["minValue"] - lo) < 60 and abs(w["maxValue"] - hi) < 60

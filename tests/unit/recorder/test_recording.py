@@ -13,6 +13,7 @@ from mcap_ros2.decoder import DecoderFactory
 from recorder.bench.record import MemorySource
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.sidecar import validate_sidecar
 from recorder.icd.topics import decode_image
 from recorder.storage.segments import SegmentPolicy
@@ -37,18 +38,20 @@ def _read_all(session_dir: Path):
             out["attachments"] += [a.name for a in reader.iter_attachments()]
             out["metadata"] += [(m.name, m.metadata) for m in reader.iter_metadata()]
             for _schema, channel, msg in reader.iter_messages(log_time_order=False):
+                doc = None if channel.topic in ("/thermal/image", "/thermal/annotations") else \
+                    json.loads(json_payload(channel.message_encoding, msg.data))
                 if channel.topic == "/thermal/image":
                     stamp, px = decode_image(msg.data)
                     assert stamp == msg.log_time
                     out["frames"].append((msg.log_time, px.copy()))
                 elif channel.topic == "/thermal/metadata":
-                    out["meta"].append((msg.log_time, json.loads(msg.data)))
+                    out["meta"].append((msg.log_time, doc))
                 elif channel.topic == "/recorder/stats":
-                    out["stats"].append(json.loads(msg.data))
+                    out["stats"].append(doc)
                 elif channel.topic == "/radar/cue":
-                    out["cue"].append(json.loads(msg.data))
+                    out["cue"].append(doc)
                 elif channel.topic == "/sim/ground_truth":
-                    out["truth"].append(json.loads(msg.data))
+                    out["truth"].append(doc)
     return out
 
 
@@ -72,7 +75,8 @@ def test_recorded_session_reads_back_bit_exact(tmp_path):
         assert t_img == t_meta
         validate_sidecar(meta)
     assert data["schemas"]["sensor_msgs/msg/Image"] == "ros2msg"
-    assert data["schemas"]["thermcap.ThermalSidecar"] == "jsonschema"
+    assert data["schemas"]["thermcap_msgs/msg/ThermalSidecar"] == "ros2msg"
+    assert set(data["schemas"].values()) == {"ros2msg"}  # every topic a ROS 2 message
     assert "bad_pixel_map.json" in data["attachments"]
     session_meta = dict(data["metadata"])["thermcap.session"]
     assert json.loads(session_meta["radiometric_model"]) == {"kind": "linear", "scale_c_per_count": 0.036,

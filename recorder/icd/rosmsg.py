@@ -1,0 +1,314 @@
+"""ROS 2 messages for every topic we record besides the image, so rosbags, ros2 bag and Foxglove
+all decode them, with their fields visible in Foxglove's Plot and Raw Messages panels.
+
+Each thermcap message starts with ``string json``: the document exactly as recorded (for the
+sidecar, the ICD JSON the archive keeps and hashes). The typed fields after it are a view for
+plotting: floats are NaN where the document has null. Because ``json`` is the first field, any
+reader takes the document back from the CDR bytes without a full decode (``json_payload``).
+Recordings made before these messages (JSON channels with a JSON schema) read the same way.
+
+Detections are also published as ``foxglove_msgs/msg/ImageAnnotations``, which Foxglove's Image
+panel draws over the thermal image with no plugin.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import struct
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from typing import Any
+
+__all__ = [
+    "ANNOTATIONS",
+    "JSON_DOCUMENT",
+    "SIDECAR",
+    "RosMessage",
+    "annotations_message",
+    "json_payload",
+    "message_for_topic",
+]
+
+_SEP = "=" * 80
+
+
+@dataclass(frozen=True)
+class RosMessage:
+    """A ros2msg definition (dependencies included, as MCAP's ros2 profile embeds them) and how
+    a recorded JSON document becomes its fields."""
+
+    name: str
+    text: str
+    fields: Callable[[dict[str, Any]], dict[str, Any]]
+
+    def encode(self, doc: dict[str, Any], raw: bytes | None = None) -> bytes:
+        """CDR bytes of ``doc``; ``raw`` is its JSON as recorded (kept byte for byte)."""
+        text = (raw if raw is not None else json.dumps(doc, separators=(",", ":")).encode()).decode()
+        return _encoder(self.name, self.text)({"json": text, **self.fields(doc)})
+
+
+@cache
+def _encoder(name: str, text: str) -> Callable[[Any], bytes]:
+    from mcap_ros2._dynamic import serialize_dynamic
+
+    return serialize_dynamic(name, text)[name]
+
+
+def _f(v: Any) -> float:
+    try:
+        x = float(v)
+    except (TypeError, ValueError):
+        return math.nan
+    return x
+
+
+def _s(v: Any) -> str:
+    return "" if v is None else str(v)
+
+
+def _b(v: Any) -> bool:
+    return bool(v)
+
+
+def _sidecar_fields(doc: dict[str, Any]) -> dict[str, Any]:
+    cap, env = doc.get("capture") or {}, doc.get("environment") or {}
+    ta, stc = doc.get("thermal_analysis") or {}, doc.get("slew_to_cue") or {}
+    targets = doc.get("targets") or []
+    return {
+        "frame_index": int(cap.get("frame_index") or 0), "timestamp": _s(cap.get("timestamp")),
+        "ambient_temp_c": _f(env.get("ambient_temp_c")), "humidity_percent": _f(env.get("humidity_percent")),
+        "atmospheric_transmission": _f(env.get("atmospheric_transmission")),
+        "thermal_contrast_grade": _f(ta.get("thermal_contrast_grade")),
+        "max_target_temp_c": _f(ta.get("max_target_temp_c")),
+        "min_background_temp_c": _f(ta.get("min_background_temp_c")), "delta_t_deg_c": _f(ta.get("delta_t_deg_c")),
+        "snr_db": _f(ta.get("snr_db")), "detection_confidence": _f(ta.get("detection_confidence")),
+        "analysis_source": _s(ta.get("source")), "target_count": len(targets),
+        "targets": [{"target_id": _s(t.get("target_id")), "bbox": [int(v) for v in t.get("bbox") or []],
+                     "centroid": [_f(v) for v in t.get("centroid") or []], "max_temp_c": _f(t.get("max_temp_c")),
+                     "mean_temp_c": _f(t.get("mean_temp_c")), "classification": _s(t.get("classification")),
+                     "confidence": _f(t.get("confidence"))} for t in targets],
+        "slew_to_cue_active": _b(stc.get("slew_to_cue_active")),
+        "radar_cue_received": _b(stc.get("radar_cue_received")),
+        "slew_state": _s(stc.get("state")), "radar_azimuth_deg": _f(stc.get("radar_azimuth_deg")),
+        "radar_elevation_deg": _f(stc.get("radar_elevation_deg")), "radar_range_m": _f(stc.get("radar_range_m")),
+        "turret_pan_deg": _f(stc.get("turret_pan_deg")), "turret_tilt_deg": _f(stc.get("turret_tilt_deg")),
+    }
+
+
+SIDECAR = RosMessage("thermcap_msgs/msg/ThermalSidecar", f"""\
+# The ICD sidecar of one frame. json: exactly as recorded (the archive keeps and hashes it);
+# the other fields are its numbers for plotting, NaN where the ICD has null.
+string json
+uint64 frame_index
+string timestamp
+float64 ambient_temp_c
+float64 humidity_percent
+float64 atmospheric_transmission
+float64 thermal_contrast_grade
+float64 max_target_temp_c
+float64 min_background_temp_c
+float64 delta_t_deg_c
+float64 snr_db
+float64 detection_confidence
+string analysis_source
+uint32 target_count
+thermcap_msgs/Target[] targets
+bool slew_to_cue_active
+bool radar_cue_received
+string slew_state
+float64 radar_azimuth_deg
+float64 radar_elevation_deg
+float64 radar_range_m
+float64 turret_pan_deg
+float64 turret_tilt_deg
+{_SEP}
+MSG: thermcap_msgs/Target
+string target_id
+int32[] bbox
+float64[] centroid
+float64 max_temp_c
+float64 mean_temp_c
+string classification
+float64 confidence
+""", _sidecar_fields)
+
+
+def _stats_fields(d: dict[str, Any]) -> dict[str, Any]:
+    lat = ((d.get("write_latency_ms") or {}).get("interval") or {})
+    timing = d.get("timing") or {}
+    dropped = d.get("dropped") or {}
+    return {"frames_captured": int(d.get("frames_captured") or 0), "frames_written": int(d.get("frames_written") or 0),
+            "frames_dropped": int(sum(n for t, n in dropped.items() if t.endswith("/image"))),
+            "frames_paused": int(d.get("frames_paused") or 0), "queue_depth": int(d.get("queue_depth") or 0),
+            "queue_capacity": int(d.get("queue_capacity") or 0), "write_latency_p50_ms": _f(lat.get("p50")),
+            "write_latency_p99_ms": _f(lat.get("p99")), "analysis_skipped": int(d.get("analysis_skipped") or 0),
+            "achieved_fps": _f(timing.get("achieved_fps")), "segment": int(d.get("segment") or 0)}
+
+
+STATS = RosMessage("thermcap_msgs/msg/RecorderStats", """\
+# Recorder health about once a second (counts cumulative for the session); json has it all.
+string json
+uint64 frames_captured
+uint64 frames_written
+uint64 frames_dropped
+uint64 frames_paused
+uint32 queue_depth
+uint32 queue_capacity
+float64 write_latency_p50_ms
+float64 write_latency_p99_ms
+uint64 analysis_skipped
+float64 achieved_fps
+uint32 segment
+""", _stats_fields)
+
+
+def _event_fields(d: dict[str, Any]) -> dict[str, Any]:
+    def ns(v: Any) -> int:
+        return int(v) if isinstance(v, int) else -1
+
+    return {"kind": _s(d.get("kind")), "reason": _s(d.get("reason")), "note": _s(d.get("note")),
+            "camera": _s(d.get("camera")), "at_ns": ns(d.get("at_ns")),
+            "protect_start_ns": ns(d.get("protect_start_ns")),
+            "protect_end_ns": ns(d.get("protect_end_ns"))}
+
+
+EVENT = RosMessage("thermcap_msgs/msg/RecorderEvent", """\
+# A mark, trigger, pause, resume or split; times in ns since the Unix epoch, -1 where none.
+string json
+string kind
+string reason
+string note
+string camera
+int64 at_ns
+int64 protect_start_ns
+int64 protect_end_ns
+""", _event_fields)
+
+
+def _cue_fields(d: dict[str, Any]) -> dict[str, Any]:
+    return {"timestamp": _s(d.get("timestamp")), "target_id": _s(d.get("target_id")),
+            **{k: _f(d.get(k)) for k in ("latitude", "longitude", "altitude_m", "azimuth_deg", "elevation_deg",
+                                          "range_m", "uncertainty_m")}}
+
+
+RADAR_CUE = RosMessage("thermcap_msgs/msg/RadarCue", """\
+# A radar cue (ICD section 8.1); NaN where the cue has no value.
+string json
+string timestamp
+string target_id
+float64 latitude
+float64 longitude
+float64 altitude_m
+float64 azimuth_deg
+float64 elevation_deg
+float64 range_m
+float64 uncertainty_m
+""", _cue_fields)
+
+JSON_DOCUMENT = RosMessage("thermcap_msgs/msg/JsonDocument", """\
+# Any other recorded JSON document, exactly as recorded.
+string json
+""", lambda d: {})
+
+_BY_TOPIC = {"/thermal/metadata": SIDECAR, "/recorder/stats": STATS, "/recorder/events": EVENT,
+             "/radar/cue": RADAR_CUE}
+
+
+def message_for_topic(topic: str) -> RosMessage:
+    """The message of a recorded topic (a named camera's ``/thermal/<name>/...`` as the plain one)."""
+    parts = topic.split("/")
+    if len(parts) > 3 and parts[1] == "thermal" and parts[2] not in ("image", "metadata"):
+        topic = "/" + "/".join(["thermal", *parts[3:]]) if parts[3] in ("image", "metadata") else \
+            "/" + "/".join(parts[3:])
+    return _BY_TOPIC.get(topic, JSON_DOCUMENT)
+
+
+def json_payload(message_encoding: str, data: bytes | memoryview) -> bytes:
+    """A recorded document's JSON bytes from its message: the first string of a thermcap CDR
+    message, or the message itself on a JSON channel (older recordings)."""
+    if message_encoding != "cdr":
+        return bytes(data)
+    mv = memoryview(data)
+    if len(mv) < 8:
+        raise ValueError("a CDR message shorter than its header")
+    little = mv[1] == 1
+    (n,) = struct.unpack_from("<I" if little else ">I", mv, 4)
+    if n == 0 or 8 + n > len(mv):
+        raise ValueError("a CDR message whose first string runs past its end")
+    return bytes(mv[8:8 + n - 1])  # without the terminating NUL
+
+
+ANNOTATIONS = RosMessage("foxglove_msgs/msg/ImageAnnotations", f"""\
+foxglove_msgs/CircleAnnotation[] circles
+foxglove_msgs/PointsAnnotation[] points
+foxglove_msgs/TextAnnotation[] texts
+{_SEP}
+MSG: foxglove_msgs/CircleAnnotation
+builtin_interfaces/Time timestamp
+foxglove_msgs/Point2 position
+float64 diameter
+float64 thickness
+foxglove_msgs/Color fill_color
+foxglove_msgs/Color outline_color
+{_SEP}
+MSG: foxglove_msgs/PointsAnnotation
+builtin_interfaces/Time timestamp
+uint8 UNKNOWN=0
+uint8 POINTS=1
+uint8 LINE_LOOP=2
+uint8 LINE_STRIP=3
+uint8 LINE_LIST=4
+uint8 type
+foxglove_msgs/Point2[] points
+foxglove_msgs/Color outline_color
+foxglove_msgs/Color[] outline_colors
+foxglove_msgs/Color fill_color
+float64 thickness
+{_SEP}
+MSG: foxglove_msgs/TextAnnotation
+builtin_interfaces/Time timestamp
+foxglove_msgs/Point2 position
+string text
+float64 font_size
+foxglove_msgs/Color text_color
+foxglove_msgs/Color background_color
+{_SEP}
+MSG: foxglove_msgs/Point2
+float64 x
+float64 y
+{_SEP}
+MSG: foxglove_msgs/Color
+float64 r
+float64 g
+float64 b
+float64 a
+{_SEP}
+MSG: builtin_interfaces/Time
+int32 sec
+uint32 nanosec
+""", lambda d: d)
+
+
+def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
+    """A box and a "#id max °C" label per detected target, for Foxglove's Image panel."""
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    t = {"sec": sec, "nanosec": nsec}
+    red, white, shade = ({"r": 1.0, "g": 0.2, "b": 0.1, "a": 1.0}, {"r": 1.0, "g": 1.0, "b": 1.0, "a": 1.0},
+                         {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.6})
+    none = {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0}
+    points, texts = [], []
+    for tg in targets:
+        bbox = tg.get("bbox") or []
+        if len(bbox) != 4:
+            continue
+        x0, y0, x1, y1 = (float(v) for v in bbox)
+        x1, y1 = x1 + 1, y1 + 1  # inclusive pixel boxes: to the far edge of the last pixel
+        points.append({"timestamp": t, "type": 2, "points": [{"x": x0, "y": y0}, {"x": x1, "y": y0},
+                                                             {"x": x1, "y": y1}, {"x": x0, "y": y1}],
+                       "outline_color": red, "outline_colors": [], "fill_color": none, "thickness": 2.0})
+        label = f"#{tg.get('target_id')} {tg.get('max_temp_c')} °C"
+        texts.append({"timestamp": t, "position": {"x": x0, "y": max(0.0, y0 - 2)}, "text": label,
+                      "font_size": 12.0, "text_color": white, "background_color": shade})
+    return _encoder(ANNOTATIONS.name, ANNOTATIONS.text)({"circles": [], "points": points, "texts": texts})
