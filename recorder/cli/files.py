@@ -69,8 +69,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @cli.command("export")
 @click.argument("session")
 @root_option
-@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "celsius-cog", "heatmap-png", "icd",
-                                                "dji-rjpeg"]),
+@click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints",
+                                                "heatmap-png", "icd", "dji-rjpeg"]),
               required=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder (default: SESSION/export/KIND).")

@@ -24,7 +24,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
-from recorder.exports.geotiff import write_temperature_tiff
+from recorder.exports.geotiff import utm_tags, write_temperature_tiff
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.icd.rosmsg import json_payload
@@ -33,7 +33,8 @@ from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
 
-EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "heatmap-png", "icd", "dji-rjpeg")
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints", "heatmap-png", "icd",
+                "dji-rjpeg")
 PERCENTILES = (5, 25, 50, 75, 95)
 
 
@@ -120,6 +121,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
+    if kind in ("map-tiff", "footprints"):
+        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame)
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
@@ -188,6 +191,52 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         _write_summary(out, summary, stats, meta)
     return {"out": str(out), "kind": kind, "files": len(written), "refused": refused,
             "summary": (str(out / f"summary.{summary}") if summary else None)}
+
+
+def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: str, meta: dict[str, Any],
+                on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+    """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
+    frame as a °C GeoTIFF in its UTM zone (``recorder.maps``). A frame that cannot be placed is
+    refused with what its file lacks, never placed by a guess."""
+    from recorder.maps.footprint import FootprintRefused, footprint
+    from recorder.maps.pose import PoseMissing, pose_from_vendor
+
+    vendors = _import_vendor(session_dir)
+    features, written, refused = [], [], []
+    for f in iter_session_frames(session_dir):
+        h, w = f.pixels.shape
+        try:
+            fp = footprint(pose_from_vendor(vendors.get(f.log_time, {}), w, h))
+        except (PoseMissing, FootprintRefused) as exc:
+            refused.append(f"frame {f.index}: {exc}")
+            continue
+        props = {"frame_index": f.index, "time": iso_utc(f.log_time), **fp.to_properties()}
+        if kind == "footprints":
+            ring = [list(c) for c in fp.corners_lonlat] + [list(fp.corners_lonlat[0])]
+            features.append({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
+                             "properties": props})
+        else:
+            try:
+                temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32)
+            except TemperatureUnavailable as exc:
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            name = format_name(f.log_time, sensor_id, *_name_range(model, vendors.get(f.log_time, {}), temps))
+            path = out / f"{name}.map.tiff"
+            write_temperature_tiff(path, temps, units="degC", geo_tags=utm_tags(fp),
+                                   description=json.dumps({"units": "degC", **props}),
+                                   metadata={"session_id": meta.get("session_id"), "frame_index": f.index,
+                                             "time": iso_utc(f.log_time), "footprint": props,
+                                             "radiometric_model": model.to_dict()})
+            written.append(path.name)
+        if on_frame:
+            on_frame(len(features) + len(written))
+    if kind == "footprints":
+        path = out / "footprints.geojson"
+        path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1))
+        written = [path.name] if features else []
+    return {"out": str(out), "kind": kind, "files": len(written), "features": len(features), "refused": refused,
+            "summary": None}
 
 
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:

@@ -21,7 +21,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 
-__all__ = ["gdal_metadata_xml", "write_temperature_tiff"]
+__all__ = ["gdal_metadata_xml", "utm_tags", "write_temperature_tiff"]
 
 GDAL_METADATA, GDAL_NODATA = 42112, 42113
 
@@ -31,6 +31,23 @@ def gdal_metadata_xml(items: dict[str, Any], units: str) -> str:
             for k, v in items.items() if v is not None]
     rows.append(f'<Item name="UNITTYPE" sample="0" role="unittype">{escape(units)}</Item>')
     return "<GDALMetadata>" + "".join(rows) + "</GDALMetadata>"
+
+
+def utm_tags(fp: Any) -> list[tuple]:
+    """GeoTIFF tags placing an image by its footprint (``recorder.maps.footprint``) in its UTM
+    zone: near nadir an affine ModelTransformation (rotation included); oblique, the four
+    corners as tie points, which GDAL reads as GCPs."""
+    keys = (1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, fp.epsg)  # projected, PixelIsArea, EPSG
+    if fp.nadir:
+        e0, de_c, de_r, n0, dn_c, dn_r = fp.geotransform()
+        matrix = (de_c, de_r, 0.0, e0, dn_c, dn_r, 0.0, n0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+        return [(34264, "d", 16, matrix, True), (34735, "H", len(keys), keys, True)]
+    w, h = fp.pose.width, fp.pose.height
+    pixels = [(0.0, 0.0), (float(w), 0.0), (float(w), float(h)), (0.0, float(h))]
+    ties: list[float] = []
+    for (c, r), (e, n) in zip(pixels, fp.corners_en, strict=True):
+        ties += [c, r, 0.0, e, n, 0.0]
+    return [(33922, "d", len(ties), tuple(ties), True), (34735, "H", len(keys), keys, True)]
 
 
 def _tile(shape: tuple[int, ...]) -> tuple[int, int] | None:

@@ -147,6 +147,8 @@ def read_dji(path: str, data: bytes) -> list[ImportedFrame]:
     xmp = xmp_fields(app1)
     ts, time_basis = capture_time(exif, xmp)
     meta = {"exif_make": exif.get("Make"), "exif_model": model, "layout": layout, "embedded_params": params,
+            "exif_focal_length_mm": exif.get("FocalLength"),
+            "exif_focal_length_35mm": exif.get("FocalLengthIn35mmFilm"),
             "signed_int16": layout == "girp" or xt_s, "xmp_drone_dji": xmp,
             "exif_time": exif.get("DateTimeOriginal") or exif.get("DateTime"), "time_basis": time_basis}
     return [ImportedFrame(path=path, format="dji-rjpeg", layout=layout, pixels=pixels,

@@ -9,7 +9,8 @@ from datetime import UTC, datetime
 __all__ = ["capture_time", "exif_fields", "exif_position", "exif_time_ns", "xmp_fields"]
 
 _TAGS = {0x010F: "Make", 0x0110: "Model", 0x0132: "DateTime", 0x9003: "DateTimeOriginal", 0x8769: "ExifIFD",
-         0x8825: "GPSIFD", 0x9010: "OffsetTime", 0x9011: "OffsetTimeOriginal", 0x9291: "SubSecTimeOriginal"}
+         0x8825: "GPSIFD", 0x9010: "OffsetTime", 0x9011: "OffsetTimeOriginal", 0x9291: "SubSecTimeOriginal",
+         0x920A: "FocalLength", 0xA405: "FocalLengthIn35mmFilm"}
 _GPS_TAGS = {0x0001: "GPSLatitudeRef", 0x0002: "GPSLatitude", 0x0003: "GPSLongitudeRef", 0x0004: "GPSLongitude",
              0x0005: "GPSAltitudeRef", 0x0006: "GPSAltitude", 0x0007: "GPSTimeStamp", 0x0012: "GPSMapDatum",
              0x001D: "GPSDateStamp"}
@@ -39,6 +40,8 @@ def _walk_ifd(t: bytes, order: str, out: dict[str, object], offset: int, tags: d
             out[name] = vals if count == 3 else vals[0]
         elif typ == 1 and count == 1:  # BYTE: GPSAltitudeRef (1: below sea level)
             out[name] = e[8]
+        elif typ == 3 and count == 1:  # SHORT: FocalLengthIn35mmFilm
+            out[name] = struct.unpack(order + "H", e[8:10])[0]
 
 
 def exif_fields(app1_payloads: list[bytes]) -> dict[str, object]:

@@ -203,6 +203,8 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
         frame.timestamp_ns = ts
         frame.vendor_metadata["time_basis"] = time_basis
     frame.vendor_metadata.update(exif_make=exif.get("Make"), exif_model=exif.get("Model"),
+                                 exif_focal_length_mm=exif.get("FocalLength"),
+                                 exif_focal_length_35mm=exif.get("FocalLengthIn35mmFilm"),
                                  exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
     if xmp:
         frame.vendor_metadata["xmp_drone_dji"] = xmp

@@ -1,0 +1,163 @@
+"""Where an image lands on a flat ground plane, in the local UTM zone.
+
+Each corner's ray leaves the camera through the lens (the field of view), is turned by the
+gimbal's roll, pitch and yaw, and meets the plane ``height_m`` below the camera. A corner ray
+within ``HORIZON_MARGIN_DEG`` of the horizon (or above it) has no meaningful ground point, so
+such an image is refused with the reason instead of stretched to infinity. Near nadir the four
+corners are an affine map (a GeoTIFF geotransform); otherwise they are four GCPs. The
+uncertainty is the spread of the footprint's centre when each pose input moves by its typical
+error (GPS 2 m, height 1 m, gimbal angles 1 deg), added in quadrature.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from recorder.maps.pose import CameraPose
+
+__all__ = ["HORIZON_MARGIN_DEG", "NADIR_TOLERANCE_DEG", "Footprint", "FootprintRefused", "footprint",
+           "ground_to_pixel", "utm_epsg"]
+
+HORIZON_MARGIN_DEG = 5.0
+NADIR_TOLERANCE_DEG = 5.0
+POSE_ERRORS = {"gps_m": 2.0, "height_m": 1.0, "angle_deg": 1.0}
+
+
+class FootprintRefused(ValueError):
+    """The pose puts part of the image at or above the horizon."""
+
+
+def utm_epsg(lat: float, lon: float) -> int:
+    zone = int((lon + 180) // 6) % 60 + 1
+    return (32600 if lat >= 0 else 32700) + zone
+
+
+@dataclass(frozen=True)
+class Footprint:
+    epsg: int
+    corners_en: list[tuple[float, float]]  # TL, TR, BR, BL: (easting, northing) in metres
+    corners_lonlat: list[tuple[float, float]]
+    camera_en: tuple[float, float]
+    nadir: bool
+    gsd_m: float  # ground sample distance under the image centre
+    uncertainty_m: float
+    pose: CameraPose
+    notes: list[str] = field(default_factory=list)
+
+    @property
+    def width_m(self) -> float:
+        (x0, y0), (x1, y1) = self.corners_en[0], self.corners_en[1]
+        return math.hypot(x1 - x0, y1 - y0)
+
+    def geotransform(self) -> tuple[float, float, float, float, float, float]:
+        """GDAL's (E0, dE/dcol, dE/drow, N0, dN/dcol, dN/drow) from the TL, TR and BL corners."""
+        (e0, n0), (e1, n1), _, (e3, n3) = self.corners_en
+        w, h = self.pose.width, self.pose.height
+        return e0, (e1 - e0) / w, (e3 - e0) / h, n0, (n1 - n0) / w, (n3 - n0) / h
+
+    def to_properties(self) -> dict[str, Any]:
+        p = self.pose
+        return {"epsg": self.epsg, "nadir": self.nadir, "gsd_m": round(self.gsd_m, 4),
+                "uncertainty_m": round(self.uncertainty_m, 2), "width_m": round(self.width_m, 2),
+                "height_above_ground_m": p.height_m, "gimbal_pitch_deg": p.pitch_deg, "gimbal_yaw_deg": p.yaw_deg,
+                "gimbal_roll_deg": p.roll_deg, "hfov_deg": round(p.hfov_deg, 3), "fov_source": p.fov_source,
+                "latitude": p.latitude, "longitude": p.longitude, "notes": self.notes}
+
+
+def _basis(pose: CameraPose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Camera forward, right and up vectors in local East-North-Up."""
+    p, y, r = (math.radians(v) for v in (pose.pitch_deg, pose.yaw_deg, pose.roll_deg))
+    f = np.array([0.0, math.cos(p), math.sin(p)])
+    u = np.array([0.0, -math.sin(p), math.cos(p)])
+    right = np.array([1.0, 0.0, 0.0])
+    right, u = right * math.cos(r) - u * math.sin(r), u * math.cos(r) + right * math.sin(r)
+
+    def yawed(v: np.ndarray) -> np.ndarray:  # clockwise from north, about up
+        return np.array([v[0] * math.cos(y) + v[1] * math.sin(y), -v[0] * math.sin(y) + v[1] * math.cos(y), v[2]])
+
+    return yawed(f), yawed(right), yawed(u)
+
+
+def _rays(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    f, r, u = _basis(pose)
+    tx, ty = math.tan(math.radians(pose.hfov_deg) / 2), math.tan(math.radians(pose.vfov_deg) / 2)
+    return f[None, :] + sx[:, None] * tx * r[None, :] - sy[:, None] * ty * u[None, :]
+
+
+def _ground_offsets(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+    d = _rays(pose, sx, sy)
+    elevation = np.degrees(np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1)))
+    if np.any(elevation > -HORIZON_MARGIN_DEG):
+        worst = float(elevation.max())
+        raise FootprintRefused(
+            f"gimbal pitch {pose.pitch_deg:g} deg: part of the image looks {abs(worst):.1f} deg "
+            f"{'above' if worst > 0 else 'below'} the horizon (within {HORIZON_MARGIN_DEG:g} deg of it or above), "
+            f"so it has no ground footprint")
+    t = -pose.height_m / d[:, 2]
+    return d[:, :2] * t[:, None]
+
+
+_CORNERS = (np.array([-1.0, 1.0, 1.0, -1.0]), np.array([-1.0, -1.0, 1.0, 1.0]))  # TL, TR, BR, BL
+
+
+def _centre_offset(pose: CameraPose) -> np.ndarray:
+    return _ground_offsets(pose, np.array([0.0]), np.array([0.0]))[0]
+
+
+def footprint(pose: CameraPose) -> Footprint:
+    from pyproj import Transformer
+
+    offsets = _ground_offsets(pose, *_CORNERS)
+    epsg = utm_epsg(pose.latitude, pose.longitude)
+    to_utm = Transformer.from_crs(4326, epsg, always_xy=True)
+    to_ll = Transformer.from_crs(epsg, 4326, always_xy=True)
+    ce, cn = to_utm.transform(pose.longitude, pose.latitude)
+    # UTM grid north is not true north away from the central meridian: turn ENU offsets by the
+    # grid convergence so a north-facing footprint is north on the map
+    e_n, n_n = to_utm.transform(pose.longitude, pose.latitude + 1e-4)
+    gamma = math.atan2(e_n - ce, n_n - cn)
+    cg, sg = math.cos(gamma), math.sin(gamma)
+    grid = [(ce + x * cg + y * sg, cn - x * sg + y * cg) for x, y in offsets]
+    lonlat = [to_ll.transform(e, n) for e, n in grid]
+    centre_px = _ground_offsets(pose, np.array([0.0, 2.0 / pose.width]), np.array([0.0, 0.0]))
+    gsd = float(np.linalg.norm(centre_px[1] - centre_px[0]))
+    base = _centre_offset(pose)
+    spread = [POSE_ERRORS["gps_m"] ** 2]
+    for name, delta in (("height_m", POSE_ERRORS["height_m"]), ("pitch_deg", POSE_ERRORS["angle_deg"]),
+                        ("yaw_deg", POSE_ERRORS["angle_deg"]), ("roll_deg", POSE_ERRORS["angle_deg"])):
+        try:
+            moved = _centre_offset(replace(pose, **{name: getattr(pose, name) + delta}))
+        except FootprintRefused:
+            moved = base + 10 * pose.height_m  # so near the horizon that an error of one step is unbounded
+        spread.append(float(np.sum((moved - base) ** 2)))
+    nadir = abs(pose.pitch_deg + 90) <= NADIR_TOLERANCE_DEG and abs(pose.roll_deg) <= NADIR_TOLERANCE_DEG
+    notes = [] if nadir else ["oblique: the corners are GCPs, the footprint is a trapezoid"]
+    return Footprint(epsg, grid, [(float(a), float(b)) for a, b in lonlat], (ce, cn), nadir, gsd,
+                     math.sqrt(sum(spread)), pose, notes)
+
+
+def ground_to_pixel(fp: Footprint, easting: float, northing: float) -> tuple[float, float] | None:
+    """Where a ground point appears in the image (column, row), or None if outside the view."""
+    pose = fp.pose
+    f, r, u = _basis(pose)
+    ce, cn = fp.camera_en
+    from pyproj import Transformer
+
+    to_utm = Transformer.from_crs(4326, fp.epsg, always_xy=True)
+    e_n, n_n = to_utm.transform(pose.longitude, pose.latitude + 1e-4)
+    gamma = math.atan2(e_n - ce, n_n - cn)
+    de, dn = easting - ce, northing - cn
+    x, y = de * math.cos(gamma) - dn * math.sin(gamma), de * math.sin(gamma) + dn * math.cos(gamma)
+    d = np.array([x, y, -pose.height_m])
+    depth = float(d @ f)
+    if depth <= 0:
+        return None
+    tx, ty = math.tan(math.radians(pose.hfov_deg) / 2), math.tan(math.radians(pose.vfov_deg) / 2)
+    sx, sy = float(d @ r) / depth / tx, -float(d @ u) / depth / ty
+    if abs(sx) > 1 + 1e-6 or abs(sy) > 1 + 1e-6:  # the image edge itself is in view
+        return None
+    return (sx + 1) / 2 * pose.width, (sy + 1) / 2 * pose.height

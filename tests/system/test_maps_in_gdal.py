@@ -1,0 +1,97 @@
+"""Thermal images on the map, checked with GDAL and with the samples' own metadata:
+
+- a map GeoTIFF near nadir carries a geotransform in the right UTM zone, oblique ones four GCPs
+  (``gdalinfo``);
+- the DJI H20T sample (gimbal pitch -10.5 deg) is refused: its top edge looks above the
+  horizon, and the export says so; the samples without a position say that;
+- the same H20T file with its XMP pitch set to -90.00 (a byte-for-byte edit of the real file)
+  gets a footprint of 2·h·tan(FOV/2) from its own RelativeAltitude and focal length.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import subprocess
+
+import numpy as np
+import pytest
+
+from recorder.exports.files import export_session
+from recorder.exports.geotiff import utm_tags, write_temperature_tiff
+from recorder.importers.run import import_paths
+from recorder.maps.footprint import footprint
+from recorder.maps.pose import CameraPose
+from tests.conftest import SAMPLES
+
+pytest.importorskip("pyproj", reason="pyproj is in the geo extra")
+if shutil.which("gdalinfo") is None:
+    pytest.skip("no gdalinfo here (apt-get install gdal-bin; .ci/run does this)", allow_module_level=True)
+
+
+def _info(path) -> dict:
+    r = subprocess.run(["gdalinfo", "-json", str(path)], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    return json.loads(r.stdout)
+
+
+@pytest.mark.parametrize("pitch", [-90.0, -55.0])
+def test_map_geotiffs_in_gdal(tmp_path, pitch):
+    fp = footprint(CameraPose(53.4489, -2.815, 60.0, pitch, 20.0, 0.0, 32.0, 640, 512, "test"))
+    path = tmp_path / "m.tiff"
+    write_temperature_tiff(path, np.full((512, 640), 21.5, np.float32), units="degC", metadata={},
+                           geo_tags=utm_tags(fp))
+    info = _info(path)
+    crs = (info.get("coordinateSystem") or info["gcps"]["coordinateSystem"])["wkt"]  # GCPs carry their own CRS
+    assert crs.startswith('PROJCRS["WGS 84 / UTM zone 30N"') and crs.rstrip().endswith('ID["EPSG",32630]]')
+    if fp.nadir:
+        assert info["geoTransform"] == pytest.approx(list(fp.geotransform()), abs=1e-6)
+        centre = info["cornerCoordinates"]["center"]
+        assert centre == pytest.approx(list(fp.camera_en), abs=0.01)
+    else:
+        gcps = info["gcps"]["gcpList"]
+        assert len(gcps) == 4
+        for g, (e, n) in zip(gcps, fp.corners_en, strict=True):
+            assert (g["x"], g["y"]) == pytest.approx((e, n), abs=1e-3)
+
+
+def _import(tmp_path, data: bytes, name: str):
+    src = tmp_path / name
+    src.write_bytes(data)
+    root = tmp_path / "root"
+    import_paths([str(src)], root, session=name.split(".")[0], analysis=False)
+    return root / "sessions" / name.split(".")[0]
+
+
+def test_the_h20t_sample_is_refused_and_a_nadir_copy_gets_its_footprint(tmp_path):
+    sample = SAMPLES / "dji" / "DJI_H20T.jpg"
+    if not sample.is_file():
+        pytest.skip(f"{sample} is not here")
+    data = sample.read_bytes()
+    session = _import(tmp_path, data, "h20t.jpg")
+    res = export_session(session, "footprints", tmp_path / "fp")
+    assert res["features"] == 0 and "horizon" in res["refused"][0] and "-10.5" in res["refused"][0]
+    assert b'GimbalPitchDegree="-10.50"' in data
+    nadir = _import(tmp_path, data.replace(b'GimbalPitchDegree="-10.50"', b'GimbalPitchDegree="-90.00"'),
+                    "h20tnadir.jpg")
+    res = export_session(nadir, "footprints", tmp_path / "fpn")
+    assert res["features"] == 1 and not res["refused"]
+    (feature,) = json.loads((tmp_path / "fpn" / "footprints.geojson").read_text())["features"]
+    p = feature["properties"]
+    want = 2 * 16.508 * math.tan(math.atan(18 / 58))  # its RelativeAltitude and 35 mm focal length
+    assert p["width_m"] == pytest.approx(want, abs=0.01) and p["epsg"] == 32617
+    ring = feature["geometry"]["coordinates"][0]
+    assert len(ring) == 5 and ring[0] == ring[-1]
+    lon, lat = np.mean(ring[:4], axis=0)
+    assert (lat, lon) == pytest.approx((40 + 33 / 60 + 49.61 / 3600, -(79 + 45 / 60 + 53.87 / 3600)), abs=2e-5)
+
+
+@pytest.mark.parametrize("name", ["M30T_DJI_0001_R.JPG", "M2EA_DJI_0001_R.JPG"])
+def test_samples_without_a_position_say_so(tmp_path, name):
+    sample = SAMPLES / "dji" / name
+    if not sample.is_file():
+        pytest.skip(f"{sample} is not here")
+    session = _import(tmp_path, sample.read_bytes(), name.lower())
+    res = export_session(session, "footprints", tmp_path / "fp")
+    assert res["features"] == 0 and "no position" in res["refused"][0]
