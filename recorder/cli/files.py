@@ -81,11 +81,14 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
               show_default=True, help="heatmap-png: one scale for the session, each frame's own, or --min/--max.")
 @click.option("--min", "t_min", type=float, default=None, help="heatmap-png: the scale's low end, °C (--range fixed).")
 @click.option("--max", "t_max", type=float, default=None, help="heatmap-png: the scale's high end, °C.")
+@click.option("--crs", type=click.Choice(["utm", "4326"]), default=None,
+              help="map-tiff of TERRA-REF images: EPSG:4326 as the pipeline publishes (default) or UTM 12N.")
 @click.option("--colorbar/--no-colorbar", default=True, show_default=True,
               help="heatmap-png: draw the scale into each picture (the range is in its PNG text either way).")
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
-               range_mode: str, t_min: float | None, t_max: float | None, colorbar: bool, as_json: bool) -> None:
+               range_mode: str, t_min: float | None, t_max: float | None, crs: str | None, colorbar: bool,
+               as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from recorder.exports.files import export_session
     from recorder.storage.reader import resolve_session
@@ -95,7 +98,8 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         if t_min is not None and t_max is not None and range_mode == "session":
             range_mode = "fixed"  # --min and --max alone mean a fixed scale
         res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette,
-                             range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar)
+                             range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
+                             crs=crs or "4326")
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else

@@ -24,7 +24,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
-from recorder.exports.geotiff import utm_tags, write_temperature_tiff
+from recorder.exports.geotiff import geotransform_tags, utm_tags, write_temperature_tiff
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.icd.rosmsg import json_payload
@@ -108,7 +108,7 @@ def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
 def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
                    palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None,
                    range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
-                   colorbar: bool = True) -> dict[str, Any]:
+                   colorbar: bool = True, crs: str = "4326") -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
     each PNG's text chunks either way."""
@@ -122,7 +122,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
     if kind in ("map-tiff", "footprints"):
-        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame)
+        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame, crs)
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
@@ -194,36 +194,52 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
 
 
 def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: str, meta: dict[str, Any],
-                on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+                on_frame: Callable[[int], None] | None, crs: str = "4326") -> dict[str, Any]:
     """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
-    frame as a °C GeoTIFF in its UTM zone (``recorder.maps``). A frame that cannot be placed is
-    refused with what its file lacks, never placed by a guess."""
+    frame as a °C GeoTIFF (``recorder.maps``): a drone image in its UTM zone; a TERRA-REF gantry
+    image rotated and placed as the TERRA-REF pipeline does, in EPSG:4326 as it publishes (or UTM
+    12N with ``crs="utm"``). A frame that cannot be placed is refused with what its file lacks,
+    never placed by a guess."""
     from recorder.maps.footprint import FootprintRefused, footprint
     from recorder.maps.pose import PoseMissing, pose_from_vendor
+    from recorder.maps.terraref import UTM_12N, gantry_footprint
 
     vendors = _import_vendor(session_dir)
     features, written, refused = [], [], []
     for f in iter_session_frames(session_dir):
         h, w = f.pixels.shape
-        try:
-            fp = footprint(pose_from_vendor(vendors.get(f.log_time, {}), w, h))
-        except (PoseMissing, FootprintRefused) as exc:
-            refused.append(f"frame {f.index}: {exc}")
-            continue
-        props = {"frame_index": f.index, "time": iso_utc(f.log_time), **fp.to_properties()}
+        vendor = vendors.get(f.log_time, {})
+        pixels = f.pixels
+        gantry = gantry_footprint(vendor, iso_utc(f.log_time)[:10]) if vendor.get("position_m") else None
+        if gantry is not None:
+            pixels = np.rot90(f.pixels, 3)  # as the pipeline writes it: 640 rows north-south
+            ph, pw = pixels.shape
+            props = {"frame_index": f.index, "time": iso_utc(f.log_time), **gantry.to_properties()}
+            ring_ll = [(gantry.lon_min, gantry.lat_max), (gantry.lon_max, gantry.lat_max),
+                       (gantry.lon_max, gantry.lat_min), (gantry.lon_min, gantry.lat_min)]
+            tags = geotransform_tags(gantry.geotransform_4326(pw, ph), 4326) if crs != "utm" else \
+                geotransform_tags(gantry.geotransform_utm(pw, ph), UTM_12N)
+        else:
+            try:
+                fp = footprint(pose_from_vendor(vendor, w, h))
+            except (PoseMissing, FootprintRefused) as exc:
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            props = {"frame_index": f.index, "time": iso_utc(f.log_time), **fp.to_properties()}
+            ring_ll, tags = fp.corners_lonlat, utm_tags(fp)
         if kind == "footprints":
-            ring = [list(c) for c in fp.corners_lonlat] + [list(fp.corners_lonlat[0])]
+            ring = [list(c) for c in ring_ll] + [list(ring_ll[0])]
             features.append({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
                              "properties": props})
         else:
             try:
-                temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32)
+                temps = np.asarray(model.to_celsius(pixels), dtype=np.float32)
             except TemperatureUnavailable as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
-            name = format_name(f.log_time, sensor_id, *_name_range(model, vendors.get(f.log_time, {}), temps))
+            name = format_name(f.log_time, sensor_id, *_name_range(model, vendor, temps))
             path = out / f"{name}.map.tiff"
-            write_temperature_tiff(path, temps, units="degC", geo_tags=utm_tags(fp),
+            write_temperature_tiff(path, temps, units="degC", geo_tags=tags,
                                    description=json.dumps({"units": "degC", **props}),
                                    metadata={"session_id": meta.get("session_id"), "frame_index": f.index,
                                              "time": iso_utc(f.log_time), "footprint": props,

@@ -21,7 +21,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 
-__all__ = ["gdal_metadata_xml", "utm_tags", "write_temperature_tiff"]
+__all__ = ["gcp_tags", "gdal_metadata_xml", "geotransform_tags", "utm_tags", "write_temperature_tiff"]
 
 GDAL_METADATA, GDAL_NODATA = 42112, 42113
 
@@ -33,21 +33,37 @@ def gdal_metadata_xml(items: dict[str, Any], units: str) -> str:
     return "<GDALMetadata>" + "".join(rows) + "</GDALMetadata>"
 
 
+def _geokeys(epsg: int) -> tuple[int, ...]:
+    if epsg == 4326:  # geographic WGS 84, PixelIsArea
+        return (1, 1, 0, 3, 1024, 0, 1, 2, 1025, 0, 1, 1, 2048, 0, 1, 4326)
+    return (1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, epsg)  # projected, PixelIsArea
+
+
+def geotransform_tags(gt: Sequence[float], epsg: int) -> list[tuple]:
+    """GDAL's six-term geotransform (rotation included) as a ModelTransformation and GeoKeys."""
+    e0, de_c, de_r, n0, dn_c, dn_r = gt
+    matrix = (de_c, de_r, 0.0, e0, dn_c, dn_r, 0.0, n0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
+    keys = _geokeys(epsg)
+    return [(34264, "d", 16, matrix, True), (34735, "H", len(keys), keys, True)]
+
+
+def gcp_tags(pixels: Sequence[tuple[float, float]], coords: Sequence[tuple[float, float]], epsg: int) -> list[tuple]:
+    """Tie points (column, row) -> (x, y), which GDAL reads as GCPs."""
+    ties: list[float] = []
+    for (c, r), (x, y) in zip(pixels, coords, strict=True):
+        ties += [c, r, 0.0, x, y, 0.0]
+    keys = _geokeys(epsg)
+    return [(33922, "d", len(ties), tuple(ties), True), (34735, "H", len(keys), keys, True)]
+
+
 def utm_tags(fp: Any) -> list[tuple]:
     """GeoTIFF tags placing an image by its footprint (``recorder.maps.footprint``) in its UTM
     zone: near nadir an affine ModelTransformation (rotation included); oblique, the four
     corners as tie points, which GDAL reads as GCPs."""
-    keys = (1, 1, 0, 3, 1024, 0, 1, 1, 1025, 0, 1, 1, 3072, 0, 1, fp.epsg)  # projected, PixelIsArea, EPSG
     if fp.nadir:
-        e0, de_c, de_r, n0, dn_c, dn_r = fp.geotransform()
-        matrix = (de_c, de_r, 0.0, e0, dn_c, dn_r, 0.0, n0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0)
-        return [(34264, "d", 16, matrix, True), (34735, "H", len(keys), keys, True)]
+        return geotransform_tags(fp.geotransform(), fp.epsg)
     w, h = fp.pose.width, fp.pose.height
-    pixels = [(0.0, 0.0), (float(w), 0.0), (float(w), float(h)), (0.0, float(h))]
-    ties: list[float] = []
-    for (c, r), (e, n) in zip(pixels, fp.corners_en, strict=True):
-        ties += [c, r, 0.0, e, n, 0.0]
-    return [(33922, "d", len(ties), tuple(ties), True), (34735, "H", len(keys), keys, True)]
+    return gcp_tags([(0.0, 0.0), (float(w), 0.0), (float(w), float(h)), (0.0, float(h))], fp.corners_en, fp.epsg)
 
 
 def _tile(shape: tuple[int, ...]) -> tuple[int, int] | None:

@@ -75,6 +75,8 @@ def read_terraref(path: str, data: bytes, *, variant: str = "pipeline") -> list[
               "lens_temperature_k": var.get("lens temperature [K]"),
               "is_calibrated": fixed.get("is calibrated"),
               "display_rotation": "numpy.rot90(raw, 3) in the TERRA-REF pipeline",
+              "camera_box_m": {k: fixed.get(f"location in camera box {k} [m]") for k in "xyz"},
+              "field_of_view_m": {k: fixed.get(f"field of view {k} [m]") for k in "xy"},
               "temperature_variant": variant if isinstance(model, TerraRefPlanckModel) else "deci-kelvin"}
     return [ImportedFrame(path=path, format="terraref-bin", layout="480x640-le", pixels=pixels, model=model,
                           timestamp_ns=ts, sensor_model=f"FLIR {fixed.get('sensor product name', 'A615')}",

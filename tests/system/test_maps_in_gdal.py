@@ -95,3 +95,47 @@ def test_samples_without_a_position_say_so(tmp_path, name):
     session = _import(tmp_path, sample.read_bytes(), name.lower())
     res = export_session(session, "footprints", tmp_path / "fp")
     assert res["features"] == 0 and "no position" in res["refused"][0]
+
+
+@pytest.mark.parametrize("crs", ["4326", "utm"])
+def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
+    binf = SAMPLES / "terraref" / "c3c21db1-deb5-481a-8180-ad447f356a95_ir.bin"
+    if not binf.is_file():
+        pytest.skip(f"{binf} is not here")
+    root = tmp_path / "root"
+    import_paths([str(binf)], root, session="tr", analysis=False)
+    session = root / "sessions" / "tr"
+    res = export_session(session, "map-tiff", tmp_path / "m", crs=crs)
+    assert res["files"] == 1, res
+    (path,) = (tmp_path / "m").glob("*.map.tiff")
+    info = _info(path)
+    assert info["size"] == [480, 640]  # rotated as the pipeline writes it: numpy.rot90(raw, 3)
+    md = json.loads((SAMPLES / "terraref" / "c3c21db1-deb5-481a-8180-ad447f356a95_metadata.json").read_text())
+    lm = md["lemnatec_measurement_metadata"]
+    g, s = lm["gantry_system_variable_metadata"], lm["sensor_fixed_metadata"]
+    cx = float(g["position x [m]"]) + float(s["location in camera box x [m]"])
+    cy = float(g["position y [m]"]) + float(s["location in camera box y [m]"])
+    above = float(g["position z [m]"]) + float(s["location in camera box z [m]"]) + 1.0  # rail_height_offset
+    fx, fy = float(s["field of view x [m]"]) * above / 2, float(s["field of view y [m]"]) * above / 2
+    gt = info["geoTransform"]
+    if crs == "4326":
+        assert 'ID["EPSG",4326]' in info["coordinateSystem"]["wkt"]
+        assert gt[1] * 480 == pytest.approx(fy / (111320 * math.cos(math.radians(33.0746))), rel=0.01)
+        assert -gt[5] * 640 == pytest.approx(fx / 110900, rel=0.01)
+        assert (gt[3], gt[0]) == pytest.approx((33.07462, -111.97504), abs=2e-5)  # the field's SE corner area
+    else:
+        assert info["coordinateSystem"]["wkt"].rstrip().endswith('ID["EPSG",32612]]')
+        e_nw = 409012.2032 + 0.009 * (cx + fx / 2) - 0.9986 * (cy + fy / 2)
+        n_nw = 3659974.971 + 1.0002 * (cx + fx / 2) + 0.0078 * (cy + fy / 2)
+        assert (gt[0], gt[3]) == pytest.approx((e_nw, n_nw), abs=1e-3)
+    from recorder.radiometry import model_from_dict
+    from recorder.storage.reader import iter_session_frames
+    from recorder.storage.reader import read_session_meta as meta
+
+    frame = next(iter(iter_session_frames(session))).pixels
+    want = np.rot90(np.asarray(model_from_dict(meta(session)["radiometric_model"]).to_celsius(frame)), 3)
+    out = tmp_path / "copy.tiff"  # what GDAL reads, written out by GDAL
+    subprocess.run(["gdal_translate", "-q", "-co", "COMPRESS=NONE", str(path), str(out)], check=True, timeout=60)
+    import tifffile
+
+    np.testing.assert_allclose(tifffile.imread(out), want, rtol=1e-6)
