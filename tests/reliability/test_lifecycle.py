@@ -28,6 +28,7 @@ import pytest
 from mcap.reader import make_reader
 
 from recorder.capture.sources.sim import SimSource
+from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import decode_image
 from tests.conftest import ApiServer, run_cli, wait_for
 
@@ -51,7 +52,7 @@ def _truth(session: Path) -> list[tuple[int, str, bytes]]:
                     px = decode_image(msg.data)[1]
                     slot[0] = hashlib.sha256(np.ascontiguousarray(px, "<u2").tobytes()).hexdigest()
                 else:
-                    slot[1] = bytes(msg.data)
+                    slot[1] = json_payload(ch.message_encoding, msg.data)  # the sidecar as recorded
         out += [(t, v[0], v[1]) for t, v in sorted(pending.items())]
     return out
 
