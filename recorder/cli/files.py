@@ -70,7 +70,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @click.argument("session")
 @root_option
 @click.option("--to", "kind", type=click.Choice(["celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints",
-                                                "heatmap-png", "icd", "dji-rjpeg"]),
+                                                "mosaic", "hotspots", "heatmap-png", "icd", "dji-rjpeg"]),
               required=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder (default: SESSION/export/KIND).")

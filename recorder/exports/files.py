@@ -24,7 +24,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
-from recorder.exports.geotiff import geotransform_tags, utm_tags, write_temperature_tiff
+from recorder.exports.geotiff import geotransform_tags, utm_tags, write_cog, write_temperature_tiff
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.icd.rosmsg import json_payload
@@ -33,8 +33,9 @@ from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
 
-EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints", "heatmap-png", "icd",
-                "dji-rjpeg")
+EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints", "mosaic", "hotspots",
+                "heatmap-png", "icd", "dji-rjpeg")
+_MAP_KINDS = ("map-tiff", "footprints", "mosaic", "hotspots")
 PERCENTILES = (5, 25, 50, 75, 95)
 
 
@@ -121,7 +122,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
-    if kind in ("map-tiff", "footprints"):
+    if kind in _MAP_KINDS:
         return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame, crs)
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
@@ -201,11 +202,16 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
     12N with ``crs="utm"``). A frame that cannot be placed is refused with what its file lacks,
     never placed by a guess."""
     from recorder.maps.footprint import FootprintRefused, footprint
+    from recorder.maps.mosaic import hot_spot_points
     from recorder.maps.pose import PoseMissing, pose_from_vendor
     from recorder.maps.terraref import UTM_12N, gantry_footprint
 
     vendors = _import_vendor(session_dir)
-    features, written, refused = [], [], []
+    features: list[dict[str, Any]] = []
+    written: list[str] = []
+    refused: list[str] = []
+    tiles: list[tuple[int, Any, np.ndarray]] = []  # mosaic: (frame, footprint, °C)
+    frame_times: dict[int, str] = {}
     for f in iter_session_frames(session_dir):
         h, w = f.pixels.shape
         vendor = vendors.get(f.log_time, {})
@@ -231,6 +237,25 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
             ring = [list(c) for c in ring_ll] + [list(ring_ll[0])]
             features.append({"type": "Feature", "geometry": {"type": "Polygon", "coordinates": [ring]},
                              "properties": props})
+        elif kind == "hotspots":
+            if gantry is not None:
+                refused.append(f"frame {f.index}: hot spots on the map are for drone images")
+                continue
+            for pt in hot_spot_points(fp, f.sidecar_dict().get("targets") or []):
+                features.append({"type": "Feature",
+                                 "geometry": {"type": "Point", "coordinates": [pt["longitude"], pt["latitude"]]},
+                                 "properties": {"frame_index": f.index, "time": iso_utc(f.log_time), **pt}})
+        elif kind == "mosaic":
+            if gantry is not None or not fp.nadir:
+                refused.append(f"frame {f.index}: not near nadir, so not in the mosaic (its pixels are not on "
+                               f"one scale; export it with --to map-tiff)")
+                continue
+            try:
+                tiles.append((f.index, fp, np.asarray(model.to_celsius(f.pixels), dtype=np.float32)))
+            except TemperatureUnavailable as exc:
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            frame_times[f.index] = iso_utc(f.log_time)
         else:
             try:
                 temps = np.asarray(model.to_celsius(pixels), dtype=np.float32)
@@ -247,12 +272,34 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
             written.append(path.name)
         if on_frame:
             on_frame(len(features) + len(written))
-    if kind == "footprints":
-        path = out / "footprints.geojson"
+    if kind in ("footprints", "hotspots"):
+        path = out / f"{kind}.geojson"
         path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1))
         written = [path.name] if features else []
+    if kind == "mosaic":
+        written = _write_mosaic(out, tiles, frame_times, meta) if tiles else []
     return {"out": str(out), "kind": kind, "files": len(written), "features": len(features), "refused": refused,
             "summary": None}
+
+
+def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_times: dict[int, str],
+                  meta: dict[str, Any]) -> list[str]:
+    from recorder.maps.mosaic import build_mosaic
+
+    try:
+        mosaic = build_mosaic(tiles)
+    except ValueError as exc:
+        raise ThermcapError(str(exc)) from None
+    rule = "each cell: the nearest pixel of the image whose centre is nearest (one real measurement)"
+    common = {"session_id": meta.get("session_id"), "gsd_m": mosaic.gsd_m, "blending": rule}
+    write_cog(out / "mosaic.tiff", mosaic.temps, geotransform=mosaic.geotransform, epsg=mosaic.epsg, units="degC",
+              metadata={**common, "sources": "mosaic.sources.tiff"}, nodata=float("nan"))
+    write_cog(out / "mosaic.sources.tiff", mosaic.sources, geotransform=mosaic.geotransform, epsg=mosaic.epsg,
+              units=None, metadata={**common, "value": "frame index of each cell (-1: none)"}, nodata=-1)
+    (out / "mosaic.frames.json").write_text(json.dumps(
+        {"epsg": mosaic.epsg, "gsd_m": mosaic.gsd_m, "blending": rule,
+         "frames": [{"frame_index": i, "time": frame_times[i]} for i in mosaic.frames]}, indent=1))
+    return ["mosaic.tiff", "mosaic.sources.tiff", "mosaic.frames.json"]
 
 
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:

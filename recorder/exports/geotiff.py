@@ -21,7 +21,7 @@ import tifffile
 
 from recorder.exceptions import ThermcapError
 
-__all__ = ["gcp_tags", "gdal_metadata_xml", "geotransform_tags", "utm_tags", "write_temperature_tiff"]
+__all__ = ["gcp_tags", "gdal_metadata_xml", "geotransform_tags", "utm_tags", "write_cog", "write_temperature_tiff"]
 
 GDAL_METADATA, GDAL_NODATA = 42112, 42113
 
@@ -85,6 +85,30 @@ def write_temperature_tiff(target: str | Path | io.BytesIO, data: np.ndarray, *,
                  (GDAL_NODATA, "s", 0, "nan", True), *geo_tags]
     tifffile.imwrite(target, data, photometric="minisblack", byteorder="<", metadata=None, description=description,
                      compression="zlib", predictor=True, tile=_tile(data.shape), extratags=extratags)
+
+
+def write_cog(path: str | Path, data: np.ndarray, *, geotransform: Sequence[float], epsg: int,
+              units: str | None, metadata: dict[str, Any], nodata: float | int) -> None:
+    """A north-up Cloud-Optimized GeoTIFF on a map grid (a mosaic and its companions)."""
+    try:
+        import rasterio
+        from rasterio.crs import CRS
+        from rasterio.transform import Affine
+    except ImportError:
+        raise ThermcapError("a Cloud-Optimized GeoTIFF needs rasterio (pip install 'thermcap[geo]')") from None
+    h, w = data.shape
+    e0, a, b, n0, c, d = geotransform
+    profile: dict[str, Any] = {"driver": "COG", "width": w, "height": h, "count": 1, "dtype": str(data.dtype),
+                               "nodata": nodata, "compress": "DEFLATE",
+                               "predictor": 3 if data.dtype.kind == "f" else 2,
+                               "blocksize": 256 if min(h, w) >= 256 else 128,
+                               "crs": CRS.from_epsg(epsg), "transform": Affine(a, b, e0, c, d, n0)}
+    with rasterio.Env(), rasterio.open(str(path), "w", **profile) as dst:
+        dst.write(data, 1)
+        dst.update_tags(**{k: v if isinstance(v, str) else json.dumps(v) for k, v in metadata.items()
+                           if v is not None})
+        if units:
+            dst.units = (units,)
 
 
 def _write_cog(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str, metadata: dict[str, Any],

@@ -20,7 +20,7 @@ import numpy as np
 from recorder.maps.pose import CameraPose
 
 __all__ = ["HORIZON_MARGIN_DEG", "NADIR_TOLERANCE_DEG", "Footprint", "FootprintRefused", "footprint",
-           "ground_to_pixel", "utm_epsg"]
+           "ground_to_pixel", "pixel_to_ground", "utm_epsg"]
 
 HORIZON_MARGIN_DEG = 5.0
 NADIR_TOLERANCE_DEG = 5.0
@@ -108,18 +108,38 @@ def _centre_offset(pose: CameraPose) -> np.ndarray:
     return _ground_offsets(pose, np.array([0.0]), np.array([0.0]))[0]
 
 
+def _grid(pose: CameraPose, epsg: int) -> tuple[float, float, float]:
+    """The camera's UTM position and the grid convergence (true north from grid north, radians):
+    away from the central meridian UTM grid north is not true north, so ENU offsets are turned
+    by it and a north-facing footprint is north on the map."""
+    from pyproj import Transformer
+
+    to_utm = Transformer.from_crs(4326, epsg, always_xy=True)
+    ce, cn = to_utm.transform(pose.longitude, pose.latitude)
+    e_n, n_n = to_utm.transform(pose.longitude, pose.latitude + 1e-4)
+    return ce, cn, math.atan2(e_n - ce, n_n - cn)
+
+
+def pixel_to_ground(fp: Footprint, cols: np.ndarray, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """UTM easting and northing of image points (pixel coordinates: 0..width, 0..height)."""
+    pose = fp.pose
+    sx = np.asarray(cols, dtype=np.float64) / pose.width * 2 - 1
+    sy = np.asarray(rows, dtype=np.float64) / pose.height * 2 - 1
+    off = _ground_offsets(pose, sx.ravel(), sy.ravel())
+    ce, cn, gamma = _grid(pose, fp.epsg)
+    cg, sg = math.cos(gamma), math.sin(gamma)
+    e = ce + off[:, 0] * cg + off[:, 1] * sg
+    n = cn - off[:, 0] * sg + off[:, 1] * cg
+    return e.reshape(np.shape(cols)), n.reshape(np.shape(cols))
+
+
 def footprint(pose: CameraPose) -> Footprint:
     from pyproj import Transformer
 
     offsets = _ground_offsets(pose, *_CORNERS)
     epsg = utm_epsg(pose.latitude, pose.longitude)
-    to_utm = Transformer.from_crs(4326, epsg, always_xy=True)
     to_ll = Transformer.from_crs(epsg, 4326, always_xy=True)
-    ce, cn = to_utm.transform(pose.longitude, pose.latitude)
-    # UTM grid north is not true north away from the central meridian: turn ENU offsets by the
-    # grid convergence so a north-facing footprint is north on the map
-    e_n, n_n = to_utm.transform(pose.longitude, pose.latitude + 1e-4)
-    gamma = math.atan2(e_n - ce, n_n - cn)
+    ce, cn, gamma = _grid(pose, epsg)
     cg, sg = math.cos(gamma), math.sin(gamma)
     grid = [(ce + x * cg + y * sg, cn - x * sg + y * cg) for x, y in offsets]
     lonlat = [to_ll.transform(e, n) for e, n in grid]
@@ -144,12 +164,7 @@ def ground_to_pixel(fp: Footprint, easting: float, northing: float) -> tuple[flo
     """Where a ground point appears in the image (column, row), or None if outside the view."""
     pose = fp.pose
     f, r, u = _basis(pose)
-    ce, cn = fp.camera_en
-    from pyproj import Transformer
-
-    to_utm = Transformer.from_crs(4326, fp.epsg, always_xy=True)
-    e_n, n_n = to_utm.transform(pose.longitude, pose.latitude + 1e-4)
-    gamma = math.atan2(e_n - ce, n_n - cn)
+    ce, cn, gamma = _grid(pose, fp.epsg)
     de, dn = easting - ce, northing - cn
     x, y = de * math.cos(gamma) - dn * math.sin(gamma), de * math.sin(gamma) + dn * math.cos(gamma)
     d = np.array([x, y, -pose.height_m])

@@ -139,3 +139,47 @@ def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
     import tifffile
 
     np.testing.assert_allclose(tifffile.imread(out), want, rtol=1e-6)
+
+
+def test_a_mosaic_and_its_footprints_render_in_gdal(tmp_path):
+    """The README's picture, made the same way: GDAL colours the mosaic and draws the flight's
+    footprints over it; the targets show where they are."""
+    from pyproj import Transformer
+
+    from recorder.capture.recorder import Recorder
+    from recorder.maps.footprint import utm_epsg
+    from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
+
+    pytest.importorskip("rasterio", reason="rasterio is in the geo extra")
+    lat, lon = 33.0746, -111.975
+    epsg = utm_epsg(lat, lon)
+    e0, n0 = Transformer.from_crs(4326, epsg, always_xy=True).transform(lon, lat)
+    targets = [GroundTarget(e0 + 3, n0 + 5, 0.8, 45.0), GroundTarget(e0 + 22, n0 + 31, 0.8, 50.0)]
+    poses = lawnmower(lat, lon, height_m=40, legs=3, per_leg=4, spacing_m=12.0,
+                      hfov_deg=2 * math.degrees(math.atan(18 / 58)))
+    rec = Recorder(FlightSource(poses=poses, targets=targets, epsg=epsg), tmp_path / "root", session_id="f",
+                   analysis=False)
+    assert rec.run().ok
+    out = tmp_path / "out"
+    for kind in ("mosaic", "footprints"):
+        assert export_session(rec.session_dir, kind, out)["files"]
+
+    def run(*cmd):
+        r = subprocess.run(cmd, capture_output=True, text=True, timeout=120, cwd=out)
+        assert r.returncode == 0, (cmd, r.stderr)
+
+    run("ogr2ogr", "-t_srs", f"EPSG:{epsg}", "-nlt", "MULTILINESTRING", "lines.geojson", "footprints.geojson")
+    (out / "colors.txt").write_text("nv 0 0 0 0\n15 0 0 0\n20 32 0 96\n34 208 48 64\n46 255 208 32\n51 255 255 240\n")
+    run("gdaldem", "color-relief", "-q", "mosaic.tiff", "colors.txt", "rgb.tif", "-alpha")
+    run("gdal_rasterize", "-q", "-b", "1", "-b", "2", "-b", "3", "-burn", "120", "-burn", "200", "-burn", "255",
+        "lines.geojson", "rgb.tif")
+    run("gdal_translate", "-q", "-of", "PNG", "rgb.tif", "map.png")
+    import imagecodecs
+    import rasterio
+
+    img = imagecodecs.png_decode((out / "map.png").read_bytes())
+    assert ((img[..., 0] == 120) & (img[..., 2] == 255)).sum() > 500  # the footprint outlines
+    with rasterio.open(out / "mosaic.tiff") as m:
+        for t in targets:
+            row, col = m.index(t.easting, t.northing)
+            assert img[row, col, 0] > 200, "the target is not where it is on the map"  # warm, not background

@@ -1,0 +1,97 @@
+"""A temperature mosaic of a flight's near-nadir images on one UTM grid.
+
+Blending rule: each mosaic cell takes the pixel nearest to it from the image whose centre is
+nearest to the cell, among the images that see it. So every mosaic value is one real
+measurement of one frame, never an average of two; ``sources`` says which frame (-1: none).
+Cells are ``gsd`` metres (the flight's median ground sample distance unless given).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from recorder.maps.footprint import Footprint, ground_to_pixel
+
+__all__ = ["Mosaic", "build_mosaic"]
+
+
+@dataclass
+class Mosaic:
+    temps: np.ndarray  # (rows, cols) float32 °C, NaN where no image sees the cell
+    sources: np.ndarray  # (rows, cols) int32 frame index, -1 where none
+    geotransform: tuple[float, float, float, float, float, float]  # north-up
+    epsg: int
+    gsd_m: float
+    frames: list[int]
+
+
+def _inverse_map(fp: Footprint, east: np.ndarray, north: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Image (col, row) of ground points for a near-nadir image: the affine inverse of its
+    geotransform (exact for nadir; near nadir within the tolerance the footprint allows)."""
+    e0, a, b, n0, c, d = fp.geotransform()
+    det = a * d - b * c
+    de, dn = east - e0, north - n0
+    return (d * de - b * dn) / det, (-c * de + a * dn) / det
+
+
+def build_mosaic(images: list[tuple[int, Footprint, np.ndarray]], gsd_m: float | None = None,
+                 max_cells: int = 40_000_000) -> Mosaic:
+    """``images``: (frame index, its near-nadir footprint, its °C array)."""
+    if not images:
+        raise ValueError("no near-nadir image to mosaic")
+    epsgs = {fp.epsg for _, fp, _ in images}
+    if len(epsgs) != 1:
+        raise ValueError(f"the flight spans UTM zones {sorted(epsgs)}; mosaic one zone at a time")
+    gsd = gsd_m or float(np.median([fp.gsd_m for _, fp, _ in images]))
+    es = [e for _, fp, _ in images for e, _ in fp.corners_en]
+    ns = [n for _, fp, _ in images for _, n in fp.corners_en]
+    e0, n0 = math.floor(min(es) / gsd) * gsd, math.ceil(max(ns) / gsd) * gsd
+    cols, rows = math.ceil((max(es) - e0) / gsd), math.ceil((n0 - min(ns)) / gsd)
+    if rows * cols > max_cells:
+        raise ValueError(f"a {cols}x{rows} mosaic at {gsd:.3f} m is too large; give a coarser gsd")
+    east = e0 + (np.arange(cols) + 0.5) * gsd
+    north = n0 - (np.arange(rows) + 0.5) * gsd
+    ee, nn = np.meshgrid(east, north)
+    temps = np.full((rows, cols), np.nan, np.float32)
+    sources = np.full((rows, cols), -1, np.int32)
+    best = np.full((rows, cols), np.inf)
+    for index, fp, t in images:
+        c, r = _inverse_map(fp, ee, nn)
+        h, w = t.shape
+        inside = (c >= 0) & (c < w) & (r >= 0) & (r < h)
+        dist = (c - w / 2) ** 2 + (r - h / 2) ** 2  # nearest image centre wins
+        take = inside & (dist < best)
+        ci = np.clip(np.floor(c[take]).astype(np.int64), 0, w - 1)
+        ri = np.clip(np.floor(r[take]).astype(np.int64), 0, h - 1)
+        temps[take] = t[ri, ci]
+        sources[take] = index
+        best[take] = dist[take]
+    return Mosaic(temps, sources, (e0, gsd, 0.0, n0, 0.0, -gsd), epsgs.pop(), gsd, [i for i, _, _ in images])
+
+
+def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Detected targets as map points: each target's centroid through the footprint."""
+    from pyproj import Transformer
+
+    from recorder.maps.footprint import pixel_to_ground
+
+    to_ll = Transformer.from_crs(fp.epsg, 4326, always_xy=True)
+    out = []
+    for t in targets:
+        cen = t.get("centroid")
+        if not cen or len(cen) != 2:
+            continue
+        e, n = pixel_to_ground(fp, np.array([float(cen[0]) + 0.5]), np.array([float(cen[1]) + 0.5]))
+        lon, lat = to_ll.transform(float(e[0]), float(n[0]))
+        out.append({"easting": float(e[0]), "northing": float(n[0]), "longitude": lon, "latitude": lat,
+                    "target_id": t.get("target_id"), "max_temp_c": t.get("max_temp_c"),
+                    "classification": t.get("classification"), "uncertainty_m": round(fp.uncertainty_m, 2)})
+    return out
+
+
+__all__ += ["hot_spot_points"]
+_ = ground_to_pixel  # the exact inverse for one point (oblique too); the mosaic uses the affine one

@@ -1,0 +1,92 @@
+"""The proof of the maps on a simulated flight: a camera at known poses over warm targets at
+known UTM positions. The mosaic puts every target within one cell of where it is, each cell is
+one frame's real measurement (``sources``), hot spots land on the targets, and where the GPS is
+off the error stays inside the uncertainty the export reports."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+pytest.importorskip("rasterio", reason="rasterio is in the geo extra (pip install 'thermcap[geo]')")
+import rasterio  # noqa: E402
+from pyproj import Transformer  # noqa: E402
+
+from recorder.capture.recorder import Recorder  # noqa: E402
+from recorder.exports.files import export_session  # noqa: E402
+from recorder.maps.footprint import utm_epsg  # noqa: E402
+from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower  # noqa: E402
+
+LAT, LON, H, HFOV = 33.0746, -111.975, 40.0, 2 * math.degrees(math.atan(18 / 58))
+EPSG = utm_epsg(LAT, LON)
+
+
+def _targets() -> list[GroundTarget]:
+    e0, n0 = Transformer.from_crs(4326, EPSG, always_xy=True).transform(LON, LAT)
+    return [GroundTarget(e0 + de, n0 + dn, 0.6, 45.0) for de, dn in ((3.0, 5.0), (14.0, 20.0), (22.0, 31.0),
+                                                                       (8.0, 33.0))]
+
+
+def _flight(tmp_path, name, pitch=-90.0, gps_error_m=0.0):
+    poses = lawnmower(LAT, LON, height_m=H, legs=3, per_leg=4, spacing_m=12.0, hfov_deg=HFOV, pitch_deg=pitch)
+    reported = None
+    if gps_error_m:
+        d = gps_error_m / 111_320.0
+        reported = [type(p)(**{**p.to_dict(), "latitude": p.latitude + d}) for p in poses]
+    src = FlightSource(poses=poses, targets=_targets(), epsg=EPSG, reported=reported)
+    rec = Recorder(src, tmp_path, session_id=name, analysis=True)
+    assert rec.run().ok
+    return rec.session_dir
+
+
+def test_the_mosaic_puts_every_target_where_it_is(tmp_path):
+    session = _flight(tmp_path, "nadir")
+    res = export_session(session, "mosaic", tmp_path / "m")
+    assert res["files"] == 3 and not res["refused"], res
+    with rasterio.open(tmp_path / "m" / "mosaic.tiff") as m, rasterio.open(tmp_path / "m" / "mosaic.sources.tiff") as s:
+        assert m.crs.to_epsg() == EPSG and m.profile["driver"] == "GTiff"
+        temps, sources, t = m.read(1), s.read(1), m.transform
+        gsd = t.a
+        assert set(np.unique(sources)) <= set(range(12)) | {-1}
+        assert np.isnan(temps[sources == -1]).all() and not np.isnan(temps[sources >= 0]).any()
+        for target in _targets():
+            col, row = ~t * (target.easting, target.northing)
+            r0, c0 = int(row), int(col)
+            win = temps[max(0, r0 - 30):r0 + 30, max(0, c0 - 30):c0 + 30]
+            rr, cc = np.nonzero(win >= 44.0)
+            assert len(rr) > 0, "the target is missing from the mosaic"
+            cy, cx = rr.mean() + max(0, r0 - 30) + 0.5, cc.mean() + max(0, c0 - 30) + 0.5
+            assert math.hypot(cx - col, cy - row) <= 1.0, f"target off by {math.hypot(cx - col, cy - row):.2f} cells"
+            assert len(rr) * gsd * gsd == pytest.approx(math.pi * target.radius_m ** 2, rel=0.3)
+    info = json.loads((tmp_path / "m" / "mosaic.frames.json").read_text())
+    assert len(info["frames"]) == 12 and "nearest" in info["blending"]
+
+
+def _hot_spot_errors(session, out):
+    res = export_session(session, "hotspots", out)
+    feats = json.loads((out / "hotspots.geojson").read_text())["features"]
+    assert feats, res
+    truth = [(t.easting, t.northing) for t in _targets()]
+    errs = []
+    for f in feats:
+        p = f["properties"]
+        errs.append((min(math.dist((p["easting"], p["northing"]), tr) for tr in truth), p["uncertainty_m"]))
+    return errs
+
+
+def test_hot_spots_land_on_the_targets_and_a_gps_error_stays_inside_the_uncertainty(tmp_path):
+    exact = _hot_spot_errors(_flight(tmp_path, "exact"), tmp_path / "h")
+    assert max(e for e, _ in exact) < 0.2
+    noisy = _hot_spot_errors(_flight(tmp_path, "noisy", gps_error_m=1.5), tmp_path / "hn")
+    assert all(1.0 < e <= u for e, u in noisy), noisy
+
+
+def test_oblique_frames_are_not_mosaicked_and_still_mapped(tmp_path):
+    session = _flight(tmp_path, "oblique", pitch=-60.0)
+    res = export_session(session, "mosaic", tmp_path / "m")
+    assert res["files"] == 0 and len(res["refused"]) == 12 and "not near nadir" in res["refused"][0]
+    errs = _hot_spot_errors(session, tmp_path / "h")
+    assert all(e <= u for e, u in errs) and max(e for e, _ in errs) < 1.0  # perspective shifts a blob's centroid
