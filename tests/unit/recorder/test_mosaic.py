@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 pytest.importorskip("rasterio", reason="rasterio is in the geo extra (pip install 'thermcap[geo]')")
-import rasterio  # noqa: E402
-from pyproj import Transformer  # noqa: E402
+import rasterio
+from pyproj import Transformer
 
-from recorder.capture.recorder import Recorder  # noqa: E402
-from recorder.exports.files import export_session  # noqa: E402
-from recorder.maps.footprint import utm_epsg  # noqa: E402
-from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower  # noqa: E402
+from recorder.capture.recorder import Recorder
+from recorder.exports.files import export_session
+from recorder.maps.footprint import utm_epsg
+from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
 
 LAT, LON, H, HFOV = 33.0746, -111.975, 40.0, 2 * math.degrees(math.atan(18 / 58))
 EPSG = utm_epsg(LAT, LON)
