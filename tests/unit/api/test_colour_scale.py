@@ -9,27 +9,13 @@ import json
 import imagecodecs
 import numpy as np
 import pytest
-from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
 from recorder.exports.colorbar import TemperatureRange, add_colorbar, png_text
 from recorder.exports.files import export_session
 from recorder.exports.render import palette
 from recorder.radiometry import DEFAULT_MODEL
 from recorder.storage.reader import iter_session_frames
-from tests.support.api_data import H, W, make_root
-
-
-@pytest.fixture(scope="module")
-def root(tmp_path_factory):
-    return make_root(tmp_path_factory.mktemp("scale"))
-
-
-@pytest.fixture(scope="module")
-def client(root):
-    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
-        yield c
+from tests.support.api_data import H, W
 
 
 def _url(n, **q):

@@ -6,24 +6,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
 from recorder.cli import cli
 from recorder.storage.reader import iter_session_frames
-from tests.support.api_data import make_root
-
-
-@pytest.fixture(scope="module")
-def root(tmp_path_factory):
-    return make_root(tmp_path_factory.mktemp("http"))
-
-
-@pytest.fixture(scope="module")
-def client(root):
-    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
-        yield c
 
 
 @pytest.mark.parametrize("fmt", ["png16", "raw", "tiff", "celsius-tiff", "preview"])
