@@ -83,11 +83,18 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @click.option("--max", "t_max", type=float, default=None, help="heatmap-png: the scale's high end, °C.")
 @click.option("--crs", type=click.Choice(["utm", "4326"]), default=None,
               help="map-tiff of TERRA-REF images: EPSG:4326 as the pipeline publishes (default) or UTM 12N.")
+@click.option("--ground-elevation", type=float, default=None, metavar="M",
+              help="Maps: the ground's height above sea level (with the file's absolute altitude) instead of the "
+                   "take-off point's.")
+@click.option("--truth", type=click.Path(dir_okay=False, exists=True), default=None,
+              help="hotspots: ground-truth points (GeoJSON or latitude,longitude CSV) to match the detections with.")
+@click.option("--match-radius", type=float, default=3.0, show_default=True, help="hotspots --truth: metres.")
 @click.option("--colorbar/--no-colorbar", default=True, show_default=True,
               help="heatmap-png: draw the scale into each picture (the range is in its PNG text either way).")
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
-               range_mode: str, t_min: float | None, t_max: float | None, crs: str | None, colorbar: bool,
+               range_mode: str, t_min: float | None, t_max: float | None, crs: str | None,
+               ground_elevation: float | None, truth: str | None, match_radius: float, colorbar: bool,
                as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from recorder.exports.files import export_session
@@ -99,11 +106,17 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
             range_mode = "fixed"  # --min and --max alone mean a fixed scale
         res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette,
                              range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
-                             crs=crs or "4326")
+                             crs=crs or "4326", ground_elevation_m=ground_elevation, truth=truth,
+                             match_radius_m=match_radius)
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else
                f"{res['files']} files in {res['out']}" + (f"; summary {res['summary']}" if res["summary"] else ""))
+    if res.get("truth") and not as_json:
+        t = res["truth"]
+        click.echo(f"ground truth: {t['matched']} of {t['truth']} found within {t['radius_m']} m "
+                   f"(recall {t['recall']}), "
+                   f"{t['detections'] - t['matched']} detections match none (precision {t['precision']})")
     for r in res["refused"][:5]:
         click.echo(f"warning: {r}", err=True)
     if res["refused"]:

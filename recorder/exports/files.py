@@ -109,7 +109,8 @@ def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
 def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
                    palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None,
                    range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
-                   colorbar: bool = True, crs: str = "4326") -> dict[str, Any]:
+                   colorbar: bool = True, crs: str = "4326", ground_elevation_m: float | None = None,
+                   truth: str | Path | None = None, match_radius_m: float = 3.0) -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
     each PNG's text chunks either way."""
@@ -123,7 +124,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
     if kind in _MAP_KINDS:
-        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame, crs)
+        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame, crs, ground_elevation_m,
+                           truth, match_radius_m)
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
@@ -195,7 +197,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
 
 
 def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: str, meta: dict[str, Any],
-                on_frame: Callable[[int], None] | None, crs: str = "4326") -> dict[str, Any]:
+                on_frame: Callable[[int], None] | None, crs: str = "4326", ground_elevation_m: float | None = None,
+                truth: str | Path | None = None, match_radius_m: float = 3.0) -> dict[str, Any]:
     """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
     frame as a °C GeoTIFF (``recorder.maps``): a drone image in its UTM zone; a TERRA-REF gantry
     image rotated and placed as the TERRA-REF pipeline does, in EPSG:4326 as it publishes (or UTM
@@ -227,7 +230,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
                 geotransform_tags(gantry.geotransform_utm(pw, ph), UTM_12N)
         else:
             try:
-                fp = footprint(pose_from_vendor(vendor, w, h))
+                fp = footprint(pose_from_vendor(vendor, w, h, ground_elevation_m=ground_elevation_m))
             except (PoseMissing, FootprintRefused) as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
@@ -276,10 +279,21 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
         path = out / f"{kind}.geojson"
         path.write_text(json.dumps({"type": "FeatureCollection", "features": features}, indent=1))
         written = [path.name] if features else []
+    report = None
+    if kind == "hotspots" and truth is not None:
+        from recorder.maps.truth import compare_with_truth, read_truth
+
+        spots = [f["properties"] for f in features]
+        if not spots:
+            raise ThermcapError(f"{session_dir}: no hot spot on the map to compare with {truth}")
+        epsg = features[0]["properties"].get("epsg") or 4326
+        report = compare_with_truth(spots, read_truth(truth), int(epsg), match_radius_m).to_dict()
+        (out / "hotspots.truth.json").write_text(json.dumps(report, indent=1))
+        written.append("hotspots.truth.json")
     if kind == "mosaic":
         written = _write_mosaic(out, tiles, frame_times, meta) if tiles else []
     return {"out": str(out), "kind": kind, "files": len(written), "features": len(features), "refused": refused,
-            "summary": None}
+            "summary": None, **({"truth": report} if report is not None else {})}
 
 
 def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_times: dict[int, str],

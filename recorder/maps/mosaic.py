@@ -87,7 +87,8 @@ def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[s
             continue
         e, n = pixel_to_ground(fp, np.array([float(cen[0]) + 0.5]), np.array([float(cen[1]) + 0.5]))
         lon, lat = to_ll.transform(float(e[0]), float(n[0]))
-        out.append({"easting": float(e[0]), "northing": float(n[0]), "longitude": lon, "latitude": lat,
+        out.append({"easting": float(e[0]), "northing": float(n[0]), "epsg": fp.epsg, "longitude": lon,
+                    "latitude": lat,
                     "target_id": t.get("target_id"), "max_temp_c": t.get("max_temp_c"),
                     "classification": t.get("classification"), "uncertainty_m": round(fp.uncertainty_m, 2)})
     return out

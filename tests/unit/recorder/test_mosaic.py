@@ -90,3 +90,27 @@ def test_oblique_frames_are_not_mosaicked_and_still_mapped(tmp_path):
     assert res["files"] == 0 and len(res["refused"]) == 12 and "not near nadir" in res["refused"][0]
     errs = _hot_spot_errors(session, tmp_path / "h")
     assert all(e <= u for e, u in errs) and max(e for e, _ in errs) < 1.0  # perspective shifts a blob's centroid
+
+
+def test_finding_the_targets_against_ground_truth_is_one_command(tmp_path):
+    _flight(tmp_path, "truth")
+    to_ll = Transformer.from_crs(EPSG, 4326, always_xy=True)
+    pts = [to_ll.transform(t.easting, t.northing) for t in _targets()]
+    truth = tmp_path / "animals.csv"
+    truth.write_text("id,latitude,longitude\n" + "".join(f"a{i},{lat},{lon}\n" for i, (lon, lat) in enumerate(pts)))
+    from click.testing import CliRunner
+
+    from recorder.cli import cli
+
+    r = CliRunner().invoke(cli, ["export", "truth", "--root", str(tmp_path), "--to", "hotspots", "--truth", str(truth),
+                                 "--out", str(tmp_path / "h"), "--json"])
+    assert r.exit_code == 0, r.output
+    report = json.loads(r.output)["truth"]
+    assert report["truth"] == 4 and report["matched"] == 4 and report["recall"] == 1.0
+    assert all(m["distance_m"] < 0.2 for m in report["matches"])
+    assert report["precision"] == round(4 / report["detections"], 4)  # a target seen in two frames counts twice
+    bad = tmp_path / "bad.csv"
+    bad.write_text("lat,lon\n1,2\n")
+    r = CliRunner().invoke(cli, ["export", "truth", "--root", str(tmp_path), "--to", "hotspots", "--truth", str(bad),
+                                 "--out", str(tmp_path / "h2")])
+    assert r.exit_code == 1 and "bad.csv" in r.output and "latitude,longitude" in r.output
