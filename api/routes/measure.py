@@ -1,0 +1,139 @@
+"""Thermographer's tools over stored frames: measurements (spot, box, line, polygon, with ΔT),
+line profiles, histograms, isotherms, and a region's statistic as a time series."""
+
+from __future__ import annotations
+
+import csv
+import io
+from typing import Annotated, Literal
+
+import numpy as np
+from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+
+from api.routes.common import session_row
+from api.security import require
+from recorder.exports.render import celsius, session_model
+from recorder.radiometry import describe_model
+from recorder.thermography.measure import (
+    Line,
+    ToolError,
+    histogram,
+    isotherm,
+    line_profile,
+    measure,
+    parse_tool,
+)
+from recorder.thermography.series import region_series
+
+router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["thermography"],
+                   dependencies=[Depends(require("read"))])
+
+
+def _frame_temps(request: Request, session_id: str, n: int) -> tuple[dict, np.ndarray]:
+    row = session_row(request, session_id)
+    if n < 0 or n >= row["frames"]:
+        raise HTTPException(404, f"session {row['id']} has frames 0..{row['frames'] - 1}, not {n}")
+    model = session_model(row["radiometric_model"])
+    return row, celsius(request.app.state.frames.pixels(session_id, n), model)
+
+
+def _tools(texts: list[str]) -> list:
+    try:
+        return [parse_tool(t) for t in texts]
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+
+
+@router.get("/frames/{n}/measure")
+def get_measure(request: Request, session_id: str, n: int,
+                tool: Annotated[list[str], Query(description="spot:x,y | box:x0,y0,x1,y1 | line:... | polygon:...; "
+                                                             "repeat for several (ΔT between the first two)")]) -> dict:
+    row, temps = _frame_temps(request, session_id, n)
+    try:
+        ms = [measure(temps, t, label=text) for t, text in zip(_tools(tool), tool, strict=True)]
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+    out: dict = {"frame": n, "model": describe_model(session_model(row["radiometric_model"])),
+                 "measurements": [m.to_dict() for m in ms]}
+    if len(ms) >= 2 and ms[0].max_c is not None and ms[1].max_c is not None:
+        out["delta_t_c"] = {"max": round(ms[0].max_c - ms[1].max_c, 4),
+                            "mean": round((ms[0].mean_c or 0) - (ms[1].mean_c or 0), 4)}
+    return out
+
+
+@router.get("/frames/{n}/profile")
+def get_profile(request: Request, session_id: str, n: int,
+                line: str = Query(..., description="x0,y0,x1,y1")) -> dict:
+    _, temps = _frame_temps(request, session_id, n)
+    try:
+        tool = parse_tool(f"line:{line}")
+        assert isinstance(tool, Line)
+        return {"frame": n, "line": line, "samples": line_profile(temps, tool)}
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+
+
+@router.get("/frames/{n}/histogram")
+def get_histogram(request: Request, session_id: str, n: int, bins: int = Query(64, ge=1, le=4096),
+                  min: float | None = None, max: float | None = None, tool: str | None = None) -> dict:
+    _, temps = _frame_temps(request, session_id, n)
+    try:
+        return {"frame": n, **histogram(temps, bins, min, max, parse_tool(tool) if tool else None)}
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+
+
+@router.get("/frames/{n}/isotherm", responses={200: {"content": {"image/png": {}, "application/json": {}}}})
+def get_isotherm(request: Request, session_id: str, n: int, above: float | None = None, below: float | None = None,
+                 format: Literal["json", "png"] = "json") -> Response:
+    _, temps = _frame_temps(request, session_id, n)
+    try:
+        mask = isotherm(temps, above, below)
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+    if format == "png":
+        import imagecodecs
+
+        return Response(imagecodecs.png_encode(mask.astype(np.uint8) * 255), media_type="image/png")
+    import json
+
+    body = {"frame": n, "above_c": above, "below_c": below, "pixels": int(mask.sum()),
+            "fraction": round(float(mask.mean()), 6)}
+    return Response(json.dumps(body), media_type="application/json")
+
+
+@router.get("/series")
+def get_series(request: Request, session_id: str, tool: str, stat: Literal["max", "mean", "min"] = "max",
+               start: int = Query(0, ge=0), end: int | None = Query(None, ge=1), step: int = Query(1, ge=1),
+               format: Literal["json", "csv"] = "json") -> Response:
+    """The statistic of ``tool`` on frames start..end (exclusive), every ``step``."""
+    row = session_row(request, session_id)
+    stop = min(row["frames"], end if end is not None else row["frames"])
+    t = _tools([tool])[0]
+    model = session_model(row["radiometric_model"])
+    reader = request.app.state.frames
+    from sqlalchemy import select
+
+    from api import db
+
+    with request.app.state.engine.connect() as conn:
+        times = dict(conn.execute(select(db.frames.c.idx, db.frames.c.timestamp_ns)
+                                  .where(db.frames.c.session_id == session_id)).all())
+
+    def frames():
+        for i in range(start, stop, step):
+            yield i, times.get(i, 0), reader.pixels(session_id, i)
+
+    try:
+        points = region_series(frames(), t, stat, model.to_celsius)
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
+    if format == "csv":
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=["frame", "timestamp_ns", "celsius"])
+        w.writeheader()
+        w.writerows(points)
+        return Response(buf.getvalue(), media_type="text/csv")
+    import json
+
+    return Response(json.dumps({"tool": tool, "stat": stat, "points": points}), media_type="application/json")
