@@ -142,9 +142,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                      "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from api.routes import archives, export, frames, measure, meta, sessions, ui
+    from api.routes import archives, export, frames, measure, meta, radiometry, sessions, ui
 
-    for module in (meta, sessions, frames, measure, archives, export, ui):
+    for module in (meta, sessions, frames, measure, radiometry, archives, export, ui):
         app.include_router(module.router)
     return app
 

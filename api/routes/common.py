@@ -13,7 +13,8 @@ from api import db
 from api.security import check_session_id
 from recorder.icd.names import iso_utc, parse_rfc3339
 
-__all__ = ["decode_cursor", "encode_cursor", "iso", "page_size", "parse_time", "session_row"]
+__all__ = ["FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size", "parse_time",
+           "session_row"]
 
 
 def session_row(request: Request, session_id: str) -> dict[str, Any]:
@@ -23,6 +24,43 @@ def session_row(request: Request, session_id: str) -> dict[str, Any]:
     if row is None:
         raise HTTPException(404, f"no session {session_id!r}")
     return dict(row)
+
+
+class FrameModel:
+    """The radiometric model a frame's temperatures use here: the session's recorded model, its
+    latest re-parameterisation covering the frame (``radiometry.json``), and any object
+    parameters given on this request, and what to say about it in the response."""
+
+    def __init__(self, request: Request, row: dict[str, Any]) -> None:
+        from recorder.exports.render import session_model
+        from recorder.radiometry.params import OBJECT_PARAMS, read_versions
+
+        self.base = session_model(row["radiometric_model"])
+        self.overrides: dict[str, float] = {}
+        for name in OBJECT_PARAMS:
+            if name in request.query_params:
+                try:
+                    self.overrides[name] = float(request.query_params[name])
+                except ValueError:
+                    raise HTTPException(400, f"{name} must be a number") from None
+        session_dir = request.app.state.settings.root / "sessions" / row["id"]
+        try:
+            self.versions = read_versions(session_dir)
+        except ValueError as exc:
+            raise HTTPException(500, str(exc)) from None
+
+    def at(self, frame: int) -> tuple[Any, dict[str, Any]]:
+        from recorder.radiometry.params import model_for_frame
+
+        try:
+            model, version = model_for_frame(self.base, self.versions, frame, self.overrides)
+        except ValueError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return model, {"model_version": version, **({"object_parameters": self.overrides} if self.overrides else {})}
+
+
+def frame_model(request: Request, row: dict[str, Any], frame: int) -> tuple[Any, dict[str, Any]]:
+    return FrameModel(request, row).at(frame)
 
 
 def encode_cursor(values: list[Any]) -> str:

@@ -9,11 +9,11 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from api.routes.common import session_row
+from api.routes.common import frame_model, session_row
 from api.security import require
 from archive.codecs import get_codec
 from recorder.exports.colorbar import TemperatureRange
-from recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, session_model, tiff16
+from recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, tiff16
 from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
 from recorder.radiometry import TemperatureUnavailable, describe_model
 
@@ -78,7 +78,8 @@ def get_frame(request: Request, session_id: str, n: int,
         except ValueError as exc:
             raise HTTPException(409, f"frame {n}: {exc}") from None
         return _send(request, body, "image/jpeg", {**dims, "Content-Disposition": disposition})
-    model = session_model(row["radiometric_model"])
+    model, said = frame_model(request, row, n)
+    dims = {**dims, "X-Model-Version": str(said["model_version"])}
     if format == "celsius-tiff":
         return _send(request, celsius_tiff(frame, model), "image/tiff", dims)
     if min is not None and max is not None and max <= min:
@@ -125,9 +126,9 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     h, w = frame.shape
     if x >= w or y >= h:
         raise HTTPException(400, f"pixel ({x}, {y}) is outside the {w}x{h} frame")
-    model = session_model(row["radiometric_model"])
+    model, said = frame_model(request, row, n)
     value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
     return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value,
             "approximate": getattr(model, "approximate", False),
-            "model": describe_model(model)}
+            "model": describe_model(model), **said}
 

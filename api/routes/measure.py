@@ -10,9 +10,9 @@ from typing import Annotated, Literal
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from api.routes.common import session_row
+from api.routes.common import FrameModel, frame_model, session_row
 from api.security import require
-from recorder.exports.render import celsius, session_model
+from recorder.exports.render import celsius
 from recorder.radiometry import describe_model
 from recorder.thermography.measure import (
     Line,
@@ -30,11 +30,12 @@ router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["thermography"]
 
 
 def _frame_temps(request: Request, session_id: str, n: int) -> tuple[dict, np.ndarray]:
+    """(what to say about the model used, °C) of frame ``n``."""
     row = session_row(request, session_id)
     if n < 0 or n >= row["frames"]:
         raise HTTPException(404, f"session {row['id']} has frames 0..{row['frames'] - 1}, not {n}")
-    model = session_model(row["radiometric_model"])
-    return row, celsius(request.app.state.frames.pixels(session_id, n), model)
+    model, said = frame_model(request, row, n)
+    return {**said, "model": describe_model(model)}, celsius(request.app.state.frames.pixels(session_id, n), model)
 
 
 def _tools(texts: list[str]) -> list:
@@ -48,13 +49,12 @@ def _tools(texts: list[str]) -> list:
 def get_measure(request: Request, session_id: str, n: int,
                 tool: Annotated[list[str], Query(description="spot:x,y | box:x0,y0,x1,y1 | line:... | polygon:...; "
                                                              "repeat for several (ΔT between the first two)")]) -> dict:
-    row, temps = _frame_temps(request, session_id, n)
+    said, temps = _frame_temps(request, session_id, n)
     try:
         ms = [measure(temps, t, label=text) for t, text in zip(_tools(tool), tool, strict=True)]
     except ToolError as exc:
         raise HTTPException(400, str(exc)) from None
-    out: dict = {"frame": n, "model": describe_model(session_model(row["radiometric_model"])),
-                 "measurements": [m.to_dict() for m in ms]}
+    out: dict = {"frame": n, **said, "measurements": [m.to_dict() for m in ms]}
     if len(ms) >= 2 and ms[0].max_c is not None and ms[1].max_c is not None:
         out["delta_t_c"] = {"max": round(ms[0].max_c - ms[1].max_c, 4),
                             "mean": round((ms[0].mean_c or 0) - (ms[1].mean_c or 0), 4)}
@@ -110,7 +110,7 @@ def get_series(request: Request, session_id: str, tool: str, stat: Literal["max"
     row = session_row(request, session_id)
     stop = min(row["frames"], end if end is not None else row["frames"])
     t = _tools([tool])[0]
-    model = session_model(row["radiometric_model"])
+    models = FrameModel(request, row)
     reader = request.app.state.frames
     from sqlalchemy import select
 
@@ -124,8 +124,11 @@ def get_series(request: Request, session_id: str, tool: str, stat: Literal["max"
         for i in range(start, stop, step):
             yield i, times.get(i, 0), reader.pixels(session_id, i)
 
+    def to_celsius(index: int, counts: np.ndarray) -> np.ndarray:
+        return np.asarray(models.at(index)[0].to_celsius(counts))
+
     try:
-        points = region_series(frames(), t, stat, model.to_celsius)
+        points = region_series(frames(), t, stat, to_celsius)
     except ToolError as exc:
         raise HTTPException(400, str(exc)) from None
     if format == "csv":

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import sys
 
 import click
@@ -123,3 +124,52 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         sys.exit(1)
 
 
+
+
+@cli.command("radiometry")
+@click.argument("session")
+@root_option
+@click.option("--set", "sets", multiple=True, metavar="NAME=VALUE",
+              help="An object parameter (emissivity, reflected_temp_c, object_distance_m, atmospheric_temp_c, "
+                   "relative_humidity_pct, ir_window_temp_c, ir_window_transmission); repeat.")
+@click.option("--why", default="", help="Why the parameters change (kept with the version).")
+@click.option("--frames", default=None, metavar="START:END", help="Only these frames [START, END).")
+@click.option("--who", default=lambda: os.environ.get("USER", "unknown"), show_default="$USER")
+@json_option
+def radiometry_cmd(session: str, root: str, sets: tuple[str, ...], why: str, frames: str | None, who: str,
+                   as_json: bool) -> None:
+    """List a session's radiometric model versions, or add one (--set ... --why ...): the stored
+    counts never change; every temperature names the version it used."""
+    from recorder.radiometry import model_from_dict
+    from recorder.radiometry.params import add_version, read_versions
+    from recorder.storage.reader import read_session_meta, resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        if sets:
+            params = {}
+            for item in sets:
+                key, sep, value = item.partition("=")
+                if not sep:
+                    raise ValueError(f"--set {item!r}: use NAME=VALUE")
+                params[key.strip()] = float(value)
+            span = None
+            if frames:
+                a, _, b = frames.partition(":")
+                span = (int(a), int(b))
+            base = model_from_dict(read_session_meta(d).get("radiometric_model") or {"kind": "linear"})
+            new = add_version(d, base, params, who=who, why=why, frames=span)
+            click.echo(json.dumps(new.to_dict(), indent=2) if as_json else
+                       f"version {new.version}: {new.params} ({new.why})")
+            return
+        versions = read_versions(d)
+    except (ThermcapError, ValueError) as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps([v.to_dict() for v in versions], indent=2))
+        return
+    if not versions:
+        click.echo("version 0 only: the model as recorded")
+    for v in versions:
+        click.echo(f"version {v.version} {v.at} by {v.who}: {v.params}"
+                   + (f" frames {v.frames[0]}:{v.frames[1]}" if v.frames else "") + f" - {v.why}")

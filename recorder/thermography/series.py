@@ -16,12 +16,13 @@ STATS = ("max", "mean", "min")
 
 
 def region_series(frames: Iterable[tuple[int, int, np.ndarray]], tool: Tool, stat: str,
-                  to_celsius: Callable[[np.ndarray], np.ndarray]) -> list[dict[str, Any]]:
-    """``frames``: (index, log time ns, counts). One point per frame: its time and the statistic."""
+                  to_celsius: Callable[[int, np.ndarray], np.ndarray]) -> list[dict[str, Any]]:
+    """``frames``: (index, log time ns, counts); ``to_celsius(index, counts)`` (a frame's model
+    may be re-parameterised). One point per frame: its time and the statistic."""
     if stat not in STATS:
         raise ValueError(f"stat must be one of {', '.join(STATS)}, got {stat!r}")
     out = []
     for index, t, counts in frames:
-        m = measure(np.asarray(to_celsius(counts), dtype=np.float32), tool)
+        m = measure(np.asarray(to_celsius(index, counts), dtype=np.float32), tool)
         out.append({"frame": index, "timestamp_ns": int(t), "celsius": getattr(m, f"{stat}_c")})
     return out

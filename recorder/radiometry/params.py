@@ -1,0 +1,116 @@
+"""Object parameters changed after capture, without touching the stored counts.
+
+The camera guessed emissivity, reflected temperature, distance, atmosphere and window when it
+recorded; a thermographer corrects them afterwards. ``reparameterise`` gives a new model with
+them changed, under one set of names whatever the model calls them. A session keeps each change
+as a numbered version (``radiometry.json``: who, when, why, which frames), and every
+temperature names the version it used; version 0 is the model as recorded.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from recorder.radiometry.base import RadiometricModel
+
+__all__ = ["OBJECT_PARAMS", "ModelVersion", "add_version", "model_for_frame", "read_versions", "reparameterise"]
+
+OBJECT_PARAMS = ("emissivity", "reflected_temp_c", "object_distance_m", "atmospheric_temp_c",
+                 "relative_humidity_pct", "ir_window_temp_c", "ir_window_transmission")
+RADIOMETRY_JSON = "radiometry.json"
+
+# our names -> (model field, scale into the field's units)
+_FIELDS: dict[str, dict[str, tuple[str, float]]] = {
+    "flir_planck": {"emissivity": ("emissivity", 1), "reflected_temp_c": ("reflected_temp_c", 1),
+                    "object_distance_m": ("object_distance_m", 1), "atmospheric_temp_c": ("atmospheric_temp_c", 1),
+                    "relative_humidity_pct": ("relative_humidity_pct", 1), "ir_window_temp_c": ("ir_window_temp_c", 1),
+                    "ir_window_transmission": ("ir_window_transmission", 1)},
+    "terraref_planck": {"emissivity": ("emissivity", 1), "object_distance_m": ("distance_m", 1),
+                        "atmospheric_temp_c": ("atm_temp_c", 1), "relative_humidity_pct": ("humidity", 0.01)},
+}
+_LIMITS = {"emissivity": (0.01, 1.0), "ir_window_transmission": (0.01, 1.0), "relative_humidity_pct": (0.0, 100.0),
+           "object_distance_m": (0.0, 1e5), "reflected_temp_c": (-273.15, 3000.0),
+           "atmospheric_temp_c": (-273.15, 3000.0), "ir_window_temp_c": (-273.15, 3000.0)}
+
+
+def reparameterise(model: RadiometricModel, params: dict[str, float]) -> RadiometricModel:
+    """The model with these object parameters; ValueError names what this model cannot take."""
+    kind = getattr(model, "kind", type(model).__name__)
+    fields = _FIELDS.get(kind)
+    if fields is None:
+        why = ("DJI's approximation ignores object parameters and DJI's SDK applies them at import "
+               "(re-import with --dji-sdk)") if kind == "dji" else "it has no object parameters"
+        raise ValueError(f"a {kind} model cannot be re-parameterised: {why}")
+    changes = {}
+    for name, value in params.items():
+        if name not in OBJECT_PARAMS:
+            raise ValueError(f"unknown object parameter {name!r}; use {', '.join(OBJECT_PARAMS)}")
+        if name not in fields:
+            raise ValueError(f"a {kind} model has no {name} (it takes {', '.join(fields)})")
+        lo, hi = _LIMITS[name]
+        v = float(value)
+        if not lo <= v <= hi:
+            raise ValueError(f"{name} = {v:g} is outside {lo:g}..{hi:g}")
+        field, scale = fields[name]
+        changes[field] = v * scale
+    return dataclasses.replace(model, **changes)  # type: ignore[type-var]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelVersion:
+    version: int
+    at: str
+    who: str
+    why: str
+    params: dict[str, float]
+    frames: tuple[int, int] | None = None  # [start, end) frame indices; None: the whole session
+
+    def covers(self, frame: int) -> bool:
+        return self.frames is None or self.frames[0] <= frame < self.frames[1]
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def read_versions(session_dir: str | os.PathLike) -> list[ModelVersion]:
+    path = Path(session_dir) / RADIOMETRY_JSON
+    try:
+        doc = json.loads(path.read_text())
+    except FileNotFoundError:
+        return []
+    except ValueError as exc:
+        raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    return [ModelVersion(v["version"], v["at"], v["who"], v["why"], dict(v["params"]),
+                         tuple(v["frames"]) if v.get("frames") else None) for v in doc.get("versions", [])]
+
+
+def add_version(session_dir: str | os.PathLike, base: RadiometricModel, params: dict[str, float], *, who: str,
+                why: str, frames: tuple[int, int] | None = None) -> ModelVersion:
+    """Record a re-parameterisation (checked against the model first); append-only."""
+    if not why.strip():
+        raise ValueError("say why the parameters change (it is kept with the version)")
+    reparameterise(base, params)
+    versions = read_versions(session_dir)
+    v = ModelVersion(len(versions) + 1, time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), who, why,
+                     {k: float(x) for k, x in params.items()}, frames)
+    path = Path(session_dir) / RADIOMETRY_JSON
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps({"versions": [x.to_dict() for x in [*versions, v]]}, indent=1))
+    os.replace(tmp, path)
+    return v
+
+
+def model_for_frame(base: RadiometricModel, versions: list[ModelVersion], frame: int,
+                    overrides: dict[str, float] | None = None) -> tuple[RadiometricModel, int]:
+    """The model a frame's temperatures use, and its version (the latest covering the frame);
+    per-request ``overrides`` go on top (version reported as the base it started from)."""
+    chosen = next((v for v in reversed(versions) if v.covers(frame)), None)
+    model = reparameterise(base, chosen.params) if chosen else base
+    if overrides:
+        model = reparameterise(model, overrides)
+    return model, chosen.version if chosen else 0
