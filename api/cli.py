@@ -234,3 +234,35 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
     click.echo(f"{verb} {sum(x.frees for x in res.deleted):,} bytes in {len(res.deleted)} sessions; "
                f"{res.bytes_remaining:,} bytes remain; "
                f"{sum(1 for x in res.decisions if x.action == 'keep')} kept (nothing else covers them)")
+
+
+@click.command("watch")
+@click.argument("inbox", type=click.Path(file_okay=False))
+@root_option
+@click.option("--once", is_flag=True, help="One pass, then exit.")
+@click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
+@click.option("--settle", type=float, default=2.0, show_default=True,
+              help="A file is taken once it has not changed for this many seconds.")
+@click.option("--archive/--no-archive", default=True, show_default=True, help="Archive and verify each session.")
+@click.option("--formats", default="png16,hdf5", show_default=True)
+@json_option
+def watch(inbox: str, root: str, once: bool, interval: float, settle: float, archive: bool, formats: str,
+          as_json: bool) -> None:
+    """Take in every camera file dropped in INBOX exactly once: import, archive, derived products
+    beside it (heatmap PNG, °C GeoTIFF, surface_temperature summary); bad files to quarantine/."""
+    import time as _time
+
+    from api.jobs.inbox import process_inbox
+
+    fmts = [f.strip() for f in formats.split(",") if f.strip()] if archive else None
+    while True:
+        try:
+            res = process_inbox(inbox, root, settle_s=settle, archive_formats=fmts,
+                                log=(lambda m: None) if as_json else (lambda m: click.echo(m, err=True)))
+        except ThermcapError as exc:
+            fail(str(exc))
+        if as_json:
+            click.echo(json.dumps(res.to_dict()))
+        if once:
+            sys.exit(1 if res.quarantined else 0)
+        _time.sleep(interval)

@@ -1,0 +1,180 @@
+"""``thermcap watch``: a folder where files are dropped and each is taken in exactly once.
+
+As the TERRA-REF converter ran "whenever a file is added to a dataset": each camera file
+dropped in the inbox (DJI, FLIR, TERRA-REF, ICD) is imported into the data root (one session
+per file), archived and verified, and its derived products are written beside it in
+``<name>.derived/``: a heatmap PNG with its colour bar, a °C GeoTIFF, and per-frame
+``surface_temperature`` statistics. The API's index takes the sessions in on its next pass.
+
+- Exactly once: the journal (``.thermcap/inbox.jsonl``) keys each file by its content's
+  sha256, so a file seen before (under any name) is never processed again, and a restart
+  resumes where it stopped.
+- Never half-way: a file is taken only when its size and mtime have not changed for
+  ``settle_s``, and names of files being written (``.part``, ``.tmp``, dot files) are skipped.
+- A bad file goes to ``quarantine/`` with a ``.reason.txt`` beside it; the queue goes on.
+- One watcher per inbox (a lock), so two cannot take the same file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+from recorder.exceptions import ThermcapError
+from recorder.storage.lock import lock_session
+
+__all__ = ["InboxPass", "process_inbox"]
+
+STATE = ".thermcap"
+QUARANTINE = "quarantine"
+_SKIP_SUFFIXES = (".part", ".tmp", ".crdownload", ".partial", ".reason.txt")
+
+
+@dataclass
+class InboxPass:
+    processed: list[dict[str, Any]] = field(default_factory=list)
+    duplicates: list[str] = field(default_factory=list)  # content seen before
+    waiting: list[str] = field(default_factory=list)  # still changing (being copied)
+    quarantined: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _journal(inbox: Path) -> dict[str, dict[str, Any]]:
+    path = inbox / STATE / "inbox.jsonl"
+    out: dict[str, dict[str, Any]] = {}
+    if path.is_file():
+        for line in path.read_text().splitlines():
+            try:
+                rec = json.loads(line)
+            except ValueError:
+                continue  # a line cut by a crash: that file is simply taken again
+            out[rec["sha256"]] = rec
+    return out
+
+
+def _record(inbox: Path, rec: dict[str, Any]) -> None:
+    path = inbox / STATE / "inbox.jsonl"
+    with open(path, "a") as f:
+        f.write(json.dumps(rec) + "\n")
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def _candidates(inbox: Path) -> list[Path]:
+    out = []
+    for p in sorted(inbox.rglob("*")):
+        rel = p.relative_to(inbox).parts
+        if not p.is_file() or rel[0] in (STATE, QUARANTINE) or any(x.endswith(".derived") for x in rel[:-1]):
+            continue
+        if p.name.startswith(".") or p.name.endswith(_SKIP_SUFFIXES):
+            continue
+        if p.suffix.lower() == ".json" and any(p.with_suffix(s).exists() for s in (".tif", ".tiff", ".bin", ".raw")):
+            continue  # the sidecar of an ICD pair or the metadata of a TERRA-REF image: taken with it
+        if p.name.endswith("_metadata.json") and list(p.parent.glob(p.name.replace("_metadata.json", "_ir.bin"))):
+            continue
+        out.append(p)
+    return out
+
+
+def _settled(path: Path, settle_s: float, now: float) -> bool:
+    st = path.stat()
+    return now - st.st_mtime >= settle_s
+
+
+def _quarantine(inbox: Path, path: Path, reason: str) -> None:
+    q = inbox / QUARANTINE
+    q.mkdir(exist_ok=True)
+    dest = q / path.name
+    k = 1
+    while dest.exists():
+        dest = q / f"{path.stem}.{k}{path.suffix}"
+        k += 1
+    shutil.move(str(path), dest)
+    dest.with_name(dest.name + ".reason.txt").write_text(reason + "\n")
+
+
+def _derive(session_dir: Path, out: Path) -> list[str]:
+    from recorder.exports.files import export_session
+
+    out.mkdir(exist_ok=True)
+    made = []
+    for kind, summary in (("heatmap-png", None), ("celsius-tiff", "json")):
+        try:
+            res = export_session(session_dir, kind, out, summary=summary)
+        except ThermcapError as exc:
+            made.append(f"{kind}: not made ({exc})")
+            continue
+        made.append(f"{kind}: {res['files']} files" + ("" if not res["refused"] else f" ({res['refused'][0]})"))
+    return made
+
+
+def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
+                  archive_formats: list[str] | None = None, log: Callable[[str], None] = lambda m: None) -> InboxPass:
+    """One pass: take every settled new file once."""
+    from archive.archiver import archive_session
+    from recorder.importers.run import import_paths
+
+    inbox, root = Path(inbox), Path(root)
+    if not inbox.is_dir():
+        raise ThermcapError(f"{inbox}: no such inbox folder")
+    (inbox / STATE).mkdir(exist_ok=True)
+    lock = lock_session(inbox / STATE, "watch", wait_s=0.0)
+    if lock is None:
+        raise ThermcapError(f"{inbox}: another `thermcap watch` holds this inbox")
+    result = InboxPass()
+    try:
+        seen = _journal(inbox)
+        now = time.time()
+        for path in _candidates(inbox):
+            rel = str(path.relative_to(inbox))
+            if not _settled(path, settle_s, now):
+                result.waiting.append(rel)
+                continue
+            digest = _sha256(path)
+            if digest in seen:
+                if seen[digest]["path"] != rel:
+                    result.duplicates.append(rel)
+                continue
+            report = import_paths([str(path)], root, session_per_file=True)
+            problem = "; ".join(f["error"] for f in report.failed + report.truncated)
+            if problem or not report.sessions:
+                _quarantine(inbox, path, problem or "not a camera file thermcap reads")
+                result.quarantined[rel] = problem or "not a camera file thermcap reads"
+                log(f"quarantined {rel}: {result.quarantined[rel]}")
+                rec: dict[str, Any] = {"sha256": digest, "path": rel, "status": "quarantined",
+                                       "reason": result.quarantined[rel]}
+            else:
+                sessions = [str(s.session_dir) for s in report.sessions]
+                archived = []
+                for s in report.sessions:
+                    if archive_formats:
+                        archive_session(s.session_dir, archive_formats)
+                        archived.append(s.session_id)
+                derived = _derive(report.sessions[0].session_dir, path.with_name(path.name + ".derived"))
+                rec = {"sha256": digest, "path": rel, "status": "processed", "sessions": sessions,
+                       "archived": archived, "derived": derived, "at": time.strftime("%Y-%m-%dT%H:%M:%SZ",
+                                                                                        time.gmtime())}
+                result.processed.append(rec)
+                log(f"took {rel} -> {', '.join(Path(x).name for x in sessions)}")
+            _record(inbox, rec)
+            seen[digest] = rec
+    finally:
+        lock.release()
+    return result

@@ -1,0 +1,55 @@
+"""``thermcap watch``: files dropped in an inbox are each taken exactly once (by content), with
+the TERRA-REF extractor's derived products beside them; a file still being copied waits; a
+corrupt one is quarantined with its reason and the queue goes on; a second pass does nothing."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources import SimSource
+from recorder.exports.files import export_session
+from recorder.storage.reader import list_sessions
+from tests.conftest import SAMPLES, run_cli
+
+
+def test_each_dropped_file_is_taken_once(tmp_path):
+    rec = Recorder(SimSource(width=64, height=48, fps=30, frames=6, paced=False, seed=4), tmp_path / "src",
+                   session_id="src", analysis=False)
+    assert rec.run().ok
+    icd = tmp_path / "icd"
+    export_session(rec.session_dir, "icd", icd)  # ICD TIFF + JSON pairs, six distinct frames
+    inbox = tmp_path / "inbox"
+    inbox.mkdir()
+    for p in sorted(icd.iterdir()):
+        shutil.copy(p, inbox / p.name)
+    shutil.copy(next(icd.glob("*.tiff")), inbox / "again_same_bytes.tiff")  # the same content under another name
+    (inbox / "broken.jpg").write_bytes(b"\xff\xd8\xff\xe1" + os.urandom(300))  # a corrupt JPEG
+    sample = SAMPLES / "flir" / "FLIR_E40.jpg"
+    copying = inbox / "still_copying.jpg"
+    copying.write_bytes(sample.read_bytes()[:5000] if sample.is_file() else b"x" * 5000)
+    old = time.time() - 60
+    for p in inbox.iterdir():
+        if p != copying:
+            os.utime(p, (old, old))  # settled long ago; the one being copied was written just now
+    root = tmp_path / "root"
+    r = run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "5", "--json", "--no-archive")
+    assert r.returncode == 1, r.stderr  # one file quarantined
+    res = json.loads(r.stdout)
+    assert len(res["processed"]) == 6
+    assert len(res["duplicates"]) == 1  # whichever name came second, the content is taken once
+    assert res["waiting"] == ["still_copying.jpg"]
+    assert set(res["quarantined"]) == {"broken.jpg"} and "broken.jpg" in res["quarantined"]["broken.jpg"]
+    assert (inbox / "quarantine" / "broken.jpg").is_file()
+    assert (inbox / "quarantine" / "broken.jpg.reason.txt").read_text().strip()
+    assert len(list_sessions(root)) == 6
+    one = res["processed"][0]
+    derived = inbox / (one["path"] + ".derived")
+    assert list(derived.glob("*.png")) and list(derived.glob("*.celsius.tiff")) and (derived / "summary.json").is_file()
+    again = json.loads(run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "5", "--json",
+                               "--no-archive").stdout)
+    assert again["processed"] == [] and again["quarantined"] == {}  # nothing twice
+    assert len(list_sessions(root)) == 6
