@@ -154,3 +154,36 @@ def print_table(rows: list[dict[str, Any]]) -> str:
         lines.append(f"{r['frames']:24} {r['codec']:34} {r['kind']:9} {r['ratio']:>6} {r['x_png16']!s:>7} "
                      f"{r['encode_fps']!s:>8} {r['decode_fps']!s:>8}")
     return "\n".join(lines)
+
+
+def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
+                  workdir: str | None = None) -> dict[str, Any]:
+    """A whole session archived end to end (hash, every format, verification, extras) against the
+    time it covers, beside the floor: the same formats' own encoders on the same frames, one
+    after another on one thread, with nothing else to do."""
+    from archive.archiver import DEFAULT_FORMATS, archive_session
+    from recorder.capture.recorder import Recorder
+
+    fmts = tuple(formats or DEFAULT_FORMATS)
+    n = int(seconds * 60)
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        rec = Recorder(SimSource(width=640, height=512, fps=60, frames=n, paced=False, seed=3), tmp,
+                       session_id="bench", analysis=False, recover_leftovers=False)
+        res = rec.run()
+        if not res.ok:
+            raise RuntimeError(f"the benchmark session did not record cleanly: {res.problems}")
+        t = time.perf_counter()
+        m = archive_session(rec.session_dir, list(fmts))
+        wall = time.perf_counter() - t
+        # the floor: each format's own encode time per frame (measured by the archiver, encode only)
+        rates = [float(m["formats"][f].get("encode_fps") or 0.0) for f in fmts]
+        floor_s = sum(n / r for r in rates if r > 0)
+        single = {}
+        for f in fmts:
+            t = time.perf_counter()
+            archive_session(rec.session_dir, [f], force=True)
+            single[f] = round(seconds / (time.perf_counter() - t), 3)
+    return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts),
+            "archive_wall_s": round(wall, 2), "x_real_time": round(seconds / wall, 3),
+            "floor_encode_s": round(floor_s, 2), "floor_x_real_time": round(seconds / floor_s, 3) if floor_s else None,
+            "x_real_time_one_format": single}

@@ -255,11 +255,23 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 
 @click.command("archive")
 @click.option("--frames", "n_frames", type=int, default=60, show_default=True, help="Simulated frames per run.")
+@click.option("--session", "session_s", type=float, default=None, metavar="SECONDS",
+              help="Instead: archive a whole 640x512@60 session of this length end to end and report x real time, "
+                   "beside the formats' own encode time (the floor) and each format alone.")
 @json_option
-def bench_archive(n_frames: int, as_json: bool) -> None:
+def bench_archive(n_frames: int, session_s: float | None, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
     from archive.bench import bench_archive as run
-    from archive.bench import print_table
+    from archive.bench import bench_session, print_table
+
+    if session_s:
+        res = bench_session(session_s)
+        click.echo(json.dumps(res, indent=2) if as_json else
+                   f"{res['seconds_of_recording']} s of 640x512@60 ({res['frames']} frames), formats "
+                   f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "
+                   f"{res['x_real_time']}x real time; the formats' own encoders alone: {res['floor_x_real_time']}x; "
+                   f"one format at a time: {res['x_real_time_one_format']}")
+        return
 
     rows = run(n_frames)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))

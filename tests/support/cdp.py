@@ -29,9 +29,10 @@ def chromium_binary() -> str | None:
 
 class Browser:
     def __init__(self, binary: str) -> None:
-        self._profile = tempfile.TemporaryDirectory()
+        self._profile = tempfile.TemporaryDirectory(ignore_cleanup_errors=True)
+        # its own process group: closing kills the renderers too, not only the browser process
         self.proc = subprocess.Popen([binary, *FLAGS, f"--user-data-dir={self._profile.name}", "about:blank"],
-                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
         port_file = Path(self._profile.name) / "DevToolsActivePort"
         deadline = time.monotonic() + 60
         while not port_file.is_file() or len(port_file.read_text().splitlines()) < 2:
@@ -100,9 +101,15 @@ class Browser:
         self.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x, "y": y}, session=True)
 
     def close(self) -> None:
+        import contextlib
+        import os
+        import signal
+
         try:
             self._ws.close()
         finally:
-            self.proc.kill()
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(self.proc.pid, signal.SIGKILL)
             self.proc.wait()
+            time.sleep(0.2)  # let the killed renderers' last writes land before the profile goes
             self._profile.cleanup()
