@@ -267,6 +267,7 @@ class Recorder:
         self._book: ProtectionBook | None = None
         self._evictor: Evictor | None = None
         self.writer_thread_id: int | None = None
+        self._waiting_for_disk = False
         self.live = live
         if live is not None:
             for feed in self.feeds:
@@ -354,7 +355,9 @@ class Recorder:
         if self._writer_error:
             reasons.append(self._writer_error)
         if self._evictor is not None and self._evictor.state.blocked:
-            reasons.append(f"ring cannot free space: {self._evictor.state.blocked_reason}")
+            reasons.append(f"ring cannot free space: {self._evictor.state.blocked_reason}"
+                           + ("; waiting for disk (the source is not read meanwhile, nothing is lost)"
+                              if self._waiting_for_disk else ""))
         return not reasons, reasons
 
     def stop(self) -> None:
@@ -621,6 +624,8 @@ class Recorder:
                     feed, frame = item
                     if self.writer_delay_s:
                         time.sleep(self.writer_delay_s)
+                    if self._evictor is not None and self._evictor.state.blocked and feed.can_wait:
+                        self._wait_for_disk(session)  # a file or a pipe is never dropped from: it waits
                     if self._evictor is not None and self._evictor.state.blocked:
                         # nothing left to evict: drop and count rather than fill the disk
                         self.counters.drop(feed.message_topics(frame))
@@ -638,6 +643,27 @@ class Recorder:
         except Exception as exc:
             self._writer_error = f"writer failed: {type(exc).__name__}: {exc}"
             self._abort(session, running)
+
+    def _wait_for_disk(self, session: SessionWriter) -> None:
+        """Hold a source that can wait until the ring frees space (a protected window expires
+        from the budget's view, an operator frees disk) or a stop is asked; capture stops reading
+        it meanwhile, so the pipe backs up instead of losing frames. Said on status and in logs."""
+        assert self._evictor is not None
+        self._waiting_for_disk = True
+        print(f"thermcap: waiting for disk, not reading the source: {self._evictor.state.blocked_reason}",
+              file=sys.stderr, flush=True)
+        next_try = time.monotonic() + 0.5
+        try:
+            while self._evictor.state.blocked and not self._stop.is_set():
+                self._handle_requests()
+                session.poll()
+                time.sleep(0.05)
+                if time.monotonic() >= next_try:
+                    next_try = time.monotonic() + 0.5
+                    with contextlib.suppress(Exception):
+                        self._evictor.evict_once()
+        finally:
+            self._waiting_for_disk = False
 
     def _abort(self, session: SessionWriter, running: int) -> None:
         self.stop()

@@ -112,7 +112,9 @@ def test_ring_soak_keeps_the_budget_and_every_protected_window(tmp_path):
 
 def test_everything_protected_blocks_and_counts_the_drops(tmp_path):
     ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02)  # one mark protects all time
-    rec = Recorder(_sim(600), tmp_path, session_id="full", policy=SegmentPolicy(max_duration_s=0.1), analysis=False,
+    live = SimSource(width=W, height=H, fps=600.0, frames=600, paced=True, seed=11, start_time_ns=T0,
+                     cue_period_s=0)  # a live camera, which cannot wait: its frames are dropped and counted
+    rec = Recorder(live, tmp_path, session_id="full", policy=SegmentPolicy(max_duration_s=0.1), analysis=False,
                    ring=ring)
     rec.mark("keep everything")
     result = rec.run()
@@ -125,3 +127,44 @@ def test_everything_protected_blocks_and_counts_the_drops(tmp_path):
     kept = [f.index for f in iter_session_frames(tmp_path / "sessions" / "full")]
     assert kept == sorted(kept)
     assert len(kept) == result.frames_written
+
+
+def test_a_source_that_can_wait_waits_for_disk_instead_of_dropping(tmp_path):
+    """A file or a pipe is never dropped from: with everything protected and the budget
+    exceeded, the recorder stops reading it (the pipe backs up) until space frees, and says so."""
+    import io
+
+    import numpy as np
+
+    from recorder.capture.sources.raw import RawSource
+
+    px = np.random.default_rng(2).integers(0, 1 << 14, size=(300, 48, 64), dtype=np.uint16)
+    src = RawSource("pipe", width=64, height=48, fps=60, stream=io.BytesIO(px.astype("<u2").tobytes()))
+    ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02)
+    rec = Recorder(src, tmp_path, session_id="w", policy=SegmentPolicy(max_duration_s=0.1), analysis=False,
+                   ring=ring)
+    rec.mark("keep everything")
+    out = {}
+    t = threading.Thread(target=lambda: out.setdefault("res", rec.run()))
+    t.start()
+    assert _wait(lambda: rec.status().get("ring", {}).get("blocked"), 20)
+    time.sleep(0.5)
+    st = rec.status()
+    assert st["dropped"] == {} and any("waiting for disk" in p for p in st["problems"]), st
+    written = st["frames_written"]
+    time.sleep(0.5)
+    assert rec.status()["frames_written"] == written  # it waits, it does not write past the budget
+    rec.stop()
+    t.join(30)
+    res = out["res"]
+    assert res.frames_written + res.frames_dropped == res.frames_captured
+    assert any("waiting for disk" in p or "dropped" in p for p in res.problems)
+
+
+def _wait(pred, timeout: float) -> bool:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if pred():
+            return True
+        time.sleep(0.02)
+    return False
