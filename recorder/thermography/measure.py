@@ -16,8 +16,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Box", "Line", "Measurement", "Polygon", "Spot", "Tool", "ToolError", "histogram", "isotherm",
-           "line_profile", "measure", "parse_tool"]
+__all__ = ["Box", "Line", "Measurement", "Polygon", "Spot", "Tool", "ToolError", "bounds", "histogram", "isotherm",
+           "line_profile", "measure", "parse_tool", "shifted"]
 
 
 class ToolError(ValueError):
@@ -72,6 +72,34 @@ def parse_tool(text: str) -> Tool:
         return Polygon(tuple(zip(nums[::2], nums[1::2], strict=True)))
     raise ToolError(f"tool {text!r}: use spot:x,y, box:x0,y0,x1,y1, line:x0,y0,x1,y1 or "
                     f"polygon:x0,y0,x1,y1,x2,y2[,...]")
+
+
+def bounds(tool: Tool, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The tool's pixel rectangle (x0, y0, x1, y1 exclusive), clipped to the frame: the only part
+    of a frame a statistic of the tool needs converted to °C."""
+    h, w = shape
+    if isinstance(tool, Spot):
+        x0, y0, x1, y1 = tool.x, tool.y, tool.x + 1, tool.y + 1
+    elif isinstance(tool, Box):
+        x0, y0, x1, y1 = tool.x0, tool.y0, tool.x1 + 1, tool.y1 + 1
+    elif isinstance(tool, Line):
+        x0, x1 = math.floor(min(tool.x0, tool.x1)), math.floor(max(tool.x0, tool.x1)) + 1
+        y0, y1 = math.floor(min(tool.y0, tool.y1)), math.floor(max(tool.y0, tool.y1)) + 1
+    else:
+        xs, ys = [p[0] for p in tool.points], [p[1] for p in tool.points]
+        x0, x1, y0, y1 = math.floor(min(xs)), math.ceil(max(xs)) + 1, math.floor(min(ys)), math.ceil(max(ys)) + 1
+    return max(0, x0), max(0, y0), min(w, x1), min(h, y1)
+
+
+def shifted(tool: Tool, dx: int, dy: int) -> Tool:
+    """The same tool in a crop that starts at (dx, dy)."""
+    if isinstance(tool, Spot):
+        return Spot(tool.x - dx, tool.y - dy)
+    if isinstance(tool, Box):
+        return Box(tool.x0 - dx, tool.y0 - dy, tool.x1 - dx, tool.y1 - dy)
+    if isinstance(tool, Line):
+        return Line(tool.x0 - dx, tool.y0 - dy, tool.x1 - dx, tool.y1 - dy)
+    return Polygon(tuple((x - dx, y - dy) for x, y in tool.points))
 
 
 def _polygon_mask(shape: tuple[int, int], points: tuple[tuple[float, float], ...]) -> np.ndarray:
