@@ -57,6 +57,8 @@ def play(session: str, root: str, host: str, port: int, rate: float, loop: bool,
     try:
         result = replay_session(session_dir, publisher, rate=rate, loop=loop, start_s=start_s, max_fps=max_fps,
                                 stop=stop, duration_s=duration_s, wait_for_viewer_s=wait_for_viewer)
+        if not stop.is_set():
+            stop.wait(1.0)  # the server sends on its own threads: let viewers receive the last messages
     except ThermcapError as exc:
         fail(str(exc))
     finally:
