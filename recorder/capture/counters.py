@@ -77,5 +77,5 @@ class RecorderCounters:
     @property
     def frames_dropped(self) -> int:
         """Frames of every camera dropped (the image topics' drops)."""
-        from recorder.icd.topics import is_image_topic
-        return sum(n for t, n in self.dropped.items() if is_image_topic(t))
+        from recorder.icd.topics import sum_image_topics
+        return sum_image_topics(self.dropped)

@@ -46,7 +46,7 @@ from recorder.icd.topics import (
     CameraTopics,
     camera_topics,
     image_message_parts,
-    is_image_topic,
+    sum_image_topics,
 )
 from recorder.radiometry import LinearModel, describe_model
 from recorder.storage.layout import SessionLayout
@@ -118,7 +118,7 @@ class RecordingResult:
 
     @property
     def frames_dropped(self) -> int:
-        return sum(n for t, n in self.dropped.items() if is_image_topic(t))
+        return sum_image_topics(self.dropped)
 
     def to_dict(self) -> dict[str, Any]:
         return {"session_id": self.session_id, "session_dir": str(self.session_dir),
@@ -254,7 +254,6 @@ class Recorder:
                 feed.detector = HotSpotDetector(src.model, bad_pixel_map=src.bad_pixel_map)
                 feed.analysis_period_ns = int(1e9 / (analysis_max_fps or src.sensor.frame_rate_hz or 60.0))
             self.feeds.append(feed)
-        self.wait_when_full = all(f.can_wait for f in self.feeds)
         self.analysis_wait_s = analysis_wait_s
         # Control while recording (thermcap ctl): requests are queued to the writer thread, which
         # acts on them between two frames, so a split or a mark never loses or repeats a frame.
@@ -736,7 +735,7 @@ class Recorder:
         if feed.triggers is not None:
             for reason in feed.triggers.check(blocks):
                 self._protect(ts, "trigger", reason, camera=feed.name)
-        extra = [(feed.topics.extra(topic), json.dumps(msg, separators=(",", ":")).encode())
+        extra = [(feed.topics.extra(topic), json.dumps(msg, separators=(",", ":")).encode(), msg)
                  for topic, msg in frame.messages]
         attachments = frame.attachments if not self.multi else \
             [(f"{feed.name}/{name}", media, data) for name, media, data in frame.attachments]

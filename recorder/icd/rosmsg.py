@@ -21,6 +21,8 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
+from recorder.icd.topics import sum_image_topics
+
 __all__ = [
     "ANNOTATIONS",
     "JSON_DOCUMENT",
@@ -140,7 +142,7 @@ def _stats_fields(d: dict[str, Any]) -> dict[str, Any]:
     timing = d.get("timing") or {}
     dropped = d.get("dropped") or {}
     return {"frames_captured": int(d.get("frames_captured") or 0), "frames_written": int(d.get("frames_written") or 0),
-            "frames_dropped": int(sum(n for t, n in dropped.items() if t.endswith("/image"))),
+            "frames_dropped": sum_image_topics(dropped),
             "frames_paused": int(d.get("frames_paused") or 0), "queue_depth": int(d.get("queue_depth") or 0),
             "queue_capacity": int(d.get("queue_capacity") or 0), "write_latency_p50_ms": _f(lat.get("p50")),
             "write_latency_p99_ms": _f(lat.get("p99")), "analysis_skipped": int(d.get("analysis_skipped") or 0),

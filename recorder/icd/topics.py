@@ -36,6 +36,7 @@ __all__ = [
     "encode_image_prefix",
     "image_message_parts",
     "is_image_topic",
+    "sum_image_topics",
 ]
 
 TOPIC_IMAGE = "/thermal/image"
@@ -83,6 +84,11 @@ def is_image_topic(topic: str) -> bool:
         return True
     parts = topic.split("/")
     return len(parts) == 4 and parts[1] == "thermal" and parts[3] == "image" and bool(_CAMERA_NAME.fullmatch(parts[2]))
+
+
+def sum_image_topics(counts: dict[str, int]) -> int:
+    """The per-topic counts (messages, drops) of every camera's image topic, added: frames."""
+    return sum(n for t, n in counts.items() if is_image_topic(t))
 
 
 IMAGE_SCHEMA_NAME = "sensor_msgs/msg/Image"

@@ -16,7 +16,7 @@ from mcap.reader import make_reader
 from recorder.exceptions import McapFileError
 from recorder.icd.names import iso_utc
 from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import TOPIC_STATS, camera_topics, is_image_topic
+from recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import session_status
 from recorder.storage.reader import archived_frame_count
@@ -145,7 +145,7 @@ def segment_info(path: str | Path) -> SegmentInfo:
     comp = sum(c.compressed_size for c in chunks)
     uncomp = sum(c.uncompressed_size for c in chunks)
     counts = {topics[cid]: n for cid, n in stats.channel_message_counts.items() if cid in topics}
-    frames = sum(n for t, n in counts.items() if is_image_topic(t))
+    frames = sum_image_topics(counts)
     span_s = (stats.message_end_time - stats.message_start_time) / 1e9 if stats.message_count else 0.0
     last = json.loads(last_stats) if last_stats is not None else {}
     return SegmentInfo(

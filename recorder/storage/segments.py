@@ -138,8 +138,10 @@ class _Syncer(threading.Thread):
         self.join()
 
 
-def _as_message(topic: str, payload: bytes) -> bytes:
-    return message_for_topic(topic).encode(json.loads(payload), payload)
+def _as_message(topic: str, payload: bytes, doc: dict[str, Any] | None = None) -> bytes:
+    """``payload`` (JSON) as its topic's ROS 2 message; ``doc`` is the same document when the
+    caller has it, so it is not parsed back."""
+    return message_for_topic(topic).encode(json.loads(payload) if doc is None else doc, payload)
 
 
 class SessionWriter:
@@ -278,7 +280,7 @@ class SessionWriter:
 
     # -- writing -------------------------------------------------------------------------------
     def write_frame(self, log_time: int, image_parts: list[Any], sidecar_json: bytes,
-                    extra: Sequence[tuple[str, bytes]] = (), token: Any = None, sequence: int = 0,
+                    extra: Sequence[tuple[str, bytes, dict[str, Any]]] = (), token: Any = None, sequence: int = 0,
                     attachments: Sequence[tuple[str, str, bytes]] = (), camera: str | None = None,
                     sidecar_doc: dict[str, Any] | None = None) -> None:
         """One frame: its image, its sidecar (``sidecar_json`` kept byte for byte inside the ROS 2
@@ -297,8 +299,8 @@ class SessionWriter:
         self._add(topics.metadata, log_time, SIDECAR.encode(doc, sidecar_json), sequence=sequence)
         self._add(topics.annotations, log_time, annotations_message(log_time, doc.get("targets") or []),
                   sequence=sequence)
-        for topic, payload in extra:
-            self._add(topic, log_time, _as_message(topic, payload))
+        for topic, payload, extra_doc in extra:
+            self._add(topic, log_time, _as_message(topic, payload, extra_doc))
         self.segments[-1].frames += 1
 
     def write_message(self, topic: str, log_time: int, payload: bytes) -> None:
