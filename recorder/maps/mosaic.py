@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from recorder.maps.footprint import Footprint, ground_to_pixel
+from recorder.maps.footprint import Footprint, pixel_to_ground
 
-__all__ = ["Mosaic", "build_mosaic"]
+__all__ = ["Mosaic", "build_mosaic", "hot_spot_points"]
 
 
 @dataclass
@@ -77,8 +77,6 @@ def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[s
     """Detected targets as map points: each target's centroid through the footprint."""
     from pyproj import Transformer
 
-    from recorder.maps.footprint import pixel_to_ground
-
     to_ll = Transformer.from_crs(fp.epsg, 4326, always_xy=True)
     out = []
     for t in targets:
@@ -93,6 +91,3 @@ def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[s
                     "classification": t.get("classification"), "uncertainty_m": round(fp.uncertainty_m, 2)})
     return out
 
-
-__all__ += ["hot_spot_points"]
-_ = ground_to_pixel  # the exact inverse for one point (oblique too); the mosaic uses the affine one

@@ -76,12 +76,14 @@ def parse_tool(text: str) -> Tool:
 
 def bounds(tool: Tool, shape: tuple[int, int]) -> tuple[int, int, int, int]:
     """The tool's pixel rectangle (x0, y0, x1, y1 exclusive), clipped to the frame: the only part
-    of a frame a statistic of the tool needs converted to °C."""
+    of a frame a statistic of the tool needs converted to °C. A spot or box that leaves the frame
+    is a ToolError, as ``measure`` says it."""
     h, w = shape
-    if isinstance(tool, Spot):
-        x0, y0, x1, y1 = tool.x, tool.y, tool.x + 1, tool.y + 1
-    elif isinstance(tool, Box):
-        x0, y0, x1, y1 = tool.x0, tool.y0, tool.x1 + 1, tool.y1 + 1
+    if isinstance(tool, Spot | Box):
+        x0, y0, x1, y1 = (tool.x, tool.y, tool.x + 1, tool.y + 1) if isinstance(tool, Spot) else \
+            (tool.x0, tool.y0, tool.x1 + 1, tool.y1 + 1)
+        if x0 < 0 or y0 < 0 or x1 > w or y1 > h:
+            _mask(shape, tool)  # raises, with the message measure gives
     elif isinstance(tool, Line):
         x0, x1 = math.floor(min(tool.x0, tool.x1)), math.floor(max(tool.x0, tool.x1)) + 1
         y0, y1 = math.floor(min(tool.y0, tool.y1)), math.floor(max(tool.y0, tool.y1)) + 1

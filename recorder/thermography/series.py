@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.thermography.measure import Box, Line, Spot, Tool, ToolError, bounds, measure, shifted
+from recorder.thermography.measure import Tool, bounds, measure, shifted
 
 __all__ = ["STATS", "region_series"]
 
@@ -25,21 +25,8 @@ def region_series(frames: Iterable[tuple[int, int, np.ndarray]], tool: Tool, sta
         raise ValueError(f"stat must be one of {', '.join(STATS)}, got {stat!r}")
     out = []
     for index, t, counts in frames:
-        h, w = counts.shape
-        if isinstance(tool, (Spot, Box)) and not (bounds(tool, (h, w)) == _unclipped(tool)):
-            raise ToolError(f"{type(tool).__name__.lower()} is outside the {w}x{h} frame")
-        x0, y0, x1, y1 = bounds(tool, (h, w))
+        x0, y0, x1, y1 = bounds(tool, counts.shape)
         crop = np.ascontiguousarray(counts[y0:y1, x0:x1])
-        part = tool if isinstance(tool, Line) else shifted(tool, x0, y0)
-        if isinstance(tool, Line):  # a line's samples are placed on the whole frame: keep it whole
-            crop, part = counts, tool
-        m = measure(np.asarray(to_celsius(index, crop), dtype=np.float32), part)
+        m = measure(np.asarray(to_celsius(index, crop), dtype=np.float32), shifted(tool, x0, y0))
         out.append({"frame": index, "timestamp_ns": int(t), "celsius": getattr(m, f"{stat}_c")})
     return out
-
-
-def _unclipped(tool: Tool) -> tuple[int, int, int, int]:
-    if isinstance(tool, Spot):
-        return tool.x, tool.y, tool.x + 1, tool.y + 1
-    assert isinstance(tool, Box)
-    return tool.x0, tool.y0, tool.x1 + 1, tool.y1 + 1
