@@ -23,6 +23,7 @@ from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
 __all__ = [
     "SessionFrame",
+    "archived_frame_count",
     "count_frames",
     "frame_files",
     "iter_session_frames",

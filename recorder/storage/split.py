@@ -27,7 +27,14 @@ from recorder.exceptions import McapFileError, ThermcapError
 from recorder.icd.topics import TOPIC_EVENTS, TOPIC_STATS, camera_topics
 from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import iter_session_frames, read_session_meta, session_cameras, session_segments
+from recorder.storage.reader import (
+    archived_frame_count,
+    count_frames,
+    iter_session_frames,
+    read_session_meta,
+    session_cameras,
+    session_segments,
+)
 from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import SESSION_METADATA, fsync_dir, write_json_atomic
 from recorder.storage.writer import ChunkedWriter, Compression
@@ -136,12 +143,13 @@ def _split_locked(session_dir: Path, cameras: list[str], delete_source: bool) ->
     if not segments and not meta.get("split_into"):
         raise ThermcapError(f"{session_dir}: no segments to split")
     events = _read_json(SessionLayout.of(session_dir).events_json).get("events", [])
+    compared: set[str] = set()  # copies made and compared with the source in this run
     for cam in cameras:
         out = session_dir.parent / camera_session_id(sid, cam)
         result.cameras[cam] = str(out)
         if SessionLayout.of(out).session_json.is_file():
-            result.already.append(cam)
-            result.frames[cam] = len(list(iter_session_frames(out)))
+            result.already.append(cam)  # counted from its summaries, or its archive once archived
+            result.frames[cam] = sum(count_frames(out).values()) or archived_frame_count(out) or 0
             continue
         if not segments:
             raise ThermcapError(f"{session_dir}: its segments are gone but {out.name} was never made")
@@ -178,11 +186,12 @@ def _split_locked(session_dir: Path, cameras: list[str], delete_source: bool) ->
         fsync_dir(tmp)
         os.rename(tmp, out)
         fsync_dir(session_dir.parent)
+        compared.add(cam)
         result.frames[cam] = frames
     meta["split_into"] = {cam: Path(p).name for cam, p in result.cameras.items()}
     write_json_atomic(SessionLayout.of(session_dir).session_json, meta)
     if delete_source and segments:
-        for cam in cameras:  # every copy compared equal to the source before any segment goes
+        for cam in [c for c in cameras if c not in compared]:  # made by an earlier run: compare them now
             if _frame_hashes(Path(result.cameras[cam]), None) != _frame_hashes(session_dir, cam):
                 raise ThermcapError(f"{result.cameras[cam]}: differs from the source; the source was kept")
         for seg in segments:

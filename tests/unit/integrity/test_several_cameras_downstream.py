@@ -58,6 +58,7 @@ def test_split_cameras_makes_bit_exact_single_camera_sessions(tmp_path):
         assert any(e.get("note") == "deer" for e in events)
     again = split_cameras(d)  # idempotent
     assert sorted(again.already) == ["front", "mast"]
+    assert again.frames == {"front": 24, "mast": 12}  # counted again without decoding the copies
     with pytest.raises(ThermcapError, match="one camera"):
         split_cameras(tmp_path / "sessions" / "mc.front")
 
