@@ -232,7 +232,17 @@ class Evictor(threading.Thread):
 
     def _evict(self) -> list[Eviction]:
         """Oldest first, skipping protected segments, until nothing presses; the tree is walked
-        and the candidates listed once per pass, and each deletion is subtracted."""
+        and the candidates listed once per pass, and each deletion is subtracted. Each session
+        touched gets its rosbag2 metadata.yaml rewritten once, at the end of the pass."""
+        touched: set[Path] = set()
+        try:
+            return self._evict_pass(touched)
+        finally:
+            for d in touched:
+                with contextlib.suppress(OSError):  # derived data: the next change writes it again
+                    write_bag_metadata(d)
+
+    def _evict_pass(self, touched: set[Path]) -> list[Eviction]:
         done: list[Eviction] = []
         used = disk_usage(self.root) if self.policy.max_disk is not None else None
         if (reason := self.pressure(used)) is None:
@@ -246,6 +256,7 @@ class Evictor(threading.Thread):
                 st = c.path.stat()
                 c.path.unlink()
             self._record_eviction(c, st.st_size, reason)
+            touched.add(c.session_dir)
             done.append(self.state.last[-1])
             if used is not None:
                 used -= st.st_blocks * 512  # as disk_usage counts it
@@ -260,8 +271,6 @@ class Evictor(threading.Thread):
     def _record_eviction(self, victim: _Candidate, size: int, reason: str) -> None:
         self._spans.pop(victim.path, None)
         fsync_dir(victim.session_dir)
-        with contextlib.suppress(OSError):  # derived data: the next change writes it again
-            write_bag_metadata(victim.session_dir)
         ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
                       bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
                       end=iso_utc(victim.end_ns), reason=reason)
