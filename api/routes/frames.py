@@ -95,10 +95,13 @@ def get_frame(request: Request, session_id: str, n: int,
 
 def _session_range(request: Request, row: dict, model) -> TemperatureRange | None:
     """One scale for a whole session: the widest 0.5..99.5 percentiles of 16 frames spread over
-    it, computed once per session and kept."""
+    it, computed once per session and model (a re-parameterised model has its own scale) and
+    kept, up to a bound."""
     cache = request.app.state.__dict__.setdefault("session_ranges", {})
-    key = (row["id"], row["frames"])
+    key = (row["id"], row["frames"], model)  # models are frozen dataclasses: hashable, compared by value
     if key not in cache:
+        if len(cache) >= 256:
+            cache.clear()
         reader = request.app.state.frames
         picks = sorted({int(i) for i in np.linspace(0, row["frames"] - 1, num=min(16, row["frames"]))})
         try:

@@ -116,3 +116,11 @@ def test_the_cli_records_versions_and_refusals_say_why(client, root):
     if (root / "sessions" / "m30t").is_dir():
         r = client.post("/api/v1/sessions/m30t/radiometry", json={"params": {"emissivity": 0.9}, "why": "x"})
         assert r.status_code == 409 and "DJI" in r.json()["error"]
+
+
+def test_a_session_scale_follows_the_parameters_it_was_made_with(client):
+    url = "/api/v1/sessions/flir-e40/frames/0"
+    plain = client.get(url, params={"format": "preview", "range": "session"})
+    changed = client.get(url, params={"format": "preview", "range": "session", **PARAMS[4]})
+    assert plain.status_code == changed.status_code == 200
+    assert plain.headers["x-range-max"] != changed.headers["x-range-max"]  # not the scale of the other model
