@@ -28,9 +28,11 @@ __all__ = [
     "JSON_DOCUMENT",
     "SIDECAR",
     "RosMessage",
+    "TargetMark",
     "annotations_message",
     "json_payload",
     "message_for_topic",
+    "target_marks",
 ]
 
 _SEP = "=" * 80
@@ -293,24 +295,48 @@ uint32 nanosec
 """, lambda d: d)
 
 
-def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
-    """A box and a "#id max °C" label per detected target, for Foxglove's Image panel."""
-    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
-    t = {"sec": sec, "nanosec": nsec}
-    red, white, shade = ({"r": 1.0, "g": 0.2, "b": 0.1, "a": 1.0}, {"r": 1.0, "g": 1.0, "b": 1.0, "a": 1.0},
-                         {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.6})
-    none = {"r": 0.0, "g": 0.0, "b": 0.0, "a": 0.0}
-    points, texts = [], []
+#: how a detection is drawn (RGBA): box outline, label text, label background
+BOX_RGBA, LABEL_RGBA, LABEL_BACKGROUND_RGBA = (1.0, 0.2, 0.1, 1.0), (1.0, 1.0, 1.0, 1.0), (0.0, 0.0, 0.0, 0.6)
+
+
+@dataclass(frozen=True)
+class TargetMark:
+    """One detected target as it is drawn: its box's corners and its label, in image pixels."""
+
+    corners: tuple[tuple[float, float], ...]  # TL, TR, BR, BL
+    label: str
+    label_at: tuple[float, float]
+
+
+def target_marks(targets: list[dict[str, Any]], scale: float = 1.0) -> list[TargetMark]:
+    """A box and a "#id max °C" label per target with a box, in an image ``scale`` times the
+    frame's size (a subsampled live picture)."""
+    out = []
     for tg in targets:
         bbox = tg.get("bbox") or []
         if len(bbox) != 4:
             continue
-        x0, y0, x1, y1 = (float(v) for v in bbox)
-        x1, y1 = x1 + 1, y1 + 1  # inclusive pixel boxes: to the far edge of the last pixel
-        points.append({"timestamp": t, "type": 2, "points": [{"x": x0, "y": y0}, {"x": x1, "y": y0},
-                                                             {"x": x1, "y": y1}, {"x": x0, "y": y1}],
-                       "outline_color": red, "outline_colors": [], "fill_color": none, "thickness": 2.0})
-        label = f"#{tg.get('target_id')} {tg.get('max_temp_c')} °C"
-        texts.append({"timestamp": t, "position": {"x": x0, "y": max(0.0, y0 - 2)}, "text": label,
-                      "font_size": 12.0, "text_color": white, "background_color": shade})
+        x0, y0, x1, y1 = (float(v) * scale for v in bbox)
+        x1, y1 = x1 + scale, y1 + scale  # inclusive pixel boxes: to the far edge of the last pixel
+        out.append(TargetMark(((x0, y0), (x1, y0), (x1, y1), (x0, y1)),
+                              f"#{tg.get('target_id')} {tg.get('max_temp_c')} °C", (x0, max(0.0, y0 - 2))))
+    return out
+
+
+def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
+    """The targets' marks as CDR ``foxglove_msgs/msg/ImageAnnotations``, for Foxglove's Image panel."""
+    sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
+    t = {"sec": sec, "nanosec": nsec}
+
+    def rgba(c: tuple[float, ...]) -> dict[str, float]:
+        return dict(zip("rgba", c, strict=True))
+
+    none = rgba((0.0, 0.0, 0.0, 0.0))
+    marks = target_marks(targets)
+    points = [{"timestamp": t, "type": 2, "points": [{"x": x, "y": y} for x, y in m.corners],
+               "outline_color": rgba(BOX_RGBA), "outline_colors": [], "fill_color": none, "thickness": 2.0}
+              for m in marks]
+    texts = [{"timestamp": t, "position": {"x": m.label_at[0], "y": m.label_at[1]}, "text": m.label,
+              "font_size": 12.0, "text_color": rgba(LABEL_RGBA), "background_color": rgba(LABEL_BACKGROUND_RGBA)}
+             for m in marks]
     return _encoder(ANNOTATIONS.name, ANNOTATIONS.text)({"circles": [], "points": points, "texts": texts})

@@ -206,19 +206,16 @@ def _annotations(targets: list[dict[str, Any]], stamp: Any, k: int) -> Any:
         TextAnnotation,
     )
 
-    red, white, shade = Color(r=1.0, g=0.2, b=0.1, a=1.0), Color(r=1, g=1, b=1, a=1), Color(r=0, g=0, b=0, a=0.6)
-    boxes, labels = [], []
-    for t in targets:
-        bbox = t.get("bbox")
-        if not bbox or len(bbox) != 4:
-            continue
-        x0, y0, x1, y1 = (float(v) / k for v in bbox)
-        x1, y1 = x1 + 1.0 / k, y1 + 1.0 / k  # inclusive pixel boxes: the far edge of the last pixel
-        boxes.append(PointsAnnotation(timestamp=stamp, type=PointsAnnotationType.LineLoop,
-                                      points=[Point2(x=x0, y=y0), Point2(x=x1, y=y0), Point2(x=x1, y=y1),
-                                              Point2(x=x0, y=y1)],
-                                      outline_color=red, thickness=2.0))
-        label = f"#{t.get('target_id')} {t.get('max_temp_c')} °C"
-        labels.append(TextAnnotation(timestamp=stamp, position=Point2(x=x0, y=max(0.0, y0 - 2)), text=label,
-                                     font_size=12.0, text_color=white, background_color=shade))
+    from recorder.icd.rosmsg import BOX_RGBA, LABEL_BACKGROUND_RGBA, LABEL_RGBA, target_marks
+
+    def color(c: tuple[float, ...]) -> Any:
+        return Color(r=c[0], g=c[1], b=c[2], a=c[3])
+
+    marks = target_marks(targets, 1.0 / k)  # the same marks as recorded, on the subsampled picture
+    boxes = [PointsAnnotation(timestamp=stamp, type=PointsAnnotationType.LineLoop,
+                              points=[Point2(x=x, y=y) for x, y in m.corners], outline_color=color(BOX_RGBA),
+                              thickness=2.0) for m in marks]
+    labels = [TextAnnotation(timestamp=stamp, position=Point2(x=m.label_at[0], y=m.label_at[1]), text=m.label,
+                             font_size=12.0, text_color=color(LABEL_RGBA),
+                             background_color=color(LABEL_BACKGROUND_RGBA)) for m in marks]
     return ImageAnnotations(timestamp=stamp, points=boxes, texts=labels)
