@@ -173,9 +173,8 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         if not res.ok:
             raise RuntimeError(f"the benchmark session did not record cleanly: {res.problems}")
         t = time.perf_counter()
-        m = archive_session(rec.session_dir, list(fmts))
+        archive_session(rec.session_dir, list(fmts))
         wall = time.perf_counter() - t
-        _ = m
         single, floor_s = {}, 0.0
         for f in fmts:
             t = time.perf_counter()

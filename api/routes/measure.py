@@ -5,11 +5,15 @@ from __future__ import annotations
 
 import csv
 import io
+import json
 from typing import Annotated, Literal
 
+import imagecodecs
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
+from sqlalchemy import select
 
+from api import db
 from api.routes.common import FrameModel, frame_model, session_row
 from api.security import require
 from recorder.exports.render import celsius
@@ -92,11 +96,7 @@ def get_isotherm(request: Request, session_id: str, n: int, above: float | None 
     except ToolError as exc:
         raise HTTPException(400, str(exc)) from None
     if format == "png":
-        import imagecodecs
-
         return Response(imagecodecs.png_encode(mask.astype(np.uint8) * 255), media_type="image/png")
-    import json
-
     body = {"frame": n, "above_c": above, "below_c": below, "pixels": int(mask.sum()),
             "fraction": round(float(mask.mean()), 6)}
     return Response(json.dumps(body), media_type="application/json")
@@ -112,10 +112,6 @@ def get_series(request: Request, session_id: str, tool: str, stat: Literal["max"
     t = _tools([tool])[0]
     models = FrameModel(request, row)
     reader = request.app.state.frames
-    from sqlalchemy import select
-
-    from api import db
-
     with request.app.state.engine.connect() as conn:
         times = dict(conn.execute(select(db.frames.c.idx, db.frames.c.timestamp_ns)
                                   .where(db.frames.c.session_id == session_id)).all())
@@ -137,6 +133,4 @@ def get_series(request: Request, session_id: str, tool: str, stat: Literal["max"
         w.writeheader()
         w.writerows(points)
         return Response(buf.getvalue(), media_type="text/csv")
-    import json
-
     return Response(json.dumps({"tool": tool, "stat": stat, "points": points}), media_type="application/json")
