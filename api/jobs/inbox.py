@@ -8,7 +8,9 @@ per file), archived and verified, and its derived products are written beside it
 
 - Exactly once: the journal (``.thermcap/inbox.jsonl``) keys each file by its content's
   sha256, so a file seen before (under any name) is never processed again, and a restart
-  resumes where it stopped.
+  resumes where it stopped. Its sessions are named by that content (``inbox-<sha256[:16]>``),
+  so a crash between importing and journaling finds them instead of importing again, and a
+  session a crash left half-made is imported again from the file.
 - Never half-way: a file is taken only when its size and mtime have not changed for
   ``settle_s``, and names of files being written (``.part``, ``.tmp``, dot files) are skipped.
 - A bad file goes to ``quarantine/`` with a ``.reason.txt`` beside it; the queue goes on.
@@ -29,6 +31,7 @@ from typing import Any
 
 from recorder.exceptions import ThermcapError
 from recorder.storage.lock import lock_session
+from recorder.storage.reader import read_session_meta
 
 __all__ = ["InboxPass", "process_inbox"]
 
@@ -110,6 +113,22 @@ def _quarantine(inbox: Path, path: Path, reason: str) -> None:
     dest.with_name(dest.name + ".reason.txt").write_text(reason + "\n")
 
 
+def _earlier_sessions(root: Path, name: str) -> list[Path]:
+    """The sessions an earlier run imported from the same content, if it finished importing;
+    a session it left half-made (it died mid-import) is removed, for the file is still here to
+    import again, and the others of that file with it, so it is imported whole, once."""
+    base = root / "sessions"
+    found = sorted(p for p in base.glob(f"{name}*") if p.is_dir() and (p.name == name or
+                                                                        p.name.startswith(name + "-")))
+    if not found:
+        return []
+    if all(read_session_meta(p).get("status") == "complete" for p in found):
+        return found
+    for p in found:
+        shutil.rmtree(p)
+    return []
+
+
 def _derive(session_dir: Path, out: Path) -> list[str]:
     from recorder.exports.files import export_session
 
@@ -152,22 +171,29 @@ def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
                 if seen[digest]["path"] != rel:
                     result.duplicates.append(rel)
                 continue
-            report = import_paths([str(path)], root, session_per_file=True)
-            problem = "; ".join(f["error"] for f in report.failed + report.truncated)
-            if problem or not report.sessions:
+            name = f"inbox-{digest[:16]}"  # a file's sessions are named by its content: a rerun finds them
+            done = _earlier_sessions(root, name)
+            if done:
+                report = None  # imported before a crash that came ahead of the journal: not imported again
+                session_dirs = done
+            else:
+                report = import_paths([str(path)], root, session=name)
+                session_dirs = [s.session_dir for s in report.sessions]
+            problem = "" if report is None else "; ".join(f["error"] for f in report.failed + report.truncated)
+            if problem or not session_dirs:
                 _quarantine(inbox, path, problem or "not a camera file thermcap reads")
                 result.quarantined[rel] = problem or "not a camera file thermcap reads"
                 log(f"quarantined {rel}: {result.quarantined[rel]}")
                 rec: dict[str, Any] = {"sha256": digest, "path": rel, "status": "quarantined",
                                        "reason": result.quarantined[rel]}
             else:
-                sessions = [str(s.session_dir) for s in report.sessions]
+                sessions = [str(d) for d in session_dirs]
                 archived = []
-                for s in report.sessions:
+                for d in session_dirs:
                     if archive_formats:
-                        archive_session(s.session_dir, archive_formats)
-                        archived.append(s.session_id)
-                derived = _derive(report.sessions[0].session_dir, path.with_name(path.name + ".derived"))
+                        archive_session(d, archive_formats)  # resumes a half-done archive, skips a done one
+                        archived.append(d.name)
+                derived = _derive(session_dirs[0], path.with_name(path.name + ".derived"))
                 rec = {"sha256": digest, "path": rel, "status": "processed", "sessions": sessions,
                        "archived": archived, "derived": derived, "at": time.strftime("%Y-%m-%dT%H:%M:%SZ",
                                                                                         time.gmtime())}

@@ -53,3 +53,33 @@ def test_each_dropped_file_is_taken_once(tmp_path):
                                "--no-archive").stdout)
     assert again["processed"] == [] and again["quarantined"] == {}  # nothing twice
     assert len(list_sessions(root)) == 6
+
+
+def test_a_crash_between_import_and_journal_imports_nothing_twice(tmp_path):
+    import hashlib
+
+    from api.jobs.inbox import process_inbox
+
+    rec = Recorder(SimSource(width=64, height=48, fps=30, frames=2, paced=False, seed=8), tmp_path / "src",
+                   session_id="src", analysis=False)
+    assert rec.run().ok
+    icd = tmp_path / "icd"
+    export_session(rec.session_dir, "icd", icd)
+    inbox, root = tmp_path / "inbox", tmp_path / "root"
+    inbox.mkdir()
+    a, b = sorted(icd.glob("*.tiff"))
+    for p in (a, b):
+        shutil.copy(p, inbox / p.name)
+        shutil.copy(p.with_suffix(".json"), inbox / p.with_suffix(".json").name)
+    first = process_inbox(inbox, root, settle_s=0)
+    assert len(first.processed) == 2
+    sessions = sorted(p.name for p in list_sessions(root))
+    # the journal lost both entries (a crash after importing, before journaling); one session half-made
+    (inbox / ".thermcap" / "inbox.jsonl").unlink()
+    half = root / "sessions" / f"inbox-{hashlib.sha256((inbox / b.name).read_bytes()).hexdigest()[:16]}"
+    meta = json.loads((half / "session.json").read_text())
+    (half / "session.json").write_text(json.dumps({**meta, "status": "recording"}))
+    again = process_inbox(inbox, root, settle_s=0)
+    assert len(again.processed) == 2
+    assert sorted(p.name for p in list_sessions(root)) == sessions  # the same two sessions, none twice
+    assert json.loads((half / "session.json").read_text())["status"] == "complete"  # re-imported whole
