@@ -87,6 +87,9 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @click.option("--ground-elevation", type=float, default=None, metavar="M",
               help="Maps: the ground's height above sea level (with the file's absolute altitude) instead of the "
                    "take-off point's.")
+@click.option("--dem", type=click.Path(dir_okay=False, exists=True), default=None, metavar="GEOTIFF",
+              help="Maps: a DEM (any CRS GDAL reads, heights in metres above the geoid): each footprint corner "
+                   "lands on the terrain, with the camera's absolute altitude.")
 @click.option("--truth", type=click.Path(dir_okay=False, exists=True), default=None,
               help="hotspots: ground-truth points (GeoJSON or latitude,longitude CSV) to match the detections with.")
 @click.option("--match-radius", type=float, default=3.0, show_default=True, help="hotspots --truth: metres.")
@@ -95,7 +98,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                range_mode: str, t_min: float | None, t_max: float | None, crs: str | None,
-               ground_elevation: float | None, truth: str | None, match_radius: float, colorbar: bool,
+               ground_elevation: float | None, dem: str | None, truth: str | None, match_radius: float, colorbar: bool,
                as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from recorder.exports.files import export_session
@@ -108,7 +111,7 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette,
                              range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
                              crs=crs or "4326", ground_elevation_m=ground_elevation, truth=truth,
-                             match_radius_m=match_radius)
+                             match_radius_m=match_radius, dem=dem)
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else

@@ -16,6 +16,7 @@ import csv
 import json
 import os
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -110,7 +111,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                    palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None,
                    range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
                    colorbar: bool = True, crs: str = "4326", ground_elevation_m: float | None = None,
-                   truth: str | Path | None = None, match_radius_m: float = 3.0) -> dict[str, Any]:
+                   truth: str | Path | None = None, match_radius_m: float = 3.0,
+                   dem: str | Path | None = None) -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
     each PNG's text chunks either way."""
@@ -124,8 +126,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
     if kind in _MAP_KINDS:
-        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame, crs, ground_elevation_m,
-                           truth, match_radius_m)
+        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame,
+                           MapOptions(crs, ground_elevation_m, dem, truth, match_radius_m))
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
@@ -196,9 +198,20 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             "summary": (str(out / f"summary.{summary}") if summary else None)}
 
 
+@dataclass(frozen=True)
+class MapOptions:
+    """How map exports place frames: the CRS of TERRA-REF tiles, the ground (a flat plane at the
+    take-off point, at ``ground_elevation_m``, or a DEM's terrain) and the ground truth to match."""
+
+    crs: str = "4326"
+    ground_elevation_m: float | None = None
+    dem: str | Path | None = None
+    truth: str | Path | None = None
+    match_radius_m: float = 3.0
+
+
 def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: str, meta: dict[str, Any],
-                on_frame: Callable[[int], None] | None, crs: str = "4326", ground_elevation_m: float | None = None,
-                truth: str | Path | None = None, match_radius_m: float = 3.0) -> dict[str, Any]:
+                on_frame: Callable[[int], None] | None, opts: MapOptions) -> dict[str, Any]:
     """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
     frame as a °C GeoTIFF (``recorder.maps``): a drone image in its UTM zone; a TERRA-REF gantry
     image rotated and placed as the TERRA-REF pipeline does, in EPSG:4326 as it publishes (or UTM
@@ -207,8 +220,11 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
     from recorder.maps.footprint import FootprintRefused, footprint
     from recorder.maps.mosaic import hot_spot_points
     from recorder.maps.pose import PoseMissing, pose_from_vendor
+    from recorder.maps.terrain import Dem, DemError
     from recorder.maps.terraref import UTM_12N, gantry_footprint
 
+    crs, truth = opts.crs, opts.truth
+    dem = Dem.from_file(opts.dem) if opts.dem is not None else None
     vendors = _import_vendor(session_dir)
     features: list[dict[str, Any]] = []
     written: list[str] = []
@@ -230,8 +246,9 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
                 geotransform_tags(gantry.geotransform_utm(pw, ph), UTM_12N)
         else:
             try:
-                fp = footprint(pose_from_vendor(vendor, w, h, ground_elevation_m=ground_elevation_m))
-            except (PoseMissing, FootprintRefused) as exc:
+                fp = footprint(pose_from_vendor(vendor, w, h, ground_elevation_m=opts.ground_elevation_m, dem=dem),
+                               dem=dem)
+            except (PoseMissing, FootprintRefused, DemError) as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
             props = {"frame_index": f.index, "time": iso_utc(f.log_time), **fp.to_properties()}
@@ -287,7 +304,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
         if not spots:
             raise ThermcapError(f"{session_dir}: no hot spot on the map to compare with {truth}")
         epsg = features[0]["properties"].get("epsg") or 4326
-        report = compare_with_truth(spots, read_truth(truth), int(epsg), match_radius_m).to_dict()
+        report = compare_with_truth(spots, read_truth(truth), int(epsg), opts.match_radius_m).to_dict()
         (out / "hotspots.truth.json").write_text(json.dumps(report, indent=1))
         written.append("hotspots.truth.json")
     if kind == "mosaic":

@@ -81,13 +81,16 @@ def exif_position(exif: dict[str, object]) -> dict[str, object] | None:
     return out
 
 
-def xmp_fields(app1_payloads: list[bytes]) -> dict[str, str]:
-    """drone-dji:* attributes of the XMP packet (GPS, altitudes, gimbal and flight attitude, ...)."""
+def xmp_fields(app1_payloads: list[bytes], prefix: str = "drone-dji") -> dict[str, str]:
+    """The ``prefix:*`` properties of the XMP packet, written as attributes or as elements:
+    ``drone-dji`` (GPS, altitudes, gimbal and flight attitude), Pix4D's ``Camera`` (FLIR drone
+    cameras' attitude), ``FLIR`` (MAVLink altitude and attitude)."""
+    ns = re.escape(prefix)
     for p in app1_payloads:
         if p.startswith(b"http://ns.adobe.com/xap/1.0/"):
             text = p.decode("utf-8", "replace")
-            found = dict(re.findall(r'drone-dji:(\w+)="([^"]*)"', text))
-            found.update(re.findall(r"<drone-dji:(\w+)>([^<]*)</drone-dji:\1>", text))
+            found = dict(re.findall(rf'\b{ns}:(\w+)="([^"]*)"', text))
+            found.update(re.findall(rf"<{ns}:(\w+)>([^<]*)</{ns}:\1>", text))
             return found
     return {}
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import mmap
 import struct
 from collections.abc import Iterator
+from typing import Any
 
 import imagecodecs
 import numpy as np
@@ -116,10 +117,14 @@ def _camera_info(path: str, rec: bytes, order: str) -> tuple[FlirPlanckModel, di
         alpha1=_f(rec, o, 0x70), alpha2=_f(rec, o, 0x74), beta1=_f(rec, o, 0x78), beta2=_f(rec, o, 0x7C),
         trans_x=_f(rec, o, 0x80))
     text = lambda a, b: rec[a:b].split(b"\x00")[0].decode("latin-1").strip()  # noqa: E731
-    meta = {"camera_model": text(0xD4, 0xF4), "part_number": text(0xF4, 0x104), "serial": text(0x104, 0x114),
+    meta: dict[str, Any] = {
+            "camera_model": text(0xD4, 0xF4), "part_number": text(0xF4, 0x104), "serial": text(0x104, 0x114),
             "lens_model": text(0x170, 0x180),
             # the calibrated measurement range (CameraTemperatureRangeMin/Max, Kelvin floats)
             "camera_range_c": [round(_f(rec, o, 0x94) - k, 3), round(_f(rec, o, 0x90) - k, 3)]}
+    fov = _f(rec, o, 0x1B4)  # FieldOfView (ExifTool's FLIR CameraInfo 0x1b4), degrees; 0 where unset
+    if 0 < fov < 180:
+        meta["field_of_view_deg"] = round(fov, 4)
     if model.emissivity <= 0 or model.planck_r1 == 0:
         raise ImportFileError(f"{path}: FLIR CameraInfo has no usable Planck constants")
     if len(rec) >= 0x38E:  # DateTimeOriginal: u32 UTC seconds, u32 ms (low 16 bits), s16 minutes west of UTC
@@ -208,6 +213,10 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
                                  exif_time=exif.get("DateTimeOriginal") or exif.get("DateTime"))
     if xmp:
         frame.vendor_metadata["xmp_drone_dji"] = xmp
+    for key, prefix in (("xmp_camera", "Camera"), ("xmp_flir", "FLIR")):  # a FLIR drone camera's pose
+        fields = xmp_fields(app1, prefix)
+        if fields:
+            frame.vendor_metadata[key] = fields
     if "gps" not in frame.vendor_metadata:  # FLIR's own record first, EXIF's GPS where that is absent
         position = exif_position(exif)
         if position is not None:

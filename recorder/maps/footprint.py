@@ -1,7 +1,10 @@
-"""Where an image lands on a flat ground plane, in the local UTM zone.
+"""Where an image lands on the ground, in the local UTM zone (or one zone given for a whole flight).
 
 Each corner's ray leaves the camera through the lens (the field of view), is turned by the
-gimbal's roll, pitch and yaw, and meets the plane ``height_m`` below the camera. A corner ray
+gimbal's roll, pitch and yaw, and meets the ground: the plane ``height_m`` below the camera, or,
+given a DEM (``recorder.maps.terrain``), the terrain itself, where each corner lands at its own
+height. A footprint in another zone than its own (a flight that crosses a zone boundary is
+mosaicked on one grid) is the same computation with that zone's grid convergence. A corner ray
 within ``HORIZON_MARGIN_DEG`` of the horizon (or above it) has no meaningful ground point, so
 such an image is refused with the reason instead of stretched to infinity. Near nadir the four
 corners are an affine map (a GeoTIFF geotransform); otherwise they are four GCPs. The
@@ -13,11 +16,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from recorder.maps.pose import CameraPose
+from recorder.maps.pose import CameraPose, PoseMissing
+from recorder.maps.terrain import Dem
 
 __all__ = ["HORIZON_MARGIN_DEG", "NADIR_TOLERANCE_DEG", "Footprint", "FootprintRefused", "footprint",
            "ground_to_pixel", "pixel_to_ground", "utm_epsg"]
@@ -47,6 +52,7 @@ class Footprint:
     uncertainty_m: float
     pose: CameraPose
     notes: list[str] = field(default_factory=list)
+    dem: Dem | None = field(default=None, compare=False, repr=False)
 
     @property
     def width_m(self) -> float:
@@ -65,7 +71,8 @@ class Footprint:
                 "uncertainty_m": round(self.uncertainty_m, 2), "width_m": round(self.width_m, 2),
                 "height_above_ground_m": p.height_m, "gimbal_pitch_deg": p.pitch_deg, "gimbal_yaw_deg": p.yaw_deg,
                 "gimbal_roll_deg": p.roll_deg, "hfov_deg": round(p.hfov_deg, 3), "fov_source": p.fov_source,
-                "latitude": p.latitude, "longitude": p.longitude, "notes": self.notes}
+                "latitude": p.latitude, "longitude": p.longitude, "absolute_altitude_m": p.absolute_altitude_m,
+                "ground": self.dem.describe() if self.dem is not None else "flat plane", "notes": self.notes}
 
 
 def _basis(pose: CameraPose) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -88,7 +95,35 @@ def _rays(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
     return f[None, :] + sx[:, None] * tx * r[None, :] - sy[:, None] * ty * u[None, :]
 
 
-def _ground_offsets(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndarray:
+@dataclass(frozen=True)
+class _Ground:
+    """The terrain a footprint's rays meet: the DEM and the camera on the map grid."""
+
+    dem: Dem
+    epsg: int
+    camera_en: tuple[float, float]
+    gamma: float  # grid convergence, radians
+    altitude_m: float
+
+    @classmethod
+    def of(cls, pose: CameraPose, dem: Dem | None, epsg: int) -> _Ground | None:
+        if dem is None:
+            return None
+        if pose.absolute_altitude_m is None:
+            raise PoseMissing("a DEM needs the camera's absolute altitude (AbsoluteAltitude or a GPS altitude)")
+        ce, cn, gamma = _grid(pose, epsg)
+        return cls(dem, epsg, (ce, cn), gamma, pose.absolute_altitude_m)
+
+    def offsets(self, d: np.ndarray) -> np.ndarray:
+        """ENU ground offsets of ENU ray directions ``d`` (k, 3)."""
+        cg, sg = math.cos(self.gamma), math.sin(self.gamma)
+        grid = np.stack([d[:, 0] * cg + d[:, 1] * sg, -d[:, 0] * sg + d[:, 1] * cg, d[:, 2]], axis=1)
+        hit = self.dem.intersect(self.altitude_m, self.camera_en, grid, self.epsg)
+        de, dn = hit[:, 0] - self.camera_en[0], hit[:, 1] - self.camera_en[1]
+        return np.stack([de * cg - dn * sg, de * sg + dn * cg], axis=1)
+
+
+def _ground_offsets(pose: CameraPose, sx: np.ndarray, sy: np.ndarray, ground: _Ground | None = None) -> np.ndarray:
     d = _rays(pose, sx, sy)
     elevation = np.degrees(np.arcsin(d[:, 2] / np.linalg.norm(d, axis=1)))
     if np.any(elevation > -HORIZON_MARGIN_DEG):
@@ -97,6 +132,8 @@ def _ground_offsets(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndar
             f"gimbal pitch {pose.pitch_deg:g} deg: part of the image looks {abs(worst):.1f} deg "
             f"{'above' if worst > 0 else 'below'} the horizon (within {HORIZON_MARGIN_DEG:g} deg of it or above), "
             f"so it has no ground footprint")
+    if ground is not None:
+        return ground.offsets(d)
     t = -pose.height_m / d[:, 2]
     return d[:, :2] * t[:, None]
 
@@ -104,8 +141,8 @@ def _ground_offsets(pose: CameraPose, sx: np.ndarray, sy: np.ndarray) -> np.ndar
 _CORNERS = (np.array([-1.0, 1.0, 1.0, -1.0]), np.array([-1.0, -1.0, 1.0, 1.0]))  # TL, TR, BR, BL
 
 
-def _centre_offset(pose: CameraPose) -> np.ndarray:
-    return _ground_offsets(pose, np.array([0.0]), np.array([0.0]))[0]
+def _centre_offset(pose: CameraPose, ground: _Ground | None) -> np.ndarray:
+    return _ground_offsets(pose, np.array([0.0]), np.array([0.0]), ground)[0]
 
 
 def _grid(pose: CameraPose, epsg: int) -> tuple[float, float, float]:
@@ -125,7 +162,7 @@ def pixel_to_ground(fp: Footprint, cols: np.ndarray, rows: np.ndarray) -> tuple[
     pose = fp.pose
     sx = np.asarray(cols, dtype=np.float64) / pose.width * 2 - 1
     sy = np.asarray(rows, dtype=np.float64) / pose.height * 2 - 1
-    off = _ground_offsets(pose, sx.ravel(), sy.ravel())
+    off = _ground_offsets(pose, sx.ravel(), sy.ravel(), _Ground.of(pose, fp.dem, fp.epsg))
     ce, cn, gamma = _grid(pose, fp.epsg)
     cg, sg = math.cos(gamma), math.sin(gamma)
     e = ce + off[:, 0] * cg + off[:, 1] * sg
@@ -133,31 +170,45 @@ def pixel_to_ground(fp: Footprint, cols: np.ndarray, rows: np.ndarray) -> tuple[
     return e.reshape(np.shape(cols)), n.reshape(np.shape(cols))
 
 
-def footprint(pose: CameraPose) -> Footprint:
+def _moved(pose: CameraPose, name: str, delta: float) -> CameraPose:
+    if name == "height_m" and pose.absolute_altitude_m is not None:  # over a DEM the altitude is what moves
+        return replace(pose, height_m=pose.height_m + delta, absolute_altitude_m=pose.absolute_altitude_m + delta)
+    return replace(pose, **{name: getattr(pose, name) + delta})
+
+
+def footprint(pose: CameraPose, *, epsg: int | None = None, dem: Dem | None = None) -> Footprint:
+    """The image's footprint on the grid of ``epsg`` (default: its own UTM zone), on a flat
+    ground plane or on ``dem``'s terrain. A DEM that does not cover the view is a DemError."""
     from pyproj import Transformer
 
-    offsets = _ground_offsets(pose, *_CORNERS)
-    epsg = utm_epsg(pose.latitude, pose.longitude)
+    epsg = epsg or utm_epsg(pose.latitude, pose.longitude)
+    ground = _Ground.of(pose, dem, epsg)
+    offsets = _ground_offsets(pose, *_CORNERS, ground)
     to_ll = Transformer.from_crs(epsg, 4326, always_xy=True)
     ce, cn, gamma = _grid(pose, epsg)
     cg, sg = math.cos(gamma), math.sin(gamma)
     grid = [(ce + x * cg + y * sg, cn - x * sg + y * cg) for x, y in offsets]
     lonlat = [to_ll.transform(e, n) for e, n in grid]
-    centre_px = _ground_offsets(pose, np.array([0.0, 2.0 / pose.width]), np.array([0.0, 0.0]))
+    centre_px = _ground_offsets(pose, np.array([0.0, 2.0 / pose.width]), np.array([0.0, 0.0]), ground)
     gsd = float(np.linalg.norm(centre_px[1] - centre_px[0]))
-    base = _centre_offset(pose)
+    base = _centre_offset(pose, ground)
     spread = [POSE_ERRORS["gps_m"] ** 2]
     for name, delta in (("height_m", POSE_ERRORS["height_m"]), ("pitch_deg", POSE_ERRORS["angle_deg"]),
                         ("yaw_deg", POSE_ERRORS["angle_deg"]), ("roll_deg", POSE_ERRORS["angle_deg"])):
         try:
-            moved = _centre_offset(replace(pose, **{name: getattr(pose, name) + delta}))
+            moved_pose = _moved(pose, name, delta)
+            moved = _centre_offset(moved_pose, _Ground.of(moved_pose, dem, epsg))
         except FootprintRefused:
             moved = base + 10 * pose.height_m  # so near the horizon that an error of one step is unbounded
         spread.append(float(np.sum((moved - base) ** 2)))
     nadir = abs(pose.pitch_deg + 90) <= NADIR_TOLERANCE_DEG and abs(pose.roll_deg) <= NADIR_TOLERANCE_DEG
     notes = [] if nadir else ["oblique: the corners are GCPs, the footprint is a trapezoid"]
+    if dem is not None:
+        notes.append(f"on the terrain of {Path(dem.source).name}: each corner at its own height")
+    if epsg != utm_epsg(pose.latitude, pose.longitude):
+        notes.append(f"on the grid of EPSG:{epsg}, not the image's own UTM zone")
     return Footprint(epsg, grid, [(float(a), float(b)) for a, b in lonlat], (ce, cn), nadir, gsd,
-                     math.sqrt(sum(spread)), pose, notes)
+                     math.sqrt(sum(spread)), pose, notes, dem)
 
 
 def ground_to_pixel(fp: Footprint, easting: float, northing: float) -> tuple[float, float] | None:
@@ -167,7 +218,13 @@ def ground_to_pixel(fp: Footprint, easting: float, northing: float) -> tuple[flo
     ce, cn, gamma = _grid(pose, fp.epsg)
     de, dn = easting - ce, northing - cn
     x, y = de * math.cos(gamma) - dn * math.sin(gamma), de * math.sin(gamma) + dn * math.cos(gamma)
-    d = np.array([x, y, -pose.height_m])
+    if fp.dem is not None and pose.absolute_altitude_m is not None:
+        z = float(fp.dem.elevation(np.array([easting]), np.array([northing]), fp.epsg)[0]) - pose.absolute_altitude_m
+        if not math.isfinite(z):
+            return None
+    else:
+        z = -pose.height_m
+    d = np.array([x, y, z])
     depth = float(d @ f)
     if depth <= 0:
         return None

@@ -3,18 +3,22 @@
 Blending rule: each mosaic cell takes the pixel nearest to it from the image whose centre is
 nearest to the cell, among the images that see it. So every mosaic value is one real
 measurement of one frame, never an average of two; ``sources`` says which frame (-1: none).
-Cells are ``gsd`` metres (the flight's median ground sample distance unless given).
+Cells are ``gsd`` metres (the flight's median ground sample distance unless given). A flight
+that crosses a UTM zone boundary is mosaicked on the grid of the zone most of its images are in:
+the others' footprints are computed again on that grid (``footprint(..., epsg=)``), which is
+exact, only with a larger grid convergence, rather than joined from two grids that do not meet.
 """
 
 from __future__ import annotations
 
 import math
+from collections import Counter
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from recorder.maps.footprint import Footprint, pixel_to_ground
+from recorder.maps.footprint import Footprint, footprint, pixel_to_ground
 
 __all__ = ["Mosaic", "build_mosaic", "hot_spot_points"]
 
@@ -43,9 +47,8 @@ def build_mosaic(images: list[tuple[int, Footprint, np.ndarray]], gsd_m: float |
     """``images``: (frame index, its near-nadir footprint, its °C array)."""
     if not images:
         raise ValueError("no near-nadir image to mosaic")
-    epsgs = {fp.epsg for _, fp, _ in images}
-    if len(epsgs) != 1:
-        raise ValueError(f"the flight spans UTM zones {sorted(epsgs)}; mosaic one zone at a time")
+    zone = Counter(fp.epsg for _, fp, _ in images).most_common(1)[0][0]
+    images = [(i, fp if fp.epsg == zone else footprint(fp.pose, epsg=zone, dem=fp.dem), t) for i, fp, t in images]
     gsd = gsd_m or float(np.median([fp.gsd_m for _, fp, _ in images]))
     es = [e for _, fp, _ in images for e, _ in fp.corners_en]
     ns = [n for _, fp, _ in images for _, n in fp.corners_en]
@@ -70,7 +73,7 @@ def build_mosaic(images: list[tuple[int, Footprint, np.ndarray]], gsd_m: float |
         temps[take] = t[ri, ci]
         sources[take] = index
         best[take] = dist[take]
-    return Mosaic(temps, sources, (e0, gsd, 0.0, n0, 0.0, -gsd), epsgs.pop(), gsd, [i for i, _, _ in images])
+    return Mosaic(temps, sources, (e0, gsd, 0.0, n0, 0.0, -gsd), zone, gsd, [i for i, _, _ in images])
 
 
 def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[str, Any]]:

@@ -15,6 +15,7 @@ import numpy as np
 from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
 from recorder.maps.footprint import footprint, pixel_to_ground
 from recorder.maps.pose import CameraPose
+from recorder.maps.terrain import Dem
 from recorder.radiometry import LinearModel
 
 __all__ = ["FlightSource", "GroundTarget", "lawnmower"]
@@ -39,6 +40,8 @@ class FlightSource(FrameSource):
     start_time_ns: int = 1_800_000_000_000_000_000
     f35_mm: float = 58.0
     reported: list[CameraPose] | None = None  # what the metadata says (a noisy GPS), if not the truth
+    dem: Dem | None = None  # the terrain the scene lies on (poses then carry their absolute altitude)
+    takeoff_elevation_m: float | None = None  # over a DEM: RelativeAltitude is above this
     name: str = "flight"
     extra_topics: ClassVar[dict[str, dict[str, Any]]] = {"/import/source": {"title": "thermcap.ImportSource"}}
     can_wait: bool = True
@@ -50,7 +53,7 @@ class FlightSource(FrameSource):
                                  height=p.height, frame_rate_hz=1.0, type="simulated")
 
     def render(self, pose: CameraPose) -> np.ndarray:
-        fp = footprint(pose)
+        fp = footprint(pose, epsg=self.epsg, dem=self.dem)  # the targets' grid, even across a zone boundary
         cols, rows = np.meshgrid(np.arange(pose.width) + 0.5, np.arange(pose.height) + 0.5)
         e, n = pixel_to_ground(fp, cols, rows)
         temps = np.full(e.shape, self.background_c)
@@ -65,6 +68,10 @@ class FlightSource(FrameSource):
             xmp = {"GpsLatitude": f"{said.latitude:.9f}", "GpsLongitude": f"{said.longitude:.9f}",
                    "RelativeAltitude": f"{said.height_m:+.3f}", "GimbalPitchDegree": f"{said.pitch_deg:+.2f}",
                    "GimbalYawDegree": f"{said.yaw_deg:+.2f}", "GimbalRollDegree": f"{said.roll_deg:+.2f}"}
+            if said.absolute_altitude_m is not None:
+                xmp["AbsoluteAltitude"] = f"{said.absolute_altitude_m:+.3f}"
+                if self.takeoff_elevation_m is not None:
+                    xmp["RelativeAltitude"] = f"{said.absolute_altitude_m - self.takeoff_elevation_m:+.3f}"
             vendor = {"xmp_drone_dji": xmp, "exif_focal_length_35mm": self.f35_mm, "exif_model": "SIMFLIGHT"}
             yield CapturedFrame(index=i, timestamp_ns=self.start_time_ns + i * 1_000_000_000,
                                 pixels=self.render(pose),

@@ -67,8 +67,9 @@ def compare_with_truth(hot_spots: list[dict[str, Any]], truth: list[dict[str, An
 
     to_utm = Transformer.from_crs(4326, epsg, always_xy=True)
     tpos = [to_utm.transform(t["longitude"], t["latitude"]) for t in truth]
-    pairs = sorted((math.dist(tp, (h["easting"], h["northing"])), ti, hi)
-                   for ti, tp in enumerate(tpos) for hi, h in enumerate(hot_spots))
+    # by longitude and latitude: hot spots of a flight across a zone boundary are each in their own zone
+    hpos = [to_utm.transform(h["longitude"], h["latitude"]) for h in hot_spots]
+    pairs = sorted((math.dist(tp, hp), ti, hi) for ti, tp in enumerate(tpos) for hi, hp in enumerate(hpos))
     used_t: set[int] = set()
     used_h: set[int] = set()
     matches = []

@@ -183,3 +183,52 @@ def test_a_mosaic_and_its_footprints_render_in_gdal(tmp_path):
         for t in targets:
             row, col = m.index(t.easting, t.northing)
             assert img[row, col, 0] > 200, "the target is not where it is on the map"  # warm, not background
+
+
+def _with_xmp(data: bytes, xmp: bytes) -> bytes:
+    """The JPEG with its XMP APP1 segment replaced (every other byte kept)."""
+    head = b"http://ns.adobe.com/xap/1.0/\x00"
+    i = data.index(head) - 4
+    assert data[i:i + 2] == b"\xff\xe1"
+    old = int.from_bytes(data[i + 2:i + 4], "big")
+    payload = head + xmp
+    return data[:i] + b"\xff\xe1" + (len(payload) + 2).to_bytes(2, "big") + payload + data[i + 2 + old:]
+
+
+def test_flir_samples_a_duo_pro_r_fff_has_no_attitude_and_an_xt2_laid_out_as_a_flir_drone_file_is_placed(tmp_path):
+    """The Duo Pro R FFF holds a GPS fix and the lens's FieldOfView (45 deg) but no attitude: it
+    is refused, and says so. The XT2 file (a FLIR-format file from a DJI Zenmuse XT2) looks at
+    the horizon (drone-dji pitch 0) and is refused; with its XMP in the layout of FLIR's own
+    drone cameras (Pix4D Camera:Pitch 0 = nadir, FLIR:MAVRelativeAltitude, rationals), it gets a
+    footprint of 2·h·tan(FOV/2) from the XT2 19 mm lens's datasheet FOV."""
+    fff, xt2 = SAMPLES / "flir" / "frame_000000.fff", SAMPLES / "flir" / "DJI_XT2.jpg"
+    if not (fff.is_file() and xt2.is_file()):
+        pytest.skip(f"the FLIR samples are not here ({fff.parent})")
+    duo = _import(tmp_path, fff.read_bytes(), "duo.fff")
+    res = export_session(duo, "footprints", tmp_path / "duo")
+    assert res["features"] == 0 and "no camera attitude" in res["refused"][0]
+    from recorder.exports.files import _import_vendor
+
+    (vendor,) = _import_vendor(duo).values()
+    assert vendor["field_of_view_deg"] == 45.0 and vendor["gps"]["latitude"] == pytest.approx(53.44890, abs=1e-4)
+
+    data = xt2.read_bytes()
+    res = export_session(_import(tmp_path, data, "xt2.jpg"), "footprints", tmp_path / "xt2")
+    assert res["features"] == 0 and "horizon" in res["refused"][0]
+    xmp = (b'<x:xmpmeta xmlns:x="adobe:ns:meta/"><rdf:RDF xmlns:rdf="http://www.w3.org/1999/02/22-rdf-syntax-ns#">'
+           b'<rdf:Description rdf:about="" xmlns:Camera="http://pix4d.com/camera/1.0/" '
+           b'xmlns:FLIR="http://ns.flir.com/xmp/1.0/"><Camera:Yaw>8240/100</Camera:Yaw>'
+           b'<Camera:Pitch>0/100</Camera:Pitch><Camera:Roll>0/100</Camera:Roll>'
+           b'<FLIR:MAVRelativeAltitude>30000/1000</FLIR:MAVRelativeAltitude></rdf:Description></rdf:RDF></x:xmpmeta>')
+    session = _import(tmp_path, _with_xmp(data, xmp), "xt2flir.jpg")
+    res = export_session(session, "footprints", tmp_path / "xt2f")
+    assert res["features"] == 1 and not res["refused"], res
+    (feature,) = json.loads((tmp_path / "xt2f" / "footprints.geojson").read_text())["features"]
+    p = feature["properties"]
+    assert p["nadir"] and p["gimbal_yaw_deg"] == pytest.approx(82.4) and "XT2" in p["fov_source"]
+    assert p["width_m"] == pytest.approx(2 * 30.0 * math.tan(math.radians(16.0)), abs=0.01)
+    lon, lat = np.mean(feature["geometry"]["coordinates"][0][:4], axis=0)
+    assert (lat, lon) == pytest.approx((9 + 58 / 60 + 19.77 / 3600, 76 + 22 / 60 + 40.03 / 3600), abs=2e-5)
+    res = export_session(session, "map-tiff", tmp_path / "xt2t")
+    (tif,) = (tmp_path / "xt2t").glob("*.map.tiff")
+    assert _info(tif)["coordinateSystem"]["wkt"].endswith('ID["EPSG",32643]]')  # UTM 43N

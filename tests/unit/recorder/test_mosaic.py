@@ -114,3 +114,69 @@ def test_finding_the_targets_against_ground_truth_is_one_command(tmp_path):
     r = CliRunner().invoke(cli, ["export", "truth", "--root", str(tmp_path), "--to", "hotspots", "--truth", str(bad),
                                  "--out", str(tmp_path / "h2")])
     assert r.exit_code == 1 and "bad.csv" in r.output and "latitude,longitude" in r.output
+
+
+def test_a_flight_across_a_utm_zone_boundary_is_one_mosaic(tmp_path):
+    """Legs at 114.0002 W, 114.00007 W and 113.99994 W: two in zone 11, one in zone 12. The
+    mosaic is on zone 11's grid, with the zone-12 leg's footprints computed on it."""
+    lat, lon = 33.0746, -114.0002
+    epsg = utm_epsg(lat, lon)
+    e0, n0 = Transformer.from_crs(4326, epsg, always_xy=True).transform(lon, lat)
+    targets = [GroundTarget(e0 + de, n0 + dn, 0.6, 45.0) for de, dn in ((3.0, 5.0), (26.0, 20.0), (22.0, 31.0))]
+    poses = lawnmower(lat, lon, height_m=H, legs=3, per_leg=4, spacing_m=12.0, hfov_deg=HFOV)
+    assert {utm_epsg(p.latitude, p.longitude) for p in poses} == {32611, 32612}
+    rec = Recorder(FlightSource(poses=poses, targets=targets, epsg=epsg), tmp_path, session_id="zones", analysis=False)
+    assert rec.run().ok
+    res = export_session(rec.session_dir, "mosaic", tmp_path / "m")
+    assert res["files"] == 3 and not res["refused"], res
+    with rasterio.open(tmp_path / "m" / "mosaic.tiff") as m:
+        assert m.crs.to_epsg() == 32611
+        temps, t = m.read(1), m.transform
+        for target in targets:
+            col, row = ~t * (target.easting, target.northing)
+            r0, c0 = int(row), int(col)
+            win = temps[max(0, r0 - 30):r0 + 30, max(0, c0 - 30):c0 + 30]
+            rr, cc = np.nonzero(win >= 44.0)
+            assert len(rr) > 0
+            cy, cx = rr.mean() + max(0, r0 - 30) + 0.5, cc.mean() + max(0, c0 - 30) + 0.5
+            assert math.hypot(cx - col, cy - row) <= 1.0
+
+
+def test_over_a_dem_hot_spots_land_on_the_targets_and_a_flat_plane_misses_them(tmp_path):
+    """A hillside rising 25 % to the east; the drone flies at a constant altitude 40 m above its
+    take-off point at the foot of the slope. With the DEM the targets land within 0.3 m; with a
+    flat plane at the take-off height (what a file alone says) they are metres off."""
+    from recorder.maps.terrain import Dem
+
+    e0, n0 = Transformer.from_crs(4326, EPSG, always_xy=True).transform(LON, LAT)
+    cell, half, base, slope = 0.5, 150.0, 350.0, 0.25
+    n = int(2 * half / cell)
+    east = e0 - half + (np.arange(n) + 0.5) * cell
+    heights = np.tile(base + slope * np.clip(east - e0, 0, None), (n, 1)).astype(np.float32)
+    path = tmp_path / "hill.tif"
+    with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs=f"EPSG:{EPSG}",
+                       transform=rasterio.transform.from_origin(e0 - half, n0 + half, cell, cell)) as dst:
+        dst.write(heights, 1)
+    dem = Dem.from_file(path)
+    altitude = base + 40.0
+    poses = []
+    for p in lawnmower(LAT, LON, height_m=H, legs=3, per_leg=4, spacing_m=12.0, hfov_deg=HFOV, width=160,
+                       height=128):
+        ground = dem.elevation_at_lonlat(p.longitude, p.latitude)
+        poses.append(type(p)(**{**p.to_dict(), "height_m": altitude - ground, "absolute_altitude_m": altitude}))
+    src = FlightSource(poses=poses, targets=_targets(), epsg=EPSG, dem=dem, takeoff_elevation_m=base)
+    rec = Recorder(src, tmp_path, session_id="hill", analysis=True)
+    assert rec.run().ok
+
+    def errors(**kw):
+        res = export_session(rec.session_dir, "hotspots", tmp_path / f"h{len(kw)}", **kw)
+        feats = json.loads((tmp_path / f"h{len(kw)}" / "hotspots.geojson").read_text())["features"]
+        assert feats, res
+        truth = [(t.easting, t.northing) for t in _targets()]
+        return [min(math.dist((f["properties"]["easting"], f["properties"]["northing"]), tr) for tr in truth)
+                for f in feats]
+
+    on_dem = errors(dem=path)
+    assert max(on_dem) < 0.3, on_dem
+    flat = errors()
+    assert max(flat) > 1.0, flat
