@@ -16,14 +16,13 @@ import os
 import shutil
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from archive.codecs import library_versions
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.extras import EXTRAS_NAME, write_extras
+from archive.extras import EXTRAS_NAME, ExtrasWriter
 from archive.fanout import fan_out
 from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from archive.manifest import (
@@ -37,11 +36,10 @@ from archive.manifest import (
     sidecar_sha256,
 )
 from archive.manifest_types import FileEntry, FormatEntry, Manifest
-from archive.source_checks import channel_problems
-from recorder.icd.topics import TOPIC_METADATA
+from archive.source_pass import SourcePass
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import SessionFrame, count_frames, iter_session_frames, read_session_meta, session_segments
+from recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
 from recorder.storage.ring import load_windows
 from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
@@ -49,45 +47,6 @@ from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
 
 DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
-
-
-@dataclass
-class _Source:
-    hashes: list[str]
-    sidecar_hashes: list[str]
-    timestamps: list[int]
-    segments: list[str]
-    width: int
-    height: int
-
-
-def _scan_source(session_dir: Path, per_segment: dict[str, int]) -> _Source:
-    """Hash every frame, sidecar and time of the source, and refuse a source that disagrees
-    with itself: a frame without its sidecar, or segments whose summaries count other frames
-    than their data holds (a damaged channel record, a flipped bit in an index). Archiving such
-    a source would prove a copy of the damage, or of nothing, as good."""
-    hashes, sidecars, times, segs = [], [], [], []
-    problems: list[str] = []
-    w = h = 0
-    read: dict[str, int] = {}
-    for f in iter_session_frames(session_dir):
-        hashes.append(frame_sha256(f.pixels))
-        sidecars.append(sidecar_sha256(f.sidecar))
-        times.append(f.log_time)
-        segs.append(f.segment)
-        read[f.segment] = read.get(f.segment, 0) + 1
-        if not f.sidecar and len(problems) < 20:
-            problems.append(f"{f.segment}: frame {f.index} has no sidecar on {TOPIC_METADATA}")
-        h, w = f.pixels.shape
-    for name, n in per_segment.items():
-        if read.get(name, 0) != n:
-            problems.append(f"{name}: its summary counts {n} frames, its data holds {read.get(name, 0)}")
-    for seg in session_segments(session_dir):
-        problems += [f"{seg.name}: {p}" for p in channel_problems(seg)]
-    if problems:
-        raise SourceDamagedError(f"{session_dir}: the MCAP source disagrees with itself; nothing was archived "
-                                 f"(run `thermcap info` on the segments, and `thermcap recover` on a copy)", problems)
-    return _Source(hashes, sidecars, times, segs, w, h)
 
 
 def _fsync_tree(path: Path) -> None:
@@ -160,7 +119,7 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
     The archiver feeds it the MCAP source; ``scrub --repair`` any verified copy."""
     adir = archive_dir(session_dir)
     session_id = manifest.get("session_id", session_dir.name)
-    expected = manifest["frames"]["sha256"]
+    total = sum(per_segment.values())
     final = adir / fid
     partial = adir / (fid + PARTIAL_SUFFIX)
     if partial.exists():  # left by a crashed run; never taken for an archive
@@ -171,13 +130,20 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
     def tick() -> None:
         done[0] += 1
         if on_progress and done[0] % 16 == 0:
-            on_progress(f"writing {fid}", done[0], len(expected))
+            on_progress(f"writing {fid}", done[0], total)
 
-    ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=len(expected),
+    ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=total,
                          frames_per_segment=per_segment, workers=workers, on_frame=tick)
     t = time.perf_counter()
-    records: list[FileRecord] = fmt.write(frames, partial, ctx)
+    try:
+        records: list[FileRecord] = fmt.write(frames, partial, ctx)
+    except BaseException:  # the source failed (or the writer): no half-written copy is left behind
+        shutil.rmtree(partial, ignore_errors=True)
+        raise
     encode_s = time.perf_counter() - t
+    # read only now: the archiver's single read of the source gives the manifest its hashes when
+    # the frame stream ends, which is before any writer returns
+    expected = manifest["frames"]["sha256"]
     for rec in records:
         p = partial / rec.path
         rec.bytes = p.stat().st_size
@@ -270,34 +236,57 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             or not (adir / f).is_dir()]
     if todo and (source_gone or not segments):
         raise ArchiveError(f"{session_dir}: the MCAP source is gone; cannot write {', '.join(todo)}")
-    per_segment = count_frames(session_dir) if todo else {}
-    if todo:
-        total = sum(per_segment.values())
-        if not manifest["frames"].get("sha256") or len(manifest["frames"]["sha256"]) != total \
-                or "sidecar_sha256" not in manifest["frames"]:
-            if on_progress:
-                on_progress("hashing source", 0, total)
-            src = _scan_source(session_dir, per_segment)
-            manifest["frames"] = {"sha256": src.hashes, "sidecar_sha256": src.sidecar_hashes,
-                                  "timestamps_ns": src.timestamps, "segments": src.segments}
-            manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name],
-                                                "bytes": s.stat().st_size}
-                                               for s in segments],
-                                  "frames": total, "width": src.width, "height": src.height,
-                                  "raw_bytes": total * src.width * src.height * 2, "deleted": False}
-            save_manifest(session_dir, manifest)
+    need_extras = bool(segments) and not source_gone and (
+        force or bool(todo) or not manifest.get("extras", {}).get("verified") or not (adir / EXTRAS_NAME).is_file())
+    per_segment = count_frames(session_dir) if todo or need_extras else {}
+    total = sum(per_segment.values())
+    known = manifest["frames"].get("sha256")
+    # hashes already in the manifest stay what every copy is compared with (a source that rotted
+    # since then fails verification instead of being hashed again as good)
+    source = SourcePass(session_dir, per_segment,
+                        hash_frames=bool(todo) and (not known or len(known) != total
+                                                    or "sidecar_sha256" not in manifest["frames"]),
+                        extras=ExtrasWriter(adir) if need_extras else None)
+
+    def frames() -> Iterator[SessionFrame]:
+        yield from source.frames()
+        hashes = source.hashes  # the stream ended and the source agreed with itself
+        if hashes is not None:
+            with _MANIFEST_LOCK:
+                manifest["frames"] = {"sha256": hashes.sha256, "sidecar_sha256": hashes.sidecar_sha256,
+                                      "timestamps_ns": hashes.timestamps_ns, "segments": hashes.segments}
+                manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name],
+                                                    "bytes": s.stat().st_size} for s in segments],
+                                      "frames": total, "width": hashes.width, "height": hashes.height,
+                                      "raw_bytes": total * hashes.width * hashes.height * 2, "deleted": False}
+                save_manifest(session_dir, manifest)
+
     failures: list[str] = []
 
-    # The source is decoded once and teed to every format's writer (each on its own thread);
-    # each format is still verified on its own, by its own reader, before it takes its name.
+    # The source is decoded once and teed to every format's writer (each on its own thread), and
+    # its other messages go to the extras from the same read; each format is still verified on
+    # its own, by its own reader, before it takes its name.
     def writer_for(fid: str) -> Callable[[Iterable[SessionFrame]], list[str]]:
         def write(frames: Iterable[SessionFrame]) -> list[str]:
             return build_format(session_dir, fid, fmts[fid], frames, manifest, meta, per_segment,
                                 workers=workers, on_progress=on_progress)
         return write
 
-    outcomes = fan_out(iter_session_frames(session_dir), [writer_for(fid) for fid in todo],
-                       copy=dataclasses.replace) if todo else []
+    try:
+        if todo:
+            outcomes = fan_out(frames(), [writer_for(fid) for fid in todo], copy=dataclasses.replace)
+        else:
+            outcomes = []
+            if source.extras is not None:
+                for _ in frames():  # the extras alone
+                    pass
+        damaged = next((o for o in outcomes if isinstance(o, SourceDamagedError)), None)
+        if damaged is not None:
+            raise damaged
+    except BaseException:
+        if source.extras is not None:
+            source.extras.abort()
+        raise
     for fid, outcome in zip(todo, outcomes, strict=True):
         if isinstance(outcome, ArchiveError | OSError):
             failures.append(f"{fid}: {outcome}")
@@ -306,11 +295,10 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         elif outcome:
             failures.append(f"{fid}: " + "; ".join(outcome[:5]))
 
-    if segments and not source_gone and (force or todo or not manifest.get("extras", {}).get("verified")
-                                         or not (adir / EXTRAS_NAME).is_file()):
+    if source.extras is not None:
         if on_progress:
             on_progress("keeping extras (attachments, metadata, other topics)", 0, 1)
-        manifest["extras"] = write_extras(session_dir, adir)
+        manifest["extras"] = source.extras.finish(segments)
         save_manifest(session_dir, manifest)
         if not manifest["extras"]["verified"]:
             failures.append(f"extras: {manifest['extras']['verification']}")

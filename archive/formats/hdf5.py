@@ -2,8 +2,14 @@
 
 ``frames`` (N, H, W) uint16, one frame per chunk, SZIP (libaec, nearest-neighbour 32): ratio ~4
 at ~400 fps, and stock h5py reads it without plugins (falls back to shuffle + gzip where an
-h5py build lacks the SZIP encoder); ``timestamps_ns`` (N,) int64; ``metadata`` (N,) UTF-8 JSON
-sidecars; the radiometric model, sensor and session id as attributes.
+h5py build lacks the SZIP encoder). The SZIP chunks are compressed by imagecodecs' libaec on the
+archive's encode threads, outside the GIL, and handed to HDF5 whole (``write_direct_chunk``):
+HDF5's own filter would compress them inside h5py's lock, one at a time, stalling every other
+format's thread. The bytes are the ones HDF5's filter writes (its 4-byte size header, then the
+CCSDS stream with the parameters ``H5Z_set_local_szip`` derives), which a test checks, and
+verification reads them back through HDF5's own filter pipeline. Beside ``frames``:
+``timestamps_ns`` (N,) int64; ``metadata`` (N,) UTF-8 JSON sidecars; the radiometric model,
+sensor and session id as attributes.
 
 For netCDF and CF readers (xarray, netCDF-C, MATLAB's ncread, Panoply): ``time``, ``y`` and
 ``x`` are dimension scales attached to every variable; ``time`` is in CF units (ns since the
@@ -24,7 +30,7 @@ import h5py
 import numpy as np
 
 from archive.exceptions import ArchiveError
-from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
+from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate, ordered_map
 from recorder.storage.reader import SessionFrame
 
 __all__ = ["LIBVER", "Hdf5"]
@@ -36,6 +42,29 @@ def _szip_encoder_available() -> bool:
     if not h5py.h5z.filter_avail(h5py.h5z.FILTER_SZIP):
         return False
     return bool(h5py.h5z.get_filter_info(h5py.h5z.FILTER_SZIP) & h5py.h5z.FILTER_CONFIG_ENCODE_ENABLED)
+
+
+def szip_chunk(frame: np.ndarray) -> tuple[int, bytes]:
+    """One (H, W) little-endian uint16 frame as HDF5's SZIP filter stores it in a (1, H, W) chunk
+    with ``compression_opts=("nn", 32)``, as (filter mask, bytes): the uncompressed size (uint32
+    LE), then the CCSDS-121 stream with nearest-neighbour preprocessing, 32-pixel blocks and one
+    scanline of the chunk's fastest dimension per reference sample interval (HDF5 caps it at 128
+    blocks = 4096 pixels). Where that is no smaller than the frame, HDF5 stores the frame as it
+    is with the (optional) filter marked skipped, and so does this."""
+    import struct
+
+    import imagecodecs
+
+    frame = np.ascontiguousarray(frame, dtype="<u2")
+    scanline = min(frame.shape[-1], 32 * 128)
+    if scanline % 32:
+        raise ArchiveError(f"szip_chunk needs a width that is a multiple of 32, got {frame.shape[-1]}")
+    payload = imagecodecs.aec_encode(frame, bitspersample=16, flags=imagecodecs.AEC.FLAG.DATA_PREPROCESS,
+                                     blocksize=32, rsi=scanline // 32)
+    chunk = struct.pack("<I", frame.nbytes) + payload
+    if len(chunk) >= frame.nbytes:
+        return 1, frame.tobytes()
+    return 0, chunk
 
 
 class Hdf5(ArchiveFormat):
@@ -61,6 +90,13 @@ class Hdf5(ArchiveFormat):
         if n_total is None:
             raise ArchiveError("hdf5 needs the frame count up front")
         n = 0
+        direct = self.filter == "szip"
+
+        def encoded(frame: SessionFrame) -> tuple[SessionFrame, tuple[int, bytes] | None]:
+            px = np.asarray(frame.pixels)
+            fits = px.ndim == 2 and px.shape[-1] % 32 == 0 and px.shape[-1] <= 4096  # else HDF5 pads: its own filter
+            return frame, (szip_chunk(px) if direct and fits else None)
+
         # The oldest file-format bounds that hold what we use (chunks, SZIP, variable-length UTF-8):
         # "latest" from the HDF5 2.x inside h5py's wheel is unreadable to HDF5 1.10 tools (h5dump,
         # GDAL and MATLAB builds of that era).
@@ -68,7 +104,7 @@ class Hdf5(ArchiveFormat):
             dset: Any = None
             times: Any = None
             meta: Any = None
-            for frame in frames:
+            for frame, chunk in ordered_map(encoded, frames, ctx.workers if direct else 1):
                 px = np.asarray(frame.pixels)
                 if dset is None:
                     h, w = px.shape
@@ -80,7 +116,10 @@ class Hdf5(ArchiveFormat):
                     raise ArchiveError(f"frame {frame.index} is {px.shape}, the session's frames are {dset.shape[1:]}")
                 if n >= n_total:
                     raise ArchiveError(f"more frames than the {n_total} counted")
-                dset[n] = px
+                if chunk is not None:
+                    dset.id.write_direct_chunk((n, 0, 0), chunk[1], filter_mask=chunk[0])
+                else:
+                    dset[n] = px
                 times[n] = frame.log_time
                 meta[n] = frame.sidecar.decode() if frame.sidecar else "{}"
                 n += 1

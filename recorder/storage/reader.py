@@ -7,7 +7,7 @@ the API read sessions the same way the recorder wrote them.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -26,6 +26,7 @@ __all__ = [
     "archived_frame_count",
     "count_frames",
     "frame_files",
+    "iter_segment_frames",
     "iter_session_frames",
     "list_sessions",
     "read_session_meta",
@@ -83,16 +84,25 @@ def session_cameras(session_dir: str | Path) -> list[str]:
     return sorted(cams) if isinstance(cams, dict) else []
 
 
-def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None = None) -> Iterator[SessionFrame]:
+def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None = None,
+                        others: Callable[[Any, Any, Any], None] | None = None) -> Iterator[SessionFrame]:
     """Frames of one segment (of one named camera); each image is paired with the sidecar that
-    has its log time."""
+    has its log time. ``others(schema, channel, message)`` is given every message but the images,
+    sidecars included, from the same read: the archiver keeps them without decompressing the
+    segment a second time."""
     topics = camera_topics(camera)
+    wanted = (topics.image, topics.metadata)
     try:
         with open(path, "rb") as f:
             reader = make_reader(f)
             pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
             index = first_index
-            for _, channel, msg in reader.iter_messages(topics=[topics.image, topics.metadata]):
+            for schema, channel, msg in reader.iter_messages(topics=None if others is not None else list(wanted)):
+                if others is not None:
+                    if channel.topic != topics.image:
+                        others(schema, channel, msg)
+                    if channel.topic not in wanted:
+                        continue
                 img, meta = pending.get(msg.log_time, (None, None))
                 if channel.topic == topics.image:
                     img = decode_image(msg.data)[1]

@@ -1,0 +1,85 @@
+"""The one read of an MCAP source that archiving needs.
+
+Archiving used to decompress a session's segments again for every job: a hash scan, each
+format's writer, and the extras. ``SourcePass.frames()`` reads them once. Each frame is hashed
+(pixels, sidecar, time) and checked on its way to the formats' writers, and every other
+message goes to the ``ExtrasWriter`` from the same decompressed chunk. Only when the stream
+has ended, and the source agreed with itself, does the pass give the manifest its hashes:
+a source that disagrees with itself (a frame without its sidecar, summaries that count other
+frames than the data holds, a damaged channel record) raises ``SourceDamagedError`` at the
+end of the stream. The formats' writers then fail too, and nothing takes a name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from archive.exceptions import SourceDamagedError
+from archive.extras import ExtrasWriter
+from archive.manifest import frame_sha256, sidecar_sha256
+from archive.source_checks import channel_problems
+from recorder.icd.topics import TOPIC_METADATA
+from recorder.storage.reader import SessionFrame, iter_segment_frames, session_segments
+
+__all__ = ["SourceHashes", "SourcePass"]
+
+
+@dataclass
+class SourceHashes:
+    """What verification compares every copy with: one entry per frame, in session order."""
+
+    sha256: list[str] = field(default_factory=list)
+    sidecar_sha256: list[str] = field(default_factory=list)
+    timestamps_ns: list[int] = field(default_factory=list)
+    segments: list[str] = field(default_factory=list)
+    width: int = 0
+    height: int = 0
+
+
+class SourcePass:
+    """``frames()`` once; then ``hashes`` (None when ``hash_frames`` is off: the manifest already
+    has them, and they stay what copies are compared with) and the extras, if given a writer."""
+
+    def __init__(self, session_dir: Path, per_segment: dict[str, int], *, hash_frames: bool = True,
+                 extras: ExtrasWriter | None = None) -> None:
+        self.session_dir = session_dir
+        self.per_segment = per_segment
+        self.hash_frames = hash_frames
+        self.extras = extras
+        self.hashes: SourceHashes | None = None
+
+    def frames(self) -> Iterator[SessionFrame]:
+        segments = session_segments(self.session_dir)
+        problems = [f"{seg.name}: {p}" for seg in segments for p in channel_problems(seg)]
+        if problems:  # before anything is written
+            self._refuse(problems)
+        got = SourceHashes()
+        read: dict[str, int] = {}
+        others = self.extras.add_message if self.extras is not None else None
+        index = 0
+        for seg in segments:
+            for f in iter_segment_frames(seg, first_index=index, others=others):
+                if self.hash_frames:
+                    got.sha256.append(frame_sha256(f.pixels))
+                    got.sidecar_sha256.append(sidecar_sha256(f.sidecar))
+                    got.timestamps_ns.append(f.log_time)
+                    got.segments.append(f.segment)
+                read[f.segment] = read.get(f.segment, 0) + 1
+                if not f.sidecar and len(problems) < 20:
+                    problems.append(f"{f.segment}: frame {f.index} has no sidecar on {TOPIC_METADATA}")
+                got.height, got.width = f.pixels.shape
+                index = f.index + 1
+                yield f
+        for name, n in self.per_segment.items():
+            if read.get(name, 0) != n:
+                problems.append(f"{name}: its summary counts {n} frames, its data holds {read.get(name, 0)}")
+        if problems:
+            self._refuse(problems)
+        if self.hash_frames:
+            self.hashes = got
+
+    def _refuse(self, problems: list[str]) -> None:
+        raise SourceDamagedError(f"{self.session_dir}: the MCAP source disagrees with itself; nothing was archived "
+                                 f"(run `thermcap info` on the segments, and `thermcap recover` on a copy)", problems)
