@@ -159,30 +159,42 @@ def print_table(rows: list[dict[str, Any]]) -> str:
 def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
                   workdir: str | None = None) -> dict[str, Any]:
     """A whole session archived end to end (hash, every format, verification, extras) against the
-    time it covers, beside each format archived alone and the floor: the formats' encoders alone
-    (their encode time per frame, measured when each was archived alone), one after another."""
+    time it covers, beside each format archived alone and two floors: the formats' encoders
+    alone (their encode time per frame, measured when each was archived alone), one after
+    another; and the CPU the whole job took spread on every core, which is the best any
+    scheduling of the same work could do (encoding and the verification decode are most of it)."""
+    import resource
+
     from archive.archiver import DEFAULT_FORMATS, archive_session
     from recorder.capture.recorder import Recorder
 
+    def cpu_s() -> float:
+        r = resource.getrusage(resource.RUSAGE_SELF)
+        return r.ru_utime + r.ru_stime
+
     fmts = tuple(formats or DEFAULT_FORMATS)
     n = int(seconds * 60)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         rec = Recorder(SimSource(width=640, height=512, fps=60, frames=n, paced=False, seed=3), tmp,
                        session_id="bench", analysis=False, recover_leftovers=False)
         res = rec.run()
         if not res.ok:
             raise RuntimeError(f"the benchmark session did not record cleanly: {res.problems}")
-        t = time.perf_counter()
+        t, c = time.perf_counter(), cpu_s()
         archive_session(rec.session_dir, list(fmts))
-        wall = time.perf_counter() - t
-        single, floor_s = {}, 0.0
+        wall, cpu = time.perf_counter() - t, cpu_s() - c
+        single, floor_s, ratios = {}, 0.0, {}
         for f in fmts:
             t = time.perf_counter()
             alone = archive_session(rec.session_dir, [f], force=True)
             single[f] = round(seconds / (time.perf_counter() - t), 3)
             rate = float(alone["formats"][f].get("encode_fps") or 0.0)
             floor_s += n / rate if rate > 0 else 0.0
-    return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts),
+            ratios[f] = alone["formats"][f].get("compression_ratio")
+    return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts), "cores": cores,
             "archive_wall_s": round(wall, 2), "x_real_time": round(seconds / wall, 3),
+            "cpu_s": round(cpu, 2), "cpu_ms_per_frame": round(cpu / n * 1000, 2),
+            "cpu_bound_x_real_time": round(seconds * cores / cpu, 3) if cpu else None,
             "floor_encode_s": round(floor_s, 2), "floor_x_real_time": round(seconds / floor_s, 3) if floor_s else None,
-            "x_real_time_one_format": single}
+            "x_real_time_one_format": single, "compression_ratio": ratios}

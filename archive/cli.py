@@ -258,19 +258,22 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 @click.option("--session", "session_s", type=float, default=None, metavar="SECONDS",
               help="Instead: archive a whole 640x512@60 session of this length end to end and report x real time, "
                    "beside the formats' own encode time (the floor) and each format alone.")
+@click.option("--formats", default=None, metavar="ID,ID",
+              help="--session: the formats to archive (default: the archiver's defaults).")
 @json_option
-def bench_archive(n_frames: int, session_s: float | None, as_json: bool) -> None:
+def bench_archive(n_frames: int, session_s: float | None, formats: str | None, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
     from archive.bench import bench_archive as run
     from archive.bench import bench_session, print_table
 
     if session_s:
-        res = bench_session(session_s)
+        res = bench_session(session_s, tuple(formats.split(",")) if formats else None)
         click.echo(json.dumps(res, indent=2) if as_json else
                    f"{res['seconds_of_recording']} s of 640x512@60 ({res['frames']} frames), formats "
                    f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "
-                   f"{res['x_real_time']}x real time; the formats' own encoders alone: {res['floor_x_real_time']}x; "
-                   f"one format at a time: {res['x_real_time_one_format']}")
+                   f"{res['x_real_time']}x real time, {res['cpu_ms_per_frame']} CPU ms per frame (at best "
+                   f"{res['cpu_bound_x_real_time']}x on {res['cores']} cores); the formats' own encoders alone: "
+                   f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}")
         return
 
     rows = run(n_frames)
