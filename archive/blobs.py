@@ -57,6 +57,16 @@ class BlobStore:
             yield self.get_range(key, pos, stop)
             pos = stop
 
+    def list(self, prefix: str) -> Iterator[tuple[str, int]]:
+        """(key, size) of every blob under ``prefix``, keys without the store's own prefix."""
+        cut = len(self.prefix) + 1 if self.prefix else 0
+        for batch in obstore.list(self.store, self._key(prefix)):
+            for meta in batch:
+                yield str(meta["path"])[cut:], int(meta["size"])
+
+    def put_bytes(self, key: str, data: bytes) -> None:
+        obstore.put(self.store, self._key(key), data, mode="overwrite")
+
     def put_file(self, key: str, path: Path, *, overwrite: bool = True) -> None:
         with open(path, "rb") as f:
             obstore.put(self.store, self._key(key), f, mode="overwrite" if overwrite else "create")

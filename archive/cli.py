@@ -278,3 +278,32 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, a
 
     rows = run(n_frames)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
+
+
+@click.command("sync-confirm")
+@click.option("--bucket", envvar="THERMCAP_S3_BUCKET", default=None, help="The bucket vehicles sync to.")
+@click.option("--endpoint", envvar="THERMCAP_S3_ENDPOINT", default=None, help="S3-compatible endpoint.")
+@click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
+@click.option("--prefix", envvar="THERMCAP_S3_PREFIX", default="", help="Key prefix in the bucket.")
+@click.option("--from", "from_dir", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Instead of a bucket: the folder vehicles sync to (`thermcap sync --to`).")
+@json_option
+def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: str, from_dir: str | None,
+                 as_json: bool) -> None:
+    """Re-read every segment vehicles shipped, re-hash every frame, and write the receipts they free space by."""
+    from archive.blobs import open_store
+    from archive.receipts import confirm_synced
+
+    if bool(bucket) == bool(from_dir):
+        fail("give one source: --bucket (with --endpoint) or --from DIR")
+    store = open_store(Path(from_dir or "."), bucket=bucket, endpoint=endpoint, region=region, prefix=prefix)
+    report = confirm_synced(store)
+    if as_json:
+        click.echo(json.dumps(report.__dict__, indent=2))
+    else:
+        click.echo(f"{len(report.receipted)} segments receipted, {len(report.damaged)} damaged, "
+                   f"{report.already} receipted before")
+        for key, problem in report.damaged.items():
+            click.echo(f"damaged: {key}: {problem}", err=True)
+    if report.damaged:
+        sys.exit(1)

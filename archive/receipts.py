@@ -1,0 +1,78 @@
+"""The cloud's side of ``thermcap sync``: re-read every segment a vehicle shipped, re-hash every
+frame, and write a receipt the vehicle checks before it frees anything.
+
+A receipt (``receipts/<key>.json``) names the bytes the store holds (size and sha256, hashed
+here from what was read back, not taken from the vehicle's word) and says whether the segment
+is a whole MCAP whose summary counts the frames its data holds. The vehicle confirms a segment
+only when the receipt's size and sha256 are its own; a receipt for other bytes makes it send the
+segment again. A segment already receipted is not read again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from archive.blobs import BlobStore
+from archive.manifest import frame_sha256, iso_now, sidecar_sha256
+from recorder.exceptions import McapFileError
+from recorder.storage.reader import iter_segment_frames, segment_span
+from recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
+
+__all__ = ["ConfirmReport", "check_segment", "confirm_synced"]
+
+
+@dataclass
+class ConfirmReport:
+    receipted: list[str] = field(default_factory=list)
+    damaged: dict[str, str] = field(default_factory=dict)
+    already: int = 0
+
+
+def check_segment(path: Path) -> dict[str, Any]:
+    """What a receipt says of one MCAP segment file."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        while block := f.read(1 << 20):
+            h.update(block)
+    out: dict[str, Any] = {"bytes": path.stat().st_size, "sha256": h.hexdigest()}
+    frames = hashlib.sha256()
+    n = 0
+    try:
+        _, _, counted = segment_span(path)
+        for fr in iter_segment_frames(path):
+            frames.update((frame_sha256(fr.pixels) + sidecar_sha256(fr.sidecar)).encode()
+                          + fr.log_time.to_bytes(8, "little"))
+            n += 1
+    except McapFileError as exc:
+        return {**out, "ok": False, "problem": str(exc).replace(str(path), path.name)}
+    if n != counted:
+        return {**out, "ok": False, "frames": n, "problem": f"its summary counts {counted} frames, its data holds {n}"}
+    return {**out, "ok": True, "frames": n, "frames_sha256": frames.hexdigest()}
+
+
+def confirm_synced(store: BlobStore, prefix: str = "sessions/") -> ConfirmReport:
+    report = ConfirmReport()
+    for key in sorted(k for k, _ in store.list(prefix)):
+        if not key.endswith(".mcap") or "/archive/" in key or key.startswith(RECEIPTS_PREFIX + "/"):
+            continue
+        rkey = receipt_key(key)
+        if store.head(rkey) is not None:
+            report.already += 1
+            continue
+        with tempfile.TemporaryDirectory() as tmp:
+            local = Path(tmp) / Path(key).name
+            with open(local, "wb") as f:
+                for block in store.iter_bytes(key):
+                    f.write(block)
+            receipt = {"key": key, **check_segment(local), "checked_at": iso_now(), "by": "thermcap sync-confirm"}
+        store.put_bytes(rkey, json.dumps(receipt, indent=1).encode())
+        if receipt["ok"]:
+            report.receipted.append(key)
+        else:
+            report.damaged[key] = receipt["problem"]
+    return report

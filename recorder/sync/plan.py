@@ -1,0 +1,53 @@
+"""What a vehicle ships, in the order it ships it.
+
+Events, session metadata and protected windows go first (small, and what an operator at the
+depot looks at before anything else), then closed segments oldest first. A segment still being
+written (``.active``) is not data yet and never goes. Keys are paths relative to the data root,
+the same as the archive's blob keys, so a synced session sits in the bucket where an archived
+one would.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from recorder.storage.layout import EVENTS_JSON, PROTECTED_JSON, SESSION_JSON, SessionLayout
+
+__all__ = ["SyncItem", "plan_root"]
+
+_METADATA = (EVENTS_JSON, SESSION_JSON, PROTECTED_JSON, "metadata.yaml", "foxglove_layout.json")
+
+
+@dataclass(frozen=True)
+class SyncItem:
+    key: str  # relative to the data root, '/'-separated
+    path: Path
+    size: int
+    mtime_ns: int
+    session: str
+    segment: bool  # an MCAP segment (immutable once closed) rather than metadata (rewritten)
+
+
+def plan_root(root: Path, sessions: list[str] | None = None) -> list[SyncItem]:
+    base = root / "sessions"
+    if not base.is_dir():
+        return []
+    dirs = [d for d in base.iterdir() if d.is_dir() and (sessions is None or d.name in sessions)]
+    meta: list[SyncItem] = []
+    segs: list[tuple[int, str, SyncItem]] = []
+    for d in dirs:
+        for name in _METADATA:
+            p = d / name
+            if p.is_file():
+                meta.append(_item(root, p, d.name, segment=False))
+        for seg in SessionLayout.of(d).segments():
+            item = _item(root, seg, d.name, segment=True)
+            segs.append((item.mtime_ns, item.key, item))
+    meta.sort(key=lambda i: (_METADATA.index(i.path.name), i.key))
+    return meta + [i for _, _, i in sorted(segs)]
+
+
+def _item(root: Path, path: Path, session: str, *, segment: bool) -> SyncItem:
+    st = path.stat()
+    return SyncItem(path.relative_to(root).as_posix(), path, st.st_size, st.st_mtime_ns, session, segment)

@@ -1,0 +1,164 @@
+"""``thermcap sync`` to a folder, in-process: the order it ships in, a crash mid-segment that
+costs at most the part in flight, the cloud's receipts, freeing only what a receipt names, and a
+bandwidth cap that is never exceeded. The same engine against SeaweedFS through a link that
+cuts and throttles is ``tests/system/test_sync_link.py``."""
+
+from __future__ import annotations
+
+import json
+import time
+from datetime import datetime
+from pathlib import Path
+
+import pytest
+
+from archive.blobs import open_store
+from archive.receipts import confirm_synced
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
+from recorder.exceptions import ThermcapError
+from recorder.storage.segments import SegmentPolicy
+from recorder.sync.engine import Syncer, _Throttled
+from recorder.sync.rate import RateLimit, parse_rate
+from recorder.sync.targets import DirTarget, receipt_key
+
+MiB = 1 << 20
+
+
+@pytest.fixture(scope="module")
+def vehicle(tmp_path_factory) -> Path:
+    root = tmp_path_factory.mktemp("vehicle")
+    rec = Recorder(SimSource(width=640, height=512, frames=150, paced=False, seed=2), root, session_id="drive",
+                   analysis=False, recover_leftovers=False,
+                   policy=SegmentPolicy(max_duration_s=None, max_bytes=16 * MiB))
+    assert rec.run().ok
+    segs = sorted((root / "sessions" / "drive").glob("*.mcap"))
+    assert len(segs) >= 3 and segs[0].stat().st_size > 5 * MiB  # two parts of 5 MiB or more in the first
+    return root
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    import shutil
+
+    shutil.copytree(src, dst)
+    return dst
+
+
+class _Crash(BaseException):
+    """A power cut: nothing after it runs, not even the engine's retries."""
+
+
+class _CrashingTarget(DirTarget):
+    def __init__(self, dest: Path, after_parts: int) -> None:
+        super().__init__(dest)
+        self.after, self.parts = after_parts, 0
+        self.keys: list[str] = []
+
+    def put_part(self, key, upload_id, number, offset, body, size, md5_b64):  # noqa: ANN001, ANN201
+        if self.parts == self.after:
+            body.read(size // 2)  # half of it on the wire, then the power goes
+            raise _Crash
+        self.parts += 1
+        return super().put_part(key, upload_id, number, offset, body, size, md5_b64)
+
+    def put_small(self, key, data, sha256):  # noqa: ANN001, ANN201
+        self.keys.append(key)
+        return super().put_small(key, data, sha256)
+
+    def begin(self, key, size, sha256):  # noqa: ANN001, ANN201
+        self.keys.append(key)
+        return super().begin(key, size, sha256)
+
+
+def test_a_crash_mid_segment_costs_at_most_the_part_in_flight(vehicle, tmp_path):
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    segs = sorted((root / "sessions" / "drive").glob("*.mcap"))
+    total_parts = sum(-(-s.stat().st_size // (5 * MiB)) for s in segs)
+    crashing = _CrashingTarget(dest, after_parts=1)
+    with pytest.raises(_Crash):
+        Syncer(root, crashing, part_size=5 * MiB).run_once()
+    # metadata first (events before session.json), then the segments oldest first
+    assert crashing.keys[0].endswith("session.json") or crashing.keys[0].endswith("events.json")
+    assert crashing.keys[-1].endswith(segs[0].name)
+    journal = json.loads((root / ".sync" / "journal.json").read_text())["objects"]
+    assert [len(o["parts"]) for k, o in journal.items() if k.endswith(".mcap")] == [1]
+
+    again = Syncer(root, DirTarget(dest), part_size=5 * MiB)  # the vehicle reboots: a new process, the same journal
+    report = again.run_once()
+    assert not report.failed and report.parts_sent == total_parts - 1  # nothing the depot held is sent again
+    for s in segs:
+        assert (dest / s.relative_to(root)).read_bytes() == s.read_bytes()
+    st = again.status()
+    assert len([k for k in st.uploaded if k.endswith(".mcap")]) == len(segs) and not st.pending and not st.in_flight
+
+    # the cloud re-reads every segment and re-hashes every frame; only then is a segment confirmed
+    res = confirm_synced(open_store(dest))
+    assert sorted(res.receipted) == sorted(s.relative_to(root).as_posix() for s in segs) and not res.damaged
+    receipt = json.loads((dest / receipt_key(segs[0].relative_to(root).as_posix())).read_text())
+    assert receipt["ok"] and receipt["frames"] > 0 and receipt["bytes"] == segs[0].stat().st_size
+    assert again.check_receipts() == len(segs)
+    assert len(again.status().confirmed) == len(segs)
+    assert sorted(again.delete_confirmed()) == sorted(s.relative_to(root).as_posix() for s in segs)
+    assert not list((root / "sessions" / "drive").glob("*.mcap")) and (root / "sessions" / "drive" / "session.json").exists()
+
+
+def test_only_a_receipt_for_the_same_bytes_confirms_and_frees(vehicle, tmp_path):
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    syncer = Syncer(root, DirTarget(dest), part_size=5 * MiB)
+    assert not syncer.run_once().failed
+    segs = sorted((root / "sessions" / "drive").glob("*.mcap"))
+    key = segs[0].relative_to(root).as_posix()
+    # the depot's copy was damaged after it arrived: its receipt names other bytes
+    copy = dest / key
+    data = bytearray(copy.read_bytes())
+    data[len(data) // 2] ^= 0x40
+    copy.write_bytes(bytes(data))
+    res = confirm_synced(open_store(dest))
+    assert key in res.damaged or key in res.receipted
+    assert syncer.check_receipts() == len(segs) - 1
+    assert syncer.delete_confirmed() == [s.relative_to(root).as_posix() for s in segs[1:]]
+    assert segs[0].exists()  # not freed
+    st = syncer.status()
+    assert key in st.pending  # sent again on the next pass
+    assert not syncer.run_once().failed and copy.read_bytes() == segs[0].read_bytes()
+
+
+def test_protected_windows_are_never_freed(vehicle, tmp_path):
+    from recorder.storage.reader import segment_span
+    from recorder.storage.ring import ProtectionBook, Window
+
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    session = root / "sessions" / "drive"
+    first = sorted(session.glob("*.mcap"))[0]
+    start, end, _ = segment_span(first)
+    ProtectionBook(session).add(Window(start, end, "manual"))
+    syncer = Syncer(root, DirTarget(dest), part_size=5 * MiB)
+    assert not syncer.run_once().failed
+    confirm_synced(open_store(dest))
+    syncer.check_receipts()
+    freed = syncer.delete_confirmed()
+    assert first.exists() and first.relative_to(root).as_posix() not in freed and freed
+
+
+def test_the_cap_is_never_exceeded():
+    rate = parse_rate("4MB/s")
+    body = _Throttled(b"x" * 2_000_000, rate, lambda n: None)
+    t = time.monotonic()
+    while body.read(1 << 20):
+        pass
+    assert time.monotonic() - t >= 0.9 * 2_000_000 / 4_000_000
+
+
+def test_rates_by_time_of_day():
+    at = {"now": datetime(2026, 12, 1, 9, 30)}
+    r = parse_rate("08:00-18:00=512KB/s,22:00-06:00=20MB/s,4MB/s")
+    r._now = lambda: at["now"]
+    assert r.rate() == 512_000
+    at["now"] = datetime(2026, 12, 1, 23, 0)
+    assert r.rate() == 20_000_000
+    at["now"] = datetime(2026, 12, 1, 19, 0)
+    assert r.rate() == 4_000_000
+    assert RateLimit().rate() is None and parse_rate("1MiB/s").rate() == MiB
+    for bad in ("fast", "0MB/s", "25:00-26:00=1MB/s", "-3MB/s"):
+        with pytest.raises(ThermcapError, match="max-rate"):
+            parse_rate(bad)
