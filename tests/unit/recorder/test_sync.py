@@ -54,18 +54,18 @@ class _CrashingTarget(DirTarget):
         self.after, self.parts = after_parts, 0
         self.keys: list[str] = []
 
-    def put_part(self, key, upload_id, number, offset, body, size, md5_b64):  # noqa: ANN001, ANN201
+    def put_part(self, key, upload_id, number, offset, body, size, md5_b64):
         if self.parts == self.after:
             body.read(size // 2)  # half of it on the wire, then the power goes
             raise _Crash
         self.parts += 1
         return super().put_part(key, upload_id, number, offset, body, size, md5_b64)
 
-    def put_small(self, key, data, sha256):  # noqa: ANN001, ANN201
+    def put_small(self, key, data, sha256):
         self.keys.append(key)
         return super().put_small(key, data, sha256)
 
-    def begin(self, key, size, sha256):  # noqa: ANN001, ANN201
+    def begin(self, key, size, sha256):
         self.keys.append(key)
         return super().begin(key, size, sha256)
 
@@ -99,7 +99,8 @@ def test_a_crash_mid_segment_costs_at_most_the_part_in_flight(vehicle, tmp_path)
     assert again.check_receipts() == len(segs)
     assert len(again.status().confirmed) == len(segs)
     assert sorted(again.delete_confirmed()) == sorted(s.relative_to(root).as_posix() for s in segs)
-    assert not list((root / "sessions" / "drive").glob("*.mcap")) and (root / "sessions" / "drive" / "session.json").exists()
+    session = root / "sessions" / "drive"
+    assert not list(session.glob("*.mcap")) and (session / "session.json").exists()
 
 
 def test_only_a_receipt_for_the_same_bytes_confirms_and_frees(vehicle, tmp_path):
