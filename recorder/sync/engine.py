@@ -166,7 +166,11 @@ class Syncer:
                 return True
         if st.upload_id is not None:
             held = self.target.parts_held(item.key, st.upload_id, [(p.number, p.size, p.etag) for p in st.parts])
-            if held is None:  # the store forgot the upload: start it again
+            if held is None and self.target.complete_copy(item.key, item.size, st.sha256):
+                st.state, st.upload_id = "uploaded", None  # completed just before a crash: the journal missed it
+                self.journal.put(st)
+                return True
+            if held is None:  # the store forgot the upload (expired, aborted): start it again
                 st.upload_id, st.parts = None, []
             else:
                 st.parts = [p for p in st.parts if p.number in held]

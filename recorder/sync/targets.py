@@ -61,10 +61,15 @@ class S3Target:
         self.bucket, self.prefix = bucket, prefix.strip("/")
         self.name = f"s3://{bucket}/{self.prefix}" if self.prefix else f"s3://{bucket}"
         # credentials from AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY (boto3's own chain), never logged;
-        # no retries of its own: the engine retries a part with backoff and journals it
+        # no retries of its own: the engine retries a part with backoff and journals it. The payload
+        # is not hashed into the signature (the store checks every part's Content-MD5 instead), or
+        # botocore would read each part twice, once to hash it and once to send it, and the cap
+        # would be kept on the hashing as well as on the wire.
         self.s3 = boto3.client("s3", endpoint_url=endpoint, region_name=region,
-                               config=Config(retries={"max_attempts": 1}, connect_timeout=timeout_s,
-                                             read_timeout=timeout_s, s3={"addressing_style": "path"},
+                               config=Config(retries={"total_max_attempts": 1, "mode": "standard"},
+                                             connect_timeout=timeout_s,
+                                             read_timeout=timeout_s,
+                                             s3={"addressing_style": "path", "payload_signing_enabled": False},
                                              request_checksum_calculation="when_required",
                                              response_checksum_validation="when_required"))
 
