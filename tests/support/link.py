@@ -4,6 +4,7 @@ at most ``rate`` bytes a second towards it and cuts every connection open when a
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import threading
 import time
@@ -46,10 +47,8 @@ class FlakyLink:
     def _cut_all(self) -> None:
         self.cuts += 1
         for s in self._conns:
-            try:
+            with contextlib.suppress(OSError):
                 s.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
             s.close()
         self._conns.clear()
 
@@ -78,10 +77,8 @@ class FlakyLink:
             pass
         finally:
             for s in (src, dst):
-                try:
+                with contextlib.suppress(OSError):
                     s.close()
-                except OSError:
-                    pass
 
     def close(self) -> None:
         self._stop.set()

@@ -28,7 +28,8 @@ def test_sync_through_a_link_that_cuts_and_throttles(seaweedfs, tmp_path, monkey
         monkeypatch.setenv(k, seaweedfs[k])
     root = tmp_path / "vehicle"
     rec = Recorder(SimSource(width=640, height=512, frames=120, paced=False, seed=9), root, session_id="lte",
-                   analysis=False, recover_leftovers=False, policy=SegmentPolicy(max_duration_s=None, max_bytes=16 * MiB))
+                   analysis=False, recover_leftovers=False,
+                   policy=SegmentPolicy(max_duration_s=None, max_bytes=16 * MiB))
     assert rec.run().ok
     segs = sorted((root / "sessions" / "lte").glob("*.mcap"))
     total = sum(s.stat().st_size for s in segs)
