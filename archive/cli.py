@@ -307,3 +307,22 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
             click.echo(f"damaged: {key}: {problem}", err=True)
     if report.damaged:
         sys.exit(1)
+
+
+@click.command("temporal")
+@click.option("--frames", "n_frames", type=int, default=240, show_default=True, help="Frames per sequence.")
+@json_option
+def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
+    """tpred (temporal prediction) against JPEG-XL e2, PNG16 and FFV1 on still, sweeping and cued views."""
+    from archive.bench_temporal import bench_temporal
+
+    rows = bench_temporal(n_frames)
+    if as_json:
+        click.echo(json.dumps(rows, indent=2))
+        return
+    click.echo(f"{'sequence':32} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'ffv1':>6} {'png16':>6} "
+               f"{'fps 1c':>7} {'fps 2c':>7}")
+    for r in rows:
+        click.echo(f"{r['sequence']:32} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
+                   f"{r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} {r['tpred_fps_1_core']:>7} "
+                   f"{r['tpred_fps_2_cores']:>7}")

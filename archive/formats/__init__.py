@@ -2,6 +2,7 @@
 
 from archive.formats.base import ArchiveContext, ArchiveFormat, FileRecord, format_registry, get_format, register_format
 from archive.formats.hdf5 import Hdf5
+from archive.formats.temporal import TemporalFrames
 from archive.formats.tiff_lzw import TiffLzw
 from archive.formats.zipped import ZippedFrames, zipped_factory
 
@@ -11,12 +12,14 @@ register_format("hdf5", Hdf5)
 register_format("jxl", zipped_factory("jxl", effort=2))
 register_format("htj2k", zipped_factory("htj2k"))
 register_format("jpegls", zipped_factory("jpegls"))
+register_format("tpred", TemporalFrames)
 
 __all__ = [
            "ArchiveContext",
            "ArchiveFormat",
            "FileRecord",
            "Hdf5",
+           "TemporalFrames",
            "TiffLzw",
            "ZippedFrames",
            "format_registry",

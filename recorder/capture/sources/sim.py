@@ -7,9 +7,17 @@ target's contrast against its local background to nothing and back, as at dawn o
 contrast grade falls below 0.3.
 
 The radar side: at ``cue_period_s`` the radar cues the drone; the turret state machine runs
-cue -> slew -> spiral search -> lock -> handoff -> idle and fills ``slew_to_cue``. The camera
-image itself stays scene-fixed (the turret motion is simulated in the metadata only), which keeps
-ground truth simple and exact.
+cue -> slew -> spiral search -> lock -> handoff -> idle and fills ``slew_to_cue``. By default the
+camera image stays scene-fixed (the turret motion is in the metadata only), which keeps ground
+truth simple and exact. ``view="turret"`` pans the picture with the turret's pan angle over a
+360-degree panorama (``pan_px_per_deg`` pixels a degree); ``view="patrol"`` sweeps it back and
+forth at ``patrol_deg_s`` whether cued or not: the moving scenes a temporal codec must be measured
+on. The targets keep their own motion in the picture; the tilt does not move it.
+
+Noise, besides NETD: ``fpn_mk`` column fixed-pattern noise and ``pixel_fpn_mk`` per-pixel
+fixed-pattern noise, both tied to the sensor (they stay put while the scene pans), and
+``drift_mk`` a global 1/f drift (eight sinusoids from 0.01 to 1 Hz with amplitudes in 1/sqrt(f)),
+as an uncooled core drifts between flat-field corrections.
 
 Determinism: frame ``i`` depends only on the seed and ``i`` (timestamps aside): two runs with
 the same seed give the same pixels, bit for bit.
@@ -173,9 +181,18 @@ class SimSource(FrameSource):
         targets: tuple[SimTarget, ...] = DEFAULT_TARGETS,
         start_time_ns: int | None = None,
         sensor_id: str = "SIM640",
+        view: str = "fixed",
+        pan_px_per_deg: float = 12.8,
+        patrol_deg_s: float = 10.0,
+        pixel_fpn_mk: float = 0.0,
+        drift_mk: float = 0.0,
     ) -> None:
         if width < 16 or height < 16:
             raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
+        if view not in ("fixed", "turret", "patrol"):
+            raise ValueError(f"view must be fixed, turret or patrol, got {view!r}")
+        self.view, self.pan_px_per_deg, self.patrol_deg_s = view, pan_px_per_deg, patrol_deg_s
+        self._pan_deg = 0.0
         self.width, self.height, self.fps = width, height, fps
         self.model: LinearModel = LinearModel()
         self.sensor = SensorInfo(model="thermcap simulator (Boson-like)", sensor_id=sensor_id,
@@ -210,6 +227,20 @@ class SimSource(FrameSource):
         self._background_counts = (
             (self._background_c - self.model.offset_c) / self.model.scale_c_per_count + fpn
         ).astype(np.float32)
+        self._fpn_counts = fpn
+        if pixel_fpn_mk:
+            self._fpn_counts = (fpn + rng.normal(0.0, pixel_fpn_mk / 1000.0 / self.model.scale_c_per_count,
+                                                 size=(height, width))).astype(np.float32)
+            self._background_counts += self._fpn_counts - fpn
+        if view != "fixed":  # a 360-degree panorama the view pans over (wrapping), in counts without the FPN
+            span = max(width, round(360 * pan_px_per_deg))
+            self._panorama_counts = ((self._make_background(rng, span) - self.model.offset_c)
+                                     / self.model.scale_c_per_count).astype(np.float32)
+        rng_drift = np.random.default_rng([seed, 3])
+        freqs = np.logspace(-2, 0, 8)
+        amps = 1 / np.sqrt(freqs)
+        amps *= (drift_mk / 1000.0 / self.model.scale_c_per_count) / max(float(np.sqrt((amps ** 2).sum() / 2)), 1e-9)
+        self._drift = (freqs, amps, rng_drift.uniform(0, 2 * np.pi, 8)) if drift_mk else None
         n = width * height
         self._noise_pool = (rng.standard_normal(n * 3, dtype=np.float32) * np.float32(sigma_counts))
         # Dead (0) and hot (max) pixels, away from the borders.
@@ -222,11 +253,11 @@ class SimSource(FrameSource):
 
     def describe(self) -> dict[str, Any]:
         return {"source": "sim", "seed": self.seed, "crossover": self.crossover, "netd_mk": self.netd_mk,
-                "cue_period_s": self.cue_period_s}
+                "cue_period_s": self.cue_period_s, "view": self.view}
 
     # -- scene ------------------------------------------------------------------------------
-    def _make_background(self, rng: np.random.Generator) -> np.ndarray:
-        h, w, hz = self.height, self.width, self._horizon
+    def _make_background(self, rng: np.random.Generator, width: int | None = None) -> np.ndarray:
+        h, w, hz = self.height, width or self.width, self._horizon
         y = np.arange(h, dtype=np.float32)[:, None]
         sky = -18.0 + 20.0 * (y / max(hz, 1))  # -18 C at the top to +2 C at the horizon
         ground = 14.0 + 6.0 * ((y - hz) / max(h - hz, 1))
@@ -235,7 +266,12 @@ class SimSource(FrameSource):
         coarse = rng.normal(0.0, 1.5, size=(h // 16 + 2, w // 16 + 2)).astype(np.float32)
         tex = np.kron(coarse, np.ones((16, 16), np.float32))[:h, :w]
         k = np.ones(9, np.float32) / 9
-        tex = np.apply_along_axis(lambda r: np.convolve(r, k, mode="same"), 1, tex)
+        if width:  # a panorama: the texture wraps around, so 360 degrees meet without a seam
+            from scipy.ndimage import uniform_filter1d
+
+            tex = uniform_filter1d(tex, 9, axis=1, mode="wrap")
+        else:
+            tex = np.apply_along_axis(lambda r: np.convolve(r, k, mode="same"), 1, tex)
         tex = np.apply_along_axis(lambda c: np.convolve(c, k, mode="same"), 0, tex)
         bg[hz:] += tex[hz:]
         return bg.astype(np.float32)
@@ -248,6 +284,17 @@ class SimSource(FrameSource):
         hw = self.crossover_half_width_s
         d = abs(t - self.crossover_center_s)
         return float(np.clip((d - hw / 3) / (hw * 2 / 3), 0.0, 1.0))
+
+    def view_offset_px(self, t: float) -> int:
+        """Where the view's left edge is on the panorama: the turret's pan, or the patrol sweep
+        (a triangle wave over +-30 degrees)."""
+        if self.view == "patrol":
+            period = 4 * 30.0 / self.patrol_deg_s
+            phase = (t % period) / period
+            pan = 30.0 * (4 * phase - 1 if phase < 0.5 else 3 - 4 * phase)
+        else:
+            pan = self._pan_deg
+        return round(pan * self.pan_px_per_deg)
 
     def _target_box(self, tgt: SimTarget, t: float) -> tuple[int, int, int, int]:
         s = self._scale if tgt.scale_size else 1.0
@@ -271,7 +318,14 @@ class SimSource(FrameSource):
         """Frame ``index``: (counts, ground-truth targets, thermal_analysis, noiseless target temps)."""
         t = index / self.fps
         f = self.crossover_factor(t)
-        counts_f = self._background_counts.copy()
+        if self.view == "fixed":
+            counts_f = self._background_counts.copy()
+        else:
+            counts_f = np.take(self._panorama_counts, self.view_offset_px(t) + np.arange(self.width), axis=1,
+                               mode="wrap") + self._fpn_counts
+        if self._drift is not None:
+            fr, amp, ph = self._drift
+            counts_f += np.float32((amp * np.sin(2 * np.pi * fr * t + ph)).sum())
         truths = []
         model = self.model
         for tgt in self.targets:
@@ -350,6 +404,7 @@ class SimSource(FrameSource):
             drone_visible = any(g["classification"] == "drone_motor" for g in gt) \
                 and analysis["thermal_contrast_grade"] >= 0.3
             stc_block, cues = stc.step(t, ts, drone_visible)
+            self._pan_deg = stc.pan  # view="turret": the next frame looks where the turret now points
             messages: list[tuple[str, dict[str, Any]]] = [(TOPIC_RADAR_CUE, c) for c in cues]
             messages.append((TOPIC_GROUND_TRUTH, {
                 "frame_index": index, "targets": gt, "crossover_factor": round(self.crossover_factor(t), 4),

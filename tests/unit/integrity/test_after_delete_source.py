@@ -45,7 +45,7 @@ def _attachments(data: bytes) -> set:
     return {(a.name, hashlib.sha256(a.data).hexdigest()) for a in make_reader(io.BytesIO(data)).iter_attachments()}
 
 
-@pytest.mark.parametrize("fmt", ["hdf5", "tiff-lzw", "png16", "jxl"])
+@pytest.mark.parametrize("fmt", ["hdf5", "tiff-lzw", "png16", "jxl", "tpred"])
 def test_each_format_alone_serves_indexes_analyses_and_exports_everything(tmp_path, fmt):
     session = _record(tmp_path)
     before = [(f.log_time, np.array(f.pixels), f.sidecar) for f in iter_session_frames(session)]

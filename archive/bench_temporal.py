@@ -1,0 +1,118 @@
+"""``thermcap bench temporal``: the temporal codec against the intra anchors, in one run.
+
+For each sequence (the simulator's still view, with sensor-fixed pattern noise and drift, its
+patrol sweep and its turret following radar cues), the ratio and encode rate of ``tpred``
+beside JPEG-XL effort 2 (the intra anchor the goal is stated against), PNG16 and FFV1 in
+Matroska (what film and video archives trust; through PyAV when installed). Every codec is
+checked bit-exact on the same frames before its figure counts. ``tpred``'s rate on two cores is
+two sequences encoded at once on two threads (each camera, or each segment, is a sequence).
+"""
+
+from __future__ import annotations
+
+import io
+import threading
+import time
+from typing import Any
+
+import numpy as np
+
+from archive.codecs import get_codec
+from archive.temporal import TemporalEncoder, decode_records
+from recorder.capture.sources.sim import SimSource
+
+__all__ = ["bench_temporal"]
+
+
+def _sequences(n: int) -> dict[str, list[np.ndarray]]:
+    common: dict[str, Any] = {"width": 640, "height": 512, "frames": n, "paced": False, "seed": 21}
+    honest: dict[str, Any] = {"pixel_fpn_mk": 15.0, "drift_mk": 30.0}
+    return {
+        "still (NETD + column FPN)": [f.pixels for f in SimSource(**common).frames()],
+        "still + pixel FPN + 1/f drift": [f.pixels for f in SimSource(**common, **honest).frames()],
+        "patrol sweep 10 deg/s": [f.pixels for f in SimSource(**common, **honest, view="patrol").frames()],
+        "patrol sweep 3 deg/s": [f.pixels for f in SimSource(**common, **honest, view="patrol",
+                                                               patrol_deg_s=3.0).frames()],
+        "turret on radar cues": [f.pixels for f in SimSource(**common, **honest, view="turret", cue_period_s=2.0,
+                                                               first_cue_s=0.2).frames()],
+    }
+
+
+def _tpred(frames: list[np.ndarray]) -> tuple[float, float, float]:
+    enc = TemporalEncoder()
+    t = time.perf_counter()
+    records = [enc.encode(f) for f in frames]
+    one = len(frames) / (time.perf_counter() - t)
+    if not all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True)):
+        raise AssertionError("tpred did not decode bit-exact")
+    half = len(frames) // 2
+
+    def run(part: list[np.ndarray]) -> None:
+        e = TemporalEncoder()
+        for f in part:
+            e.encode(f)
+
+    threads = [threading.Thread(target=run, args=(p,)) for p in (frames[:half], frames[half:])]
+    t = time.perf_counter()
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    two = len(frames) / (time.perf_counter() - t)
+    return sum(f.nbytes for f in frames) / sum(map(len, records)), one, two
+
+
+def _intra(codec_config: dict[str, Any], frames: list[np.ndarray]) -> tuple[float, float]:
+    codec = get_codec(codec_config)
+    t = time.perf_counter()
+    data = [codec.encode(f) for f in frames]
+    fps = len(frames) / (time.perf_counter() - t)
+    if not all(np.array_equal(codec.decode(d), f) for d, f in zip(data, frames, strict=True)):
+        raise AssertionError(f"{codec_config} did not decode bit-exact")
+    return sum(f.nbytes for f in frames) / sum(map(len, data)), fps
+
+
+def _ffv1(frames: list[np.ndarray]) -> tuple[float, float] | None:
+    try:
+        import av
+    except ImportError:
+        return None
+    h, w = frames[0].shape
+    buf = io.BytesIO()
+    t = time.perf_counter()
+    with av.open(buf, "w", format="matroska") as c:
+        s = c.add_stream("ffv1", rate=60)
+        s.width, s.height, s.pix_fmt = w, h, "gray16le"
+        s.options = {"level": "3", "slices": "4", "slicecrc": "1", "context": "1", "coder": "1", "threads": "2"}
+        for f in frames:
+            for p in s.encode(av.VideoFrame.from_ndarray(f, format="gray16le")):
+                c.mux(p)
+        for p in s.encode():
+            c.mux(p)
+    fps = len(frames) / (time.perf_counter() - t)
+    buf.seek(0)
+    with av.open(buf, "r") as src:
+        out = [fr.to_ndarray() for fr in src.decode(video=0)]
+    if len(out) != len(frames) or not all(np.array_equal(a, b) for a, b in zip(frames, out, strict=True)):
+        raise AssertionError("FFV1 did not decode bit-exact")
+    return sum(f.nbytes for f in frames) / len(buf.getvalue()), fps
+
+
+def bench_temporal(frames: int = 240) -> list[dict[str, Any]]:
+    rows = []
+    for name, seq in _sequences(frames).items():
+        jxl_ratio, jxl_fps = _intra({"id": "jxl", "effort": 2}, seq)
+        t_ratio, t_one, t_two = _tpred(seq)
+        png_ratio, png_fps = _intra({"id": "png16"}, seq)
+        row: dict[str, Any] = {
+            "sequence": name, "frames": len(seq),
+            "tpred_ratio": round(t_ratio, 3), "jxl_e2_ratio": round(jxl_ratio, 3),
+            "x_jxl_e2": round(t_ratio / jxl_ratio, 3), "goal_x_jxl_e2": 1.25,
+            "tpred_fps_1_core": round(t_one, 1), "tpred_fps_2_cores": round(t_two, 1), "goal_fps_2_cores": 120,
+            "jxl_e2_fps": round(jxl_fps, 1), "png16_ratio": round(png_ratio, 3), "png16_fps": round(png_fps, 1)}
+        ffv1 = _ffv1(seq)
+        if ffv1 is not None:
+            row.update(ffv1_ratio=round(ffv1[0], 3), ffv1_fps=round(ffv1[1], 1),
+                       x_ffv1=round(t_ratio / ffv1[0], 3))
+        rows.append(row)
+    return rows

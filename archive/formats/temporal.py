@@ -1,0 +1,107 @@
+"""``tpred``: the temporal codec (``archive.temporal``) in one stored ZIP per segment.
+
+Each frame is ``thermal_<time>_<sensor>_<range>.tpf`` (one tpred record) with its ICD ``.json``
+sidecar beside it, as ``png16`` lays its frames out. Every segment starts a new sequence, so its
+first frame is a key frame and frame ``k`` of a file decodes from the key at
+``k - k % key_interval`` in at most ``key_interval`` steps: ``read_frame`` reads only those
+members (ranged reads on an object store).
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+from archive.exceptions import ArchiveError
+from archive.formats.base import (
+    ArchiveContext,
+    ArchiveFormat,
+    DecodedFrame,
+    FileRecord,
+    frame_name,
+    group_by_segment,
+    locate,
+    sidecar_text,
+)
+from archive.formats.zipped import _info, _time_from_name
+from archive.temporal import KEY, TemporalDecoder, TemporalEncoder, TpredError, parse_header
+from recorder.storage.reader import SessionFrame
+
+__all__ = ["TemporalFrames"]
+
+EXT = ".tpf"
+
+
+class TemporalFrames(ArchiveFormat):
+    format_id = "tpred"
+    description = "one stored ZIP per segment of temporally predicted frames (tpred v1) + ICD JSON sidecars"
+
+    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24, bitstream: int = 1) -> None:
+        if bitstream != 1:
+            raise ArchiveError(f"tpred bitstream version {bitstream} is newer than this thermcap reads (1)")
+        self.window, self.key_interval, self.max_shift = window, key_interval, max_shift
+
+    def get_config(self) -> dict[str, Any]:
+        return {"id": self.format_id, "window": self.window, "key_interval": self.key_interval,
+                "max_shift": self.max_shift, "bitstream": 1}
+
+    def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
+        records = []
+        for segment, run in group_by_segment(frames):
+            rel = Path(segment).stem + ".zip"
+            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift)
+            n = 0
+            with zipfile.ZipFile(out_dir / rel, "x", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+                for frame in run:
+                    name = frame_name(ctx, frame)
+                    zf.writestr(_info(name + EXT, frame.log_time), enc.encode(frame.pixels))
+                    zf.writestr(_info(name + ".json", frame.log_time), sidecar_text(frame))
+                    n += 1
+                    if ctx.on_frame:
+                        ctx.on_frame()
+            records.append(FileRecord(rel, n))
+        return records
+
+    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+        for rel in files:
+            path = out_dir / rel
+            try:
+                with zipfile.ZipFile(path) as zf:
+                    yield from _decode_run(zf, 0, None)
+            except (zipfile.BadZipFile, OSError) as exc:
+                raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
+
+    def read_frame(self, open_file: Any, files: list[dict[str, Any]], index: int) -> DecodedFrame:
+        rel, k = locate(files, index)
+        with open_file(rel) as fh:
+            try:
+                with zipfile.ZipFile(fh) as zf:
+                    members = [i for i in zf.infolist() if i.filename.endswith(EXT)]
+                    key = k - k % self.key_interval
+                    while key > 0 and parse_header(_head(zf, members[key])).kind != KEY:
+                        key -= 1  # a file written with another interval: walk back to its key
+                    *_, last = _decode_run(zf, key, k + 1)
+                    return last
+            except (zipfile.BadZipFile, OSError, IndexError, TpredError) as exc:
+                raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
+
+
+def _head(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
+    """A record whole (parse_header checks its length against the payload it declares)."""
+    return zf.read(info)
+
+
+def _decode_run(zf: zipfile.ZipFile, start: int, stop: int | None) -> Iterator[DecodedFrame]:
+    names = set(zf.namelist())
+    members = [i for i in zf.infolist() if i.filename.endswith(EXT)][start:stop]
+    dec = TemporalDecoder()
+    for info in members:
+        base = info.filename[: -len(EXT)]
+        try:
+            pixels = dec.decode(zf.read(info))
+        except TpredError as exc:
+            raise ArchiveError(f"{info.filename}: {exc}") from None
+        sidecar = zf.read(base + ".json") if base + ".json" in names else b""
+        yield DecodedFrame(pixels, sidecar, _time_from_name(base))

@@ -1,0 +1,29 @@
+"""The archive benchmarks' short forms: each runs end to end and reports the figures its README
+table is made from, with every codec checked bit-exact inside the benchmark itself."""
+
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+
+from recorder.cli import cli
+
+
+def test_bench_temporal_reports_every_sequence_against_its_anchors():
+    r = CliRunner().invoke(cli, ["bench", "temporal", "--frames", "8", "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    assert {row["sequence"] for row in rows} >= {"patrol sweep 10 deg/s", "still (NETD + column FPN)"}
+    for row in rows:
+        assert row["tpred_ratio"] > 0 and row["jxl_e2_ratio"] > 0 and row["tpred_fps_2_cores"] > 0
+        assert row["x_jxl_e2"] == round(row["tpred_ratio"] / row["jxl_e2_ratio"], 3)
+
+
+def test_bench_archive_session_reports_x_real_time_beside_its_floors():
+    r = CliRunner().invoke(cli, ["bench", "archive", "--session", "0.5", "--formats", "png16,hdf5", "--json"])
+    assert r.exit_code == 0, r.output
+    res = json.loads(r.output)
+    assert res["frames"] == 30 and res["formats"] == ["png16", "hdf5"]
+    assert res["x_real_time"] > 0 and res["cpu_bound_x_real_time"] >= res["x_real_time"] * 0.5
+    assert set(res["x_real_time_one_format"]) == {"png16", "hdf5"} and res["compression_ratio"]["hdf5"] > 1
