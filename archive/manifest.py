@@ -19,6 +19,7 @@ import numpy as np
 
 from archive.exceptions import ManifestError
 from archive.manifest_types import Manifest
+from recorder.storage.digest import file_sha256
 from recorder.storage.layout import MANIFEST_JSON, SessionLayout
 from recorder.storage.segments import write_json_atomic
 
@@ -61,12 +62,6 @@ def sidecar_sha256(sidecar: bytes) -> str:
     return hashlib.sha256(sidecar).hexdigest()
 
 
-def file_sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while chunk := f.read(1 << 20):
-            h.update(chunk)
-    return h.hexdigest()
 
 
 def new_manifest(session_id: str, session_meta: dict[str, Any]) -> Manifest:

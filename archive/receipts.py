@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from archive.blobs import BlobStore
-from archive.manifest import frame_sha256, iso_now, sidecar_sha256
+from archive.manifest import file_sha256, frame_sha256, iso_now, sidecar_sha256
 from recorder.exceptions import McapFileError
 from recorder.storage.reader import iter_segment_frames, segment_span
 from recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
@@ -35,11 +35,7 @@ class ConfirmReport:
 
 def check_segment(path: Path) -> dict[str, Any]:
     """What a receipt says of one MCAP segment file."""
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(1 << 20):
-            h.update(block)
-    out: dict[str, Any] = {"bytes": path.stat().st_size, "sha256": h.hexdigest()}
+    out: dict[str, Any] = {"bytes": path.stat().st_size, "sha256": file_sha256(path)}
     frames = hashlib.sha256()
     n = 0
     try:

@@ -14,18 +14,11 @@ from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from archive.exceptions import ArchiveError
-from archive.formats.base import (
-    ArchiveContext,
-    ArchiveFormat,
-    DecodedFrame,
-    FileRecord,
-    frame_name,
-    group_by_segment,
-    locate,
-    sidecar_text,
-)
-from archive.formats.zipped import _info, _time_from_name
+from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
+from archive.formats.zipped import _time_from_name, write_zip_segments
 from archive.temporal import KEY, TemporalDecoder, TemporalEncoder, TpredError, parse_header
 from recorder.storage.reader import SessionFrame
 
@@ -48,21 +41,12 @@ class TemporalFrames(ArchiveFormat):
                 "max_shift": self.max_shift, "bitstream": 1}
 
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
-        records = []
-        for segment, run in group_by_segment(frames):
-            rel = Path(segment).stem + ".zip"
-            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift)
-            n = 0
-            with zipfile.ZipFile(out_dir / rel, "x", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for frame in run:
-                    name = frame_name(ctx, frame)
-                    zf.writestr(_info(name + EXT, frame.log_time), enc.encode(frame.pixels))
-                    zf.writestr(_info(name + ".json", frame.log_time), sidecar_text(frame))
-                    n += 1
-                    if ctx.on_frame:
-                        ctx.on_frame()
-            records.append(FileRecord(rel, n))
-        return records
+        def sequence(run: Iterator[SessionFrame]) -> Iterator[tuple[SessionFrame, bytes]]:
+            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift)  # every segment starts a key
+            for frame in run:
+                yield frame, enc.encode(np.asarray(frame.pixels))
+
+        return write_zip_segments(frames, out_dir, ctx, EXT, sequence)
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
         for rel in files:

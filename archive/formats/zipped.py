@@ -8,7 +8,7 @@ are already compressed), so any frame is one ranged read once the central direct
 from __future__ import annotations
 
 import zipfile
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -28,7 +28,7 @@ from archive.formats.base import (
 )
 from recorder.storage.reader import SessionFrame
 
-__all__ = ["ZippedFrames"]
+__all__ = ["ZippedFrames", "write_zip_segments"]
 
 
 class ZippedFrames(ArchiveFormat):
@@ -42,25 +42,13 @@ class ZippedFrames(ArchiveFormat):
         return {"id": self.format_id, "codec": self.codec.get_config()}
 
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
-        records = []
         codec = self.codec
 
         def encode(frame: SessionFrame) -> tuple[SessionFrame, bytes]:
             return frame, codec.encode(np.asarray(frame.pixels))
 
-        for segment, run in group_by_segment(frames):
-            rel = Path(segment).stem + ".zip"
-            n = 0
-            with zipfile.ZipFile(out_dir / rel, "x", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
-                for frame, data in ordered_map(encode, run, ctx.workers):
-                    name = frame_name(ctx, frame)
-                    zf.writestr(_info(name + codec.extension, frame.log_time), data)
-                    zf.writestr(_info(name + ".json", frame.log_time), sidecar_text(frame))
-                    n += 1
-                    if ctx.on_frame:
-                        ctx.on_frame()
-            records.append(FileRecord(rel, n))
-        return records
+        return write_zip_segments(frames, out_dir, ctx, codec.extension,
+                                  lambda run: ordered_map(encode, run, ctx.workers))
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
         ext = self.codec.extension
@@ -91,6 +79,27 @@ class ZippedFrames(ArchiveFormat):
                     return DecodedFrame(self.codec.decode(zf.read(images[k])), sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError, IndexError) as exc:
                 raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
+
+
+def write_zip_segments(frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext, ext: str,
+                       encoded: Callable[[Iterator[SessionFrame]], Iterable[tuple[SessionFrame, bytes]]],
+                       ) -> list[FileRecord]:
+    """One stored ZIP per segment of ICD pairs ``<frame name><ext>`` + ``.json``; ``encoded``
+    turns a segment's frames into (frame, bytes) in order (on a pool, or one sequence)."""
+    records = []
+    for segment, run in group_by_segment(frames):
+        rel = Path(segment).stem + ".zip"
+        n = 0
+        with zipfile.ZipFile(out_dir / rel, "x", compression=zipfile.ZIP_STORED, allowZip64=True) as zf:
+            for frame, data in encoded(run):
+                name = frame_name(ctx, frame)
+                zf.writestr(_info(name + ext, frame.log_time), data)
+                zf.writestr(_info(name + ".json", frame.log_time), sidecar_text(frame))
+                n += 1
+                if ctx.on_frame:
+                    ctx.on_frame()
+        records.append(FileRecord(rel, n))
+    return records
 
 
 def _time_from_name(base: str) -> int | None:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from recorder.exceptions import ThermcapError
+from recorder.storage.digest import file_sha256
 from recorder.storage.ring import load_windows
 from recorder.sync.journal import Journal, ObjectState, PartState
 from recorder.sync.plan import SyncItem, plan_root
@@ -106,14 +107,6 @@ class _Throttled(io.RawIOBase):
         return len(data)
 
 
-def _sha256_file(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        while block := f.read(1 << 20):
-            h.update(block)
-    return h.hexdigest()
-
-
 class Syncer:
     def __init__(self, root: Path, target: Target, *, rate: RateLimit | None = None, part_size: int = 8 << 20,
                  max_failures: int = 8, backoff_s: float = 0.5, max_backoff_s: float = 30.0,
@@ -158,7 +151,7 @@ class Syncer:
             self.journal.put(ObjectState(item.key, len(data), sha, item.mtime_ns, state="uploaded"))
             return True
         if st is None or (st.size, st.mtime_ns) != (item.size, item.mtime_ns):
-            sha = _sha256_file(item.path)
+            sha = file_sha256(item.path)
             st = ObjectState(item.key, item.size, sha, item.mtime_ns)
             if self.target.complete_copy(item.key, item.size, sha):  # sent before the journal knew (a lost journal)
                 st.state = "uploaded"
@@ -207,7 +200,7 @@ class Syncer:
                 self.journal.save()
                 if on_progress:
                     on_progress(item.key, st.bytes_done, item.size)
-        if _sha256_file(item.path) != st.sha256:  # a closed segment never changes; if this one did, say so
+        if file_sha256(item.path) != st.sha256:  # a closed segment never changes; if this one did, say so
             raise ThermcapError(f"{item.path}: changed while it was being sent; it is sent again on the next pass")
         parts = [(p.number, p.etag) for p in sorted(st.parts, key=lambda p: p.number)]
         upload_id = st.upload_id
@@ -291,7 +284,7 @@ class Syncer:
             path = self.root / st.key
             if st.state != "confirmed" or not st.key.endswith(".mcap") or not path.is_file():
                 continue
-            if path.stat().st_size != st.size or _sha256_file(path) != st.sha256:
+            if path.stat().st_size != st.size or file_sha256(path) != st.sha256:
                 continue
             windows = load_windows(path.parent)
             if windows:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from recorder.exceptions import ThermcapError
+from recorder.storage.digest import file_sha256
 
 __all__ = ["RECEIPTS_PREFIX", "DirTarget", "S3Target", "Target", "receipt_key"]
 
@@ -156,13 +157,7 @@ class DirTarget:
 
     def complete_copy(self, key: str, size: int, sha256: str) -> bool:
         p = self._p(key)
-        if not p.is_file() or p.stat().st_size != size:
-            return False
-        h = hashlib.sha256()
-        with open(p, "rb") as f:
-            while block := f.read(1 << 20):
-                h.update(block)
-        return h.hexdigest() == sha256
+        return p.is_file() and p.stat().st_size == size and file_sha256(p) == sha256
 
     def begin(self, key: str, size: int, sha256: str) -> str:
         p = self._p(key)
@@ -203,11 +198,7 @@ class DirTarget:
     def complete(self, key: str, upload_id: str, parts: list[tuple[int, str]], sha256: str) -> None:
         p = self._p(key)
         partial = p.with_name(p.name + ".partial")
-        h = hashlib.sha256()
-        with open(partial, "rb") as f:
-            while block := f.read(1 << 20):
-                h.update(block)
-        if h.hexdigest() != sha256:
+        if file_sha256(partial) != sha256:
             raise ThermcapError(f"{key}: the assembled copy's sha256 differs from the vehicle's")
         os.replace(partial, p)
 

@@ -19,6 +19,12 @@ fixed-pattern noise, both tied to the sensor (they stay put while the scene pans
 ``drift_mk`` a global 1/f drift (eight sinusoids from 0.01 to 1 Hz with amplitudes in 1/sqrt(f)),
 as an uncooled core drifts between flat-field corrections.
 
+For the ICD section 5 quality report's proof: ``blackbody_c`` fills the view with a uniform
+blackbody at that temperature (no scene, no targets); ``shutter_every_s`` closes the shutter for
+``shutter_frames`` frames at that period (a uniform field at ``shutter_c``, marked
+``capture.shutter_closed`` in the sidecar); ``drift_c_per_h`` adds a linear response drift. With
+the NETD, the pattern noise and the bad pixels, these are the truths the report must recover.
+
 Determinism: frame ``i`` depends only on the seed and ``i`` (timestamps aside): two runs with
 the same seed give the same pixels, bit for bit.
 """
@@ -186,12 +192,21 @@ class SimSource(FrameSource):
         patrol_deg_s: float = 10.0,
         pixel_fpn_mk: float = 0.0,
         drift_mk: float = 0.0,
+        blackbody_c: float | None = None,
+        shutter_every_s: float | None = None,
+        shutter_frames: int = 4,
+        shutter_c: float = 25.0,
+        drift_c_per_h: float = 0.0,
     ) -> None:
         if width < 16 or height < 16:
             raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
         if view not in ("fixed", "turret", "patrol"):
             raise ValueError(f"view must be fixed, turret or patrol, got {view!r}")
         self.view, self.pan_px_per_deg, self.patrol_deg_s = view, pan_px_per_deg, patrol_deg_s
+        self.blackbody_c, self.shutter_every_s, self.shutter_frames = blackbody_c, shutter_every_s, shutter_frames
+        self.shutter_c, self.drift_c_per_h = shutter_c, drift_c_per_h
+        if blackbody_c is not None:
+            targets = ()
         self._pan_deg = 0.0
         self.width, self.height, self.fps = width, height, fps
         self.model: LinearModel = LinearModel()
@@ -252,8 +267,19 @@ class SimSource(FrameSource):
         self._bad_ys, self._bad_xs = ys, xs
 
     def describe(self) -> dict[str, Any]:
-        return {"source": "sim", "seed": self.seed, "crossover": self.crossover, "netd_mk": self.netd_mk,
-                "cue_period_s": self.cue_period_s, "view": self.view}
+        out = {"source": "sim", "seed": self.seed, "crossover": self.crossover, "netd_mk": self.netd_mk,
+               "cue_period_s": self.cue_period_s, "view": self.view}
+        if self.blackbody_c is not None:
+            out["blackbody_c"] = self.blackbody_c
+        if self.shutter_every_s:
+            out.update(shutter_every_s=self.shutter_every_s, shutter_c=self.shutter_c)
+        return out
+
+    def shutter_closed(self, index: int) -> bool:
+        if not self.shutter_every_s:
+            return False
+        period = max(1, round(self.shutter_every_s * self.fps))
+        return index % period < self.shutter_frames
 
     # -- scene ------------------------------------------------------------------------------
     def _make_background(self, rng: np.random.Generator, width: int | None = None) -> np.ndarray:
@@ -318,7 +344,11 @@ class SimSource(FrameSource):
         """Frame ``index``: (counts, ground-truth targets, thermal_analysis, noiseless target temps)."""
         t = index / self.fps
         f = self.crossover_factor(t)
-        if self.view == "fixed":
+        uniform_c = self.shutter_c if self.shutter_closed(index) else self.blackbody_c
+        if uniform_c is not None:  # a uniform field: the shutter, or a blackbody filling the view
+            level = (uniform_c - self.model.offset_c) / self.model.scale_c_per_count
+            counts_f = np.full((self.height, self.width), level, np.float32) + self._fpn_counts
+        elif self.view == "fixed":
             counts_f = self._background_counts.copy()
         else:
             counts_f = np.take(self._panorama_counts, self.view_offset_px(t) + np.arange(self.width), axis=1,
@@ -326,9 +356,11 @@ class SimSource(FrameSource):
         if self._drift is not None:
             fr, amp, ph = self._drift
             counts_f += np.float32((amp * np.sin(2 * np.pi * fr * t + ph)).sum())
+        if self.drift_c_per_h:
+            counts_f += np.float32(self.drift_c_per_h * t / 3600.0 / self.model.scale_c_per_count)
         truths = []
         model = self.model
-        for tgt in self.targets:
+        for tgt in (self.targets if uniform_c is None else ()):
             x, y, tw, th = self._target_box(tgt, t)
             local_bg = float(self._background_c[y:y + th, x:x + tw].mean())
             full = tgt.temp_c if tgt.delta_k is None else local_bg + tgt.delta_k
@@ -412,6 +444,7 @@ class SimSource(FrameSource):
             yield CapturedFrame(
                 index=index, timestamp_ns=ts, pixels=frame, capture_mono_ns=released,
                 sidecar={
+                    **({"capture": {"shutter_closed": True}} if self.shutter_closed(index) else {}),
                     "thermal_analysis": analysis,
                     "slew_to_cue": stc_block,
                     "targets": [{k: v for k, v in g.items() if k != "true_temp_c"} for g in gt],

@@ -1,0 +1,65 @@
+"""``thermcap report``: reports a thermographer signs."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import click
+
+from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.root import cli
+from recorder.exceptions import ThermcapError
+
+
+@cli.group("report")
+def report() -> None:
+    """Reports over a recorded session."""
+
+
+def _reference(value: str, root: str) -> tuple[Path, float | None]:
+    from recorder.storage.reader import resolve_session
+
+    name, _, temp = value.partition("=")
+    try:
+        return resolve_session(name, root), float(temp) if temp else None
+    except ValueError:
+        raise ThermcapError(f"--reference {value!r}: expected SESSION or SESSION=TEMP_C") from None
+
+
+@report.command("quality")
+@click.argument("session")
+@root_option
+@click.option("--blackbody", type=float, default=None, metavar="TEMP_C",
+              help="The session looks at a blackbody at this temperature (else its source's, if it says).")
+@click.option("--reference", "references", multiple=True, metavar="SESSION[=TEMP_C]",
+              help="Blackbody sessions at other temperatures, for linearity (repeat).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for quality.html, .pdf and .json (default: SESSION/report).")
+@json_option
+def quality_cmd(session: str, root: str, blackbody: float | None, references: tuple[str, ...], out_dir: str | None,
+                as_json: bool) -> None:
+    """The ICD section 5 requirements measured from the session: NETD, FPA uniformity, temporal stability,
+    absolute accuracy, linearity and bad pixels, each with its limit and pass, fail or not measurable (and why).
+    Exit 1 if a requirement fails."""
+    from recorder.reports.quality import measure_quality
+    from recorder.reports.render import write_quality_report
+    from recorder.storage.reader import resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        rep = measure_quality(d, blackbody_c=blackbody, references=[_reference(r, root) for r in references])
+        paths = write_quality_report(rep, Path(out_dir) if out_dir else d / "report")
+    except ThermcapError as exc:
+        fail(str(exc))
+    out = rep.to_dict()
+    if as_json:
+        click.echo(json.dumps({**out, "files": {k: str(v) for k, v in paths.items()}}, indent=2))
+    else:
+        for m in out["measurements"]:
+            value = "-" if m["value"] is None else f"{m['value']} {m['unit']}"
+            click.echo(f"{m['requirement']:20} {value:>14}  {m['limit']:24} {m['verdict']}")
+        click.echo(f"written: {paths['html']}, {paths['pdf']}")
+    if not out["passed"]:
+        sys.exit(1)

@@ -1,0 +1,1 @@
+"""Reports a thermographer signs: ``quality`` (the ICD section 5 requirements, measured)."""
