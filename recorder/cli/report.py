@@ -63,3 +63,53 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
         click.echo(f"written: {paths['html']}, {paths['pdf']}")
     if not out["passed"]:
         sys.exit(1)
+
+
+@report.command("inspection")
+@click.argument("session")
+@root_option
+@click.option("--max-findings", type=int, default=12, show_default=True, help="The hottest targets, at most.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for inspection.pdf and .json (default: SESSION/report).")
+@json_option
+def inspection_cmd(session: str, root: str, max_findings: int, out_dir: str | None, as_json: bool) -> None:
+    """Detected hot spots as an inspection PDF: per finding the image with its colour bar and box, max, ΔT to the
+    local background, time, position, model version and frame hash, and a provenance block `report verify` checks."""
+    from recorder.reports.inspection import build_inspection
+    from recorder.reports.render import write_inspection_report
+    from recorder.storage.reader import resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        rep = build_inspection(d, max_findings=max_findings)
+        paths = write_inspection_report(rep, Path(out_dir) if out_dir else d / "report")
+    except ThermcapError as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps({**rep.to_dict(), "files": {k: str(v) for k, v in paths.items()}}, indent=2))
+    else:
+        click.echo(f"{len(rep.findings)} findings: {paths['pdf']} (and {paths['json'].name})")
+
+
+@report.command("verify")
+@click.argument("report_file", type=click.Path(dir_okay=False, exists=True))
+@root_option
+@json_option
+def verify_cmd(report_file: str, root: str, as_json: bool) -> None:
+    """Recompute every number of an inspection report (its PDF or JSON twin) from the archive; exit 1 if one no
+    longer holds."""
+    from recorder.reports.inspection import verify_inspection
+
+    try:
+        res = verify_inspection(report_file, root)
+    except ThermcapError as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps({"holds": res.holds, "checks": res.checks}, indent=2))
+    else:
+        for c in res.checks:
+            click.echo(f"{'holds ' if c['holds'] else 'DIFFERS'} frame {c.get('frame', '-')} "
+                       f"{c.get('target_id', c.get('check', ''))}: {c['why']}")
+        click.echo("the report holds" if res.holds else "the report no longer holds")
+    if not res.holds:
+        sys.exit(1)

@@ -13,7 +13,7 @@ from typing import Any
 from recorder.exceptions import ThermcapError
 from recorder.reports.quality import QualityReport
 
-__all__ = ["write_quality_report"]
+__all__ = ["write_inspection_report", "write_quality_report"]
 
 _COLOURS = {"pass": "#1a7f37", "fail": "#cf222e", "not measurable": "#6e7781"}
 
@@ -126,3 +126,77 @@ def _wrap(text: str, width: int) -> list[str]:
     import textwrap
 
     return textwrap.wrap(text, width) or [""]
+
+
+def write_inspection_report(rep: Any, out_dir: Path) -> dict[str, Path]:
+    """``inspection.json`` (what ``report verify`` recomputes) and ``inspection.pdf``: a summary
+    page, a page per finding (the frame with a colour bar and the box), and the provenance."""
+    import hashlib
+    import json
+
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.patches import Rectangle
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = {"json": out_dir / "inspection.json", "pdf": out_dir / "inspection.pdf"}
+    data = (json.dumps(rep.to_dict(), indent=2) + "\n").encode()
+    paths["json"].write_bytes(data)
+    sha = hashlib.sha256(data).hexdigest()
+    meta = {"Title": f"Inspection report: {rep.session_id}", "Creator": "thermcap report inspection",
+            "Keywords": f"thermcap-inspection json-sha256={sha}"}
+    with PdfPages(paths["pdf"], metadata=meta) as pdf:
+        page = plt.figure(figsize=(8.27, 11.69))
+        page.text(0.06, 0.95, "Inspection report", fontsize=16, weight="bold")
+        page.text(0.06, 0.92, f"session {rep.session_id}: {len(rep.findings)} findings", fontsize=9)
+        if rep.findings:
+            ax = page.add_axes((0.04, 0.45, 0.92, 0.44))
+            ax.set_axis_off()
+            cells = [[str(i + 1), f.target_id, f.classification or "", f"{f.frame}", f.time[:23], f"{f.max_c:.2f}",
+                      f"{f.delta_t_c:+.2f}", f"v{f.model_version}"] for i, f in enumerate(rep.findings)]
+            t = ax.table(cellText=cells, colLabels=["#", "target", "class", "frame", "time (UTC)", "max °C", "ΔT °C",
+                                                    "model"], loc="upper left", cellLoc="left")
+            t.auto_set_font_size(False)
+            t.set_fontsize(7)
+        else:
+            page.text(0.06, 0.85, "No target was detected in this session.", fontsize=10)
+        if rep.events:
+            page.text(0.06, 0.40, "Events: " + "; ".join(f"{e['kind']} {e['start'][11:19]}-{e['end'][11:19]}"
+                                                          for e in rep.events[:12]), fontsize=7, wrap=True)
+        pdf.savefig(page)
+        plt.close(page)
+        for i, f in enumerate(rep.findings):
+            fig, ax = plt.subplots(figsize=(8.27, 6.5))
+            temps = rep.images[f.frame]
+            lo, hi = (float(v) for v in np.percentile(temps, [0.5, 99.5]))  # a dead or hot pixel sets no scale
+            im = ax.imshow(temps, cmap="inferno", vmin=lo, vmax=max(hi, f.max_c))
+            x0, y0, x1, y1 = f.box
+            ax.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0 + 1, y1 - y0 + 1, fill=False, ec="#00e5ff", lw=1.5))
+            fig.colorbar(im, ax=ax, label="°C")
+            ax.set_axis_off()
+            where = (f"{f.position['latitude']:.6f}, {f.position['longitude']:.6f}"
+                     if f.position and "latitude" in f.position else "not recorded")
+            ax.set_title(f"Finding {i + 1}: {f.target_id} ({f.classification or 'unclassified'}), frame {f.frame}\n"
+                         f"max {f.max_c:.2f} °C, reference {f.reference_c:.2f} °C, ΔT {f.delta_t_c:+.2f} °C; "
+                         f"{f.time}; position {where}\nmodel version {f.model_version}; frame sha256 "
+                         f"{f.frame_sha256[:16]}…", fontsize=8)
+            fig.tight_layout()
+            pdf.savefig(fig)
+            plt.close(fig)
+        page = plt.figure(figsize=(8.27, 11.69))
+        page.text(0.06, 0.95, "Provenance", fontsize=14, weight="bold")
+        lines = [f"session: {rep.session_id}", f"thermcap {rep.provenance.get('thermcap')}, generated "
+                 f"{rep.provenance.get('generated_at')}", f"reference temperature: {rep.provenance.get('reference')}",
+                 f"JSON twin: {paths['json'].name}, sha256 {sha}", "frames (index: sha256 of the stored counts):"]
+        lines += [f"  {f.frame}: {f.frame_sha256}" for f in rep.findings]
+        lines += ["Every number above is recomputed from the archive by:",
+                  f"  thermcap report verify {paths['pdf'].name}"]
+        for k, line in enumerate(lines[:70]):
+            page.text(0.06, 0.91 - k * 0.0125, line, fontsize=7, family="monospace")
+        pdf.savefig(page)
+        plt.close(page)
+    return paths
