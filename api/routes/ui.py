@@ -19,11 +19,18 @@ def index_page() -> HTMLResponse:
     return HTMLResponse((_STATIC / "index.html").read_text())
 
 
-@router.get("/static/common.js")
-def common_js():
+@router.get("/static/{name}.js")
+def static_js(name: str):
+    """The pages' scripts, by name from a fixed list (a request path never reaches the disk)."""
+    from fastapi import HTTPException
     from fastapi.responses import Response
 
-    return Response((_STATIC / "common.js").read_text(), media_type="text/javascript")
+    if name not in _SCRIPTS:
+        raise HTTPException(404, f"no script {name}.js")
+    return Response((_STATIC / f"{name}.js").read_text(), media_type="text/javascript")
+
+
+_SCRIPTS = ("common", "workbench")
 
 
 @router.get("/ui/sessions/{session_id}", response_class=HTMLResponse)

@@ -100,6 +100,30 @@ class Browser:
     def move_mouse(self, x: float, y: float) -> None:
         self.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x, "y": y}, session=True)
 
+    def drag(self, x0: float, y0: float, x1: float, y1: float, steps: int = 5) -> None:
+        """Press at (x0, y0), move to (x1, y1), release: as a hand draws a box."""
+        self.send("Input.dispatchMouseEvent", {"type": "mousePressed", "x": x0, "y": y0, "button": "left",
+                                               "clickCount": 1}, session=True)
+        for k in range(1, steps + 1):
+            self.send("Input.dispatchMouseEvent", {"type": "mouseMoved", "x": x0 + (x1 - x0) * k / steps,
+                                                   "y": y0 + (y1 - y0) * k / steps, "button": "left"}, session=True)
+        self.send("Input.dispatchMouseEvent", {"type": "mouseReleased", "x": x1, "y": y1, "button": "left",
+                                               "clickCount": 1}, session=True)
+
+    def key(self, key: str, code: str, keycode: int) -> None:
+        for kind in ("keyDown", "keyUp"):
+            self.send("Input.dispatchKeyEvent", {"type": kind, "key": key, "code": code,
+                                                 "windowsVirtualKeyCode": keycode}, session=True)
+
+    def screenshot(self, path: Path, width: int = 1400, height: int = 1000) -> None:
+        import base64
+
+        self.send("Emulation.setDeviceMetricsOverride", {"width": width, "height": height, "deviceScaleFactor": 1,
+                                                         "mobile": False}, session=True)
+        self.pump(0.5)
+        data = self.send("Page.captureScreenshot", {"format": "png"}, session=True)["data"]
+        path.write_bytes(base64.b64decode(data))
+
     def close(self) -> None:
         import contextlib
         import os
