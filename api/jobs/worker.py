@@ -4,7 +4,8 @@ A session is finished when it has a summary and no ``.active`` segment and nobod
 recording lock. Workers coordinate through leases in the index (SQLite or PostgreSQL): a worker
 archives a session only while it holds the lease, so several workers on one root or one bucket
 never archive the same session twice; a lease expires, so a dead worker's session is picked up
-again. Uploads use create-only writes: an object that is already there with the same content is
+again, and a live worker renews its lease every third of its lifetime for as long as the work
+takes (an hour-long session archives for longer than any fixed lifetime). Uploads use create-only writes: an object that is already there with the same content is
 left alone, one with different content is an error, never an overwrite.
 """
 
@@ -12,6 +13,7 @@ from __future__ import annotations
 
 import os
 import socket
+import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -52,6 +54,35 @@ def acquire_lease(engine: Engine, session_id: str, owner: str, ttl_s: float) -> 
                                                    (db.leases.c.expires_ns < now) | (db.leases.c.owner == owner))
                            .values(owner=owner, expires_ns=expires))
         return res.rowcount == 1
+
+
+class _Renewal:
+    """Keeps a lease alive on a thread while its holder works; says if it was lost (a pause
+    longer than the lease, and another worker took it)."""
+
+    def __init__(self, engine: Engine, session_id: str, owner: str, ttl_s: float) -> None:
+        self.engine, self.session_id, self.owner, self.ttl_s = engine, session_id, owner, ttl_s
+        self.lost = False
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"lease-{session_id}", daemon=True)
+
+    def _run(self) -> None:
+        while not self._stop.wait(self.ttl_s / 3):
+            try:
+                renewed = acquire_lease(self.engine, self.session_id, self.owner, self.ttl_s)
+            except Exception:  # the index is unreachable for a moment: try again next time
+                renewed = True
+            if not renewed:
+                self.lost = True
+                return
+
+    def __enter__(self) -> _Renewal:
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._stop.set()
+        self._thread.join()
 
 
 def release_lease(engine: Engine, session_id: str, owner: str) -> None:
@@ -116,12 +147,16 @@ class Worker:
                 result.leased_elsewhere.append(sid)
                 continue
             try:
-                archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
-                if self.store is not None:
-                    upload_archive(self.store, self.root, d)
-                    if self.delete_source:
-                        archive_session(d, self.formats, delete_source=True)
-                index_session(self.engine, d)
+                with _Renewal(self.engine, sid, self.owner, self.lease_ttl_s) as renewal:
+                    archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
+                    if self.store is not None:
+                        upload_archive(self.store, self.root, d)
+                        if self.delete_source:
+                            archive_session(d, self.formats, delete_source=True)
+                    index_session(self.engine, d)
+                if renewal.lost:  # the work is idempotent and was done under the session lock; say so
+                    self.log(f"warning: {sid}: the lease lapsed during the work (a pause longer than "
+                             f"{self.lease_ttl_s:g} s); another worker may have started it and found it done")
                 result.archived.append(sid)
                 self.log(f"archived {sid}")
             except ThermcapError as exc:
