@@ -5,8 +5,9 @@ recording lock. Workers coordinate through leases in the index (SQLite or Postgr
 archives a session only while it holds the lease, so several workers on one root or one bucket
 never archive the same session twice; a lease expires, so a dead worker's session is picked up
 again, and a live worker renews its lease every third of its lifetime for as long as the work
-takes (an hour-long session archives for longer than any fixed lifetime). Uploads use create-only writes: an object that is already there with the same content is
-left alone, one with different content is an error, never an overwrite.
+takes (an hour-long session archives for longer than any fixed lifetime). Uploads use
+create-only writes: an object that is already there with the same content is left alone, one
+with different content is an error, never an overwrite.
 """
 
 from __future__ import annotations
