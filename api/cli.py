@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import os
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -237,7 +238,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
 
 
 @click.command("watch")
-@click.argument("inbox", type=click.Path(file_okay=False))
+@click.argument("inbox")
 @root_option
 @click.option("--once", is_flag=True, help="One pass, then exit.")
 @click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
@@ -245,20 +246,40 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
               help="A file is taken once it has not changed for this many seconds.")
 @click.option("--archive/--no-archive", default=True, show_default=True, help="Archive and verify each session.")
 @click.option("--formats", default="png16,hdf5", show_default=True)
+@click.option("--endpoint", envvar="THERMCAP_S3_ENDPOINT", default=None,
+              help="s3:// inboxes: the S3-compatible endpoint (credentials from AWS_ACCESS_KEY_ID / "
+                   "AWS_SECRET_ACCESS_KEY).")
+@click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
 @json_option
 def watch(inbox: str, root: str, once: bool, interval: float, settle: float, archive: bool, formats: str,
-          as_json: bool) -> None:
-    """Take in every camera file dropped in INBOX exactly once: import, archive, derived products
-    beside it (heatmap PNG, °C GeoTIFF, surface_temperature summary); bad files to quarantine/."""
+          endpoint: str | None, region: str, as_json: bool) -> None:
+    """Take in every camera file dropped in INBOX (a folder, or s3://BUCKET/PREFIX) exactly once: import,
+    archive, derived products beside it (heatmap PNG, °C GeoTIFF, surface_temperature summary); bad files
+    to quarantine/."""
     import time as _time
 
     from api.jobs.inbox import process_inbox
 
     fmts = [f.strip() for f in formats.split(",") if f.strip()] if archive else None
+    log = (lambda m: None) if as_json else (lambda m: click.echo(m, err=True))
+    bucket_inbox: Callable[[], Any] | None = None
+    if inbox.startswith("s3://"):
+        from api.jobs.bucket_inbox import parse_bucket_url, process_bucket_inbox
+        from archive.blobs import open_store
+
+        try:
+            bucket, prefix = parse_bucket_url(inbox)
+        except ThermcapError as exc:
+            fail(str(exc))
+        store = open_store(Path(root), bucket=bucket, endpoint=endpoint, region=region)
+
+        def one_pass() -> Any:
+            return process_bucket_inbox(store, prefix, root, bucket=bucket, archive_formats=fmts, log=log)
+        bucket_inbox = one_pass
     while True:
         try:
-            res = process_inbox(inbox, root, settle_s=settle, archive_formats=fmts,
-                                log=(lambda m: None) if as_json else (lambda m: click.echo(m, err=True)))
+            res = bucket_inbox() if bucket_inbox is not None else process_inbox(inbox, root, settle_s=settle,
+                                                                    archive_formats=fmts, log=log)
         except ThermcapError as exc:
             fail(str(exc))
         if as_json:

@@ -64,6 +64,9 @@ class BlobStore:
             for meta in batch:
                 yield str(meta["path"])[cut:], int(meta["size"])
 
+    def delete(self, key: str) -> None:
+        obstore.delete(self.store, self._key(key))
+
     def put_bytes(self, key: str, data: bytes) -> None:
         obstore.put(self.store, self._key(key), data, mode="overwrite")
 
