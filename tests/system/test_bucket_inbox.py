@@ -44,7 +44,8 @@ def test_a_bucket_prefix_is_an_inbox(seaweedfs, tmp_path):
     keys = {m["path"] for batch in obstore.list(store, prefix) for m in batch}
     tiff = next(p["path"] for p in res["processed"])
     assert any(k.startswith(f"{prefix}/{tiff}.derived/") and k.endswith(".png") for k in keys), keys
-    assert f"{prefix}/quarantine/field/broken.jpg" in keys and f"{prefix}/quarantine/field/broken.jpg.reason.txt" in keys
+    quarantined = f"{prefix}/quarantine/field/broken.jpg"
+    assert quarantined in keys and quarantined + ".reason.txt" in keys
     assert f"{prefix}/field/broken.jpg" not in keys and f"{prefix}/field/upload.tmp" in keys
     assert len(list_sessions(root)) == 3
     # another host, an empty disk: the bucket's journal says what was taken
