@@ -7,7 +7,7 @@ COPY pyproject.toml README.md ./
 COPY recorder ./recorder
 COPY archive ./archive
 COPY api ./api
-RUN pip install . && useradd --system --uid 10001 --home /data thermcap && mkdir -p /data && chown thermcap /data
+RUN pip install ".[scale,sync,report,geo]" && useradd --system --uid 10001 --home /data thermcap && mkdir -p /data && chown thermcap /data
 USER thermcap
 VOLUME ["/data"]
 EXPOSE 8000

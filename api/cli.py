@@ -161,11 +161,15 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 @click.option("--delete-source", is_flag=True,
               help="Delete the MCAP once archives verified (and uploaded, with a store).")
 @click.option("--lease-ttl", type=float, default=600.0, show_default=True)
+@click.option("--scheduler", envvar="THERMCAP_DASK_SCHEDULER", default=None, metavar="tcp://HOST:8786",
+              help="Run each session as a task on this Dask cluster ($THERMCAP_DASK_SCHEDULER) instead of here.")
+@click.option("--local-workers", type=int, default=None, metavar="N",
+              help="Run the tasks on an in-process Dask LocalCluster of N worker processes.")
 @click.option("--scrub-interval", type=float, default=86400.0, show_default=True,
               help="Seconds between scrubs (re-verify and repair every archived copy); 0: never.")
 @json_option
 def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, lease_ttl: float,
-           scrub_interval: float, as_json: bool) -> None:
+           scheduler: str | None, local_workers: int | None, scrub_interval: float, as_json: bool) -> None:
     """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
     from api.db import make_engine, migrate
     from api.jobs.worker import Worker
@@ -176,14 +180,35 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
     engine = make_engine(settings.db_url)
     migrate(engine)
     store = make_store(settings) if settings.s3_bucket else None
-    w = Worker(settings.root, engine, formats=[f for f in formats.split(",") if f], store=store,
+    fmts = [f for f in formats.split(",") if f]
+    w = Worker(settings.root, engine, formats=fmts, store=store,
                delete_source=delete_source, lease_ttl_s=lease_ttl, log=(lambda m: None) if as_json else click.echo)
-    if once:
-        res = w.run_once()
-        if as_json:
-            click.echo(json.dumps(res.to_dict(), indent=2))
-        sys.exit(1 if res.failed else 0)
-    w.run_forever(interval, scrub_interval)
+    runner: Any = w
+    if scheduler or local_workers:
+        from api.jobs.dask_jobs import DaskJobs, TaskConfig
+
+        s3 = ({"bucket": settings.s3_bucket, "endpoint": settings.s3_endpoint, "region": settings.s3_region,
+               "prefix": settings.s3_prefix} if settings.s3_bucket else None)
+        runner = DaskJobs(w, TaskConfig(str(settings.root.resolve()), tuple(fmts), settings.db_url, s3, delete_source),
+                          scheduler=scheduler, local_workers=local_workers or 2)
+    try:
+        if once:
+            res = runner.run_once()
+            w.heartbeat()
+            if as_json:
+                click.echo(json.dumps(res.to_dict(), indent=2))
+            sys.exit(1 if res.failed else 0)
+        if runner is w:
+            w.run_forever(interval, scrub_interval)
+        import time as _time
+
+        while True:  # on Dask: a pass of tasks every interval (scrub runs as `thermcap scrub`)
+            runner.run_once()
+            w.heartbeat()
+            _time.sleep(interval)
+    finally:
+        if runner is not w:
+            runner.close()
 
 
 @click.command()

@@ -204,10 +204,17 @@ class Worker:
                      + (f"repaired from {f.repaired_from}" if f.repaired else f"not repaired: {f.repair_error}"))
         return report
 
+    def heartbeat(self) -> None:
+        """``ROOT/.thermcap/worker.heartbeat``, touched after every pass: the container's health check."""
+        path = self.root / ".thermcap" / "worker.heartbeat"
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(f"{self.owner} {time.time():.0f}\n")
+
     def run_forever(self, interval_s: float = 5.0, scrub_interval_s: float = 86400.0) -> None:
         next_scrub = time.monotonic() + scrub_interval_s if scrub_interval_s > 0 else None
         while True:
             self.run_once()
+            self.heartbeat()
             if next_scrub is not None and time.monotonic() >= next_scrub:
                 self.scrub()
                 next_scrub = time.monotonic() + scrub_interval_s
