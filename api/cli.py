@@ -153,6 +153,25 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
 
 
+@click.command("jobs")
+@click.option("--sessions", type=int, default=4, show_default=True)
+@click.option("--seconds", type=float, default=4.0, show_default=True, help="Length of each 640x512@60 session.")
+@click.option("--formats", default="png16,hdf5", show_default=True)
+@json_option
+def bench_jobs_cmd(sessions: int, seconds: float, formats: str, as_json: bool) -> None:
+    """The same sessions archived as Dask tasks on one worker and on two: the scaling, and a capacity model."""
+    from api.bench_jobs import bench_jobs
+
+    res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f))
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(f"{sessions} sessions of {seconds:g} s: 1 worker {res['wall_s_1_worker']} s "
+               f"({res['x_real_time_1_worker']}x real time), 2 workers {res['wall_s_2_worker']} s "
+               f"({res['x_real_time_2_worker']}x): scaling {res['scaling_2_over_1']}x; "
+               f"cores for 100 cameras x 8 h a day: {res['capacity']['cores_for_100_cameras_8h_a_day_in_24h']}")
+
+
 @click.command()
 @root_option
 @click.option("--formats", default="png16,tiff-lzw,hdf5,jxl", show_default=True)

@@ -1,0 +1,55 @@
+"""``thermcap bench jobs``: the same sessions archived as Dask tasks on a LocalCluster of one
+worker and of two, in one run. The ratio is the scaling (2x is the limit on two cores). The
+per-core rate gives the capacity model in the README: cores needed for N cameras recording
+H hours a day."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+__all__ = ["bench_jobs"]
+
+
+def bench_jobs(sessions: int = 4, seconds: float = 4.0, formats: tuple[str, ...] = ("png16", "hdf5"),
+               workdir: str | None = None) -> dict[str, Any]:
+    from api.db import make_engine, migrate
+    from api.jobs.dask_jobs import DaskJobs, TaskConfig
+    from api.jobs.worker import Worker
+    from recorder.capture.recorder import Recorder
+    from recorder.capture.sources.sim import SimSource
+
+    n = int(seconds * 60)
+    out: dict[str, Any] = {"sessions": sessions, "seconds_each": seconds, "frames_each": n, "formats": list(formats)}
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        pristine = Path(tmp) / "pristine"
+        for k in range(sessions):
+            Recorder(SimSource(width=640, height=512, frames=n, paced=False, seed=k), pristine, session_id=f"b{k}",
+                     analysis=False, recover_leftovers=False).run()
+        for workers in (1, 2):
+            root = Path(tmp) / f"root{workers}"
+            shutil.copytree(pristine, root)
+            db = f"sqlite:///{Path(tmp) / f'index{workers}.sqlite'}"
+            engine = make_engine(db)
+            migrate(engine)
+            jobs = DaskJobs(Worker(root, engine, formats=list(formats), log=lambda m: None),
+                            TaskConfig(str(root), formats, db, None, False), local_workers=workers)
+            try:
+                t = time.perf_counter()
+                res = jobs.run_once()
+                wall = time.perf_counter() - t
+            finally:
+                jobs.close()
+            if len(res.archived) != sessions or res.failed:
+                raise RuntimeError(f"the benchmark's sessions did not all archive: {res.failed}")
+            out[f"wall_s_{workers}_worker"] = round(wall, 2)
+            out[f"x_real_time_{workers}_worker"] = round(sessions * seconds / wall, 3)
+    out["scaling_2_over_1"] = round(out["wall_s_1_worker"] / out["wall_s_2_worker"], 3)
+    per_core = out["x_real_time_1_worker"]
+    out["capacity"] = {"camera_hours_per_core_hour": per_core,
+                       "cores_for_10_cameras_8h_a_day_in_24h": round(10 * 8 / (per_core * 24), 2),
+                       "cores_for_100_cameras_8h_a_day_in_24h": round(100 * 8 / (per_core * 24), 2)}
+    return out
