@@ -11,6 +11,7 @@ ratio near 6x on simulated frames.
 from __future__ import annotations
 
 import io
+import math
 import os
 import tempfile
 import time
@@ -33,7 +34,7 @@ SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
 
 def noise_entropy_bound(sigma_counts: float, bits: int = 16) -> float:
     """Ratio limit when only Gaussian noise of ``sigma`` counts is left: 16 / H(noise)."""
-    h = 0.5 * np.log2(2 * np.pi * np.e * sigma_counts**2)
+    h = 0.5 * math.log2(2 * math.pi * math.e * sigma_counts**2)
     return bits / h
 
 

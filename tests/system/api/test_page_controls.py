@@ -9,17 +9,7 @@ import pytest
 
 from recorder.importers.run import import_paths
 from tests.conftest import SAMPLES, ApiServer
-from tests.support.cdp import Browser, chromium_binary
-
-
-@pytest.fixture(scope="module")
-def browser():
-    binary = chromium_binary()
-    if binary is None:
-        pytest.skip("no Chromium here (apt-get install chromium; .ci/run does this)")
-    b = Browser(binary)
-    yield b
-    b.close()
+from tests.support.cdp import Browser
 
 
 @pytest.fixture(scope="module")

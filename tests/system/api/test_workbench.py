@@ -10,21 +10,9 @@ import os
 import urllib.request
 from pathlib import Path
 
-import pytest
-
-from tests.support.cdp import Browser, chromium_binary
+from tests.support.cdp import Browser
 
 DOCS = Path(__file__).resolve().parents[3] / "docs"
-
-
-@pytest.fixture(scope="module")
-def browser():
-    binary = chromium_binary()
-    if binary is None:
-        pytest.skip("no Chromium here (apt-get install chromium; .ci/run does this)")
-    b = Browser(binary)
-    yield b
-    b.close()
 
 
 def _get(url: str) -> dict:
