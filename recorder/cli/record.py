@@ -57,6 +57,9 @@ if TYPE_CHECKING:
 @click.option("--max-disk", default=None, metavar="SIZE", help="With --ring: the most the data root may hold (20G).")
 @click.option("--min-free", default=None, metavar="SIZE|PCT",
               help="With --ring: keep this much free on the data root's disk (5G or 10%).")
+@click.option("--evict-only-synced", is_flag=True,
+              help="With --ring: delete only segments the cloud confirmed (thermcap sync receipts), whatever the "
+                   "pressure.")
 @click.option("--pre", "pre_s", type=float, default=30.0, show_default=True,
               help="Seconds kept before a trigger or mark.")
 @click.option("--post", "post_s", type=float, default=30.0, show_default=True,
@@ -82,7 +85,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
            root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool,
            cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
-           analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float,
+           analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, evict_only_synced: bool,
+           pre_s: float, post_s: float,
            trigger_hot: float | None, trigger_target_count: bool, control: bool, control_port: int,
            control_token: str | None, live: bool, live_host: str, live_port: int, live_fps: float,
            live_width: int, debug_writer_delay: float, as_json: bool) -> None:
@@ -135,7 +139,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
                                compression=comp, compression_level=default_level if level is None else level)
         if (max_disk or min_free) and not ring:
             raise click.BadParameter("--max-disk and --min-free need --ring")
-        ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s) if ring else None
+        ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s, evict_only_synced) if ring else None
         if ring and ring_policy is not None and ring_policy.max_disk is None and ring_policy.min_free is None \
                 and ring_policy.min_free_percent is None:
             raise click.BadParameter("--ring needs --max-disk and/or --min-free")

@@ -53,9 +53,11 @@ class RingPolicy:
     pre_s: float = 30.0  # kept before a trigger
     post_s: float = 30.0  # kept after it
     interval_s: float = 1.0  # how often the evictor looks, besides after every segment
+    require_receipt: bool = False  # evict only segments the cloud confirmed (``thermcap sync``'s receipts)
 
     @classmethod
-    def parse(cls, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float) -> RingPolicy:
+    def parse(cls, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float,
+              require_receipt: bool = False) -> RingPolicy:
         pct = None
         free = None
         if min_free:
@@ -63,7 +65,8 @@ class RingPolicy:
                 pct = float(min_free.strip()[:-1])
             else:
                 free = parse_size(min_free)
-        return cls(parse_size(max_disk) if max_disk else None, free, pct, pre_s, post_s)
+        return cls(parse_size(max_disk) if max_disk else None, free, pct, pre_s, post_s,
+                   require_receipt=require_receipt)
 
 
 @dataclass(frozen=True)
@@ -248,7 +251,11 @@ class Evictor(threading.Thread):
         if (reason := self.pressure(used)) is None:
             self.state.blocked, self.state.blocked_reason = False, None
             return done
+        confirmed = self._confirmed() if self.policy.require_receipt else None
         for c in self._candidates():
+            key = c.path.relative_to(self.root).as_posix()
+            if confirmed is not None and confirmed.get(key) != c.path.stat().st_size:
+                continue  # not yet safe in the cloud: kept, whatever the pressure
             book = self._book(c.session_dir)
             with book.lock:  # a window added now is seen before the file goes
                 if book.protects(c.start_ns, c.end_ns):
@@ -263,10 +270,22 @@ class Evictor(threading.Thread):
             if (reason := self.pressure(used)) is None:
                 self.state.blocked, self.state.blocked_reason = False, None
                 return done
+        if self.policy.require_receipt:
+            reason += "; the rest is protected or not yet confirmed by the cloud (thermcap sync)"
         if not self.state.blocked:
             self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
         self.state.blocked, self.state.blocked_reason = True, reason
         return done
+
+    def _confirmed(self) -> dict[str, int]:
+        """Segments the cloud confirmed byte for byte: key -> size, from sync's journal."""
+        from recorder.sync.journal import Journal
+
+        try:
+            journal = Journal(self.root)
+        except Exception:  # an unreadable journal confirms nothing
+            return {}
+        return {k: o.size for k, o in journal.objects.items() if o.state == "confirmed"}
 
     def _record_eviction(self, victim: _Candidate, size: int, reason: str) -> None:
         self._spans.pop(victim.path, None)

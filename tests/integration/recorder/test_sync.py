@@ -163,3 +163,31 @@ def test_rates_by_time_of_day():
     for bad in ("fast", "0MB/s", "25:00-26:00=1MB/s", "-3MB/s"):
         with pytest.raises(ThermcapError, match="max-rate"):
             parse_rate(bad)
+
+
+def test_a_ring_that_needs_receipts_evicts_only_what_the_cloud_confirmed(vehicle, tmp_path):
+    """--evict-only-synced: under disk pressure the evictor deletes a segment only once sync has
+    its receipt for exactly those bytes; the rest stays, and the evictor says why it is blocked."""
+    import json as _json
+
+    from recorder.storage.ring import Evictor, RingPolicy
+
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    session = root / "sessions" / "drive"
+    meta = _json.loads((session / "session.json").read_text())
+    (session / "session.json").write_text(_json.dumps({**meta, "ring": True}))
+    segs = sorted(session.glob("*.mcap"))
+    syncer = Syncer(root, DirTarget(dest), part_size=5 * MiB)
+    assert not syncer.run_once(sessions=["drive"]).failed
+    confirm_synced(open_store(dest))
+    first = segs[0].relative_to(root).as_posix()
+    # only the first segment's receipt reaches the vehicle
+    for st in syncer.journal.objects.values():
+        if st.key.endswith(".mcap") and st.key != first:
+            (dest / receipt_key(st.key)).unlink()
+    assert syncer.check_receipts() == 1
+    ev = Evictor(root, RingPolicy(max_disk=1, require_receipt=True), {})
+    gone = ev.evict_once()
+    assert [e.segment for e in gone] == [segs[0].name]
+    assert all(s.exists() for s in segs[1:])
+    assert ev.state.blocked and "not yet confirmed by the cloud" in ev.state.blocked_reason
