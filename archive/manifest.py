@@ -15,11 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, cast, overload
 
-import numpy as np
-
 from archive.exceptions import ManifestError
 from archive.manifest_types import Manifest
-from recorder.storage.digest import file_sha256
+from recorder.storage.digest import file_sha256, frame_sha256
 from recorder.storage.layout import MANIFEST_JSON, SessionLayout
 from recorder.storage.segments import write_json_atomic
 
@@ -49,12 +47,6 @@ def archive_dir(session_dir: Path) -> Path:
 
 def manifest_path(session_dir: Path) -> Path:
     return archive_dir(session_dir) / MANIFEST_NAME
-
-
-def frame_sha256(pixels: np.ndarray) -> str:
-    """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
-    arr = np.ascontiguousarray(pixels, dtype="<u2")
-    return hashlib.sha256(arr.data.cast("B")).hexdigest()
 
 
 def sidecar_sha256(sidecar: bytes) -> str:

@@ -19,7 +19,6 @@ per file), archived and verified, and its derived products are written beside it
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import shutil
@@ -30,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from recorder.exceptions import ThermcapError
+from recorder.storage.digest import file_sha256
 from recorder.storage.lock import lock_session
 from recorder.storage.reader import read_session_meta
 
@@ -49,14 +49,6 @@ class InboxPass:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _journal(inbox: Path) -> dict[str, dict[str, Any]]:
@@ -166,7 +158,7 @@ def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
             if not _settled(path, settle_s, now):
                 result.waiting.append(rel)
                 continue
-            digest = _sha256(path)
+            digest = file_sha256(path)
             if digest in seen:
                 if seen[digest]["path"] != rel:
                     result.duplicates.append(rel)

@@ -64,17 +64,12 @@ class TemporalFrames(ArchiveFormat):
                 with zipfile.ZipFile(fh) as zf:
                     members = [i for i in zf.infolist() if i.filename.endswith(EXT)]
                     key = k - k % self.key_interval
-                    while key > 0 and parse_header(_head(zf, members[key])).kind != KEY:
+                    while key > 0 and parse_header(zf.read(members[key])).kind != KEY:
                         key -= 1  # a file written with another interval: walk back to its key
                     *_, last = _decode_run(zf, key, k + 1)
                     return last
             except (zipfile.BadZipFile, OSError, IndexError, TpredError) as exc:
                 raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
-
-
-def _head(zf: zipfile.ZipFile, info: zipfile.ZipInfo) -> bytes:
-    """A record whole (parse_header checks its length against the payload it declares)."""
-    return zf.read(info)
 
 
 def _decode_run(zf: zipfile.ZipFile, start: int, stop: int | None) -> Iterator[DecodedFrame]:

@@ -13,7 +13,6 @@ attachments, bit-exact.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import time
@@ -29,6 +28,7 @@ from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
 from recorder.importers import ImportedFrame, ImportFileError, TruncatedImageError, iter_file
 from recorder.importers.dji_sdk import DjiBackend
 from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
+from recorder.storage.digest import frame_sha256
 
 __all__ = ["ImportReport", "import_paths"]
 
@@ -90,7 +90,7 @@ def _summary(f: ImportedFrame) -> dict[str, Any]:
         reason = str(exc)
     out = {"path": f.path, "format": f.format, "layout": f.layout, "frame_index": f.frame_index,
            "width": int(f.pixels.shape[1]), "height": int(f.pixels.shape[0]),
-           "raw_sha256": hashlib.sha256(np.ascontiguousarray(f.pixels, dtype="<u2").tobytes()).hexdigest(),
+           "raw_sha256": frame_sha256(f.pixels),
            "celsius": celsius, "model": describe_model(f.model)}
     if celsius is None:
         out["celsius_unavailable"] = reason

@@ -30,9 +30,11 @@ import numpy as np
 
 from recorder import __version__
 from recorder.exceptions import ThermcapError
+from recorder.exports.files import _positions
 from recorder.icd.names import iso_utc
 from recorder.radiometry import model_from_dict
 from recorder.radiometry.params import read_versions, reparameterise
+from recorder.storage.digest import frame_sha256
 from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["Finding", "InspectionReport", "VerifyResult", "build_inspection", "verify_inspection"]
@@ -73,11 +75,6 @@ class InspectionReport:
 class VerifyResult:
     holds: bool
     checks: list[dict[str, Any]]
-
-
-def _frame_sha256(pixels: np.ndarray) -> str:
-    """The project-wide frame hash (as the archive manifest's): sha256 of the uint16 LE bytes."""
-    return hashlib.sha256(np.ascontiguousarray(pixels, dtype="<u2").tobytes()).hexdigest()
 
 
 def _numbers(temps: np.ndarray, box: list[int]) -> tuple[float, float, float]:
@@ -134,7 +131,7 @@ def build_inspection(session_dir: str | Path, *, max_findings: int = 12) -> Insp
         top, ref, dt = _numbers(temps, box)
         images[index] = temps
         findings.append(Finding(index, iso_utc(log_time), str(tid), target.get("classification"), box, top, ref, dt,
-                                version, _frame_sha256(pixels), positions.get(log_time)))
+                                version, frame_sha256(pixels), positions.get(log_time)))
     provenance = {"thermcap": __version__, "generated_at": iso_utc(time.time_ns()),
                   "radiometric_model": meta.get("radiometric_model"),
                   "model_versions": [v.to_dict() for v in read_versions(session_dir)],
@@ -143,14 +140,6 @@ def build_inspection(session_dir: str | Path, *, max_findings: int = 12) -> Insp
     context = [{"kind": e.get("kind"), "start": iso_utc(int(e["start_ns"])), "end": iso_utc(int(e["end_ns"]))}
                for e in events if isinstance(e, dict) and e.get("start_ns") is not None and e.get("end_ns") is not None]
     return InspectionReport(meta.get("session_id", session_dir.name), findings, context, provenance, images)
-
-
-def _positions(session_dir: Path) -> dict[int, dict[str, Any]]:
-    try:
-        from recorder.exports.files import _positions as positions
-    except ImportError:  # pragma: no cover
-        return {}
-    return positions(session_dir)
 
 
 def json_sha256_in_pdf(pdf: Path) -> str | None:
@@ -191,7 +180,7 @@ def verify_inspection(path: str | Path, root: str | Path) -> VerifyResult:
             checks.append({"frame": f["frame"], "target_id": f["target_id"], "holds": False,
                            "why": "the session no longer has this frame"})
             continue
-        if _frame_sha256(pixels) != f["frame_sha256"]:
+        if frame_sha256(pixels) != f["frame_sha256"]:
             checks.append({"frame": f["frame"], "target_id": f["target_id"], "holds": False,
                            "why": "the frame's sha256 differs: the stored counts changed"})
             continue

@@ -1,12 +1,15 @@
-"""The sha256 of a file, read in 1 MiB blocks: the one way every part of thermcap hashes a file
-(the archive's manifest, sync's journal and targets, the cloud's receipts)."""
+"""The project's two hashes, in one place for every package: a file's sha256 (the archive's
+manifest, sync's journal and targets, the cloud's receipts, the inbox) and a frame's (the
+manifest, the importers' reports, the inspection report)."""
 
 from __future__ import annotations
 
 import hashlib
 from pathlib import Path
 
-__all__ = ["file_sha256"]
+import numpy as np
+
+__all__ = ["file_sha256", "frame_sha256"]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -15,3 +18,9 @@ def file_sha256(path: str | Path) -> str:
         while block := f.read(1 << 20):
             h.update(block)
     return h.hexdigest()
+
+
+def frame_sha256(pixels: np.ndarray) -> str:
+    """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
+    arr = np.ascontiguousarray(pixels, dtype="<u2")
+    return hashlib.sha256(arr.data.cast("B")).hexdigest()

@@ -37,6 +37,13 @@ def _cluster(tmp_path, port):
     return sched, workers, client
 
 
+def _stop(client, processes):
+    client.close()
+    for p in processes:
+        p.kill()
+        p.wait()
+
+
 def _running_worker_pid(client, timeout=60.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -82,10 +89,7 @@ def test_a_worker_killed_mid_task_costs_a_rerun_not_an_archive(tmp_path):
         assert json.loads(out)["archived"] == ["big"]
         _check_one_verified_archive(session)
     finally:
-        client.close()
-        for p in (*workers, sched):
-            p.kill()
-            p.wait()
+        _stop(client, (*workers, sched))
 
 
 def test_the_scheduler_killed_mid_task_and_a_rerun_finish_from_durable_state(tmp_path):
@@ -99,14 +103,11 @@ def test_the_scheduler_killed_mid_task_and_a_rerun_finish_from_durable_state(tmp
                                text=True)
         _running_worker_pid(client)
         time.sleep(1.0)
-        client.close()
-        for p in (sched, *workers):  # the scheduler dies; its workers go with it
-            p.kill()
-            p.wait()
+        _stop(client, (sched, *workers))  # the scheduler dies; its workers go with it
         job.communicate(timeout=120)
         assert job.returncode != 0  # the submitter saw the cluster go
     finally:
-        for p in (*workers, sched):
+        for p in (*workers, sched):  # already stopped unless the test failed before
             p.kill()
     port = free_port()
     sched, workers, client = _cluster(tmp_path, port)
@@ -116,7 +117,4 @@ def test_the_scheduler_killed_mid_task_and_a_rerun_finish_from_durable_state(tmp
         assert json.loads(r.stdout)["archived"] == ["big2"]
         _check_one_verified_archive(session)
     finally:
-        client.close()
-        for p in (*workers, sched):
-            p.kill()
-            p.wait()
+        _stop(client, (*workers, sched))
