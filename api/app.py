@@ -16,7 +16,9 @@ from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 from api.db import make_engine, migrate
 from api.exceptions import FrameNotFound, FrameUnavailable
 from api.indexing import index_root
+from api.jobs.runner import JobRunner
 from api.reading.frames import FrameReader
+from api.reading.regions import RegionReader
 from api.security import AuthGate
 from api.settings import Settings
 from api.storage import make_store
@@ -89,6 +91,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
         yield
         if rescan:
             rescan.halt.set()
+        app.state.jobs.close()
 
     app = FastAPI(title="thermcap", version=__version__, lifespan=lifespan,
                   description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.")
@@ -97,7 +100,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     migrate(app.state.engine)
     app.state.store = make_store(settings)
     app.state.frames = FrameReader(app.state.engine, app.state.store, settings.root)
+    app.state.regions = RegionReader(app.state.frames, app.state.engine, app.state.store)
     app.state.files = FileVerifier(app.state.store, settings.root)
+    app.state.jobs = JobRunner(app.state.engine, app.state.store)
     registry = CollectorRegistry()
     app.state.metrics_registry = registry
     requests_total = Counter("thermcap_http_requests_total", "HTTP requests", ["route", "method", "status"],
@@ -142,9 +147,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                      "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from api.routes import archives, export, frames, measure, meta, radiometry, sessions, ui
+    from api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui
 
-    for module in (meta, sessions, frames, measure, radiometry, archives, export, ui):
+    for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, ui):
         app.include_router(module.router)
     return app
 

@@ -1,4 +1,4 @@
-"""The API's ``thermcap`` subcommands: serve, index, upload."""
+"""The API's ``thermcap`` subcommands: serve, index, upload, worker, gc, watch, jobs."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import click
 from recorder.cli.options import fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
-__all__ = ["index", "on_archived", "serve", "upload"]
+__all__ = ["index", "jobs", "on_archived", "serve", "upload"]
 
 
 @click.command()
@@ -331,3 +331,39 @@ def watch(inbox: str, root: str, once: bool, interval: float, settle: float, arc
         if once:
             sys.exit(1 if res.quarantined else 0)
         _time.sleep(interval)
+
+
+@click.command("jobs")
+@root_option
+@click.option("--state", type=click.Choice(["queued", "running", "done", "failed"]), default=None)
+@click.option("--kind", default=None, help="archive, series, ...")
+@click.option("--session", "session_id", default=None)
+@click.option("--limit", type=int, default=50, show_default=True)
+@json_option
+def jobs(root: str, state: str | None, kind: str | None, session_id: str | None, limit: int, as_json: bool) -> None:
+    """Jobs from the index (THERMCAP_DATABASE_URL, or ROOT's SQLite): the API's series and the
+    workers' archive tasks, with attempts, the worker that ran them and why one failed."""
+    from sqlalchemy.exc import SQLAlchemyError
+
+    from api.db import make_engine, migrate
+    from api.jobs.records import list_jobs
+    from api.settings import Settings
+
+    settings = Settings(root=Path(root))
+    try:
+        engine = make_engine(settings.db_url)
+        migrate(engine)
+        found = list_jobs(engine, state=state, kind=kind, session_id=session_id, limit=limit)
+    except SQLAlchemyError as exc:
+        fail(index_db_problem(settings, exc))
+    if as_json:
+        click.echo(json.dumps([j.to_dict(with_result=False) for j in found], indent=2))
+        return
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table("job", "kind", "session", "state", "tries", "worker", "seconds", "error")
+    for j in found:
+        table.add_row(j.id, j.kind, j.session_id or "", j.state, str(j.attempts), j.worker or "",
+                      f"{j.seconds:.1f}" if j.seconds is not None else "", (j.error or "")[:80])
+    Console().print(table if found else "no jobs")

@@ -28,6 +28,7 @@ __all__ = [
     "events",
     "frame_blobs",
     "frames",
+    "jobs",
     "leases",
     "make_engine",
     "metadata",
@@ -60,6 +61,7 @@ sessions = Table(
     Column("coverage", Text),
     Column("source_deleted", Boolean, nullable=False, default=False),
     Column("fingerprint", Text, nullable=False),
+    Column("summary", Text),  # the archive's frame summary (path, bytes, sha256, band rows) as JSON
     Column("indexed_at", BigInteger, nullable=False),
 )
 Index("ix_sessions_start", sessions.c.start_ns)
@@ -133,6 +135,27 @@ leases = Table(
     Column("owner", String(128), nullable=False),
     Column("expires_ns", BigInteger, nullable=False),
 )
+
+
+# Work done on behalf of users and workers (a region series, a session's archive task): what was
+# asked, where it stands, how often it was tried and why it failed, so a job's fate never lives
+# only in one process's memory or in the Dask dashboard.
+jobs = Table(
+    "jobs", metadata,
+    Column("id", String(96), primary_key=True),
+    Column("kind", String(32), nullable=False),
+    Column("session_id", String(128)),
+    Column("params", Text, nullable=False, default="{}"),
+    Column("state", String(16), nullable=False),  # queued, running, done, failed
+    Column("attempts", Integer, nullable=False, default=0),
+    Column("worker", String(128)),
+    Column("error", Text),
+    Column("result", Text),  # JSON: small results inline; a large one names its blob
+    Column("created_ns", BigInteger, nullable=False),
+    Column("started_ns", BigInteger),
+    Column("finished_ns", BigInteger),
+)
+Index("jobs_by_state", jobs.c.state, jobs.c.created_ns)
 
 
 def make_engine(url: str) -> Engine:

@@ -54,7 +54,7 @@ _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
 
 
 #: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
-INDEX_RULES_VERSION = 2  # 2: frames with no graded target have no grade
+INDEX_RULES_VERSION = 3  # 2: frames with no graded target have no grade; 3: the frame summary
 
 
 def fingerprint(session_dir: Path) -> str:
@@ -229,6 +229,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),
         "coverage": json.dumps(_coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
         "fingerprint": fp, "indexed_at": time.time_ns(),
+        "summary": json.dumps((manifest or {})["summary"]) if (manifest or {}).get("summary") else None,
     }
     seg_rows = [{"session_id": sid, "name": s.name, "frames": sum(1 for x in segs if x == s.name),
                  "bytes": s.stat().st_size} for s in session_segments(session_dir)]

@@ -25,6 +25,7 @@ from archive.exceptions import ArchiveError, SourceDamagedError, VerificationErr
 from archive.extras import EXTRAS_NAME, ExtrasWriter
 from archive.fanout import fan_out
 from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from archive.frame_summary import SUMMARY_NAME, SummaryBuilder
 from archive.manifest import (
     archive_dir,
     file_sha256,
@@ -58,6 +59,12 @@ def _fsync_tree(path: Path) -> None:
             finally:
                 os.close(fd)
     fsync_dir(path)
+
+
+def _summary_intact(adir: Path, manifest: Manifest) -> bool:
+    entry = manifest.get("summary") or {}
+    path = adir / entry.get("path", SUMMARY_NAME)
+    return bool(entry.get("sha256")) and path.is_file() and file_sha256(path) == entry["sha256"]
 
 
 def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping[str, Any]],
@@ -246,7 +253,10 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     source = SourcePass(session_dir, per_segment,
                         hash_frames=bool(todo) and (not known or len(known) != total
                                                     or "sidecar_sha256" not in manifest["frames"]),
-                        extras=ExtrasWriter(adir) if need_extras else None)
+                        extras=ExtrasWriter(adir) if need_extras else None,
+                        # taken only with formats to write: they verify the very frames it summarises
+                        summary=SummaryBuilder(total) if todo and (force or not _summary_intact(adir, manifest))
+                        else None)
 
     def frames() -> Iterator[SessionFrame]:
         yield from source.frames()
@@ -304,6 +314,12 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             failures.append(f"extras: {manifest['extras']['verification']}")
     if failures:
         raise VerificationError(f"{session_dir}: archive verification failed; the source was kept", failures)
+    if source.summary is not None and source.summary.n == len(manifest["frames"]["sha256"]):
+        path = adir / SUMMARY_NAME
+        source.summary.finish().save(path)
+        manifest["summary"] = {"path": SUMMARY_NAME, "bytes": path.stat().st_size, "sha256": file_sha256(path),
+                               "band_rows": source.summary.band_rows, "frames": source.summary.n}
+        save_manifest(session_dir, manifest)
     if delete_source:
         not_ok = [f for f in formats if not manifest["formats"].get(f, {}).get("verified")]
         if not manifest.get("extras", {}).get("verified"):

@@ -92,7 +92,7 @@ class ArchivedFile:
 
 
 def archived_files(manifest: Manifest) -> list[ArchivedFile]:
-    """Every file of every verified format, and extras.mcap: what is uploaded, and what the
+    """Every file of every verified format, extras.mcap and the frame summary: what is uploaded, and what the
     bucket must hold for gc and scrub. One list, so the three never disagree."""
     out = [ArchivedFile(f"{fid}/{rec['path']}", rec["bytes"], rec["sha256"])
            for fid, entry in manifest.get("formats", {}).items() if entry.get("verified")
@@ -100,6 +100,9 @@ def archived_files(manifest: Manifest) -> list[ArchivedFile]:
     extras = manifest.get("extras") or {}
     if extras.get("verified"):  # attachments and vendor metadata travel with the frames
         out.append(ArchivedFile(extras["path"], extras["bytes"], extras["sha256"]))
+    summary = manifest.get("summary") or {}
+    if summary.get("sha256"):  # what region series read instead of decoding every frame
+        out.append(ArchivedFile(summary["path"], summary["bytes"], summary["sha256"]))
     return out
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 from typing import Any, TypedDict
 
 __all__ = ["Damage", "ExtrasEntry", "FileEntry", "FormatEntry", "FramesBlock", "Manifest", "SourceBlock",
-           "UploadBlock"]
+           "SummaryEntry", "UploadBlock"]
 
 
 class FileEntry(TypedDict, total=False):
@@ -72,6 +72,14 @@ class ExtrasEntry(TypedDict, total=False):
     damaged: Damage
 
 
+class SummaryEntry(TypedDict, total=False):
+    path: str
+    bytes: int
+    sha256: str
+    band_rows: int
+    frames: int
+
+
 class UploadBlock(TypedDict, total=False):
     complete: bool
     keys: list[str]
@@ -92,4 +100,5 @@ class Manifest(TypedDict, total=False):
     frames: FramesBlock
     formats: dict[str, FormatEntry]
     extras: ExtrasEntry
+    summary: SummaryEntry
     upload: UploadBlock

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from archive.exceptions import SourceDamagedError
 from archive.extras import ExtrasWriter
+from archive.frame_summary import SummaryBuilder
 from archive.manifest import frame_sha256, sidecar_sha256
 from archive.source_checks import channel_problems
 from recorder.icd.topics import TOPIC_METADATA
@@ -40,14 +41,16 @@ class SourceHashes:
 
 class SourcePass:
     """``frames()`` once; then ``hashes`` (None when ``hash_frames`` is off: the manifest already
-    has them, and they stay what copies are compared with) and the extras, if given a writer."""
+    has them, and they stay what copies are compared with), the extras, if given a writer, and
+    the frame summary, if given a builder."""
 
     def __init__(self, session_dir: Path, per_segment: dict[str, int], *, hash_frames: bool = True,
-                 extras: ExtrasWriter | None = None) -> None:
+                 extras: ExtrasWriter | None = None, summary: SummaryBuilder | None = None) -> None:
         self.session_dir = session_dir
         self.per_segment = per_segment
         self.hash_frames = hash_frames
         self.extras = extras
+        self.summary = summary
         self.hashes: SourceHashes | None = None
 
     def frames(self) -> Iterator[SessionFrame]:
@@ -66,6 +69,8 @@ class SourcePass:
                     got.sidecar_sha256.append(sidecar_sha256(f.sidecar))
                     got.timestamps_ns.append(f.log_time)
                     got.segments.append(f.segment)
+                if self.summary is not None:
+                    self.summary.add(f.pixels)
                 read[f.segment] = read.get(f.segment, 0) + 1
                 if not f.sidecar and len(problems) < 20:
                     problems.append(f"{f.segment}: frame {f.index} has no sidecar on {TOPIC_METADATA}")

@@ -19,13 +19,14 @@ the same ``--scheduler`` address.
 
 from __future__ import annotations
 
-import hashlib
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
 from api.jobs.worker import Worker, WorkerPass, _needs_work, finished_sessions
-from recorder.storage.reader import read_session_meta, session_segments
+from recorder.storage.reader import read_session_meta
 
 __all__ = ["DaskJobs", "archive_task", "session_task_key"]
 
@@ -42,12 +43,7 @@ class TaskConfig:
 
 
 def session_task_key(session_dir: Path, formats: tuple[str, ...]) -> str:
-    sid = read_session_meta(session_dir).get("session_id", session_dir.name)
-    h = hashlib.sha256(sid.encode())
-    for seg in session_segments(session_dir):
-        h.update(f"{seg.name}:{seg.stat().st_size};".encode())
-    h.update(",".join(formats).encode())
-    return f"thermcap-archive-{sid}-{h.hexdigest()[:16]}"
+    return archive_job_id(session_dir, formats)
 
 
 def archive_task(cfg: TaskConfig, session_dir: str) -> dict[str, Any]:
@@ -59,17 +55,33 @@ def archive_task(cfg: TaskConfig, session_dir: str) -> dict[str, Any]:
 
     d = Path(session_dir)
     store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
-    archive_session(d, list(cfg.formats), delete_source=cfg.delete_source and store is None)
-    if store is not None:
-        upload_archive(store, Path(cfg.root), d)
-        if cfg.delete_source:
-            archive_session(d, list(cfg.formats), delete_source=True)
     engine = make_engine(cfg.db_url)
+    jid = session_task_key(d, cfg.formats)
+    start_job(engine, jid, _worker_name())  # each attempt counts, so a rerun after a lost worker shows
     try:
+        archive_session(d, list(cfg.formats), delete_source=cfg.delete_source and store is None)
+        if store is not None:
+            upload_archive(store, Path(cfg.root), d)
+            if cfg.delete_source:
+                archive_session(d, list(cfg.formats), delete_source=True)
         index_session(engine, d)
+        sid = read_session_meta(d).get("session_id", d.name)
+        finish_job(engine, jid, result={"session": sid, "formats": list(cfg.formats)})
+        return {"session": sid}
+    except Exception as exc:
+        finish_job(engine, jid, error=f"{type(exc).__name__}: {exc}")
+        raise
     finally:
         engine.dispose()
-    return {"session": read_session_meta(d).get("session_id", d.name)}
+
+
+def _worker_name() -> str:
+    try:
+        from distributed import get_worker
+
+        return f"dask:{get_worker().address}"
+    except ValueError:  # not on a Dask worker (called directly)
+        return f"local:{os.getpid()}"
 
 
 class DaskJobs:
@@ -93,6 +105,9 @@ class DaskJobs:
         self.worker._split_camera_sessions(result)  # local and quick: copies, then archived as tasks
         todo = [d for d in finished_sessions(self.worker.root)
                 if _needs_work(d, list(self.cfg.formats), self.worker.store)]
+        for d in todo:  # recorded before the cluster sees it: a job never exists only in the scheduler
+            submit_job(self.worker.engine, session_task_key(d, self.cfg.formats), "archive",
+                       read_session_meta(d).get("session_id", d.name), {"formats": list(self.cfg.formats)})
         futures = {self.client.submit(archive_task, self.cfg, str(d), key=session_task_key(d, self.cfg.formats),
                                       retries=self.retries): d for d in todo}
         for fut, d in futures.items():

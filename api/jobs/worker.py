@@ -28,6 +28,7 @@ from sqlalchemy.exc import IntegrityError
 
 from api import db
 from api.indexing import index_session
+from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
 from api.storage import BlobStore, upload_archive
 from archive.archiver import archive_session
 from archive.manifest import load_manifest
@@ -147,6 +148,9 @@ class Worker:
             if not acquire_lease(self.engine, sid, self.owner, self.lease_ttl_s):
                 result.leased_elsewhere.append(sid)
                 continue
+            jid = archive_job_id(d, self.formats)
+            submit_job(self.engine, jid, "archive", sid, {"formats": list(self.formats)})
+            start_job(self.engine, jid, self.owner)
             try:
                 with _Renewal(self.engine, sid, self.owner, self.lease_ttl_s) as renewal:
                     archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
@@ -159,10 +163,15 @@ class Worker:
                     self.log(f"warning: {sid}: the lease lapsed during the work (a pause longer than "
                              f"{self.lease_ttl_s:g} s); another worker may have started it and found it done")
                 result.archived.append(sid)
+                finish_job(self.engine, jid, result={"session": sid, "formats": list(self.formats)})
                 self.log(f"archived {sid}")
             except ThermcapError as exc:
                 result.failed[sid] = str(exc)
+                finish_job(self.engine, jid, error=str(exc))
                 self.log(f"error: {sid}: {exc}")
+            except BaseException as exc:  # recorded, then raised as before
+                finish_job(self.engine, jid, error=f"{type(exc).__name__}: {exc}")
+                raise
             finally:
                 release_lease(self.engine, sid, self.owner)
         return result

@@ -44,19 +44,25 @@ class FrameModel:
                 except ValueError:
                     raise HTTPException(400, f"{name} must be a number") from None
         session_dir = request.app.state.settings.root / "sessions" / row["id"]
+        self._built: dict[int, tuple[Any, dict[str, Any]]] = {}
         try:
             self.versions = read_versions(session_dir)
         except ValueError as exc:
             raise HTTPException(500, str(exc)) from None
 
     def at(self, frame: int) -> tuple[Any, dict[str, Any]]:
+        """Built once per version (a series asks for every frame of a session)."""
         from recorder.radiometry.params import model_for_frame
 
-        try:
-            model, version = model_for_frame(self.base, self.versions, frame, self.overrides)
-        except ValueError as exc:
-            raise HTTPException(409, str(exc)) from None
-        return model, {"model_version": version, **({"object_parameters": self.overrides} if self.overrides else {})}
+        chosen = next((v.version for v in reversed(self.versions) if v.covers(frame)), 0)
+        if chosen not in self._built:
+            try:
+                model, version = model_for_frame(self.base, self.versions, frame, self.overrides)
+            except ValueError as exc:
+                raise HTTPException(409, str(exc)) from None
+            self._built[chosen] = (model, {"model_version": version,
+                                           **({"object_parameters": self.overrides} if self.overrides else {})})
+        return self._built[chosen]
 
 
 def frame_model(request: Request, row: dict[str, Any], frame: int) -> tuple[Any, dict[str, Any]]:

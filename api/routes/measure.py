@@ -20,6 +20,7 @@ from recorder.exports.render import celsius
 from recorder.radiometry import describe_model
 from recorder.thermography.measure import (
     Line,
+    Tool,
     ToolError,
     histogram,
     isotherm,
@@ -27,7 +28,6 @@ from recorder.thermography.measure import (
     measure,
     parse_tool,
 )
-from recorder.thermography.series import region_series
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["thermography"],
                    dependencies=[Depends(require("read"))])
@@ -102,35 +102,48 @@ def get_isotherm(request: Request, session_id: str, n: int, above: float | None 
     return Response(json.dumps(body), media_type="application/json")
 
 
-@router.get("/series")
-def get_series(request: Request, session_id: str, tool: str, stat: Literal["max", "mean", "min"] = "max",
-               start: int = Query(0, ge=0), end: int | None = Query(None, ge=1), step: int = Query(1, ge=1),
-               format: Literal["json", "csv"] = "json") -> Response:
-    """The statistic of ``tool`` on frames start..end (exclusive), every ``step``."""
+def series_args(request: Request, session_id: str, tool: str, start: int, end: int | None,
+                 step: int) -> tuple[dict, Tool, range, FrameModel, dict[int, int]]:
     row = session_row(request, session_id)
     stop = min(row["frames"], end if end is not None else row["frames"])
+    if tool == "frame":  # the whole frame: what the frame summary answers without decoding
+        tool = f"box:0,0,{(row['width'] or 1) - 1},{(row['height'] or 1) - 1}"
     t = _tools([tool])[0]
-    models = FrameModel(request, row)
-    reader = request.app.state.frames
     with request.app.state.engine.connect() as conn:
         times = dict(conn.execute(select(db.frames.c.idx, db.frames.c.timestamp_ns)
                                   .where(db.frames.c.session_id == session_id)).all())
+    return row, t, range(start, max(start, stop), step), FrameModel(request, row), times
 
-    def frames():
-        for i in range(start, stop, step):
-            yield i, times.get(i, 0), reader.pixels(session_id, i)
 
-    def to_celsius(index: int, counts: np.ndarray) -> np.ndarray:
-        return np.asarray(models.at(index)[0].to_celsius(counts))
-
+def compute_series(request: Request, session_id: str, tool: str, stat: str, start: int, end: int | None,
+                   step: int) -> dict:
+    """The series as the API gives it: its points, how they were read, and the model versions
+    they used."""
+    row, t, indices, models, times = series_args(request, session_id, tool, start, end, step)
     try:
-        points = region_series(frames(), t, stat, to_celsius)
+        result = request.app.state.regions.series(row, t, stat, indices, lambda i: models.at(i)[0], times)
     except ToolError as exc:
         raise HTTPException(400, str(exc)) from None
+    versions = sorted({models.at(i)[1]["model_version"] for i in indices})
+    return {"tool": tool, "stat": stat, "model_versions": versions, **result.to_dict()}
+
+
+@router.get("/series")
+def get_series(request: Request, session_id: str,
+               tool: str = Query(..., description="a tool (box:x0,y0,x1,y1 ...) or `frame` for the whole frame"),
+               stat: Literal["max", "mean", "min"] = "max",
+               start: int = Query(0, ge=0), end: int | None = Query(None, ge=1), step: int = Query(1, ge=1),
+               format: Literal["json", "csv"] = "json") -> Response:
+    """The statistic of ``tool`` on frames start..end (exclusive), every ``step``. The whole
+    frame comes from the archive's frame summary; a box reads only the TIFF strips holding its
+    rows (each checked against its band checksum); ``method`` says which was used."""
+    body = compute_series(request, session_id, tool, stat, start, end, step)
     if format == "csv":
         buf = io.StringIO()
         w = csv.DictWriter(buf, fieldnames=["frame", "timestamp_ns", "celsius"])
         w.writeheader()
-        w.writerows(points)
-        return Response(buf.getvalue(), media_type="text/csv")
-    return Response(json.dumps({"tool": tool, "stat": stat, "points": points}), media_type="application/json")
+        w.writerows(body["points"])
+        return Response(buf.getvalue(), media_type="text/csv",
+                        headers={"X-Thermcap-Series-Method": body["method"],
+                                 "X-Thermcap-Model-Versions": ",".join(map(str, body["model_versions"]))})
+    return Response(json.dumps(body), media_type="application/json")

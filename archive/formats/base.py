@@ -31,11 +31,13 @@ __all__ = [
     "ArchiveFormat",
     "DecodedFrame",
     "FileRecord",
+    "RowBlock",
     "format_registry",
     "frame_name",
     "get_format",
     "locate",
     "ordered_map",
+    "positions_in",
     "register_format",
 ]
 
@@ -59,6 +61,15 @@ class DecodedFrame:
     pixels: np.ndarray
     sidecar: bytes
     log_time: int | None  # None where an old archive did not store it apart from the sidecar
+
+
+@dataclass(frozen=True)
+class RowBlock:
+    """Part of one frame: rows ``first_row .. first_row + len(rows)`` of session frame ``index``."""
+
+    index: int
+    first_row: int
+    rows: np.ndarray
 
 
 @dataclass
@@ -123,11 +134,26 @@ class ArchiveFormat(ABC):
                     return frame
         raise IndexError(f"{rel} holds fewer than {k + 1} frames")
 
+    def read_rows(self, open_file: Callable[[str], Any], files: list[dict[str, Any]], indices: range,
+                  y0: int, y1: int) -> Iterator[RowBlock] | None:
+        """Rows ``y0..y1`` (exclusive) of the frames ``indices`` (a step of 1 or more), decoding
+        only what holds them, or None where the format cannot read part of a frame. Each block
+        covers whole storage units (TIFF strips): ``first_row`` is where it starts, so the
+        caller can check it against the frame summary's band checksums before using it."""
+        return None
+
     def get_config(self) -> dict[str, Any]:
         return {"id": self.format_id}
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.get_config()})"
+
+
+def positions_in(r: range, lo: int, hi: int) -> slice:
+    """The positions of ``r`` (step >= 1) whose values lie in [lo, hi), without walking it:
+    ``r[positions_in(r, lo, hi)]`` is the part of a frame range one file holds."""
+    a = max(0, -(-(lo - r.start) // r.step))
+    return slice(a, max(a, -(-(hi - r.start) // r.step)))
 
 
 def locate(files: list[dict[str, Any]], index: int) -> tuple[str, int]:

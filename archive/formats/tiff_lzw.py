@@ -12,9 +12,11 @@ a page on both cores; tifffile, ImageJ and GDAL all read it.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
+from typing import Any
 
+import imagecodecs
 import numpy as np
 import tifffile
 
@@ -24,8 +26,10 @@ from archive.formats.base import (
     ArchiveFormat,
     DecodedFrame,
     FileRecord,
+    RowBlock,
     group_by_segment,
     locate,
+    positions_in,
     sidecar_text,
     time_from_sidecar,
 )
@@ -94,6 +98,43 @@ class TiffLzw(ArchiveFormat):
                     return _decoded(tif.pages[k])
             except (tifffile.TiffFileError, OSError, ValueError, IndexError) as exc:
                 raise ArchiveError(f"{rel}: cannot read page {k} ({exc})") from exc
+
+    def read_rows(self, open_file: Callable[[str], Any], files: list[dict[str, Any]], indices: range,
+                  y0: int, y1: int) -> Iterator[RowBlock]:
+        """Only the strips holding rows ``y0..y1``: a 40-row box decodes one or two of a
+        640x512 frame's eight strips. Strips are undone as the TIFF says (LZW, then the
+        horizontal predictor), which is what tifffile itself does for the whole page."""
+        first = 0
+        for rec in files:
+            n = int(rec["frames"])
+            wanted = [i - first for i in indices[positions_in(indices, first, first + n)]]
+            if wanted:
+                with open_file(rec["path"]) as fh:
+                    try:
+                        with tifffile.TiffFile(fh) as tif:
+                            for k in wanted:
+                                yield RowBlock(first + k, *_strips(fh, tif.pages[k], y0, y1))
+                    except (tifffile.TiffFileError, OSError, ValueError, IndexError) as exc:
+                        raise ArchiveError(f"{rec['path']}: cannot read rows {y0}..{y1} ({exc})") from exc
+            first += n
+
+
+def _strips(fh: Any, page: Any, y0: int, y1: int) -> tuple[int, np.ndarray]:
+    if page.compression != 5 or page.predictor not in (1, 2) or page.dtype != np.uint16 or page.samplesperpixel != 1:
+        raise ValueError(f"page {page.index} is not a one-sample uint16 LZW page")
+    rps, (h, w) = page.rowsperstrip, page.shape[:2]
+    s0, s1 = y0 // rps, (min(y1, h) - 1) // rps + 1
+    out = np.empty(((min(s1 * rps, h) - s0 * rps), w), np.uint16)
+    for s in range(s0, s1):
+        fh.seek(page.dataoffsets[s])
+        rows = min(rps, h - s * rps)
+        strip = np.frombuffer(imagecodecs.lzw_decode(fh.read(page.databytecounts[s])), "<u2")
+        if strip.size < rows * w:
+            raise ValueError(f"page {page.index}, strip {s}: {strip.size} samples, {rows * w} expected")
+        strip = strip[: rows * w].reshape(rows, w)
+        out[(s - s0) * rps:(s - s0) * rps + rows] = imagecodecs.delta_decode(strip, axis=-1) \
+            if page.predictor == 2 else strip
+    return s0 * rps, out
 
 
 def _decoded(page) -> DecodedFrame:

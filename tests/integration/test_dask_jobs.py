@@ -37,6 +37,11 @@ def test_sessions_are_archived_as_tasks_on_a_local_cluster(tmp_path):
 
     with engine.connect() as c:
         assert c.execute(text("select count(*) from sessions")).scalar() == 3
+    from api.jobs.records import list_jobs
+
+    jobs = list_jobs(engine, kind="archive")  # each session's task, as `thermcap jobs` shows it
+    assert sorted(j.session_id for j in jobs) == ["s0", "s1", "s2"]
+    assert all(j.state == "done" and j.attempts == 1 and (j.worker or "").startswith("dask:") for j in jobs)
     again = run_cli("worker", "--root", str(root), "--formats", "png16,hdf5", "--local-workers", "2", "--once",
                     "--json", env=env, timeout=300)
     assert again.returncode == 0 and json.loads(again.stdout)["archived"] == []  # nothing to do twice
@@ -55,3 +60,7 @@ def test_the_task_key_is_the_content(tmp_path):
     engine = make_engine(f"sqlite:///{tmp_path / 'i.sqlite'}")
     migrate(engine)
     assert Worker(root, engine, formats=["png16"]).run_once().archived == ["a"]
+    from api.jobs.records import get_job
+
+    job = get_job(engine, k1)  # the lease loop records the same job the Dask task would be
+    assert job is not None and job.state == "done" and job.kind == "archive" and job.attempts == 1

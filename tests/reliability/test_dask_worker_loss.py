@@ -72,6 +72,16 @@ def _check_one_verified_archive(session):
     assert sorted(p.name for p in (session / "archive").iterdir() if p.is_dir()) == sorted(FORMATS.split(","))
 
 
+def _check_job(env, sid):
+    """The jobs table tells the story: one archive job, done, run more than once, on Dask."""
+    from api.db import make_engine
+    from api.jobs.records import list_jobs
+
+    jobs = list_jobs(make_engine(env["THERMCAP_DATABASE_URL"]), kind="archive", session_id=sid)
+    assert len(jobs) == 1 and jobs[0].state == "done" and jobs[0].attempts >= 2, jobs
+    assert (jobs[0].worker or "").startswith("dask:tcp://127.0.0.1:")
+
+
 def test_a_worker_killed_mid_task_costs_a_rerun_not_an_archive(tmp_path):
     root = tmp_path / "root"
     session = _record(root, "big")
@@ -88,6 +98,7 @@ def test_a_worker_killed_mid_task_costs_a_rerun_not_an_archive(tmp_path):
         assert job.returncode == 0, err
         assert json.loads(out)["archived"] == ["big"]
         _check_one_verified_archive(session)
+        _check_job(env, "big")
     finally:
         _stop(client, (*workers, sched))
 
@@ -116,5 +127,6 @@ def test_the_scheduler_killed_mid_task_and_a_rerun_finish_from_durable_state(tmp
         assert r.returncode == 0, r.stderr
         assert json.loads(r.stdout)["archived"] == ["big2"]
         _check_one_verified_archive(session)
+        _check_job(env, "big2")
     finally:
         _stop(client, (*workers, sched))

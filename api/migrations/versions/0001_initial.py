@@ -15,7 +15,8 @@ def upgrade() -> None:
     # them with explicit operations, never by editing this one.
     from api.db import metadata
 
-    metadata.create_all(op.get_bind(), tables=[t for t in metadata.sorted_tables if t.name != "leases"])
+    metadata.create_all(op.get_bind(), tables=[t for t in metadata.sorted_tables
+                                                  if t.name not in ("leases", "jobs")])
 
 
 def downgrade() -> None:
