@@ -172,6 +172,21 @@ def bench_jobs_cmd(sessions: int, seconds: float, formats: str, as_json: bool) -
                f"cores for 100 cameras x 8 h a day: {res['capacity']['cores_for_100_cameras_8h_a_day_in_24h']}")
 
 
+@click.command("series")
+@click.option("--seconds", type=float, default=60.0, show_default=True, help="Session length at 640x512@60.")
+@click.option("--tool", default="box:300,200,339,239", show_default=True)
+@json_option
+def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
+    """A region's series over an archived session (whole frame from the summary, a box from its
+    strips) against decoding every frame, in one run; exits 1 if the ways disagree."""
+    from api.bench_series import bench_series, print_table
+
+    res = bench_series(seconds, tool)
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+    if not res["same_values"]:
+        sys.exit(1)
+
+
 @click.command()
 @root_option
 @click.option("--formats", default="png16,tiff-lzw,hdf5,jxl", show_default=True)
@@ -302,7 +317,7 @@ def watch(inbox: str, root: str, once: bool, interval: float, settle: float, arc
     to quarantine/."""
     import time as _time
 
-    from api.jobs.inbox import process_inbox
+    from api.jobs.inbox import InboxBusy, process_inbox
 
     fmts = [f.strip() for f in formats.split(",") if f.strip()] if archive else None
     log = (lambda m: None) if as_json else (lambda m: click.echo(m, err=True))
@@ -324,6 +339,11 @@ def watch(inbox: str, root: str, once: bool, interval: float, settle: float, arc
         try:
             res = bucket_inbox() if bucket_inbox is not None else process_inbox(inbox, root, settle_s=settle,
                                                                     archive_formats=fmts, log=log)
+        except InboxBusy as exc:
+            if once:
+                fail(str(exc))
+            _time.sleep(interval)  # a standby: the other watcher's pass ends, or it dies and frees the lock
+            continue
         except ThermcapError as exc:
             fail(str(exc))
         if as_json:

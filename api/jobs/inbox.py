@@ -14,7 +14,9 @@ per file), archived and verified, and its derived products are written beside it
 - Never half-way: a file is taken only when its size and mtime have not changed for
   ``settle_s``, and names of files being written (``.part``, ``.tmp``, dot files) are skipped.
 - A bad file goes to ``quarantine/`` with a ``.reason.txt`` beside it; the queue goes on.
-- One watcher per inbox (a lock), so two cannot take the same file.
+- One pass at a time per inbox (a lock), so two watchers never take the same file. A second
+  watcher is a standby: it takes its turn between the other's passes, and all of them once the
+  other is gone (the lock dies with its process).
 """
 
 from __future__ import annotations
@@ -33,11 +35,15 @@ from recorder.storage.digest import file_sha256
 from recorder.storage.lock import lock_session
 from recorder.storage.reader import read_session_meta
 
-__all__ = ["InboxPass", "process_inbox"]
+__all__ = ["InboxBusy", "InboxPass", "process_inbox"]
 
 STATE = ".thermcap"
 QUARANTINE = "quarantine"
 _SKIP_SUFFIXES = (".part", ".tmp", ".crdownload", ".partial", ".reason.txt")
+
+
+class InboxBusy(ThermcapError):
+    """Another watcher is on this inbox now: a standby watcher tries again on its next pass."""
 
 
 @dataclass
@@ -148,7 +154,7 @@ def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
     (inbox / STATE).mkdir(exist_ok=True)
     lock = lock_session(inbox / STATE, "watch", wait_s=0.0)
     if lock is None:
-        raise ThermcapError(f"{inbox}: another `thermcap watch` holds this inbox")
+        raise InboxBusy(f"{inbox}: another `thermcap watch` holds this inbox")
     result = InboxPass()
     try:
         seen = _journal(inbox)

@@ -114,21 +114,3 @@ def bench_live_cmd(seconds: float, viewers: int, live_fps: float, live_width: in
     click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
     if res["with_viewers"]["frames_dropped"]:
         sys.exit(1)
-
-
-@bench.command("series")
-@click.option("--seconds", type=float, default=20.0, show_default=True, help="Session length at 640x512@60.")
-@click.option("--tool", default="box:300,200,339,239", show_default=True)
-@json_option
-def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
-    """A region's max over a session vs decoding and converting every whole frame (same run)."""
-    from recorder.bench.series import bench_series
-
-    res = bench_series(seconds, tool)
-    click.echo(json.dumps(res, indent=2) if as_json else
-               f"{res['frames']} frames, {res['tool']}: series {res['series_s']} s ({res['series_fps']} fps), "
-               f"whole-frame conversion {res['naive_full_frame_s']} s ({res['series_vs_naive']}x faster), "
-               f"decode alone {res['decode_all_s']} s (the series costs {res['series_vs_decode_only']}x the decode); "
-               f"same values: {res['same_values']}")
-    if not res["same_values"]:
-        sys.exit(1)
