@@ -7,8 +7,11 @@ from pydantic import BaseModel, Field
 
 from api.routes.common import session_row
 from api.security import require
+from recorder.exceptions import ThermcapError
 from recorder.exports.render import session_model
-from recorder.radiometry.params import add_version, read_versions
+from recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
+from recorder.importers.dji_sdk import find_backend
+from recorder.radiometry.params import ModelVersion, add_version, read_versions
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/radiometry", tags=["thermography"])
 
@@ -39,9 +42,27 @@ def new_version(request: Request, session_id: str, body: NewVersion) -> dict:
         raise HTTPException(409, f"session {row['id']} has no local folder here (served from the object store)")
     if body.frames is not None and not 0 <= body.frames[0] < body.frames[1] <= row["frames"]:
         raise HTTPException(400, f"frames must be [start, end) within 0..{row['frames']}")
+    base = session_model(row["radiometric_model"])
     try:
-        v = add_version(session_dir, session_model(row["radiometric_model"]), body.params, who=body.who,
-                        why=body.why, frames=body.frames)
+        if getattr(base, "kind", "") in DJI_KINDS:
+            v = _dji_version(session_dir, body)
+        else:
+            v = add_version(session_dir, base, body.params, who=body.who, why=body.why, frames=body.frames)
     except ValueError as exc:
         raise HTTPException(409 if "cannot be re-parameterised" in str(exc) else 400, str(exc)) from None
     return v.to_dict()
+
+
+def _dji_version(session_dir, body: NewVersion) -> ModelVersion:
+    """DJI's SDK measures the frames again (THERMCAP_DJI_SDK, or dji-thermal-cli on PATH)."""
+    try:
+        backend = find_backend("auto")
+    except ThermcapError as exc:
+        raise HTTPException(503, str(exc)) from None
+    if backend is None:
+        raise HTTPException(409, "a DJI session's object parameters are applied by DJI's SDK, which this server "
+                                 "does not have (install dji-thermal-cli or set THERMCAP_DJI_SDK)")
+    try:
+        return add_sdk_version(session_dir, body.params, backend, who=body.who, why=body.why, frames=body.frames)
+    except ThermcapError as exc:
+        raise HTTPException(409, str(exc)) from None

@@ -138,11 +138,16 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
 @click.option("--why", default="", help="Why the parameters change (kept with the version).")
 @click.option("--frames", default=None, metavar="START:END", help="Only these frames [START, END).")
 @click.option("--who", default=lambda: os.environ.get("USER", "unknown"), show_default="$USER")
+@click.option("--dji-sdk", "dji_sdk", default="auto", show_default=True, metavar="auto|PATH",
+              help="DJI sessions: the SDK that measures the frames again at the new parameters (dji-thermal-cli; "
+                   "auto: THERMCAP_DJI_SDK, else dji-thermal-cli on PATH).")
 @json_option
 def radiometry_cmd(session: str, root: str, sets: tuple[str, ...], why: str, frames: str | None, who: str,
-                   as_json: bool) -> None:
+                   dji_sdk: str, as_json: bool) -> None:
     """List a session's radiometric model versions, or add one (--set ... --why ...): the stored
     counts never change; every temperature names the version it used."""
+    from recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
+    from recorder.importers.dji_sdk import find_backend
     from recorder.radiometry import model_from_dict
     from recorder.radiometry.params import add_version, read_versions
     from recorder.storage.reader import read_session_meta, resolve_session
@@ -161,7 +166,14 @@ def radiometry_cmd(session: str, root: str, sets: tuple[str, ...], why: str, fra
                 a, _, b = frames.partition(":")
                 span = (int(a), int(b))
             base = model_from_dict(read_session_meta(d).get("radiometric_model") or {"kind": "linear"})
-            new = add_version(d, base, params, who=who, why=why, frames=span)
+            if getattr(base, "kind", "") in DJI_KINDS:
+                backend = find_backend(dji_sdk)
+                if backend is None:
+                    raise ThermcapError("a DJI session's object parameters are applied by DJI's SDK: install "
+                                        "dji-thermal-cli or give --dji-sdk PATH")
+                new = add_sdk_version(d, params, backend, who=who, why=why, frames=span)
+            else:
+                new = add_version(d, base, params, who=who, why=why, frames=span)
             click.echo(json.dumps(new.to_dict(), indent=2) if as_json else
                        f"version {new.version}: {new.params} ({new.why})")
             return

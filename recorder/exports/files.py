@@ -92,21 +92,6 @@ def _name_range(model: Any, vendor: dict[str, Any], temps: np.ndarray | None) ->
     return -40.0, 550.0  # no temperature at all (a DJI layout without the SDK): the ICD's widest
 
 
-def _dji_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
-    """Per log time: the source file's name and its kept DJI APP segments (importers/dji.py)."""
-    from mcap.reader import make_reader
-
-    from recorder.importers.dji import SEGMENTS_BLOB
-
-    out: dict[int, tuple[str, bytes]] = {}
-    for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
-        with open(seg, "rb") as f:
-            for att in make_reader(f).iter_attachments():
-                if att.name.endswith("/" + SEGMENTS_BLOB):
-                    out[att.log_time] = (att.name[: -len(SEGMENTS_BLOB) - 1], att.data)
-    return out
-
-
 def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, summary: str | None = None,
                    palette_name: str = "ironbow", on_frame: Callable[[int], None] | None = None,
                    range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
@@ -336,8 +321,9 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
     """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.exports.rjpeg``)."""
     from recorder.exports.rjpeg import rebuild_rjpeg
+    from recorder.importers.dji import kept_rjpeg_segments
 
-    kept = _dji_segments(session_dir)
+    kept = kept_rjpeg_segments(session_dir)
     written, refused = [], []
     for f in iter_session_frames(session_dir):
         if f.log_time not in kept:

@@ -9,6 +9,7 @@ it exactly.
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -18,7 +19,8 @@ from recorder.importers.exif import capture_time, exif_fields, xmp_fields
 from recorder.importers.jpeg import app_segments, concat_app
 from recorder.radiometry import DjiModel
 
-__all__ = ["DJI_SEGMENT", "RAW_PLACEHOLDER", "SEGMENTS_BLOB", "app_segment", "dji_layout", "is_dji", "read_dji"]
+__all__ = ["DJI_SEGMENT", "RAW_PLACEHOLDER", "SEGMENTS_BLOB", "app_segment", "dji_layout", "is_dji",
+           "kept_rjpeg_segments", "read_dji"]
 
 _MAGIC = b"\xff\xd2\xd1\xff"
 SEGMENTS_BLOB = "dji_rjpeg_segments.bin"
@@ -44,6 +46,25 @@ def _app_segments_without_raw(segments: list[tuple[int, bytes]], raw_marker: int
             continue
         out.append(app_segment(marker, payload))
     return b"".join(out)
+
+
+def kept_rjpeg_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
+    """Per log time: the source file's name and its kept APP segments, from the MCAP source or,
+    once that is deleted, the archive's extras.mcap (which keeps every attachment as recorded)."""
+    from mcap.reader import make_reader
+
+    from recorder.storage.layout import SessionLayout
+
+    files = sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap"))
+    if not files and SessionLayout.of(session_dir).extras.is_file():
+        files = [SessionLayout.of(session_dir).extras]
+    out: dict[int, tuple[str, bytes]] = {}
+    for seg in files:
+        with open(seg, "rb") as f:
+            for att in make_reader(f).iter_attachments():
+                if att.name.endswith("/" + SEGMENTS_BLOB):
+                    out[att.log_time] = (att.name[: -len(SEGMENTS_BLOB) - 1], att.data)
+    return out
 
 
 def _rounded(params: dict[str, Any]) -> dict[str, Any]:

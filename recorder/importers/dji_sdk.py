@@ -17,6 +17,7 @@ import os
 import shutil
 import subprocess
 import tempfile
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Protocol
 
@@ -24,7 +25,8 @@ import numpy as np
 
 from recorder.exceptions import ThermcapError
 
-__all__ = ["ENV_VAR", "DjiBackend", "DjiSdkError", "DjiThermalCli", "LibDirp", "find_backend"]
+__all__ = ["CLI_PARAMS", "ENV_VAR", "DjiBackend", "DjiSdkError", "DjiThermalCli", "LibDirp", "find_backend",
+           "sdk_params_problem"]
 
 ENV_VAR = "THERMCAP_DJI_SDK"
 
@@ -36,9 +38,24 @@ class DjiSdkError(ThermcapError):
 class DjiBackend(Protocol):
     name: str  # software and version, recorded with every table it measures
 
-    def measure(self, paths: list[str]) -> dict[str, np.ndarray | str]:
-        """float32 (H, W) temperatures in C at each file's embedded parameters, or why not."""
+    def measure(self, paths: list[str], params: Mapping[str, float] | None = None) -> dict[str, np.ndarray | str]:
+        """float32 (H, W) temperatures in C at each file's embedded parameters (or at the object
+        parameters ``params``, thermcap's names, where given), or why not."""
         ...
+
+
+#: thermcap's object parameters -> dji-thermal-cli's flags (its units: metres, percent, °C).
+CLI_PARAMS = {"emissivity": "--emissivity", "reflected_temp_c": "--reflected-temp",
+              "object_distance_m": "--distance", "relative_humidity_pct": "--humidity",
+              "atmospheric_temp_c": "--ambient-temp"}
+
+
+def sdk_params_problem(params: Mapping[str, float]) -> str | None:
+    """Why DJI's SDK cannot take these object parameters, or None."""
+    bad = sorted(set(params) - set(CLI_PARAMS))
+    if bad:
+        return f"DJI's SDK takes {', '.join(CLI_PARAMS)}, not {', '.join(bad)}"
+    return None
 
 
 class DjiThermalCli:
@@ -57,11 +74,14 @@ class DjiThermalCli:
             raise DjiSdkError(f"{executable}: `--version` failed ({(out.stderr or out.stdout).strip()[:200]})")
         self.name = f"dji-thermal-cli {version[-1]} (DJI Thermal SDK port), measured at the embedded parameters"
 
-    def measure(self, paths: list[str]) -> dict[str, np.ndarray | str]:
+    def measure(self, paths: list[str], params: Mapping[str, float] | None = None) -> dict[str, np.ndarray | str]:
         import tifffile
 
         if not paths:
             return {}
+        problem = sdk_params_problem(params or {})
+        if problem:
+            return {p: problem for p in paths}
         with tempfile.TemporaryDirectory(prefix="thermcap-dji-") as tmp:
             src, dst = Path(tmp, "in"), Path(tmp, "out")
             src.mkdir()
@@ -70,9 +90,13 @@ class DjiThermalCli:
                 link = src / f"f{i:06d}.jpg"
                 os.symlink(os.path.abspath(path), link)
                 names[path] = link.stem
+            given = dict(params or {})
             cmd = [self.executable, "process", "--input-dir", str(src), "--output-dir", str(dst),
-                   "--distance", "embedded", "--output", "temp_c:tiff", "--compression", "none",
+                   "--distance", repr(float(given.pop("object_distance_m"))) if "object_distance_m" in given
+                   else "embedded", "--output", "temp_c:tiff", "--compression", "none",
                    "--jobs", str(self.jobs), "--quiet"]
+            for name, value in sorted(given.items()):
+                cmd += [CLI_PARAMS[name], repr(float(value))]
             try:
                 run = subprocess.run(cmd, capture_output=True, text=True, timeout=120 + 10 * len(paths))
             except subprocess.TimeoutExpired:
@@ -144,7 +168,10 @@ class LibDirp:
         finally:
             self._destroy(handle)
 
-    def measure(self, paths: list[str]) -> dict[str, np.ndarray | str]:
+    def measure(self, paths: list[str], params: Mapping[str, float] | None = None) -> dict[str, np.ndarray | str]:
+        if params:  # dirp_set_measurement_params is not wired here (no libdirp to prove it against)
+            return {p: "object parameters go through dji-thermal-cli; libdirp measures at the embedded ones only"
+                    for p in paths}
         # DJI's SDK finds libv_list.ini and its plugins from the working directory on some
         # platforms: run inside the library's folder (import reads files single-threaded here).
         contents: dict[str, bytes | str] = {}

@@ -43,8 +43,9 @@ def reparameterise(model: RadiometricModel, params: dict[str, float]) -> Radiome
     kind = getattr(model, "kind", type(model).__name__)
     fields = _FIELDS.get(kind)
     if fields is None:
-        why = ("DJI's approximation ignores object parameters and DJI's SDK applies them at import "
-               "(re-import with --dji-sdk)") if kind == "dji" else "it has no object parameters"
+        why = ("DJI's curves live in DJI's SDK: `thermcap radiometry SESSION --set ... --dji-sdk` (or the API with "
+               "THERMCAP_DJI_SDK set) measures the frames again at the new parameters") \
+            if kind in ("dji", "lookup_table") else "it has no object parameters"
         raise ValueError(f"a {kind} model cannot be re-parameterised: {why}")
     changes = {}
     for name, value in params.items():
@@ -69,6 +70,9 @@ class ModelVersion:
     why: str
     params: dict[str, float]
     frames: tuple[int, int] | None = None  # [start, end) frame indices; None: the whole session
+    # A model the vendor's own software measured at these parameters (DJI's SDK: a count ->
+    # temperature table), for models whose curves thermcap cannot recompute itself.
+    model: dict[str, Any] | None = None
 
     def covers(self, frame: int) -> bool:
         return self.frames is None or self.frames[0] <= frame < self.frames[1]
@@ -86,18 +90,24 @@ def read_versions(session_dir: str | os.PathLike) -> list[ModelVersion]:
     except ValueError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
     return [ModelVersion(v["version"], v["at"], v["who"], v["why"], dict(v["params"]),
-                         tuple(v["frames"]) if v.get("frames") else None) for v in doc.get("versions", [])]
+                         tuple(v["frames"]) if v.get("frames") else None, v.get("model"))
+            for v in doc.get("versions", [])]
 
 
 def add_version(session_dir: str | os.PathLike, base: RadiometricModel, params: dict[str, float], *, who: str,
-                why: str, frames: tuple[int, int] | None = None) -> ModelVersion:
-    """Record a re-parameterisation (checked against the model first); append-only."""
+                why: str, frames: tuple[int, int] | None = None,
+                measured: RadiometricModel | None = None) -> ModelVersion:
+    """Record a re-parameterisation (checked against the model first); append-only.
+    ``measured``: the model a vendor's software gave at ``params`` (then ``base`` is not
+    re-parameterised by thermcap)."""
     if not why.strip():
         raise ValueError("say why the parameters change (it is kept with the version)")
-    reparameterise(base, params)
+    if measured is None:
+        reparameterise(base, params)
     versions = read_versions(session_dir)
     v = ModelVersion(len(versions) + 1, time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()), who, why,
-                     {k: float(x) for k, x in params.items()}, frames)
+                     {k: float(x) for k, x in params.items()}, frames,
+                     measured.to_dict() if measured is not None else None)
     path = Path(session_dir) / RADIOMETRY_JSON
     tmp = path.with_name(path.name + ".tmp")
     tmp.write_text(json.dumps({"versions": [x.to_dict() for x in [*versions, v]]}, indent=1))
@@ -105,12 +115,33 @@ def add_version(session_dir: str | os.PathLike, base: RadiometricModel, params: 
     return v
 
 
+_MEASURED: dict[int, tuple[ModelVersion, RadiometricModel]] = {}
+
+
+def _measured(version: ModelVersion) -> RadiometricModel:
+    """A measured version's model, built once per version read (a DJI table has thousands of
+    entries, and temperatures are asked for frame by frame). Keyed by the object, which the
+    entry keeps alive, so a key is never reused by another session's version."""
+    from recorder.radiometry.base import model_from_dict
+
+    got = _MEASURED.get(id(version))
+    if got is None or got[0] is not version:
+        if len(_MEASURED) > 32:
+            _MEASURED.clear()
+        got = (version, model_from_dict(dict(version.model or {})))
+        _MEASURED[id(version)] = got
+    return got[1]
+
+
 def model_for_frame(base: RadiometricModel, versions: list[ModelVersion], frame: int,
                     overrides: dict[str, float] | None = None) -> tuple[RadiometricModel, int]:
     """The model a frame's temperatures use, and its version (the latest covering the frame);
     per-request ``overrides`` go on top (version reported as the base it started from)."""
     chosen = next((v for v in reversed(versions) if v.covers(frame)), None)
-    model = reparameterise(base, chosen.params) if chosen else base
+    if chosen is not None and chosen.model is not None:
+        model = _measured(chosen)
+    else:
+        model = reparameterise(base, chosen.params) if chosen else base
     if overrides:
         model = reparameterise(model, overrides)
     return model, chosen.version if chosen else 0
