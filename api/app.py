@@ -102,7 +102,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.state.frames = FrameReader(app.state.engine, app.state.store, settings.root)
     app.state.regions = RegionReader(app.state.frames, app.state.engine, app.state.store)
     app.state.files = FileVerifier(app.state.store, settings.root)
-    app.state.jobs = JobRunner(app.state.engine, app.state.store)
+    app.state.jobs = JobRunner(app.state.engine, app.state.store, scheduler=settings.dask_scheduler)
     registry = CollectorRegistry()
     app.state.metrics_registry = registry
     requests_total = Counter("thermcap_http_requests_total", "HTTP requests", ["route", "method", "status"],

@@ -53,6 +53,9 @@ class Settings:
     s3_prefix: str = field(default_factory=lambda: os.environ.get("THERMCAP_S3_PREFIX", ""))
     cors_origins: list[str] = field(default_factory=lambda: [o for o in os.environ.get(
         "THERMCAP_CORS_ORIGINS", "*").split(",") if o])
+    # Series jobs on a Dask cluster (the workers reach the same root, index and bucket); none: the
+    # API's own threads.
+    dask_scheduler: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_DASK_SCHEDULER"))
     max_page_size: int = 1000
     rescan_interval_s: float = 30.0
 

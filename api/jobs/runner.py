@@ -2,7 +2,8 @@
 
 Why a runner and not a request: the answer may take seconds to minutes, longer than a browser or
 a proxy keeps a request open. The job is recorded in the jobs table before it runs, runs on a
-small thread pool (decoders release the GIL), and leaves its result in the blob store
+small thread pool (decoders release the GIL), or, with ``THERMCAP_DASK_SCHEDULER``, as a task on
+the Dask cluster the archive workers use. It leaves its result in the blob store
 (``jobs/<id>.json``), where any API replica finds it. A job whose process died shows as running
 with a dead worker; submitting it again runs it again.
 """
@@ -34,9 +35,11 @@ def result_key(jid: str) -> str:
 
 
 class JobRunner:
-    def __init__(self, engine: Engine, store: BlobStore, *, threads: int = 1) -> None:
+    def __init__(self, engine: Engine, store: BlobStore, *, threads: int = 1, scheduler: str | None = None) -> None:
         self.engine, self.store = engine, store
         self.name = f"api:{socket.gethostname()}:{os.getpid()}"
+        self._scheduler = scheduler
+        self._client: Any = None
         self._pool = ThreadPoolExecutor(threads, thread_name_prefix="thermcap-job")
         self._in_flight: set[str] = set()
         self._lock = threading.Lock()
@@ -60,10 +63,19 @@ class JobRunner:
         since = job.started_ns or job.created_ns
         return time.time_ns() - since > STALE_AFTER_S * 1e9
 
-    def run(self, job: JobRecord, work: Callable[[], dict[str, Any]], summary: Callable[[dict[str, Any]], Any]) \
-            -> None:
+    def dask(self) -> Any:
+        """The Dask client, connected on first use (None without a scheduler)."""
+        if self._scheduler and self._client is None:
+            from distributed import Client
+
+            self._client = Client(self._scheduler, timeout=30, set_as_default=False)
+        return self._client
+
+    def run(self, job: JobRecord, work: Callable[[], dict[str, Any]], summary: Callable[[dict[str, Any]], Any],
+            *, remote: tuple[Callable[..., dict[str, Any]], tuple[Any, ...]] | None = None) -> None:
         """Run ``work`` for ``job``; its whole result goes to the store, ``summary(result)`` to
-        the table."""
+        the table. ``remote`` (a picklable function and its arguments) runs it on the Dask
+        cluster instead, when there is one; the job is recorded here either way."""
         with self._lock:
             if job.id in self._in_flight:
                 return
@@ -71,8 +83,13 @@ class JobRunner:
 
         def go() -> None:
             try:
-                start_job(self.engine, job.id, self.name)
-                out = work()
+                client = self.dask() if remote is not None else None
+                if client is not None and remote is not None:
+                    start_job(self.engine, job.id, f"dask:{self._scheduler}")
+                    out = client.submit(remote[0], *remote[1], key=job.id, pure=False).result()
+                else:
+                    start_job(self.engine, job.id, self.name)
+                    out = work()
                 self.store.put_bytes(result_key(job.id), json.dumps(out).encode())
                 finish_job(self.engine, job.id, result={"blob": result_key(job.id), **summary(out)})
             except Exception as exc:  # recorded with the job, never lost in the thread
@@ -85,3 +102,5 @@ class JobRunner:
 
     def close(self) -> None:
         self._pool.shutdown(wait=True, cancel_futures=False)
+        if self._client is not None:
+            self._client.close()

@@ -6,17 +6,51 @@ from __future__ import annotations
 import csv
 import io
 import json
-from typing import Literal
+from dataclasses import dataclass
+from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse
 
 from api.jobs.records import STATES, get_job, job_id, list_jobs, submit_job
-from api.routes.measure import series_args
+from api.routes.measure import series_args, series_body
 from api.security import require
-from recorder.thermography.measure import ToolError, bounds
+from recorder.thermography.measure import Tool, ToolError, bounds
 
 router = APIRouter(tags=["jobs"], dependencies=[Depends(require("read"))])
+
+
+@dataclass(frozen=True)
+class SeriesTask:
+    """What a Dask worker needs to read a session: addresses, never an engine or a client."""
+
+    root: str
+    db_url: str
+    s3_bucket: str | None
+    s3_endpoint: str | None
+    s3_region: str
+    s3_prefix: str
+
+
+def series_task(cfg: SeriesTask, row: dict, tool: Tool, tool_text: str, stat: str, indices: range, models: Any,
+                times: dict[int, int]) -> dict:
+    """On a Dask worker: the same series the API would compute, through the same verified
+    readers (the summary, the strips, the frames)."""
+    from pathlib import Path
+
+    from api.db import make_engine
+    from api.reading.frames import FrameReader
+    from api.reading.regions import RegionReader
+    from archive.blobs import open_store
+
+    engine = make_engine(cfg.db_url)
+    try:
+        store = open_store(Path(cfg.root), bucket=cfg.s3_bucket, endpoint=cfg.s3_endpoint, region=cfg.s3_region,
+                           prefix=cfg.s3_prefix)
+        regions = RegionReader(FrameReader(engine, store, Path(cfg.root)), engine, store)
+        return series_body(regions, row, tool, tool_text, stat, indices, models, times)
+    finally:
+        engine.dispose()
 
 
 def _links(jid: str) -> dict[str, str]:
@@ -44,11 +78,13 @@ def submit_series(request: Request, session_id: str, tool: str = Query(...),
         regions = request.app.state.regions
 
         def work() -> dict:
-            result = regions.series(row, t, stat, indices, lambda i: models.at(i)[0], times)
-            versions = sorted({models.at(i)[1]["model_version"] for i in indices})
-            return {"tool": tool, "stat": stat, "model_versions": versions, **result.to_dict()}
+            return series_body(regions, row, t, tool, stat, indices, models, times)
 
-        runner.run(job, work, lambda out: {"points": len(out["points"]), "method": out["method"]})
+        settings = request.app.state.settings
+        remote = (series_task, (SeriesTask(str(settings.root), settings.db_url, settings.s3_bucket,
+                                           settings.s3_endpoint, settings.s3_region, settings.s3_prefix),
+                                row, t, tool, stat, indices, models, times))
+        runner.run(job, work, lambda out: {"points": len(out["points"]), "method": out["method"]}, remote=remote)
         job = get_job(engine, jid) or job
     body = {**job.to_dict(with_result=False), "links": _links(jid)}
     return JSONResponse(body, status_code=200 if job.state == "done" else 202)

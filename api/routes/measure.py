@@ -14,6 +14,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
 
 from api import db
+from api.reading.regions import RegionReader
 from api.routes.common import FrameModel, frame_model, session_row
 from api.security import require
 from recorder.exports.render import celsius
@@ -115,17 +116,22 @@ def series_args(request: Request, session_id: str, tool: str, start: int, end: i
     return row, t, range(start, max(start, stop), step), FrameModel(request, row), times
 
 
-def compute_series(request: Request, session_id: str, tool: str, stat: str, start: int, end: int | None,
-                   step: int) -> dict:
+def series_body(regions: RegionReader, row: dict, t: Tool, tool: str, stat: str, indices: range, models: FrameModel,
+                times: dict[int, int]) -> dict:
     """The series as the API gives it: its points, how they were read, and the model versions
-    they used."""
-    row, t, indices, models, times = series_args(request, session_id, tool, start, end, step)
-    try:
-        result = request.app.state.regions.series(row, t, stat, indices, lambda i: models.at(i)[0], times)
-    except ToolError as exc:
-        raise HTTPException(400, str(exc)) from None
+    they used (the same on a Dask worker as here)."""
+    result = regions.series(row, t, stat, indices, lambda i: models.at(i)[0], times)
     versions = sorted({models.at(i)[1]["model_version"] for i in indices})
     return {"tool": tool, "stat": stat, "model_versions": versions, **result.to_dict()}
+
+
+def compute_series(request: Request, session_id: str, tool: str, stat: str, start: int, end: int | None,
+                   step: int) -> dict:
+    row, t, indices, models, times = series_args(request, session_id, tool, start, end, step)
+    try:
+        return series_body(request.app.state.regions, row, t, tool, stat, indices, models, times)
+    except ToolError as exc:
+        raise HTTPException(400, str(exc)) from None
 
 
 @router.get("/series")
