@@ -1,7 +1,7 @@
-"""``thermcap bench jobs``: the same sessions archived as Dask tasks on a LocalCluster of one
-worker and of two, in one run. The ratio is the scaling (2x is the limit on two cores). The
-per-core rate gives the capacity model in the README: cores needed for N cameras recording
-H hours a day."""
+"""``thermcap bench jobs``: the same sessions archived as Dask tasks (one per segment, then a
+finalize per session) on a LocalCluster of one worker and of two, in one run. The ratio is the
+scaling (2x is the limit on two cores). The per-core rate gives the capacity model in the
+README: cores needed for N cameras recording H hours a day."""
 
 from __future__ import annotations
 
@@ -14,21 +14,26 @@ from typing import Any
 __all__ = ["bench_jobs"]
 
 
-def bench_jobs(sessions: int = 4, seconds: float = 4.0, formats: tuple[str, ...] = ("png16", "hdf5"),
-               workdir: str | None = None) -> dict[str, Any]:
+def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...] = ("png16", "tiff-lzw", "hdf5"),
+               workdir: str | None = None, segment_s: float = 1.0) -> dict[str, Any]:
     from api.db import make_engine, migrate
     from api.jobs.dask_jobs import DaskJobs, TaskConfig
     from api.jobs.worker import Worker
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources.sim import SimSource
+    from recorder.storage.segments import SegmentPolicy
 
     n = int(seconds * 60)
-    out: dict[str, Any] = {"sessions": sessions, "seconds_each": seconds, "frames_each": n, "formats": list(formats)}
+    out: dict[str, Any] = {"sessions": sessions, "seconds_each": seconds, "frames_each": n, "formats": list(formats),
+                           "segment_s": segment_s}
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         pristine = Path(tmp) / "pristine"
         for k in range(sessions):
             Recorder(SimSource(width=640, height=512, frames=n, paced=False, seed=k), pristine, session_id=f"b{k}",
-                     analysis=False, recover_leftovers=False).run()
+                     analysis=False, recover_leftovers=False, policy=SegmentPolicy(max_duration_s=segment_s)).run()
+        from recorder.storage.reader import session_segments
+
+        out["segments_each"] = len(session_segments(pristine / "sessions" / "b0"))
         for workers in (1, 2):
             root = Path(tmp) / f"root{workers}"
             shutil.copytree(pristine, root)

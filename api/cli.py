@@ -154,15 +154,18 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 
 
 @click.command("jobs")
-@click.option("--sessions", type=int, default=4, show_default=True)
-@click.option("--seconds", type=float, default=4.0, show_default=True, help="Length of each 640x512@60 session.")
-@click.option("--formats", default="png16,hdf5", show_default=True)
+@click.option("--sessions", type=int, default=1, show_default=True)
+@click.option("--seconds", type=float, default=10.0, show_default=True, help="Length of each 640x512@60 session.")
+@click.option("--segment-seconds", type=float, default=1.0, show_default=True,
+              help="Segment length: a 10 s session of 1 s segments is 10 segment tasks.")
+@click.option("--formats", default="png16,tiff-lzw,hdf5", show_default=True)
 @json_option
-def bench_jobs_cmd(sessions: int, seconds: float, formats: str, as_json: bool) -> None:
-    """The same sessions archived as Dask tasks on one worker and on two: the scaling, and a capacity model."""
+def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, formats: str, as_json: bool) -> None:
+    """The same sessions archived as Dask tasks (a task per segment) on one worker and on two: the
+    scaling, and a capacity model."""
     from api.bench_jobs import bench_jobs
 
-    res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f))
+    res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f), segment_s=segment_seconds)
     if as_json:
         click.echo(json.dumps(res, indent=2))
         return

@@ -36,7 +36,7 @@ from archive.manifest import (
     save_manifest,
     sidecar_sha256,
 )
-from archive.manifest_types import FileEntry, FormatEntry, Manifest
+from archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest
 from archive.source_pass import SourcePass
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.lock import holder, lock_session
@@ -45,7 +45,8 @@ from recorder.storage.ring import load_windows
 from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
-__all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "archive_session", "build_format", "verify_format_dir"]
+__all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "BuiltCopy", "archive_session", "build_format", "format_entry",
+           "fresh_partial", "take_name", "verify_format_dir", "write_verified"]
 
 DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
 
@@ -117,71 +118,70 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping
 _MANIFEST_LOCK = threading.Lock()
 
 
-def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
-                 manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
-                 on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
-    """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
-    manifest's hashes, and only then take the final name (replacing an older copy only now) and
-    record it in the manifest. Returns the problems; a failed copy never takes the final name.
-    The archiver feeds it the MCAP source; ``scrub --repair`` any verified copy."""
-    adir = archive_dir(session_dir)
-    session_id = manifest.get("session_id", session_dir.name)
-    total = sum(per_segment.values())
-    final = adir / fid
-    partial = adir / (fid + PARTIAL_SUFFIX)
-    if partial.exists():  # left by a crashed run; never taken for an archive
-        shutil.rmtree(partial)
-    partial.mkdir()
-    done = [0]
+@dataclasses.dataclass
+class BuiltCopy:
+    """A format's files written and checked in a folder that has not taken its final name yet."""
 
-    def tick() -> None:
-        done[0] += 1
-        if on_progress and done[0] % 16 == 0:
-            on_progress(f"writing {fid}", done[0], total)
+    files: list[FileEntry]
+    problems: list[str]
+    encode_s: float
+    decode_s: float
+    verification: str = ""
 
-    ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=total,
-                         frames_per_segment=per_segment, workers=workers, on_frame=tick)
+
+def write_verified(fmt: ArchiveFormat, fid: str, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext,
+                   expected: Callable[[], FramesBlock]) -> BuiltCopy:
+    """Write ``frames`` into ``out_dir`` and decode every file back with the format's reader,
+    comparing each frame with ``expected()`` (called once the stream has ended: the single read
+    of the source gives the hashes only then). A writer or source failure removes ``out_dir``."""
     t = time.perf_counter()
     try:
-        records: list[FileRecord] = fmt.write(frames, partial, ctx)
+        records: list[FileRecord] = fmt.write(frames, out_dir, ctx)
     except BaseException:  # the source failed (or the writer): no half-written copy is left behind
-        shutil.rmtree(partial, ignore_errors=True)
+        shutil.rmtree(out_dir, ignore_errors=True)
         raise
     encode_s = time.perf_counter() - t
-    # read only now: the archiver's single read of the source gives the manifest its hashes when
-    # the frame stream ends, which is before any writer returns
-    expected = manifest["frames"]["sha256"]
     for rec in records:
-        p = partial / rec.path
+        p = out_dir / rec.path
         rec.bytes = p.stat().st_size
         rec.sha256 = file_sha256(p)
     files: list[FileEntry] = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, "sha256": r.sha256}
                               for r in records]
-    if on_progress:
-        on_progress(f"verifying {fid}", 0, len(expected))
-    problems, decode_s = verify_format_dir(fmt, partial, files, expected, where=fid,
-                                           sidecars=manifest["frames"]["sidecar_sha256"],
-                                           times=manifest["frames"]["timestamps_ns"])
-    total_bytes = sum(r.bytes for r in records)
-    raw = manifest["source"]["raw_bytes"]
-    entry: FormatEntry = {
-        "config": fmt.get_config(), "description": fmt.description, "files": files,
-        "frames_per_file": [r.frames for r in records], "objects": len(records), "bytes": total_bytes,
-        "compression_ratio": round(raw / total_bytes, 4) if total_bytes else None,
-        "bits_per_pixel": round(total_bytes * 8 / (raw / 2), 4) if raw else None,
-        "encode_fps": round(len(expected) / encode_s, 1) if encode_s else None,
-        "decode_fps": round(len(expected) / decode_s, 1) if decode_s else None,
-        "library_versions": library_versions(), "verified": not problems, "verified_at": iso_now(),
-        "verification": (f"bit-exact: {len(expected)} frames decoded with the format's reader match the "
-                         "MCAP source's pixels, sidecars and times (sha256)") if not problems else problems[:100],
+    want = expected()
+    problems, decode_s = verify_format_dir(fmt, out_dir, files, want["sha256"], where=fid,
+                                           sidecars=want.get("sidecar_sha256"), times=want.get("timestamps_ns"))
+    return BuiltCopy(files, problems, encode_s, decode_s,
+                     f"bit-exact: {len(want['sha256'])} frames decoded with the format's reader match the MCAP "
+                     f"source's pixels, sidecars and times (sha256)")
+
+
+def format_entry(fmt: ArchiveFormat, built: BuiltCopy, frames: int, raw_bytes: int) -> FormatEntry:
+    total_bytes = sum(int(f["bytes"]) for f in built.files)
+    return {
+        "config": fmt.get_config(), "description": fmt.description, "files": built.files,
+        "frames_per_file": [int(f["frames"]) for f in built.files], "objects": len(built.files),
+        "bytes": total_bytes, "compression_ratio": round(raw_bytes / total_bytes, 4) if total_bytes else None,
+        "bits_per_pixel": round(total_bytes * 8 / (raw_bytes / 2), 4) if raw_bytes else None,
+        "encode_fps": round(frames / built.encode_s, 1) if built.encode_s else None,
+        "decode_fps": round(frames / built.decode_s, 1) if built.decode_s else None,
+        "library_versions": library_versions(), "verified": not built.problems, "verified_at": iso_now(),
+        "verification": built.verification if not built.problems else built.problems[:100],
     }
-    if problems:
+
+
+def take_name(session_dir: Path, fid: str, partial: Path, manifest: Manifest, entry: FormatEntry) -> list[str]:
+    """A checked copy takes its final name (replacing an older one only now) and its manifest
+    entry; a failed one is removed and recorded as failed. Returns the problems."""
+    adir = archive_dir(session_dir)
+    final = adir / fid
+    if not entry["verified"]:
         shutil.rmtree(partial)  # a failed archive never takes the final name
         with _MANIFEST_LOCK:
             if not manifest["formats"].get(fid, {}).get("verified"):
                 manifest["formats"][fid] = {**entry, "files": [], "bytes": 0}
                 save_manifest(session_dir, manifest)
-        return problems
+        v = entry["verification"]
+        return list(v) if isinstance(v, list) else [str(v)]
     _fsync_tree(partial)
     if final.exists():  # replace the old copy (--force, or a damaged one) only now that the new one verified
         old = adir / (fid + ".old")
@@ -197,6 +197,46 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
         manifest["formats"][fid] = entry
         save_manifest(session_dir, manifest)
     return []
+
+
+def fresh_partial(session_dir: Path, fid: str) -> Path:
+    partial = archive_dir(session_dir) / (fid + PARTIAL_SUFFIX)
+    if partial.exists():  # left by a crashed run; never taken for an archive
+        shutil.rmtree(partial)
+    partial.mkdir()
+    return partial
+
+
+def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
+                 manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
+                 on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
+    """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
+    manifest's hashes, and only then take the final name (replacing an older copy only now) and
+    record it in the manifest. Returns the problems; a failed copy never takes the final name.
+    The archiver feeds it the MCAP source; ``scrub --repair`` any verified copy."""
+    session_id = manifest.get("session_id", session_dir.name)
+    total = sum(per_segment.values())
+    partial = fresh_partial(session_dir, fid)
+    done = [0]
+
+    def tick() -> None:
+        done[0] += 1
+        if on_progress and done[0] % 16 == 0:
+            on_progress(f"writing {fid}", done[0], total)
+
+    ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=total,
+                         frames_per_segment=per_segment, workers=workers, on_frame=tick)
+
+    def expected() -> FramesBlock:
+        # read only now: the archiver's single read of the source gives the manifest its hashes
+        # when the frame stream ends, which is before any writer returns
+        if on_progress:
+            on_progress(f"verifying {fid}", 0, total)
+        return manifest["frames"]
+
+    built = write_verified(fmt, fid, frames, partial, ctx, expected)
+    entry = format_entry(fmt, built, len(manifest["frames"]["sha256"]), manifest["source"]["raw_bytes"])
+    return take_name(session_dir, fid, partial, manifest, entry)
 
 
 def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,

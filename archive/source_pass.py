@@ -45,8 +45,11 @@ class SourcePass:
     the frame summary, if given a builder."""
 
     def __init__(self, session_dir: Path, per_segment: dict[str, int], *, hash_frames: bool = True,
-                 extras: ExtrasWriter | None = None, summary: SummaryBuilder | None = None) -> None:
+                 extras: ExtrasWriter | None = None, summary: SummaryBuilder | None = None,
+                 segments: list[Path] | None = None, first_index: int = 0) -> None:
         self.session_dir = session_dir
+        self.segments = segments  # a part of the session (one segment's task); None: all of it
+        self.first_index = first_index
         self.per_segment = per_segment
         self.hash_frames = hash_frames
         self.extras = extras
@@ -54,14 +57,14 @@ class SourcePass:
         self.hashes: SourceHashes | None = None
 
     def frames(self) -> Iterator[SessionFrame]:
-        segments = session_segments(self.session_dir)
+        segments = self.segments if self.segments is not None else session_segments(self.session_dir)
         problems = [f"{seg.name}: {p}" for seg in segments for p in channel_problems(seg)]
         if problems:  # before anything is written
             self._refuse(problems)
         got = SourceHashes()
         read: dict[str, int] = {}
         others = self.extras.add_message if self.extras is not None else None
-        index = 0
+        index = self.first_index
         for seg in segments:
             for f in iter_segment_frames(seg, first_index=index, others=others):
                 if self.hash_frames:

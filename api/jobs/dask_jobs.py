@@ -1,14 +1,24 @@
 """Jobs on Dask distributed instead of the lease loop: ``thermcap worker --scheduler ADDR`` (or
 ``--local-workers N`` for an in-process ``LocalCluster``, the same code path with no server).
 
-Each session that needs work becomes one task that archives it, verifies it, uploads it and
-indexes it. The task's key is the session's content: its id, its segments' names and sizes,
-and the formats. So a resubmission while it runs (a second submitter, a restart) is the same
-task, not a second one, and a session whose content changed is a new task. Durable truth stays
-where it was:
+Each session that needs work becomes one task per segment and one finalize task
+(``archive.segmented``):
 
-- the manifest says which formats verified, so a task that finds them verified does no work;
-- the session lock keeps two processes on one filesystem from archiving a session at once;
+- Each segment's task writes and verifies that segment's share of every format, on any worker.
+- The finalize task starts when they have all finished. It writes the manifest, takes the final
+  folders (HDF5 assembled from the segments' compressed chunks), uploads, deletes the source
+  where asked, and indexes.
+
+A task's key is its content: the session's id, the segment's name and size (or, for the
+finalize task, all the segments'), and the formats. So a resubmission while it runs (a second
+submitter, a restart) is the same task, not a second one, and a session whose content changed
+is a new task. Every task is recorded in the jobs table with its attempts, the worker that ran
+it and its error. Durable truth stays where it was:
+
+- the manifest and the parts' ``part.json`` say what verified, so a task that finds it done does
+  no work;
+- the session lock (and a lock per segment) keeps two processes on one filesystem from
+  writing the same thing at once;
 - the index says what is served.
 
 A worker lost mid-task (kill -9, a node gone) has its task run again on another worker by the
@@ -19,6 +29,7 @@ the same ``--scheduler`` address.
 
 from __future__ import annotations
 
+import hashlib
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,7 +39,7 @@ from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
 from api.jobs.worker import Worker, WorkerPass, _needs_work, finished_sessions
 from recorder.storage.reader import read_session_meta
 
-__all__ = ["DaskJobs", "archive_task", "session_task_key"]
+__all__ = ["DaskJobs", "finalize_task", "segment_task", "segment_task_key", "session_task_key"]
 
 
 @dataclass(frozen=True)
@@ -46,12 +57,40 @@ def session_task_key(session_dir: Path, formats: tuple[str, ...]) -> str:
     return archive_job_id(session_dir, formats)
 
 
-def archive_task(cfg: TaskConfig, session_dir: str) -> dict[str, Any]:
-    """On a Dask worker: archive, verify, upload and index one session (idempotent)."""
+def segment_task_key(session_dir: Path, segment: str, formats: tuple[str, ...]) -> str:
+    sid = read_session_meta(session_dir).get("session_id", session_dir.name)
+    size = (session_dir / segment).stat().st_size
+    h = hashlib.sha256(f"{sid}/{segment}:{size};{','.join(formats)}".encode()).hexdigest()[:16]
+    return f"thermcap-segment-{sid}-{Path(segment).stem}-{h}"
+
+
+def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: int, key: str) -> str:
+    """On a Dask worker: one segment's share of every format, written and verified (idempotent)."""
+    from api.db import make_engine
+    from archive.segmented import archive_segment
+
+    engine = make_engine(cfg.db_url)
+    start_job(engine, key, _worker_name())
+    try:
+        part = archive_segment(Path(session_dir), segment, first_index, list(cfg.formats))
+        finish_job(engine, key, result={"segment": segment, "frames": part.count})
+        return segment
+    except Exception as exc:
+        finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
+        raise
+    finally:
+        engine.dispose()
+
+
+def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dict[str, Any]:
+    """On a Dask worker, once every segment's task has finished (``segments_done``, which Dask
+    passes in when they have): the manifest, the final folders (HDF5 from the segments'
+    compressed chunks), upload, ``--delete-source``, index."""
     from api.db import make_engine
     from api.indexing import index_session
     from archive.archiver import archive_session
     from archive.blobs import open_store, upload_archive
+    from archive.segmented import finalize_session
 
     d = Path(session_dir)
     store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
@@ -59,14 +98,15 @@ def archive_task(cfg: TaskConfig, session_dir: str) -> dict[str, Any]:
     jid = session_task_key(d, cfg.formats)
     start_job(engine, jid, _worker_name())  # each attempt counts, so a rerun after a lost worker shows
     try:
-        archive_session(d, list(cfg.formats), delete_source=cfg.delete_source and store is None)
+        if segments_done or _formats_to_write(d, cfg.formats):
+            finalize_session(d, list(cfg.formats))
         if store is not None:
             upload_archive(store, Path(cfg.root), d)
-            if cfg.delete_source:
-                archive_session(d, list(cfg.formats), delete_source=True)
+        if cfg.delete_source:
+            archive_session(d, list(cfg.formats), delete_source=True)  # everything verified: only deletes
         index_session(engine, d)
         sid = read_session_meta(d).get("session_id", d.name)
-        finish_job(engine, jid, result={"session": sid, "formats": list(cfg.formats)})
+        finish_job(engine, jid, result={"session": sid, "formats": list(cfg.formats), "segments": len(segments_done)})
         return {"session": sid}
     except Exception as exc:
         finish_job(engine, jid, error=f"{type(exc).__name__}: {exc}")
@@ -82,6 +122,14 @@ def _worker_name() -> str:
         return f"dask:{get_worker().address}"
     except ValueError:  # not on a Dask worker (called directly)
         return f"local:{os.getpid()}"
+
+
+def _formats_to_write(d: Path, formats: tuple[str, ...]) -> list[str]:
+    from archive.manifest import load_manifest
+
+    m = load_manifest(d, required=False) or {}
+    done = {f for f, e in (m.get("formats") or {}).items() if e.get("verified") and (d / "archive" / f).is_dir()}
+    return [f for f in formats if f not in done]
 
 
 class DaskJobs:
@@ -105,11 +153,7 @@ class DaskJobs:
         self.worker._split_camera_sessions(result)  # local and quick: copies, then archived as tasks
         todo = [d for d in finished_sessions(self.worker.root)
                 if _needs_work(d, list(self.cfg.formats), self.worker.store)]
-        for d in todo:  # recorded before the cluster sees it: a job never exists only in the scheduler
-            submit_job(self.worker.engine, session_task_key(d, self.cfg.formats), "archive",
-                       read_session_meta(d).get("session_id", d.name), {"formats": list(self.cfg.formats)})
-        futures = {self.client.submit(archive_task, self.cfg, str(d), key=session_task_key(d, self.cfg.formats),
-                                      retries=self.retries): d for d in todo}
+        futures = {self._submit(d): d for d in todo}
         for fut, d in futures.items():
             sid = read_session_meta(d).get("session_id", d.name)
             try:
@@ -120,6 +164,25 @@ class DaskJobs:
                 result.failed[sid] = f"{type(exc).__name__}: {exc}"
                 self.worker.log(f"error: {sid}: {exc}")
         return result
+
+    def _submit(self, d: Path) -> Any:
+        """A session as one task per segment (in parallel on any workers) and a finalize task
+        that Dask starts when they have all finished. Each is recorded in the jobs table before
+        the cluster sees it, so a job never exists only in the scheduler."""
+        from archive.segmented import plan_segments
+
+        sid = read_session_meta(d).get("session_id", d.name)
+        engine, formats = self.worker.engine, self.cfg.formats
+        parts = []
+        if _formats_to_write(d, formats):
+            for segment, first in plan_segments(d):
+                key = segment_task_key(d, segment, formats)
+                submit_job(engine, key, "archive-segment", sid, {"segment": segment, "formats": list(formats)})
+                parts.append(self.client.submit(segment_task, self.cfg, str(d), segment, first, key, key=key,
+                                                retries=self.retries))
+        key = session_task_key(d, formats)
+        submit_job(engine, key, "archive", sid, {"formats": list(formats), "segments": len(parts)})
+        return self.client.submit(finalize_task, self.cfg, str(d), *parts, key=key, retries=self.retries)
 
     def close(self) -> None:
         self.client.close()

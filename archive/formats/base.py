@@ -134,6 +134,14 @@ class ArchiveFormat(ABC):
                     return frame
         raise IndexError(f"{rel} holds fewer than {k + 1} frames")
 
+    def assemble(self, parts: list[tuple[Path, list[dict[str, Any]]]], out_dir: Path,
+                 ctx: ArchiveContext) -> list[FileRecord] | None:
+        """The session's files in ``out_dir`` from per-segment parts (each a folder and the
+        files this format wrote there for one segment, verified), or None where a format keeps
+        one file per segment, so the parts' files are the session's as they are. A format with
+        one file per session (hdf5) joins them without encoding again."""
+        return None
+
     def read_rows(self, open_file: Callable[[str], Any], files: list[dict[str, Any]], indices: range,
                   y0: int, y1: int) -> Iterator[RowBlock] | None:
         """Rows ``y0..y1`` (exclusive) of the frames ``indices`` (a step of 1 or more), decoding

@@ -97,42 +97,56 @@ class Hdf5(ArchiveFormat):
             fits = px.ndim == 2 and px.shape[-1] % 32 == 0 and px.shape[-1] <= 4096  # else HDF5 pads: its own filter
             return frame, (szip_chunk(px) if direct and fits else None)
 
-        # The oldest file-format bounds that hold what we use (chunks, SZIP, variable-length UTF-8):
-        # "latest" from the HDF5 2.x inside h5py's wheel is unreadable to HDF5 1.10 tools (h5dump,
-        # GDAL and MATLAB builds of that era).
-        with h5py.File(out_dir / rel, "w-", libver=LIBVER) as f:
-            dset: Any = None
-            times: Any = None
-            meta: Any = None
+        with _SessionFile(out_dir / rel, n_total, self._filter_kwargs(), ctx) as out:
             for frame, chunk in ordered_map(encoded, frames, ctx.workers if direct else 1):
                 px = np.asarray(frame.pixels)
-                if dset is None:
-                    h, w = px.shape
-                    dset = f.create_dataset("frames", shape=(n_total, h, w), dtype="<u2", chunks=(1, h, w),
-                                            **self._filter_kwargs())
-                    times = f.create_dataset("timestamps_ns", shape=(n_total,), dtype="<i8")
-                    meta = f.create_dataset("metadata", shape=(n_total,), dtype=h5py.string_dtype("utf-8"))
-                elif px.shape != dset.shape[1:]:
-                    raise ArchiveError(f"frame {frame.index} is {px.shape}, the session's frames are {dset.shape[1:]}")
+                dset = out.frames(px.shape, frame.index)
                 if n >= n_total:
                     raise ArchiveError(f"more frames than the {n_total} counted")
                 if chunk is not None:
                     dset.id.write_direct_chunk((n, 0, 0), chunk[1], filter_mask=chunk[0])
                 else:
                     dset[n] = px
-                times[n] = frame.log_time
-                meta[n] = frame.sidecar.decode() if frame.sidecar else "{}"
+                out.times[n] = frame.log_time
+                out.meta[n] = frame.sidecar.decode() if frame.sidecar else "{}"
                 n += 1
                 if ctx.on_frame:
                     ctx.on_frame()
             if n != n_total:
                 raise ArchiveError(f"expected {n_total} frames, got {n}")
-            f.attrs["session_id"] = ctx.session_id
-            f.attrs["radiometric_model"] = json.dumps(ctx.session_meta.get("radiometric_model"))
-            f.attrs["sensor"] = json.dumps(ctx.session_meta.get("sensor"))
-            f.attrs["format"] = "thermcap hdf5 archive 1"
-            if dset is not None:
-                _describe_for_netcdf(f, dset, times, meta, ctx.session_meta)
+        return [FileRecord(rel, n)]
+
+    def assemble(self, parts: list[tuple[Path, list[dict[str, Any]]]], out_dir: Path,
+                 ctx: ArchiveContext) -> list[FileRecord]:
+        """The session file from the segments' files: each chunk copied as stored (the filter's
+        bytes, its mask), with the times and sidecars, so no frame is encoded twice."""
+        rel = f"{ctx.session_id}.h5"
+        total = sum(int(r["frames"]) for _, files in parts for r in files)
+        n = 0
+        with _SessionFile(out_dir / rel, total, self._filter_kwargs(), ctx) as out:
+            for folder, files in parts:
+                for rec in files:
+                    try:
+                        src_file = h5py.File(folder / rec["path"], "r")
+                    except OSError as exc:
+                        raise ArchiveError(f"{folder / rec['path']}: not a readable HDF5 part ({exc})") from exc
+                    with src_file as src:
+                        s = src["frames"]
+                        if s.chunks != (1, *s.shape[1:]):
+                            raise ArchiveError(f"{folder / rec['path']}: frames are not chunked one per frame")
+                        m = s.shape[0]
+                        if n + m > total:
+                            raise ArchiveError(f"the parts hold more than the {total} frames they list")
+                        dset = out.frames(s.shape[1:], n)
+                        for k in range(m):
+                            mask, chunk = s.id.read_direct_chunk((k, 0, 0))
+                            dset.id.write_direct_chunk((n + k, 0, 0), chunk, filter_mask=mask)
+                        out.times[n:n + m] = src["timestamps_ns"][...]
+                        out.meta[n:n + m] = [v.decode("utf-8") if isinstance(v, bytes) else v
+                                             for v in src["metadata"][...]]
+                        n += m
+            if n != total:
+                raise ArchiveError(f"expected {total} frames from the parts, got {n}")
         return [FileRecord(rel, n)]
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
@@ -159,6 +173,47 @@ class Hdf5(ArchiveFormat):
                                         int(f["timestamps_ns"][k]))
             except (OSError, KeyError, ValueError) as exc:
                 raise ArchiveError(f"{rel}: not a readable HDF5 archive ({exc})") from exc
+
+
+class _SessionFile:
+    """An archive file being written: its datasets made on the first frame's shape, and on a
+    clean close the attributes and the netCDF description. The oldest file-format bounds that
+    hold what we use (chunks, SZIP, variable-length UTF-8): "latest" from the HDF5 2.x inside
+    h5py's wheel is unreadable to HDF5 1.10 tools (h5dump, GDAL and MATLAB builds of that era)."""
+
+    def __init__(self, path: Path, n_total: int, filter_kwargs: dict[str, Any], ctx: ArchiveContext) -> None:
+        self.path, self.n_total, self.filter_kwargs, self.ctx = path, n_total, filter_kwargs, ctx
+        self.f = h5py.File(path, "w-", libver=LIBVER)
+        self.dset: Any = None
+        self.times: Any = None
+        self.meta: Any = None
+
+    def frames(self, shape: tuple[int, ...], index: int) -> Any:
+        if self.dset is None:
+            h, w = shape
+            self.dset = self.f.create_dataset("frames", shape=(self.n_total, h, w), dtype="<u2", chunks=(1, h, w),
+                                              **self.filter_kwargs)
+            self.times = self.f.create_dataset("timestamps_ns", shape=(self.n_total,), dtype="<i8")
+            self.meta = self.f.create_dataset("metadata", shape=(self.n_total,), dtype=h5py.string_dtype("utf-8"))
+        elif tuple(shape) != self.dset.shape[1:]:
+            raise ArchiveError(f"frame {index} is {tuple(shape)}, the session's frames are {self.dset.shape[1:]}")
+        return self.dset
+
+    def __enter__(self) -> _SessionFile:
+        return self
+
+    def __exit__(self, exc_type: Any, *_: Any) -> None:
+        try:
+            if exc_type is None:
+                f, ctx = self.f, self.ctx
+                f.attrs["session_id"] = ctx.session_id
+                f.attrs["radiometric_model"] = json.dumps(ctx.session_meta.get("radiometric_model"))
+                f.attrs["sensor"] = json.dumps(ctx.session_meta.get("sensor"))
+                f.attrs["format"] = "thermcap hdf5 archive 1"
+                if self.dset is not None:
+                    _describe_for_netcdf(f, self.dset, self.times, self.meta, ctx.session_meta)
+        finally:
+            self.f.close()
 
 
 def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, session_meta: dict[str, Any]) -> None:
