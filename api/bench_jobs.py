@@ -1,10 +1,14 @@
 """``thermcap bench jobs``: the same sessions archived as Dask tasks (one per segment, then a
-finalize per session) on a LocalCluster of one worker and of two, in one run. The ratio is the
-scaling (2x is the limit on two cores). The per-core rate gives the capacity model in the
-README: cores needed for N cameras recording H hours a day."""
+finalize per session) on a LocalCluster of one worker and of two, in one run. Each worker process
+is pinned to a core of its own, as a cluster of one-core machines: unpinned, one worker's task
+already spreads its format threads over both of this host's cores, and the scaling would measure
+nothing. The ratio is the scaling (2x is the limit on two cores). The per-core rate gives the
+capacity model in the README: cores needed for N cameras recording H hours a day."""
 
 from __future__ import annotations
 
+import contextlib
+import os
 import shutil
 import tempfile
 import time
@@ -14,8 +18,16 @@ from typing import Any
 __all__ = ["bench_jobs"]
 
 
+def _pin_process(core: int) -> int:
+    """Every thread of this worker process (and those it starts later) on one core."""
+    for tid in os.listdir("/proc/self/task"):
+        with contextlib.suppress(OSError):
+            os.sched_setaffinity(int(tid), {core})
+    return core
+
+
 def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...] = ("png16", "tiff-lzw", "hdf5"),
-               workdir: str | None = None, segment_s: float = 1.0) -> dict[str, Any]:
+               workdir: str | None = None, segment_s: float = 1.0, pin: bool = True) -> dict[str, Any]:
     from api.db import make_engine, migrate
     from api.jobs.dask_jobs import DaskJobs, TaskConfig
     from api.jobs.worker import Worker
@@ -25,7 +37,7 @@ def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...
 
     n = int(seconds * 60)
     out: dict[str, Any] = {"sessions": sessions, "seconds_each": seconds, "frames_each": n, "formats": list(formats),
-                           "segment_s": segment_s}
+                           "segment_s": segment_s, "one_core_per_worker": pin}
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         pristine = Path(tmp) / "pristine"
         for k in range(sessions):
@@ -42,6 +54,9 @@ def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...
             migrate(engine)
             jobs = DaskJobs(Worker(root, engine, formats=list(formats), log=lambda m: None),
                             TaskConfig(str(root), formats, db, None, False), local_workers=workers)
+            if pin:  # one core per worker, as machines of one core each: a task's format threads share it
+                for k, addr in enumerate(sorted(jobs.client.scheduler_info()["workers"])):
+                    jobs.client.run(_pin_process, k % (os.cpu_count() or 1), workers=[addr])
             try:
                 t = time.perf_counter()
                 res = jobs.run_once()

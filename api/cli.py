@@ -159,13 +159,15 @@ def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> 
 @click.option("--segment-seconds", type=float, default=1.0, show_default=True,
               help="Segment length: a 10 s session of 1 s segments is 10 segment tasks.")
 @click.option("--formats", default="png16,tiff-lzw,hdf5", show_default=True)
+@click.option("--pin/--no-pin", default=True, show_default=True, help="One core per worker process.")
 @json_option
-def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, formats: str, as_json: bool) -> None:
+def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, formats: str, pin: bool,
+                   as_json: bool) -> None:
     """The same sessions archived as Dask tasks (a task per segment) on one worker and on two: the
     scaling, and a capacity model."""
     from api.bench_jobs import bench_jobs
 
-    res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f), segment_s=segment_seconds)
+    res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f), segment_s=segment_seconds, pin=pin)
     if as_json:
         click.echo(json.dumps(res, indent=2))
         return
@@ -196,19 +198,23 @@ def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
 @click.option("--once", is_flag=True, help="One pass over the root, then exit.")
 @click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
 @click.option("--delete-source", is_flag=True,
-              help="Delete the MCAP once archives verified (and uploaded, with a store).")
-@click.option("--lease-ttl", type=float, default=600.0, show_default=True)
+              help="Delete the MCAP source once every format verified (and uploaded, with a bucket).")
 @click.option("--scheduler", envvar="THERMCAP_DASK_SCHEDULER", default=None, metavar="tcp://HOST:8786",
-              help="Run each session as a task on this Dask cluster ($THERMCAP_DASK_SCHEDULER) instead of here.")
+              help="A Dask cluster's scheduler (dask-jobqueue, dask-kubernetes or `dask scheduler`); without "
+                   "it, an in-process LocalCluster runs the same tasks.")
 @click.option("--local-workers", type=int, default=None, metavar="N",
-              help="Run the tasks on an in-process Dask LocalCluster of N worker processes.")
+              help="Task threads of the in-process LocalCluster  [default: 2, or 1 on one core]")
 @click.option("--scrub-interval", type=float, default=86400.0, show_default=True,
-              help="Seconds between scrubs (re-verify and repair every archived copy); 0: never.")
+              help="Seconds between scrubs of every archived session, as Dask tasks (0: never).")
 @json_option
-def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, lease_ttl: float,
-           scheduler: str | None, local_workers: int | None, scrub_interval: float, as_json: bool) -> None:
-    """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions."""
+def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, scheduler: str | None,
+           local_workers: int | None, scrub_interval: float, as_json: bool) -> None:
+    """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions, as Dask
+    tasks: one per segment, in parallel, then a finalize per session."""
+    import time as _time
+
     from api.db import make_engine, migrate
+    from api.jobs.dask_jobs import DaskJobs, TaskConfig
     from api.jobs.worker import Worker
     from api.settings import Settings
     from api.storage import make_store
@@ -218,16 +224,15 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
     migrate(engine)
     store = make_store(settings) if settings.s3_bucket else None
     fmts = [f for f in formats.split(",") if f]
-    w = Worker(settings.root, engine, formats=fmts, store=store,
-               delete_source=delete_source, lease_ttl_s=lease_ttl, log=(lambda m: None) if as_json else click.echo)
-    runner: Any = w
-    if scheduler or local_workers:
-        from api.jobs.dask_jobs import DaskJobs, TaskConfig
-
-        s3 = ({"bucket": settings.s3_bucket, "endpoint": settings.s3_endpoint, "region": settings.s3_region,
-               "prefix": settings.s3_prefix} if settings.s3_bucket else None)
-        runner = DaskJobs(w, TaskConfig(str(settings.root.resolve()), tuple(fmts), settings.db_url, s3, delete_source),
-                          scheduler=scheduler, local_workers=local_workers or 2)
+    w = Worker(settings.root, engine, formats=fmts, store=store, delete_source=delete_source,
+               log=(lambda m: None) if as_json else click.echo)
+    s3 = ({"bucket": settings.s3_bucket, "endpoint": settings.s3_endpoint, "region": settings.s3_region,
+           "prefix": settings.s3_prefix} if settings.s3_bucket else None)
+    # Without a scheduler: an in-process LocalCluster of threads (the codecs release the GIL), so
+    # the same tasks run with no server to start and end with this process.
+    runner = DaskJobs(w, TaskConfig(str(settings.root.resolve()), tuple(fmts), settings.db_url, s3, delete_source),
+                      scheduler=scheduler, local_workers=local_workers or min(2, os.cpu_count() or 1),
+                      processes=False)
     try:
         if once:
             res = runner.run_once()
@@ -235,17 +240,17 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
             if as_json:
                 click.echo(json.dumps(res.to_dict(), indent=2))
             sys.exit(1 if res.failed else 0)
-        if runner is w:
-            w.run_forever(interval, scrub_interval)
-        import time as _time
-
-        while True:  # on Dask: a pass of tasks every interval (scrub runs as `thermcap scrub`)
+        next_scrub = _time.monotonic() + scrub_interval if scrub_interval > 0 else None
+        while True:
             runner.run_once()
             w.heartbeat()
+            if next_scrub is not None and _time.monotonic() >= next_scrub:
+                found = runner.scrub()
+                w.log(f"scrub: {found['sessions']} sessions, {found['findings']} damaged copies found")
+                next_scrub = _time.monotonic() + scrub_interval
             _time.sleep(interval)
     finally:
-        if runner is not w:
-            runner.close()
+        runner.close()
 
 
 @click.command()

@@ -29,7 +29,6 @@ __all__ = [
     "frame_blobs",
     "frames",
     "jobs",
-    "leases",
     "make_engine",
     "metadata",
     "migrate",
@@ -124,16 +123,6 @@ events = Table(
     Column("start_ns", BigInteger, nullable=False),
     Column("end_ns", BigInteger, nullable=False),
     Column("detail", Text),
-)
-
-
-# Who is archiving which session: several workers on one root or bucket never archive the same
-# session twice. A lease expires, so a worker that died does not hold a session forever.
-leases = Table(
-    "leases", metadata,
-    Column("session_id", String(128), primary_key=True),
-    Column("owner", String(128), nullable=False),
-    Column("expires_ns", BigInteger, nullable=False),
 )
 
 

@@ -113,9 +113,22 @@ def _done_part(session_dir: Path, segment: Path, formats: list[str]) -> SegmentP
     return part
 
 
+def _archived(session_dir: Path, formats: list[str]) -> bool:
+    """Whether the session's archive already holds every one of ``formats``, its extras and its
+    summary (another submitter's tasks finished it)."""
+    try:
+        m = load_manifest(session_dir, required=False)
+    except ArchiveError:
+        return False
+    adir = archive_dir(session_dir)
+    return m is not None and all(m["formats"].get(f, {}).get("verified") and (adir / f).is_dir() for f in formats) \
+        and bool((m.get("extras") or {}).get("verified")) and _summary_intact(adir, m)
+
+
 def archive_segment(session_dir: str | Path, segment: str, first_index: int,
-                    formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *, workers: int = 1) -> SegmentPart:
-    """One segment's share of the archive, written and verified (idempotent)."""
+                    formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *, workers: int = 1) -> SegmentPart | None:
+    """One segment's share of the archive, written and verified (idempotent); None when the
+    session's archive already holds all of it."""
     session_dir = Path(session_dir)
     seg = session_dir / segment
     if not seg.is_file():
@@ -124,13 +137,17 @@ def archive_segment(session_dir: str | Path, segment: str, first_index: int,
     done = _done_part(session_dir, seg, formats)
     if done is not None:
         return done
+    if _archived(session_dir, formats):
+        return None
     fmts = {fid: get_format(fid) for fid in formats}
     parts = parts_dir(session_dir)
     locks = parts / ".locks" / segment
     locks.mkdir(parents=True, exist_ok=True)
-    lock = lock_session(locks, f"segment task {segment}", wait_s=0.0)
-    if lock is None:  # the same task elsewhere (another submitter's cluster): it will make the part
-        raise ArchiveError(f"{seg}: {holder(locks) or 'another process'} is archiving this segment")
+    # The same task elsewhere (another submitter's cluster, or a lost worker's process that has
+    # not died yet): wait for it, then find its part. The lock dies with its holder.
+    lock = lock_session(locks, f"segment task {segment}", wait_s=3600.0)
+    if lock is None:
+        raise ArchiveError(f"{seg}: {holder(locks) or 'another process'} has been archiving this segment for an hour")
     try:
         return _archive_segment_locked(session_dir, seg, first_index, formats, fmts, parts, workers)
     finally:
@@ -138,11 +155,13 @@ def archive_segment(session_dir: str | Path, segment: str, first_index: int,
 
 
 def _archive_segment_locked(session_dir: Path, seg: Path, first_index: int, formats: list[str],
-                            fmts: dict[str, Any], parts: Path, workers: int) -> SegmentPart:
+                            fmts: dict[str, Any], parts: Path, workers: int) -> SegmentPart | None:
     segment = seg.name
     done = _done_part(session_dir, seg, formats)  # made while we waited for the lock
     if done is not None:
         return done
+    if _archived(session_dir, formats):
+        return None
     partial = parts / (segment + PARTIAL_SUFFIX)
     if partial.exists():  # a lost worker's: never taken for a part
         shutil.rmtree(partial)
@@ -217,7 +236,7 @@ def finalize_session(session_dir: str | Path, formats: list[str] | tuple[str, ..
     formats = list(formats)
     if list(session_dir.glob(f"*{ACTIVE_SUFFIX}")):
         raise ArchiveError(f"{session_dir}: has unfinished segments (*.active); recording, or run `thermcap recover`")
-    lock = lock_session(session_dir, "archiver")
+    lock = lock_session(session_dir, "archiver", wait_s=60.0)
     if lock is None:
         raise ArchiveError(f"{session_dir}: {holder(session_dir) or 'another process'} holds this session")
     try:
@@ -227,6 +246,9 @@ def finalize_session(session_dir: str | Path, formats: list[str] | tuple[str, ..
 
 
 def _finalize_locked(session_dir: Path, formats: list[str]) -> Manifest:
+    if _archived(session_dir, formats):  # another finalize got here first
+        shutil.rmtree(parts_dir(session_dir), ignore_errors=True)
+        return load_manifest(session_dir)
     segments = session_segments(session_dir)
     parts: list[SegmentPart] = []
     for seg in segments:
@@ -246,7 +268,8 @@ def _finalize_locked(session_dir: Path, formats: list[str]) -> Manifest:
     if known and known != frames["sha256"]:  # a rotted source must not replace the hashes it is checked against
         raise VerificationError(f"{session_dir}: the segments' frames differ from the manifest's hashes", [])
     total = len(frames["sha256"])
-    w, h = parts[0].width if parts else 0, parts[0].height if parts else 0
+    sized = [p for p in parts if p.count]
+    w, h = (sized[0].width, sized[0].height) if sized else (0, 0)
     manifest["frames"] = frames
     manifest["source"] = {"segments": [{"name": p.segment, "frames": p.count, "bytes": p.segment_bytes}
                                        for p in parts],
@@ -346,6 +369,7 @@ def _join_extras(session_dir: Path, part_dirs: list[Path], segments: list[Path])
 
 
 def _join_summaries(parts: list[FrameSummary]) -> FrameSummary:
+    parts = [p for p in parts if p.frames] or parts[:1]  # a segment may hold no frame of this camera
     first = parts[0]
     return FrameSummary(first.band_rows, first.width, first.height, np.concatenate([p.min for p in parts]),
                         np.concatenate([p.max for p in parts]), np.concatenate([p.sum for p in parts]),

@@ -31,15 +31,17 @@ from __future__ import annotations
 
 import hashlib
 import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
-from api.jobs.worker import Worker, WorkerPass, _needs_work, finished_sessions
+from api.jobs.worker import Worker, WorkerPass, finished_sessions, needs_work
+from recorder.storage.lock import holder
 from recorder.storage.reader import read_session_meta
 
-__all__ = ["DaskJobs", "finalize_task", "segment_task", "segment_task_key", "session_task_key"]
+__all__ = ["DaskJobs", "finalize_task", "scrub_task", "segment_task", "segment_task_key", "session_task_key"]
 
 
 @dataclass(frozen=True)
@@ -73,7 +75,8 @@ def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: i
     start_job(engine, key, _worker_name())
     try:
         part = archive_segment(Path(session_dir), segment, first_index, list(cfg.formats))
-        finish_job(engine, key, result={"segment": segment, "frames": part.count})
+        finish_job(engine, key, result={"segment": segment, "frames": part.count if part else None,
+                                        "already_archived": part is None})
         return segment
     except Exception as exc:
         finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
@@ -115,6 +118,32 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
         engine.dispose()
 
 
+def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True) -> dict[str, Any]:
+    """On a Dask worker: one session's archived copies (and its bucket copies) re-verified."""
+    from api.db import make_engine
+    from api.indexing import index_session
+    from archive.blobs import open_store
+    from archive.scrub import ScrubReport, scrub_session
+
+    d = Path(session_dir)
+    engine = make_engine(cfg.db_url)
+    start_job(engine, key, _worker_name())
+    try:
+        store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
+        report = ScrubReport()
+        scrub_session(d, repair=repair, store=store, root=Path(cfg.root), report=report)
+        if report.findings:  # the API stops offering damage at once
+            index_session(engine, d, force=True)
+        found = [{"copy": f.copy, "problem": f.problems[0], "repaired": f.repaired} for f in report.findings]
+        finish_job(engine, key, result={"findings": found})
+        return {"findings": len(found)}
+    except Exception as exc:
+        finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
+        raise
+    finally:
+        engine.dispose()
+
+
 def _worker_name() -> str:
     try:
         from distributed import get_worker
@@ -136,7 +165,7 @@ class DaskJobs:
     """One pass: the sessions that need work, as tasks on the cluster; waits for them."""
 
     def __init__(self, worker: Worker, cfg: TaskConfig, *, scheduler: str | None = None, local_workers: int = 2,
-                 retries: int = 2) -> None:
+                 retries: int = 2, processes: bool = True) -> None:
         from distributed import Client, LocalCluster
 
         self.worker, self.cfg, self.retries = worker, cfg, retries
@@ -144,15 +173,25 @@ class DaskJobs:
             self.client = Client(scheduler, timeout=30)
             self._cluster = None
         else:
-            self._cluster = LocalCluster(n_workers=local_workers, threads_per_worker=1, processes=True,
-                                         host="127.0.0.1", dashboard_address=None)
+            # processes: one worker process per slot, as a real cluster (the benchmark); threads:
+            # one in-process worker (the embedded default), whose tasks end with the process
+            where = {"host": "127.0.0.1"} if processes else {}  # threads talk in-process: no port at all
+            self._cluster = LocalCluster(n_workers=local_workers if processes else 1,
+                                         threads_per_worker=1 if processes else local_workers, processes=processes,
+                                         dashboard_address=None, **where)
             self.client = Client(self._cluster)
 
     def run_once(self) -> WorkerPass:
         result = WorkerPass()
         self.worker._split_camera_sessions(result)  # local and quick: copies, then archived as tasks
-        todo = [d for d in finished_sessions(self.worker.root)
-                if _needs_work(d, list(self.cfg.formats), self.worker.store)]
+        todo = []
+        for d in finished_sessions(self.worker.root):
+            if not needs_work(d, list(self.cfg.formats), self.worker.store):
+                continue
+            if holder(d) is not None:  # another submitter's finalize (or an archive) holds it now
+                result.busy.append(read_session_meta(d).get("session_id", d.name))
+                continue
+            todo.append(d)
         futures = {self._submit(d): d for d in todo}
         for fut, d in futures.items():
             sid = read_session_meta(d).get("session_id", d.name)
@@ -183,6 +222,27 @@ class DaskJobs:
         key = session_task_key(d, formats)
         submit_job(engine, key, "archive", sid, {"formats": list(formats), "segments": len(parts)})
         return self.client.submit(finalize_task, self.cfg, str(d), *parts, key=key, retries=self.retries)
+
+    def scrub(self, repair: bool = True) -> dict[str, Any]:
+        """Every archived session re-verified as a task of its own (and repaired where another
+        copy covers it); sessions where anything was found are re-indexed by their task."""
+        from recorder.storage.layout import SessionLayout
+        from recorder.storage.reader import list_sessions
+
+        futures = {}
+        for d in list_sessions(self.worker.root):
+            if SessionLayout.of(d).manifest.is_file():
+                key = f"thermcap-scrub-{d.name}-{time.time_ns()}"
+                submit_job(self.worker.engine, key, "scrub", d.name, {"repair": repair})
+                futures[d.name] = self.client.submit(scrub_task, self.cfg, str(d), key, repair, key=key,
+                                                     retries=self.retries)
+        out: dict[str, Any] = {"sessions": len(futures), "findings": 0, "failed": {}}
+        for sid, fut in futures.items():
+            try:
+                out["findings"] += fut.result()["findings"]
+            except Exception as exc:  # recorded in the jobs table by the task itself
+                out["failed"][sid] = f"{type(exc).__name__}: {exc}"
+        return out
 
     def close(self) -> None:
         self.client.close()

@@ -1,20 +1,19 @@
-"""``thermcap worker``: archive, verify, upload and index finished sessions as they appear.
+"""What ``thermcap worker`` does besides running tasks: which sessions are finished and still
+need work, splitting sessions of several cameras, scrubbing, and the heartbeat.
 
 A session is finished when it has a summary and no ``.active`` segment and nobody holds its
-recording lock. Workers coordinate through leases in the index (SQLite or PostgreSQL): a worker
-archives a session only while it holds the lease, so several workers on one root or one bucket
-never archive the same session twice; a lease expires, so a dead worker's session is picked up
-again, and a live worker renews its lease every third of its lifetime for as long as the work
-takes (an hour-long session archives for longer than any fixed lifetime). Uploads use
-create-only writes: an object that is already there with the same content is left alone, one
-with different content is an error, never an overwrite.
+recording lock. The work itself runs as Dask tasks (``api.jobs.dask_jobs``). The lease loop
+that used to coordinate workers through a table is gone. The durable truth is the manifest and
+the segments' parts; the session and segment locks keep two processes from writing the same
+thing; the jobs table records what was asked and how it went. Uploads use create-only writes:
+an object that is already there with the same content is left alone, and one with different
+content is an error, never an overwrite.
 """
 
 from __future__ import annotations
 
 import os
 import socket
-import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -22,15 +21,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import delete, insert, update
 from sqlalchemy.engine import Engine
-from sqlalchemy.exc import IntegrityError
 
-from api import db
 from api.indexing import index_session
-from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
-from api.storage import BlobStore, upload_archive
-from archive.archiver import archive_session
+from api.storage import BlobStore
 from archive.manifest import load_manifest
 from archive.scrub import ScrubReport, scrub_session
 from recorder.exceptions import ThermcapError
@@ -39,57 +33,7 @@ from recorder.storage.lock import is_locked
 from recorder.storage.reader import list_sessions, read_session_meta, session_segments
 from recorder.storage.split import split_cameras
 
-__all__ = ["Worker", "acquire_lease", "finished_sessions", "release_lease"]
-
-
-def acquire_lease(engine: Engine, session_id: str, owner: str, ttl_s: float) -> bool:
-    now = time.time_ns()
-    expires = now + int(ttl_s * 1e9)
-    with engine.begin() as conn:
-        try:
-            conn.execute(insert(db.leases).values(session_id=session_id, owner=owner, expires_ns=expires))
-            return True
-        except IntegrityError:
-            pass
-    with engine.begin() as conn:
-        res = conn.execute(update(db.leases).where(db.leases.c.session_id == session_id,
-                                                   (db.leases.c.expires_ns < now) | (db.leases.c.owner == owner))
-                           .values(owner=owner, expires_ns=expires))
-        return res.rowcount == 1
-
-
-class _Renewal:
-    """Keeps a lease alive on a thread while its holder works; says if it was lost (a pause
-    longer than the lease, and another worker took it)."""
-
-    def __init__(self, engine: Engine, session_id: str, owner: str, ttl_s: float) -> None:
-        self.engine, self.session_id, self.owner, self.ttl_s = engine, session_id, owner, ttl_s
-        self.lost = False
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=f"lease-{session_id}", daemon=True)
-
-    def _run(self) -> None:
-        while not self._stop.wait(self.ttl_s / 3):
-            try:
-                renewed = acquire_lease(self.engine, self.session_id, self.owner, self.ttl_s)
-            except Exception:  # the index is unreachable for a moment: try again next time
-                renewed = True
-            if not renewed:
-                self.lost = True
-                return
-
-    def __enter__(self) -> _Renewal:
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self._stop.set()
-        self._thread.join()
-
-
-def release_lease(engine: Engine, session_id: str, owner: str) -> None:
-    with engine.begin() as conn:
-        conn.execute(delete(db.leases).where(db.leases.c.session_id == session_id, db.leases.c.owner == owner))
+__all__ = ["Worker", "WorkerPass", "finished_sessions", "needs_work"]
 
 
 def finished_sessions(root: Path) -> list[Path]:
@@ -104,7 +48,7 @@ def finished_sessions(root: Path) -> list[Path]:
     return out
 
 
-def _needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
+def needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
     if isinstance(read_session_meta(d).get("cameras"), dict):
         return False  # archived through its per-camera sessions
     try:
@@ -121,7 +65,7 @@ class WorkerPass:
     """One pass over ROOT, by session id."""
 
     archived: list[str] = field(default_factory=list)
-    leased_elsewhere: list[str] = field(default_factory=list)  # another worker holds the lease
+    busy: list[str] = field(default_factory=list)  # another process holds the session now: next pass
     failed: dict[str, str] = field(default_factory=dict)
     split: dict[str, list[str]] = field(default_factory=dict)  # a session of several cameras -> its per-camera ones
 
@@ -131,50 +75,12 @@ class WorkerPass:
 
 class Worker:
     def __init__(self, root: Path, engine: Engine, *, formats: list[str], store: BlobStore | None = None,
-                 delete_source: bool = False, lease_ttl_s: float = 600.0, owner: str | None = None,
+                 delete_source: bool = False, owner: str | None = None,
                  log: Callable[[str], None] = print) -> None:
         self.root, self.engine, self.formats, self.store = Path(root), engine, formats, store
-        self.delete_source, self.lease_ttl_s = delete_source, lease_ttl_s
+        self.delete_source = delete_source
         self.owner = owner or f"{socket.gethostname()}:{os.getpid()}:{uuid.uuid4().hex[:6]}"
         self.log = log
-
-    def run_once(self) -> WorkerPass:
-        result = WorkerPass()
-        self._split_camera_sessions(result)
-        for d in finished_sessions(self.root):
-            if not _needs_work(d, self.formats, self.store):
-                continue
-            sid = read_session_meta(d).get("session_id", d.name)
-            if not acquire_lease(self.engine, sid, self.owner, self.lease_ttl_s):
-                result.leased_elsewhere.append(sid)
-                continue
-            jid = archive_job_id(d, self.formats)
-            submit_job(self.engine, jid, "archive", sid, {"formats": list(self.formats)})
-            start_job(self.engine, jid, self.owner)
-            try:
-                with _Renewal(self.engine, sid, self.owner, self.lease_ttl_s) as renewal:
-                    archive_session(d, self.formats, delete_source=self.delete_source and self.store is None)
-                    if self.store is not None:
-                        upload_archive(self.store, self.root, d)
-                        if self.delete_source:
-                            archive_session(d, self.formats, delete_source=True)
-                    index_session(self.engine, d)
-                if renewal.lost:  # the work is idempotent and was done under the session lock; say so
-                    self.log(f"warning: {sid}: the lease lapsed during the work (a pause longer than "
-                             f"{self.lease_ttl_s:g} s); another worker may have started it and found it done")
-                result.archived.append(sid)
-                finish_job(self.engine, jid, result={"session": sid, "formats": list(self.formats)})
-                self.log(f"archived {sid}")
-            except ThermcapError as exc:
-                result.failed[sid] = str(exc)
-                finish_job(self.engine, jid, error=str(exc))
-                self.log(f"error: {sid}: {exc}")
-            except BaseException as exc:  # recorded, then raised as before
-                finish_job(self.engine, jid, error=f"{type(exc).__name__}: {exc}")
-                raise
-            finally:
-                release_lease(self.engine, sid, self.owner)
-        return result
 
     def _split_camera_sessions(self, result: WorkerPass) -> None:
         """A session of several cameras becomes one session per camera (bit-exact copies), which
@@ -218,13 +124,3 @@ class Worker:
         path = self.root / ".thermcap" / "worker.heartbeat"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(f"{self.owner} {time.time():.0f}\n")
-
-    def run_forever(self, interval_s: float = 5.0, scrub_interval_s: float = 86400.0) -> None:
-        next_scrub = time.monotonic() + scrub_interval_s if scrub_interval_s > 0 else None
-        while True:
-            self.run_once()
-            self.heartbeat()
-            if next_scrub is not None and time.monotonic() >= next_scrub:
-                self.scrub()
-                next_scrub = time.monotonic() + scrub_interval_s
-            time.sleep(interval_s)

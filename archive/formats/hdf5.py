@@ -126,6 +126,8 @@ class Hdf5(ArchiveFormat):
         with _SessionFile(out_dir / rel, total, self._filter_kwargs(), ctx) as out:
             for folder, files in parts:
                 for rec in files:
+                    if not int(rec["frames"]):  # a segment with no frame of this session's camera
+                        continue
                     try:
                         src_file = h5py.File(folder / rec["path"], "r")
                     except OSError as exc:

@@ -59,8 +59,15 @@ def test_the_task_key_is_the_content(tmp_path):
     assert session_task_key(d, ("png16", "hdf5")) != k1
     engine = make_engine(f"sqlite:///{tmp_path / 'i.sqlite'}")
     migrate(engine)
-    assert Worker(root, engine, formats=["png16"]).run_once().archived == ["a"]
+    from api.jobs.dask_jobs import DaskJobs, TaskConfig
     from api.jobs.records import get_job
 
-    job = get_job(engine, k1)  # the lease loop records the same job the Dask task would be
+    jobs = DaskJobs(Worker(root, engine, formats=["png16"]),
+                    TaskConfig(str(root), ("png16",), f"sqlite:///{tmp_path / 'i.sqlite'}", None, False),
+                    local_workers=1, processes=False)
+    try:
+        assert jobs.run_once().archived == ["a"]
+    finally:
+        jobs.close()
+    job = get_job(engine, k1)  # the task's key is the job's id
     assert job is not None and job.state == "done" and job.kind == "archive" and job.attempts == 1

@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 
 from api.db import make_engine, migrate
 from api.indexing import index_root
+from api.jobs.dask_jobs import DaskJobs, TaskConfig
 from api.jobs.worker import Worker
 from archive.verify import verify_session
 from recorder.capture.recorder import Recorder
@@ -69,7 +70,9 @@ def test_the_worker_splits_archives_and_indexes_a_session_of_several_cameras(tmp
     engine = make_engine(f"sqlite:///{tmp_path / 'index.db'}")
     migrate(engine)
     w = Worker(tmp_path, engine, formats=["png16"], delete_source=True, log=lambda m: None)
-    res = w.run_once()
+    jobs = DaskJobs(w, TaskConfig(str(tmp_path), ("png16",), f"sqlite:///{tmp_path / 'index.db'}", None, True),
+                    local_workers=2, processes=False)
+    res = jobs.run_once()
     assert res.split == {"mc": ["mc.front", "mc.mast"]}, res
     assert sorted(res.archived) == ["mc.front", "mc.mast"], res
     assert not list(d.glob("*.mcap"))  # the session's own segments went once both copies compared equal
@@ -81,7 +84,8 @@ def test_the_worker_splits_archives_and_indexes_a_session_of_several_cameras(tmp
         assert checks and all(c.ok for c in checks.values()), checks
     report = index_root(engine, tmp_path)
     assert "mc" in report.skipped and "several cameras" in report.skipped["mc"]
-    assert w.run_once().archived == []  # nothing left to do
+    assert jobs.run_once().archived == []  # nothing left to do
+    jobs.close()
 
 
 def test_split_cameras_cli(tmp_path):
