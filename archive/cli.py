@@ -287,25 +287,36 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, a
 @click.option("--prefix", envvar="THERMCAP_S3_PREFIX", default="", help="Key prefix in the bucket.")
 @click.option("--from", "from_dir", type=click.Path(file_okay=False, exists=True), default=None,
               help="Instead of a bucket: the folder vehicles sync to (`thermcap sync --to`).")
+@click.option("--into", "into", type=click.Path(file_okay=False), default=None, metavar="ROOT",
+              help="Then land every session that has arrived whole and receipted in ROOT/sessions, where "
+                   "`thermcap worker` archives it.")
 @json_option
 def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: str, from_dir: str | None,
-                 as_json: bool) -> None:
+                 into: str | None, as_json: bool) -> None:
     """Re-read every segment vehicles shipped, re-hash every frame, and write the receipts they free space by."""
     from archive.blobs import open_store
+    from archive.landing import land_synced
     from archive.receipts import confirm_synced
 
     if bool(bucket) == bool(from_dir):
         fail("give one source: --bucket (with --endpoint) or --from DIR")
     store = open_store(Path(from_dir or "."), bucket=bucket, endpoint=endpoint, region=region, prefix=prefix)
     report = confirm_synced(store)
+    landed = land_synced(store, Path(into)) if into else None
     if as_json:
-        click.echo(json.dumps(report.__dict__, indent=2))
+        click.echo(json.dumps({**report.__dict__, **({"landing": landed.__dict__} if landed else {})}, indent=2))
     else:
         click.echo(f"{len(report.receipted)} segments receipted, {len(report.damaged)} damaged, "
                    f"{report.already} receipted before")
         for key, problem in report.damaged.items():
             click.echo(f"damaged: {key}: {problem}", err=True)
-    if report.damaged:
+        if landed:
+            click.echo(f"landed {len(landed.landed)} sessions in {into}; {len(landed.waiting)} still arriving")
+            for sid, why in landed.waiting.items():
+                click.echo(f"  waiting: {sid}: {why}")
+            for sid, why in landed.damaged.items():
+                click.echo(f"damaged: {sid}: {why}", err=True)
+    if report.damaged or (landed and landed.damaged):
         sys.exit(1)
 
 

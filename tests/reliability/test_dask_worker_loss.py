@@ -20,6 +20,7 @@ from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
 from recorder.storage.segments import SegmentPolicy
 from tests.conftest import free_port
+from tests.support.dask_cluster import start_cluster, stop_cluster
 
 pytestmark = pytest.mark.slow
 distributed = pytest.importorskip("distributed", reason="Dask distributed is in the scale extra")
@@ -27,22 +28,11 @@ FORMATS = "png16,tiff-lzw,hdf5"
 
 
 def _cluster(tmp_path, port):
-    log = open(tmp_path / f"dask-{port}.log", "ab")  # noqa: SIM115 - the processes' log, closed with them
-    sched = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
-                              "--port", str(port), "--no-dashboard"], stdout=log, stderr=log)
-    workers = [subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", f"tcp://127.0.0.1:{port}",
-                                 "--nthreads", "1", "--no-nanny", "--no-dashboard", "--name", f"w{k}",
-                                 "--host", "127.0.0.1"], stdout=log, stderr=log) for k in range(2)]
-    client = distributed.Client(f"tcp://127.0.0.1:{port}", timeout=60)
-    client.wait_for_workers(2, timeout=60)
-    return sched, workers, client
+    return start_cluster(tmp_path, port)
 
 
 def _stop(client, processes):
-    client.close()
-    for p in processes:
-        p.kill()
-        p.wait()
+    stop_cluster(client, processes)
 
 
 def _running_worker_pid(client, timeout=60.0):

@@ -1,0 +1,49 @@
+"""Synced sessions land in the cloud's root only whole and receipted: a session still recording,
+a segment with no receipt, or bytes that differ from their receipt wait (and say why); a landed
+session is the vehicle's, file for file, and its landing never leaves a half folder."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+from archive.blobs import open_store
+from archive.landing import land_synced
+from archive.receipts import confirm_synced
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy
+
+
+def _depot(tmp_path):
+    vehicle = tmp_path / "vehicle"
+    for sid in ("a", "b"):
+        Recorder(SimSource(width=64, height=48, frames=40, paced=False, seed=3), vehicle, session_id=sid,
+                 policy=SegmentPolicy(max_duration_s=0.3), analysis=False).run()
+    depot = tmp_path / "depot"
+    shutil.copytree(vehicle / "sessions", depot / "sessions")  # what `thermcap sync --to` leaves
+    return vehicle, depot
+
+
+def test_only_whole_receipted_sessions_land(tmp_path):
+    vehicle, depot = _depot(tmp_path)
+    store = open_store(depot)
+    cloud = tmp_path / "cloud"
+    meta = json.loads((depot / "sessions/b/session.json").read_text())
+    (depot / "sessions/b/session.json").write_text(json.dumps({**meta, "status": "recording"}))
+    first = land_synced(store, cloud)
+    assert first.landed == [] and "no receipt" in first.waiting["a"] and "recording" in first.waiting["b"]
+    confirm_synced(store)
+    (depot / "sessions/b/session.json").write_text(json.dumps(meta))
+    seg = sorted((depot / "sessions/b").glob("*.mcap"))[1]
+    data = bytearray(seg.read_bytes())
+    data[-100] ^= 1  # the bucket's copy rots after its receipt (same size)
+    seg.write_bytes(bytes(data))
+    second = land_synced(store, cloud)
+    assert second.landed == ["a"] and "differ from the receipt" in second.damaged["b"]
+    assert (cloud / "sessions/a").is_dir() and not (cloud / "sessions/b").exists()
+    assert not list((cloud / "sessions").glob("*.partial"))
+    for p in (vehicle / "sessions/a").iterdir():
+        assert (cloud / "sessions/a" / p.name).read_bytes() == p.read_bytes()
+    again = land_synced(store, cloud)
+    assert again.already == 1
