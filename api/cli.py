@@ -206,9 +206,11 @@ def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
               help="Task threads of the in-process LocalCluster  [default: 2, or 1 on one core]")
 @click.option("--scrub-interval", type=float, default=86400.0, show_default=True,
               help="Seconds between scrubs of every archived session, as Dask tasks (0: never).")
+@click.option("--analyze", is_flag=True,
+              help="Also run the hot-spot analysis (a task after the archive) on sessions that have none.")
 @json_option
 def worker(root: str, formats: str, once: bool, interval: float, delete_source: bool, scheduler: str | None,
-           local_workers: int | None, scrub_interval: float, as_json: bool) -> None:
+           local_workers: int | None, scrub_interval: float, analyze: bool, as_json: bool) -> None:
     """Archive, verify, upload (when THERMCAP_S3_BUCKET is set) and index finished sessions, as Dask
     tasks: one per segment, in parallel, then a finalize per session."""
     import time as _time
@@ -230,7 +232,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
            "prefix": settings.s3_prefix} if settings.s3_bucket else None)
     # Without a scheduler: an in-process LocalCluster of threads (the codecs release the GIL), so
     # the same tasks run with no server to start and end with this process.
-    runner = DaskJobs(w, TaskConfig(str(settings.root.resolve()), tuple(fmts), settings.db_url, s3, delete_source),
+    runner = DaskJobs(w, TaskConfig(str(settings.root.resolve()), tuple(fmts), settings.db_url, s3, delete_source,
+                                    analyze),
                       scheduler=scheduler, local_workers=local_workers or min(2, os.cpu_count() or 1),
                       processes=False)
     try:

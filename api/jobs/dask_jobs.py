@@ -38,10 +38,12 @@ from typing import Any
 
 from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
 from api.jobs.worker import Worker, WorkerPass, finished_sessions, needs_work
+from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import holder
 from recorder.storage.reader import read_session_meta
 
-__all__ = ["DaskJobs", "finalize_task", "scrub_task", "segment_task", "segment_task_key", "session_task_key"]
+__all__ = ["DaskJobs", "analysis_task", "finalize_task", "scrub_task", "segment_task", "segment_task_key",
+           "session_task_key"]
 
 
 @dataclass(frozen=True)
@@ -53,6 +55,7 @@ class TaskConfig:
     db_url: str
     s3: dict[str, Any] | None
     delete_source: bool
+    analyze: bool = False  # the hot-spot analysis of sessions recorded or imported without it
 
 
 def session_task_key(session_dir: Path, formats: tuple[str, ...]) -> str:
@@ -144,6 +147,29 @@ def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True)
         engine.dispose()
 
 
+def analysis_task(cfg: TaskConfig, session_dir: str, key: str, _after: Any = None) -> dict[str, Any]:
+    """On a Dask worker, after the session's finalize: the detector run over every frame (from the
+    MCAP source or, once it is deleted, the archive), then the index takes its results."""
+    from api.db import make_engine
+    from api.indexing import index_session
+    from recorder.analysis.offline import analyze_session
+
+    d = Path(session_dir)
+    engine = make_engine(cfg.db_url)
+    start_job(engine, key, _worker_name())
+    try:
+        out = analyze_session(d)
+        index_session(engine, d)
+        summary = {"frames": out.get("frames"), "detections": out.get("detections")}
+        finish_job(engine, key, result=summary)
+        return summary
+    except Exception as exc:
+        finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
+        raise
+    finally:
+        engine.dispose()
+
+
 def _worker_name() -> str:
     try:
         from distributed import get_worker
@@ -221,7 +247,12 @@ class DaskJobs:
                                                 retries=self.retries))
         key = session_task_key(d, formats)
         submit_job(engine, key, "archive", sid, {"formats": list(formats), "segments": len(parts)})
-        return self.client.submit(finalize_task, self.cfg, str(d), *parts, key=key, retries=self.retries)
+        done = self.client.submit(finalize_task, self.cfg, str(d), *parts, key=key, retries=self.retries)
+        if self.cfg.analyze and not SessionLayout.of(d).analysis_jsonl.is_file():
+            akey = key.replace("thermcap-archive-", "thermcap-analysis-", 1)
+            submit_job(engine, akey, "analysis", sid, {})
+            done = self.client.submit(analysis_task, self.cfg, str(d), akey, done, key=akey, retries=self.retries)
+        return done
 
     def scrub(self, repair: bool = True) -> dict[str, Any]:
         """Every archived session re-verified as a task of its own (and repaired where another

@@ -71,3 +71,25 @@ def test_the_task_key_is_the_content(tmp_path):
         jobs.close()
     job = get_job(engine, k1)  # the task's key is the job's id
     assert job is not None and job.state == "done" and job.kind == "archive" and job.attempts == 1
+
+
+def test_analysis_runs_as_a_task_after_the_archive(tmp_path):
+    """``--analyze``: the detector over a session recorded without it, as a task after its
+    finalize; the index then has its targets, and the jobs table the task."""
+    root = tmp_path / "root"
+    Recorder(SimSource(width=96, height=64, frames=30, paced=False, seed=4, first_cue_s=0.1), root,
+             session_id="quiet", analysis=False, recover_leftovers=False).run()
+    env = {"THERMCAP_DATABASE_URL": f"sqlite:///{tmp_path / 'index.sqlite'}"}
+    r = run_cli("worker", "--root", str(root), "--formats", "png16", "--analyze", "--once", "--json", env=env,
+                timeout=300)
+    assert r.returncode == 0, r.stderr
+    assert (root / "sessions" / "quiet" / "analysis.jsonl").is_file()
+    from api.jobs.records import list_jobs
+
+    engine = make_engine(env["THERMCAP_DATABASE_URL"])
+    kinds = {j.kind: j for j in list_jobs(engine, session_id="quiet")}
+    assert kinds["analysis"].state == "done" and kinds["analysis"].result["frames"] == 30
+    from sqlalchemy import text
+
+    with engine.connect() as c:
+        assert c.execute(text("select has_targets from sessions where id = 'quiet'")).scalar()
