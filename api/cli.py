@@ -320,9 +320,12 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
               help="s3:// inboxes: the S3-compatible endpoint (credentials from AWS_ACCESS_KEY_ID / "
                    "AWS_SECRET_ACCESS_KEY).")
 @click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
+@click.option("--scheduler", envvar="THERMCAP_DASK_SCHEDULER", default=None, metavar="tcp://HOST:8786",
+              help="Take the files as tasks on this Dask cluster (its workers must see INBOX and ROOT); "
+                   "without it, one after another here.")
 @json_option
 def watch(inbox: str, root: str, once: bool, interval: float, settle: float, archive: bool, formats: str,
-          endpoint: str | None, region: str, as_json: bool) -> None:
+          endpoint: str | None, region: str, scheduler: str | None, as_json: bool) -> None:
     """Take in every camera file dropped in INBOX (a folder, or s3://BUCKET/PREFIX) exactly once: import,
     archive, derived products beside it (heatmap PNG, °C GeoTIFF, surface_temperature summary); bad files
     to quarantine/."""
@@ -346,10 +349,15 @@ def watch(inbox: str, root: str, once: bool, interval: float, settle: float, arc
         def one_pass() -> Any:
             return process_bucket_inbox(store, prefix, root, bucket=bucket, archive_formats=fmts, log=log)
         bucket_inbox = one_pass
+    client = None
+    if scheduler and bucket_inbox is None:
+        from distributed import Client
+
+        client = Client(scheduler, timeout=30)
     while True:
         try:
             res = bucket_inbox() if bucket_inbox is not None else process_inbox(inbox, root, settle_s=settle,
-                                                                    archive_formats=fmts, log=log)
+                                                                    archive_formats=fmts, log=log, client=client)
         except InboxBusy as exc:
             if once:
                 fail(str(exc))

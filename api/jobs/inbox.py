@@ -35,7 +35,7 @@ from recorder.storage.digest import file_sha256
 from recorder.storage.lock import lock_session
 from recorder.storage.reader import read_session_meta
 
-__all__ = ["InboxBusy", "InboxPass", "process_inbox"]
+__all__ = ["InboxBusy", "InboxPass", "process_inbox", "take_file"]
 
 STATE = ".thermcap"
 QUARANTINE = "quarantine"
@@ -142,12 +142,43 @@ def _derive(session_dir: Path, out: Path) -> list[str]:
     return made
 
 
-def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
-                  archive_formats: list[str] | None = None, log: Callable[[str], None] = lambda m: None) -> InboxPass:
-    """One pass: take every settled new file once."""
+def take_file(inbox: Path, root: Path, rel: str, digest: str, archive_formats: list[str] | None) -> dict[str, Any]:
+    """One settled new file taken in: imported (or found imported, by its content-named session),
+    archived, its derived products written beside it; or quarantined with the reason. Returns
+    its journal record. The same call in-process or as a Dask task on a worker that sees both
+    folders."""
     from archive.archiver import archive_session
     from recorder.importers.run import import_paths
 
+    path = inbox / rel
+    name = f"inbox-{digest[:16]}"  # a file's sessions are named by its content: a rerun finds them
+    done = _earlier_sessions(root, name)
+    if done:
+        report = None  # imported before a crash that came ahead of the journal: not imported again
+        session_dirs = done
+    else:
+        report = import_paths([str(path)], root, session=name)
+        session_dirs = [s.session_dir for s in report.sessions]
+    problem = "" if report is None else "; ".join(f["error"] for f in report.failed + report.truncated)
+    if problem or not session_dirs:
+        reason = problem or "not a camera file thermcap reads"
+        _quarantine(inbox, path, reason)
+        return {"sha256": digest, "path": rel, "status": "quarantined", "reason": reason}
+    archived = []
+    for d in session_dirs:
+        if archive_formats:
+            archive_session(d, archive_formats)  # resumes a half-done archive, skips a done one
+            archived.append(d.name)
+    derived = _derive(session_dirs[0], path.with_name(path.name + ".derived"))
+    return {"sha256": digest, "path": rel, "status": "processed", "sessions": [str(d) for d in session_dirs],
+            "archived": archived, "derived": derived, "at": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}
+
+
+def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
+                  archive_formats: list[str] | None = None, log: Callable[[str], None] = lambda m: None,
+                  client: Any = None) -> InboxPass:
+    """One pass: take every settled new file once. ``client`` (a Dask client) takes the files as
+    tasks, in parallel on its workers; each is journaled here as it finishes."""
     inbox, root = Path(inbox), Path(root)
     if not inbox.is_dir():
         raise ThermcapError(f"{inbox}: no such inbox folder")
@@ -159,46 +190,35 @@ def process_inbox(inbox: str | Path, root: str | Path, *, settle_s: float = 2.0,
     try:
         seen = _journal(inbox)
         now = time.time()
+        todo: dict[str, str] = {}  # digest -> rel
         for path in _candidates(inbox):
             rel = str(path.relative_to(inbox))
             if not _settled(path, settle_s, now):
                 result.waiting.append(rel)
                 continue
             digest = file_sha256(path)
-            if digest in seen:
-                if seen[digest]["path"] != rel:
+            if digest in seen or digest in todo:
+                if (seen.get(digest) or {}).get("path", todo.get(digest)) != rel:
                     result.duplicates.append(rel)
                 continue
-            name = f"inbox-{digest[:16]}"  # a file's sessions are named by its content: a rerun finds them
-            done = _earlier_sessions(root, name)
-            if done:
-                report = None  # imported before a crash that came ahead of the journal: not imported again
-                session_dirs = done
+            todo[digest] = rel
+        if client is not None:
+            from distributed import as_completed
+
+            futures = [client.submit(take_file, inbox, root, rel, digest, archive_formats,
+                                     key=f"thermcap-inbox-{digest[:32]}") for digest, rel in todo.items()]
+            records = (f.result() for f in as_completed(futures))
+        else:
+            records = (take_file(inbox, root, rel, digest, archive_formats) for digest, rel in todo.items())
+        for rec in records:
+            if rec["status"] == "quarantined":
+                result.quarantined[rec["path"]] = rec["reason"]
+                log(f"quarantined {rec['path']}: {rec['reason']}")
             else:
-                report = import_paths([str(path)], root, session=name)
-                session_dirs = [s.session_dir for s in report.sessions]
-            problem = "" if report is None else "; ".join(f["error"] for f in report.failed + report.truncated)
-            if problem or not session_dirs:
-                _quarantine(inbox, path, problem or "not a camera file thermcap reads")
-                result.quarantined[rel] = problem or "not a camera file thermcap reads"
-                log(f"quarantined {rel}: {result.quarantined[rel]}")
-                rec: dict[str, Any] = {"sha256": digest, "path": rel, "status": "quarantined",
-                                       "reason": result.quarantined[rel]}
-            else:
-                sessions = [str(d) for d in session_dirs]
-                archived = []
-                for d in session_dirs:
-                    if archive_formats:
-                        archive_session(d, archive_formats)  # resumes a half-done archive, skips a done one
-                        archived.append(d.name)
-                derived = _derive(session_dirs[0], path.with_name(path.name + ".derived"))
-                rec = {"sha256": digest, "path": rel, "status": "processed", "sessions": sessions,
-                       "archived": archived, "derived": derived, "at": time.strftime("%Y-%m-%dT%H:%M:%SZ",
-                                                                                        time.gmtime())}
                 result.processed.append(rec)
-                log(f"took {rel} -> {', '.join(Path(x).name for x in sessions)}")
+                log(f"took {rec['path']} -> {', '.join(Path(x).name for x in rec['sessions'])}")
             _record(inbox, rec)
-            seen[digest] = rec
+            seen[rec["sha256"]] = rec
     finally:
         lock.release()
     return result

@@ -83,3 +83,27 @@ def test_a_crash_between_import_and_journal_imports_nothing_twice(tmp_path):
     assert len(again.processed) == 2
     assert sorted(p.name for p in list_sessions(root)) == sessions  # the same two sessions, none twice
     assert json.loads((half / "session.json").read_text())["status"] == "complete"  # re-imported whole
+
+
+def test_files_taken_as_dask_tasks_are_journaled_once(tmp_path):
+    """The same inbox pass with its files taken in parallel as tasks on a Dask cluster."""
+    from distributed import Client, LocalCluster
+
+    from api.jobs.inbox import process_inbox
+
+    rec = Recorder(SimSource(width=64, height=48, fps=30, frames=5, paced=False, seed=6), tmp_path / "src",
+                   session_id="src", analysis=False)
+    assert rec.run().ok
+    inbox, root = tmp_path / "inbox", tmp_path / "root"
+    export_session(rec.session_dir, "icd", inbox)
+    (inbox / "broken.jpg").write_bytes(b"\xff\xd8\xff\xe1" + os.urandom(300))
+    with LocalCluster(n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        res = process_inbox(inbox, root, settle_s=0, archive_formats=["png16"], client=client)
+        again = process_inbox(inbox, root, settle_s=0, archive_formats=["png16"], client=client)
+    assert len(res.processed) == 5 and set(res.quarantined) == {"broken.jpg"}
+    assert all(r["archived"] for r in res.processed)
+    assert again.processed == [] and again.quarantined == {}
+    assert len(list_sessions(root)) == 5
+    journal = (inbox / ".thermcap" / "inbox.jsonl").read_text().splitlines()
+    assert len(journal) == 6
