@@ -15,6 +15,7 @@ from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from api.db import make_engine, migrate
 from api.exceptions import FrameNotFound, FrameUnavailable
+from api.fast_frames import FrameFastPath
 from api.indexing import index_root
 from api.jobs.runner import JobRunner
 from api.reading.frames import FrameReader
@@ -120,6 +121,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                        allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
 
     app.add_middleware(AuthGate, tokens=settings.tokens)
+    # inside the metrics, outside everything else: it checks tokens itself, and hands the rest on
+    app.add_middleware(FrameFastPath, engine=app.state.engine, root=settings.root, store_kind=app.state.store.kind,
+                       tokens=settings.tokens, state=app.state)
     app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
 
     @app.exception_handler(HTTPException)

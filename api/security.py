@@ -30,6 +30,7 @@ __all__ = [
     "AuthGate",
     "check_file_name",
     "check_session_id",
+    "given_token",
     "require",
     "scopes_for_token",
 ]
@@ -51,7 +52,7 @@ def scopes_for_token(tokens: dict[str, frozenset[str]], given: str | None) -> fr
     return found
 
 
-def _given_token(authorization: str, cookie_header: str) -> str | None:
+def given_token(authorization: str, cookie_header: str) -> str | None:
     scheme, _, given = authorization.partition(" ")
     if scheme.lower() == "bearer" and given.strip():
         return given.strip()
@@ -68,7 +69,7 @@ def _given_token(authorization: str, cookie_header: str) -> str | None:
 
 def _scopes_for(request: Request) -> frozenset[str] | None:
     tokens: dict[str, frozenset[str]] = request.app.state.settings.tokens
-    given = _given_token(request.headers.get("authorization", ""), request.headers.get("cookie", ""))
+    given = given_token(request.headers.get("authorization", ""), request.headers.get("cookie", ""))
     return scopes_for_token(tokens, given)
 
 
@@ -84,7 +85,7 @@ class AuthGate:
             await self.app(scope, receive, send)
             return
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
-        given = _given_token(headers.get("authorization", ""), headers.get("cookie", ""))
+        given = given_token(headers.get("authorization", ""), headers.get("cookie", ""))
         if scopes_for_token(self.tokens, given) is not None:
             await self.app(scope, receive, send)
             return

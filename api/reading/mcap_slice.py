@@ -48,13 +48,13 @@ class _Sink(io.RawIOBase):
         return True
 
     def write(self, b) -> int:
-        data = bytes(b)
+        data = b if isinstance(b, bytes) else bytes(b)  # a whole chunk copied from the source: no second copy
         self.parts.append(data)
         self.size += len(data)
         return len(data)
 
     def take(self) -> bytes:
-        out = b"".join(self.parts)
+        out = self.parts[0] if len(self.parts) == 1 else b"".join(self.parts)
         self.parts.clear()
         self.size = 0
         return out

@@ -1,0 +1,309 @@
+"""The lean path for a frame's bytes: ``GET /api/v1/sessions/{id}/frames/{n}`` as png16 or raw.
+
+Why: a frame through the framework cost 4.1x nginx serving the same PNG. The profile put about
+40% in the middleware stack and routing, 18% in sending through those layers, 21% in the
+object store's ranged read, and 10% in a database query per request. This path answers the
+two plain requests, ``format=png16`` (or none) and ``format=raw``, in front of all that:
+
+- It keeps a session's png16 locations and frame hashes in memory. Each session's are loaded
+  by one query when first asked for, and looked at again only when the session's index row
+  changes (at most every ``CHECK_S``).
+- Bytes come by ``os.pread`` on the archive file, through a cache of open descriptors.
+- A PNG is checked against the ZIP directory's CRC-32 before it goes out, as on the full path.
+- Raw counts come from the tiff-lzw copy where there is one: its strips are decoded on two
+  threads (LZW releases the GIL), 2.4 ms for 640x512 against 4.5 ms for the PNG. Otherwise
+  they are decoded from the PNG. Either way they are checked against the frame's sha256,
+  which is also their ETag. A TIFF file's strip offsets are read from its IFDs once, the
+  first time it is asked for.
+
+It gives the same bytes, status, ETag, 304 and headers as the route. Anything else goes to the
+full application: another format or parameter, an Origin header (CORS), a token that does not
+pass, a session or copy it does not know, damage. So there is one behaviour, and the fast
+path only skips layers.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import re
+import threading
+import time
+import zlib
+from collections import OrderedDict
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qsl
+
+import anyio
+import imagecodecs
+import numpy as np
+import tifffile
+from sqlalchemy import select
+from sqlalchemy.engine import Engine
+
+from api import db
+from api.security import given_token, scopes_for_token
+from archive.codecs import get_codec
+
+__all__ = ["FrameFastPath"]
+
+_PATH = re.compile(r"/api/v1/sessions/([A-Za-z0-9][A-Za-z0-9_.-]{0,127})/frames/([0-9]{1,9})")
+CHECK_S = 2.0  # how stale a session's cached locations may be before its index row is looked at again
+_CACHE_CONTROL = b"public, max-age=31536000, immutable"
+_PNG16 = get_codec("png16")
+
+
+class _Route:
+    path = "/api/v1/sessions/{session_id}/frames/{n}"
+
+
+_ROUTE = _Route()
+
+
+@dataclass
+class _Session:
+    indexed_at: int
+    frames: int
+    files: list[str]  # png16 ZIP keys
+    file_of: np.ndarray  # int32 [n]: index into files, -1 where frame n has no png16 copy
+    offset: np.ndarray  # int64 [n]
+    length: np.ndarray  # int64 [n]
+    crc32: np.ndarray  # int64 [n], -1 unknown
+    sha256: list[bytes | None]  # the frame's pixel hash (raw LE bytes)
+    checked: float
+    tiff: list[tuple[str, int]]  # tiff-lzw files (key, frames), in session order
+
+
+@dataclass
+class _Pages:
+    """A multi-page LZW TIFF's strips, from its IFDs: what a page's rows need, without tifffile."""
+
+    offsets: list[tuple[int, ...]]
+    counts: list[tuple[int, ...]]
+    rows_per_strip: list[int]
+    shape: list[tuple[int, int]]
+    predictor: list[int]
+
+
+class FrameFastPath:
+    def __init__(self, app: Any, *, engine: Engine, root: Path, store_kind: str, tokens: dict[str, frozenset[str]],
+                 state: Any = None, keep_sessions: int = 16, keep_files: int = 64) -> None:
+        self.app, self.engine, self.root, self.tokens = app, engine, Path(root), tokens
+        if state is not None:
+            state.fast_frames = self  # for /metrics-style counts and the tests
+        self.local = store_kind == "local"
+        self._sessions: OrderedDict[str, _Session] = OrderedDict()
+        self._fds: OrderedDict[str, int] = OrderedDict()
+        self._keep_sessions, self._keep_files = keep_sessions, keep_files
+        self._lock = threading.Lock()
+        self._pages: OrderedDict[str, _Pages | None] = OrderedDict()
+        self._pool = ThreadPoolExecutor(2, thread_name_prefix="thermcap-strips")
+        self.served = 0  # requests answered here (the rest went to the application)
+        self.raw_from_strips = 0  # raw answers decoded from tiff-lzw strips (the rest from the PNG)
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        request = self._plain_frame_request(scope) if self.local else None
+        if request is None:
+            await self.app(scope, receive, send)
+            return
+        sid, n, fmt, inm = request
+        scope["route"] = _ROUTE  # the metrics count it under the route's own template
+        answer = await anyio.to_thread.run_sync(self._answer, sid, n, fmt) if fmt == "raw" else \
+            self._answer(sid, n, fmt)  # a PNG is a pread and a CRC: less than a thread hand-off
+        if answer is None:
+            await self.app(scope, receive, send)
+            return
+        body, etag, headers = answer
+        self.served += 1
+        headers = [*headers, (b"etag", etag), (b"cache-control", _CACHE_CONTROL)]
+        if inm is not None and (inm.strip() == b"*" or etag in [t.strip() for t in inm.split(b",")]):
+            await send({"type": "http.response.start", "status": 304, "headers": headers})
+            await send({"type": "http.response.body", "body": b""})
+            return
+        headers.append((b"content-length", str(len(body)).encode()))
+        await send({"type": "http.response.start", "status": 200, "headers": headers})
+        await send({"type": "http.response.body", "body": b"" if scope["method"] == "HEAD" else body})
+
+    def _plain_frame_request(self, scope: dict) -> tuple[str, int, str, bytes | None] | None:
+        if scope["type"] != "http" or scope["method"] not in ("GET", "HEAD"):
+            return None
+        m = _PATH.fullmatch(scope["path"])
+        if m is None:
+            return None
+        query = dict(parse_qsl(scope.get("query_string", b"").decode("latin-1"), keep_blank_values=True))
+        fmt = query.pop("format", "png16")
+        if query or fmt not in ("png16", "raw"):
+            return None
+        headers = dict(scope.get("headers", []))
+        if b"origin" in headers:  # CORS answers belong to the application's middleware
+            return None
+        if self.tokens:
+            given = given_token(headers.get(b"authorization", b"").decode("latin-1"),
+                                 headers.get(b"cookie", b"").decode("latin-1"))
+            scopes = scopes_for_token(self.tokens, given)
+            if scopes is None or "read" not in scopes:
+                return None  # the application says 401 or 403, as always
+        return m.group(1), int(m.group(2)), fmt, headers.get(b"if-none-match")
+
+    def _answer(self, sid: str, n: int, fmt: str) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
+        s = self._session(sid)
+        if s is None or not 0 <= n < s.frames or s.file_of[n] < 0:
+            return None
+        data = self._read(s.files[s.file_of[n]], int(s.offset[n]), int(s.length[n]))
+        if data is None or (s.crc32[n] >= 0 and zlib.crc32(data) != s.crc32[n]):
+            return None  # missing or damaged: the full path reports it and serves another copy
+        if fmt == "png16":
+            etag = b'"' + hashlib.sha256(data).hexdigest()[:40].encode() + b'"'
+            return data, etag, [(b"content-type", b"image/png")]
+        want = s.sha256[n]
+        if want is None:
+            return None
+        for source, decode in (("strips", lambda: self._tiff_pixels(s, n)), ("png", lambda: _PNG16.decode(data))):
+            got = decode()
+            if got is None:
+                continue
+            pixels = np.ascontiguousarray(got, dtype="<u2")
+            body = pixels.tobytes()
+            digest = hashlib.sha256(body).digest()
+            if digest == want:
+                if source == "strips":
+                    self.raw_from_strips += 1
+                break
+        else:
+            return None  # no copy here proves itself: the full path reports and tries the others
+        h, w = pixels.shape
+        return body, b'"' + digest.hex()[:40].encode() + b'"', [
+            (b"content-type", b"application/octet-stream"), (b"x-width", str(w).encode()),
+            (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
+
+    def _tiff_pixels(self, s: _Session, n: int) -> np.ndarray | None:
+        first = 0
+        for key, count in s.tiff:
+            if n < first + count:
+                pages = self._tiff_pages(key)
+                k = n - first
+                if pages is None or k >= len(pages.offsets):
+                    return None
+                try:
+                    return self._strips(key, pages, k)
+                except Exception:  # a damaged strip: the PNG, then the sha256, decide
+                    return None
+            first += count
+        return None
+
+    def _strips(self, key: str, pages: _Pages, k: int) -> np.ndarray | None:
+        h, w = pages.shape[k]
+        rps, predictor = pages.rows_per_strip[k], pages.predictor[k]
+        out = np.empty((h, w), np.uint16)
+
+        def strip(i: int) -> None:
+            data = self._read(key, pages.offsets[k][i], pages.counts[k][i])
+            if data is None:
+                raise OSError(f"{key}: strip {i} of page {k} is short")
+            rows = min(rps, h - i * rps)
+            a = np.frombuffer(imagecodecs.lzw_decode(data), "<u2")[: rows * w].reshape(rows, w)
+            out[i * rps:i * rps + rows] = imagecodecs.delta_decode(a, axis=-1) if predictor == 2 else a
+
+        list(self._pool.map(strip, range(len(pages.offsets[k]))))
+        return out
+
+    def _tiff_pages(self, key: str) -> _Pages | None:
+        with self._lock:
+            if key in self._pages:
+                self._pages.move_to_end(key)
+                return self._pages[key]
+        got: _Pages | None = _Pages([], [], [], [], [])
+        try:
+            with tifffile.TiffFile(self.root / key) as tif:
+                for page in tif.pages:
+                    if not isinstance(page, tifffile.TiffPage) or page.compression != 5 \
+                            or page.dtype != np.uint16 or page.samplesperpixel != 1:
+                        got = None
+                        break
+                    assert got is not None
+                    got.offsets.append(tuple(page.dataoffsets))
+                    got.counts.append(tuple(page.databytecounts))
+                    got.rows_per_strip.append(int(page.rowsperstrip))
+                    got.shape.append((int(page.shape[0]), int(page.shape[1])))
+                    got.predictor.append(int(page.predictor))
+        except (OSError, ValueError, tifffile.TiffFileError):
+            got = None
+        with self._lock:
+            self._pages[key] = got
+            while len(self._pages) > self._keep_files:
+                self._pages.popitem(last=False)
+        return got
+
+    def _read(self, key: str, offset: int, length: int) -> bytes | None:
+        with self._lock:
+            fd = self._fds.get(key)
+            if fd is not None:
+                self._fds.move_to_end(key)
+        if fd is None:
+            try:
+                fd = os.open(self.root / key, os.O_RDONLY)
+            except OSError:
+                return None
+            with self._lock:
+                self._fds[key] = fd
+                while len(self._fds) > self._keep_files:
+                    os.close(self._fds.popitem(last=False)[1])
+        try:
+            data = os.pread(fd, length, offset)
+        except OSError:
+            return None
+        return data if len(data) == length else None
+
+    def _session(self, sid: str) -> _Session | None:
+        now = time.monotonic()
+        with self._lock:
+            s = self._sessions.get(sid)
+            if s is not None and now - s.checked < CHECK_S:
+                self._sessions.move_to_end(sid)
+                return s
+        with self.engine.connect() as conn:
+            row = conn.execute(select(db.sessions.c.indexed_at, db.sessions.c.frames)
+                               .where(db.sessions.c.id == sid)).first()
+            if row is None:
+                return None
+            if s is not None and s.indexed_at == row[0]:
+                s.checked = now
+                return s
+            blobs = conn.execute(select(db.frame_blobs.c.idx, db.frame_blobs.c.file, db.frame_blobs.c.offset,
+                                        db.frame_blobs.c.length, db.frame_blobs.c.crc32)
+                                 .where(db.frame_blobs.c.session_id == sid, db.frame_blobs.c.format == "png16")).all()
+            hashes = conn.execute(select(db.frames.c.idx, db.frames.c.sha256)
+                                  .where(db.frames.c.session_id == sid)).all()
+            tiff_files = conn.execute(select(db.archives.c.files).where(
+                db.archives.c.session_id == sid, db.archives.c.format == "tiff-lzw",
+                db.archives.c.verified.is_(True))).scalar()
+        frames = int(row[1])
+        files: list[str] = []
+        where: dict[str, int] = {}
+        file_of = np.full(frames, -1, np.int32)
+        offset, length, crc = (np.zeros(frames, np.int64) for _ in range(3))
+        crc[:] = -1
+        for idx, file, off, ln, c in blobs:
+            if not 0 <= idx < frames:
+                continue
+            key = f"sessions/{sid}/archive/png16/{file}"
+            file_of[idx] = where.setdefault(key, len(files))
+            if file_of[idx] == len(files):
+                files.append(key)
+            offset[idx], length[idx], crc[idx] = off, ln, -1 if c is None else c
+        sha: list[bytes | None] = [None] * frames
+        for idx, h in hashes:
+            if 0 <= idx < frames and h:
+                sha[idx] = bytes.fromhex(h)
+        tiff = [(f"sessions/{sid}/archive/tiff-lzw/{r['path']}", int(r["frames"]))
+                for r in json.loads(tiff_files)] if tiff_files else []
+        s = _Session(int(row[0]), frames, files, file_of, offset, length, crc, sha, now, tiff)
+        with self._lock:
+            self._sessions[sid] = s
+            while len(self._sessions) > self._keep_sessions:
+                self._sessions.popitem(last=False)
+        return s

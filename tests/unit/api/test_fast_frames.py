@@ -1,0 +1,112 @@
+"""The lean frame path gives exactly what the full route gives. The full route is reached with
+the same request plus a parameter png16 and raw ignore, so every answer is compared with it:
+the bytes, the ETag, a 304, HEAD. A token that does not pass, an Origin header or a damaged copy
+go to the full application, which says 401 or serves another verified copy."""
+
+from __future__ import annotations
+
+import hashlib
+
+import imagecodecs
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from api.app import create_app
+from api.settings import Settings
+from recorder.storage.reader import iter_session_frames
+
+SID = "s-archived"
+
+
+def _full(client, n, fmt, **headers):
+    return client.get(f"/api/v1/sessions/{SID}/frames/{n}", params={"format": fmt, "palette": "gray"},
+                      headers=headers)
+
+
+@pytest.mark.parametrize("fmt", ["png16", "raw"])
+def test_the_same_answer_as_the_route(client, root, fmt):
+    fast = client.app.state.fast_frames
+    before = fast.served
+    frames = [f.pixels for f in iter_session_frames(root / "sessions" / SID)]
+    for n in (0, 7, len(frames) - 1):
+        a = client.get(f"/api/v1/sessions/{SID}/frames/{n}", params={"format": fmt})
+        b = _full(client, n, fmt)
+        assert a.status_code == b.status_code == 200
+        assert a.content == b.content and a.headers["etag"] == b.headers["etag"]
+        for h in ("content-type", "cache-control", "x-width", "x-height", "x-dtype"):
+            assert a.headers.get(h) == b.headers.get(h), h
+        if fmt == "raw":
+            assert np.array_equal(np.frombuffer(a.content, "<u2").reshape(frames[n].shape), frames[n])
+        again = client.get(f"/api/v1/sessions/{SID}/frames/{n}", params={"format": fmt},
+                           headers={"If-None-Match": a.headers["etag"]})
+        assert again.status_code == 304 and again.content == b""
+        head = client.head(f"/api/v1/sessions/{SID}/frames/{n}", params={"format": fmt})
+        assert head.status_code == 200 and head.content == b"" and head.headers["etag"] == a.headers["etag"]
+    assert fast.served >= before + 9  # answered here, not by the route
+
+
+def test_a_frame_out_of_range_or_an_unknown_session_is_the_routes_404(client):
+    assert client.get(f"/api/v1/sessions/{SID}/frames/99999").status_code == 404
+    assert client.get("/api/v1/sessions/nope/frames/0").status_code == 404
+
+
+def test_tokens_cors_and_damage_go_to_the_full_application(tmp_path):
+    from tests.support.api_data import make_root
+
+    root = make_root(tmp_path)
+    settings = Settings(root=root, tokens={"r" * 32: frozenset({"read"}), "w" * 32: frozenset({"write"})},
+                        rescan_interval_s=0)
+    with TestClient(create_app(settings)) as c:
+        fast = c.app.state.fast_frames
+        assert c.get(f"/api/v1/sessions/{SID}/frames/1").status_code == 401
+        assert c.get(f"/api/v1/sessions/{SID}/frames/1",
+                     headers={"Authorization": "Bearer " + "w" * 32}).status_code == 403
+        ok = c.get(f"/api/v1/sessions/{SID}/frames/1", headers={"Authorization": "Bearer " + "r" * 32})
+        assert ok.status_code == 200 and fast.served == 1
+        cors = c.get(f"/api/v1/sessions/{SID}/frames/1",
+                     headers={"Authorization": "Bearer " + "r" * 32, "Origin": "http://example.org"})
+        assert cors.status_code == 200 and cors.headers.get("access-control-allow-origin") and fast.served == 1
+        zip_path = next((root / "sessions" / SID / "archive" / "png16").glob("*.zip"))
+        data = bytearray(zip_path.read_bytes())
+        want = hashlib.sha256(ok.content).hexdigest()
+        at = bytes(data).find(ok.content[100:140])
+        data[at] ^= 0xFF  # frame 1's PNG, in the archive on disk
+        zip_path.write_bytes(bytes(data))
+        served = fast.served
+        raw = c.get(f"/api/v1/sessions/{SID}/frames/1", params={"format": "raw"},
+                    headers={"Authorization": "Bearer " + "r" * 32})
+        assert raw.status_code == 200 and fast.served == served  # the full path: another verified copy
+        png = c.get(f"/api/v1/sessions/{SID}/frames/1", headers={"Authorization": "Bearer " + "r" * 32})
+        assert png.status_code == 200 and fast.served == served  # re-encoded from a verified copy
+        assert np.array_equal(imagecodecs.png_decode(png.content), np.frombuffer(raw.content, "<u2").reshape(
+            int(raw.headers["x-height"]), int(raw.headers["x-width"])))
+        assert hashlib.sha256(ok.content).hexdigest() == want
+        assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
+
+
+def test_raw_from_tiff_strips_and_a_damaged_strip_falls_back_to_the_png(tmp_path):
+    import tifffile
+
+    from archive.archiver import archive_session
+    from recorder.capture.recorder import Recorder
+    from recorder.capture.sources.sim import SimSource
+
+    Recorder(SimSource(width=160, height=150, frames=12, paced=False, seed=8), tmp_path, session_id="t",
+             analysis=False).run()
+    frames = [f.pixels.copy() for f in iter_session_frames(tmp_path / "sessions" / "t")]
+    archive_session(tmp_path / "sessions" / "t", ["png16", "tiff-lzw"], delete_source=True)
+    tif = next((tmp_path / "sessions" / "t" / "archive" / "tiff-lzw").glob("*.tif"))
+    with tifffile.TiffFile(tif) as t:
+        off, n = t.pages[3].dataoffsets[1], t.pages[3].databytecounts[1]
+    data = bytearray(tif.read_bytes())
+    data[off + n // 2] ^= 0x5A  # frame 3's second strip
+    tif.write_bytes(bytes(data))
+    with TestClient(create_app(Settings(root=tmp_path, tokens={}, rescan_interval_s=0))) as c:
+        fast = c.app.state.fast_frames
+        for k, want in enumerate(frames):
+            r = c.get(f"/api/v1/sessions/t/frames/{k}", params={"format": "raw"})
+            assert r.status_code == 200
+            assert np.array_equal(np.frombuffer(r.content, "<u2").reshape(want.shape), want), k
+        assert fast.served == len(frames)  # frame 3 too: its PNG proved itself
+        assert fast.raw_from_strips == len(frames) - 1
