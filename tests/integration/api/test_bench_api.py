@@ -1,0 +1,23 @@
+"""``thermcap bench api`` in its short form: the server, nginx serving the same bytes, and the
+ratios between them from one run. Every frame is answered; the ratios are there and positive."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from api.bench_nginx import find_nginx
+from tests.conftest import run_cli
+
+
+@pytest.mark.skipif(find_nginx() is None, reason="nginx is not installed (.ci/run installs nginx-light)")
+def test_bench_api_against_nginx_short():
+    r = run_cli("bench", "api", "--frames", "20", "--requests", "20", "--clients", "2", "--json", timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = json.loads(r.stdout)
+    assert all(row.get("errors", 0) == 0 for row in rows)
+    ratios = rows[-1]["ratios"]
+    for key in ("raw_p50_vs_nginx", "png16_p50_vs_nginx", "export_vs_nginx", "export_vs_cat"):
+        assert ratios[key] and ratios[key] > 0, key
+    assert any(row["what"].startswith("nginx: the same png16") for row in rows)
