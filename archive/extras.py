@@ -24,7 +24,7 @@ from recorder.icd.topics import TOPIC_IMAGE
 from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from recorder.storage.reader import session_segments
 
-__all__ = ["EXTRAS_NAME", "ExtrasWriter", "summarize_mcap", "write_extras"]
+__all__ = ["EXTRAS_NAME", "ExtrasWriter", "extras_from", "summarize_mcap", "write_extras"]
 
 EXTRAS_NAME = EXTRAS_MCAP
 
@@ -160,10 +160,17 @@ def write_extras(session_dir: Path, archive_folder: Path) -> ExtrasEntry:
     """``extras.mcap`` from a read of its own (``scrub --repair``; the archiver feeds an
     ``ExtrasWriter`` from the read that feeds the formats)."""
     segments = session_segments(session_dir)
+    return extras_from(archive_folder, segments, segments)
+
+
+def extras_from(archive_folder: Path, message_files: list[Path], segments: list[Path]) -> ExtrasEntry:
+    """``extras.mcap`` with the non-image messages of ``message_files`` (the segments, or the
+    per-segment extras a cluster's tasks made from them) and the attachments and metadata of
+    ``segments``, compared with both before it takes its name."""
     extras = ExtrasWriter(archive_folder)
     try:
-        for seg in segments:
-            for kind, rec in _extra_records(seg):
+        for path in message_files:
+            for kind, rec in _extra_records(path):
                 if kind == "message":
                     extras.add_message(*rec)
     except BaseException:

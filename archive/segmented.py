@@ -47,7 +47,7 @@ from archive.archiver import (
     write_verified,
 )
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.extras import EXTRAS_NAME, ExtrasWriter, _extra_records
+from archive.extras import EXTRAS_NAME, ExtrasWriter, extras_from
 from archive.fanout import fan_out
 from archive.formats import ArchiveContext, get_format
 from archive.frame_summary import SUMMARY_NAME, FrameSummary, SummaryBuilder, load_summary
@@ -356,16 +356,7 @@ def _join_extras(session_dir: Path, part_dirs: list[Path], segments: list[Path])
         old = load_manifest(session_dir, required=False) or {}
         if (old.get("extras") or {}).get("verified"):
             return old["extras"]
-    extras = ExtrasWriter(adir)
-    try:
-        for d in part_dirs:
-            for kind, rec in _extra_records(d / EXTRAS_NAME, messages=True):
-                if kind == "message":
-                    extras.add_message(*rec)
-    except BaseException:
-        extras.abort()
-        raise
-    return extras.finish(segments)
+    return extras_from(adir, [d / EXTRAS_NAME for d in part_dirs], segments)
 
 
 def _join_summaries(parts: list[FrameSummary]) -> FrameSummary:

@@ -29,9 +29,11 @@ the same ``--scheduler`` address.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,18 +71,16 @@ def segment_task_key(session_dir: Path, segment: str, formats: tuple[str, ...]) 
     return f"thermcap-segment-{sid}-{Path(segment).stem}-{h}"
 
 
-def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: int, key: str) -> str:
-    """On a Dask worker: one segment's share of every format, written and verified (idempotent)."""
+@contextlib.contextmanager
+def _recorded(cfg: TaskConfig, key: str) -> Iterator[Any]:
+    """A task's run in the jobs table: each attempt counts (a rerun after a lost worker shows
+    two), and an error is kept with the job before it goes back to Dask for its retries."""
     from api.db import make_engine
-    from archive.segmented import archive_segment
 
     engine = make_engine(cfg.db_url)
     start_job(engine, key, _worker_name())
     try:
-        part = archive_segment(Path(session_dir), segment, first_index, list(cfg.formats))
-        finish_job(engine, key, result={"segment": segment, "frames": part.count if part else None,
-                                        "already_archived": part is None})
-        return segment
+        yield engine
     except Exception as exc:
         finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
         raise
@@ -88,11 +88,21 @@ def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: i
         engine.dispose()
 
 
+def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: int, key: str) -> str:
+    """On a Dask worker: one segment's share of every format, written and verified (idempotent)."""
+    from archive.segmented import archive_segment
+
+    with _recorded(cfg, key) as engine:
+        part = archive_segment(Path(session_dir), segment, first_index, list(cfg.formats))
+        finish_job(engine, key, result={"segment": segment, "frames": part.count if part else None,
+                                        "already_archived": part is None})
+        return segment
+
+
 def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dict[str, Any]:
     """On a Dask worker, once every segment's task has finished (``segments_done``, which Dask
     passes in when they have): the manifest, the final folders (HDF5 from the segments'
     compressed chunks), upload, ``--delete-source``, index."""
-    from api.db import make_engine
     from api.indexing import index_session
     from archive.archiver import archive_session
     from archive.blobs import open_store, upload_archive
@@ -100,10 +110,8 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
 
     d = Path(session_dir)
     store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
-    engine = make_engine(cfg.db_url)
     jid = session_task_key(d, cfg.formats)
-    start_job(engine, jid, _worker_name())  # each attempt counts, so a rerun after a lost worker shows
-    try:
+    with _recorded(cfg, jid) as engine:
         if segments_done or _formats_to_write(d, cfg.formats):
             finalize_session(d, list(cfg.formats))
         if store is not None:
@@ -114,24 +122,16 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
         sid = read_session_meta(d).get("session_id", d.name)
         finish_job(engine, jid, result={"session": sid, "formats": list(cfg.formats), "segments": len(segments_done)})
         return {"session": sid}
-    except Exception as exc:
-        finish_job(engine, jid, error=f"{type(exc).__name__}: {exc}")
-        raise
-    finally:
-        engine.dispose()
 
 
 def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True) -> dict[str, Any]:
     """On a Dask worker: one session's archived copies (and its bucket copies) re-verified."""
-    from api.db import make_engine
     from api.indexing import index_session
     from archive.blobs import open_store
     from archive.scrub import ScrubReport, scrub_session
 
     d = Path(session_dir)
-    engine = make_engine(cfg.db_url)
-    start_job(engine, key, _worker_name())
-    try:
+    with _recorded(cfg, key) as engine:
         store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
         report = ScrubReport()
         scrub_session(d, repair=repair, store=store, root=Path(cfg.root), report=report)
@@ -140,34 +140,21 @@ def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True)
         found = [{"copy": f.copy, "problem": f.problems[0], "repaired": f.repaired} for f in report.findings]
         finish_job(engine, key, result={"findings": found})
         return {"findings": len(found)}
-    except Exception as exc:
-        finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
-        raise
-    finally:
-        engine.dispose()
 
 
 def analysis_task(cfg: TaskConfig, session_dir: str, key: str, _after: Any = None) -> dict[str, Any]:
     """On a Dask worker, after the session's finalize: the detector run over every frame (from the
     MCAP source or, once it is deleted, the archive), then the index takes its results."""
-    from api.db import make_engine
     from api.indexing import index_session
     from recorder.analysis.offline import analyze_session
 
     d = Path(session_dir)
-    engine = make_engine(cfg.db_url)
-    start_job(engine, key, _worker_name())
-    try:
+    with _recorded(cfg, key) as engine:
         out = analyze_session(d)
         index_session(engine, d)
         summary = {"frames": out.get("frames"), "detections": out.get("detections")}
         finish_job(engine, key, result=summary)
         return summary
-    except Exception as exc:
-        finish_job(engine, key, error=f"{type(exc).__name__}: {exc}")
-        raise
-    finally:
-        engine.dispose()
 
 
 def _worker_name() -> str:
