@@ -82,6 +82,9 @@ class HotSpotDetector:
     _next_id: int = field(default=1, repr=False)
 
     _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _coarse assume 4)
+    # Built once: scipy builds the structure again on every call otherwise, a frame labels ~20 regions
+    _EIGHT: Any = field(default_factory=lambda: np.ones((3, 3), bool), repr=False)
+    _FOUR: Any = field(default_factory=lambda: ndimage.generate_binary_structure(2, 1), repr=False)
 
     def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Quarter-resolution (opened background, local mean, cell maximum) of ``temps``.
@@ -92,7 +95,7 @@ class HotSpotDetector:
         f = self._F
         h, w = temps.shape
         ph, pw = -(-h // f) * f, -(-w // f) * f
-        padded = np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
+        padded = temps if (ph, pw) == (h, w) else np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
         # Strided element-wise ops: numpy's reductions over a 4-long inner axis are 10x slower.
         cols = [padded[:, j::f] for j in range(f)]
         csum, cmx = cols[0] + cols[1] + cols[2] + cols[3], np.maximum(np.maximum(cols[0], cols[1]),
@@ -136,21 +139,29 @@ class HotSpotDetector:
         dets: list[Detection] = []
         per_target = []
         if cells.any():
-            bg = np.repeat(np.repeat(opened, f, axis=0), f, axis=1)[:h, :w]
-            regions, nreg = ndimage.label(cells, structure=np.ones((3, 3), bool))
-            # Regions whose warmest cell does not stand out from the local mean are texture:
-            # dropped here, at quarter resolution, before any full-resolution work.
-            rmax = ndimage.maximum(cmax, regions, np.arange(1, nreg + 1))
+            def bg(y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
+                """The background over a full-resolution window, from the coarse grid (only
+                where there are candidates: a whole-frame copy cost more than the rest)."""
+                cy0, cx0 = y0 // f, x0 // f
+                block = opened[cy0:-(-y1 // f), cx0:-(-x1 // f)]
+                full = np.repeat(np.repeat(block, f, axis=0), f, axis=1)
+                return full[y0 - cy0 * f:y1 - cy0 * f, x0 - cx0 * f:x1 - cx0 * f]
+
+            regions, _ = ndimage.label(cells, structure=self._EIGHT)
             found = []
-            for rsl, top in zip(ndimage.find_objects(regions), np.atleast_1d(rmax), strict=True):
+            for k, rsl in enumerate(ndimage.find_objects(regions), start=1):
+                # Regions whose warmest cell does not stand out from the local mean are texture:
+                # dropped here, at quarter resolution, before any full-resolution work. (The max
+                # over the region's own slice: scipy's labelled maximum sorts the whole grid.)
+                top = cmax[rsl][regions[rsl] == k].max()
                 cy = min((rsl[0].start + rsl[0].stop) // 2, local_mean.shape[0] - 1)
                 cx = min((rsl[1].start + rsl[1].stop) // 2, local_mean.shape[1] - 1)
                 if top - local_mean[cy, cx] < 0.8 * self.threshold_k:
                     continue
                 ry0, ry1 = rsl[0].start * f, min(h, rsl[0].stop * f)
                 rx0, rx1 = rsl[1].start * f, min(w, rsl[1].stop * f)
-                cand = (temps[ry0:ry1, rx0:rx1] - bg[ry0:ry1, rx0:rx1]) >= self.threshold_k
-                labels, n = ndimage.label(cand)
+                cand = (temps[ry0:ry1, rx0:rx1] - bg(ry0, ry1, rx0, rx1)) >= self.threshold_k
+                labels, n = ndimage.label(cand, structure=self._FOUR)
                 if not n:
                     continue
                 areas = np.bincount(labels.ravel(), minlength=n + 1)
@@ -183,8 +194,8 @@ class HotSpotDetector:
                 excess = peak - float(np.median(ring))
                 if excess < self.threshold_k or excess < self.min_sigma * (float(np.std(ring)) + 1e-3):
                     continue
-                warm = (crop - bg[Y0:Y1, X0:X1]) >= self.threshold_k  # this and any neighbouring target
-                bmask = ~ndimage.binary_dilation(warm | tmask, iterations=2)
+                warm = (crop - bg(Y0, Y1, X0, X1)) >= self.threshold_k  # this and any neighbouring target
+                bmask = ~ndimage.binary_dilation(warm | tmask, structure=self._FOUR, iterations=2)
                 if not bmask.any():
                     continue
                 m = contrast_metrics(crop, tmask, bmask)

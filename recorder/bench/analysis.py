@@ -93,20 +93,23 @@ def bench_analysis(frames_per_scene: int = 12) -> dict[str, Any]:
                f.sidecar["thermal_analysis"]["thermal_contrast_grade"])
               for f in xo.frames()]
     agree = sum((a < 0.3) == (b < 0.3) for a, b in grades) / len(grades)
-    # Speed on one core, 640x512.
-    pre = [f.pixels for f in SimSource(frames=60, paced=False, seed=3, start_time_ns=0).frames()]
+    # Speed on one core, 640x512, in CPU time (the host is shared: wall time says more of the
+    # neighbours than of the detector); the goal is <= 0.15 cores for a camera at 60 fps.
+    pre = [f.pixels for f in SimSource(frames=120, paced=False, seed=3, start_time_ns=0).frames()]
     det = HotSpotDetector(SimSource(frames=1).model)
-    t = time.perf_counter()
-    for _ in range(2):
+    for px in pre[:10]:
+        det.detect(px)
+    t = time.thread_time()
+    for _ in range(3):
         for px in pre:
             det.detect(px)
-    fps = 2 * len(pre) / (time.perf_counter() - t)
+    fps = 3 * len(pre) / (time.thread_time() - t)
     return {"bands": bands, "cells": cells,
             "centroid_error_px": {"mean": round(float(np.mean(cerr)), 3) if cerr else None,
                                   "p95": round(float(np.percentile(cerr, 95)), 3) if cerr else None},
             "false_per_100_empty_frames": round(false, 2),
             "crossover_agreement_with_truth": round(agree, 4),
-            "fps_640x512_one_core": round(fps, 1)}
+            "fps_640x512_one_core": round(fps, 1), "cores_per_camera_640x512_at_60fps": round(60 / fps, 3)}
 
 
 def print_table(res: dict[str, Any]) -> str:
@@ -125,7 +128,8 @@ def print_table(res: dict[str, Any]) -> str:
     lines.append(f"centroid error: mean {err['mean']} px, p95 {err['p95']} px")
     lines.append(f"false detections per 100 target-free frames: {res['false_per_100_empty_frames']}")
     lines.append(f"crossover (grade < 0.3) agreement with ground truth: {res['crossover_agreement_with_truth']}")
-    lines.append(f"detector speed, 640x512, one core: {res['fps_640x512_one_core']} fps")
+    lines.append(f"detector speed, 640x512, one core: {res['fps_640x512_one_core']} fps (CPU time), "
+                 f"{res['cores_per_camera_640x512_at_60fps']} cores for a camera at 60 fps")
     return "\n".join(lines)
 
 
