@@ -1,0 +1,22 @@
+"""``thermcap bench record`` in its short form. Every mode records every frame. In the analysis
+mode, frames the capped detector skips are not a failure; the bench once refused them as one,
+and failed on every run. The foxglove-sdk writer is the anchor, measured on the same frames in
+the same run."""
+
+from __future__ import annotations
+
+import json
+
+from tests.conftest import run_cli
+
+
+def test_bench_record_short_with_the_sdk_anchor():
+    r = run_cli("bench", "record", "--sizes", "160x128", "--frames", "120", "--json", timeout=300)
+    assert r.returncode == 0, r.stderr
+    rows = {row["mode"]: row for row in json.loads(r.stdout)}
+    assert set(rows) == {"auto", "auto+analysis", "lz4"}
+    auto = rows["auto"]
+    assert auto["cpu_ms_per_frame"] > 0 and auto["sdk_cpu_ms_per_frame"] > 0
+    assert auto["cpu_vs_sdk"] == round(auto["cpu_ms_per_frame"] / auto["sdk_cpu_ms_per_frame"], 3) or \
+        abs(auto["cpu_vs_sdk"] - auto["cpu_ms_per_frame"] / auto["sdk_cpu_ms_per_frame"]) < 0.01
+    assert abs(auto["ratio"] - auto["sdk_ratio"]) / auto["ratio"] < 0.1  # the same output size, near enough
