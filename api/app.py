@@ -123,7 +123,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.add_middleware(AuthGate, tokens=settings.tokens)
     # inside the metrics, outside everything else: it checks tokens itself, and hands the rest on
     app.add_middleware(FrameFastPath, engine=app.state.engine, root=settings.root, store_kind=app.state.store.kind,
-                       tokens=settings.tokens, state=app.state)
+                       tokens=settings.tokens, locations=app.state.frames.locations, state=app.state)
     app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
 
     @app.exception_handler(HTTPException)

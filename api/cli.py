@@ -177,6 +177,20 @@ def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, format
                f"cores for 100 cameras x 8 h a day: {res['capacity']['cores_for_100_cameras_8h_a_day_in_24h']}")
 
 
+@click.command("index")
+@click.option("--sessions", type=int, default=100_000, show_default=True, help="Synthetic sessions in the catalog.")
+@click.option("--frames", type=int, default=10_000_000, show_default=True, help="Synthetic frames across them.")
+@click.option("--db", "db_url", default=None, metavar="postgresql://...",
+              help="A PostgreSQL server to measure on (a fresh database is made there and dropped); default SQLite.")
+@json_option
+def bench_index_cmd(sessions: int, frames: int, db_url: str | None, as_json: bool) -> None:
+    """Index bytes per camera-hour; a catalog page and a frame search at fleet size, p50."""
+    from api.bench_index import bench_index, print_table
+
+    res = bench_index(sessions, frames, db_url)
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+
+
 @click.command("series")
 @click.option("--seconds", type=float, default=60.0, show_default=True, help="Session length at 640x512@60.")
 @click.option("--tool", default="box:300,200,339,239", show_default=True)

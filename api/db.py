@@ -26,7 +26,6 @@ from sqlalchemy.engine import Engine
 __all__ = [
     "archives",
     "events",
-    "frame_blobs",
     "frames",
     "jobs",
     "make_engine",
@@ -101,20 +100,8 @@ frames = Table(
 )
 Index("ix_frames_time", frames.c.session_id, frames.c.timestamp_ns)
 
-# Where each frame's image and sidecar sit inside a stored-ZIP archive: one ranged read each.
-frame_blobs = Table(
-    "frame_blobs", metadata,
-    Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
-    Column("format", String(32), primary_key=True),
-    Column("idx", Integer, primary_key=True),
-    Column("file", Text, nullable=False),
-    Column("offset", BigInteger, nullable=False),
-    Column("length", BigInteger, nullable=False),
-    Column("sidecar_offset", BigInteger, nullable=False),
-    Column("sidecar_length", BigInteger, nullable=False),
-    Column("crc32", BigInteger),  # the ZIP directory's CRC-32 of the image entry: checked before bytes go out
-)
-
+# Where each frame's image and sidecar sit inside a stored-ZIP archive is not kept here: the
+# ZIP's own central directory says it (api.reading.zip_index), so no row per frame per format.
 events = Table(
     "events", metadata,
     Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),

@@ -5,9 +5,10 @@ Why: a frame through the framework cost 4.1x nginx serving the same PNG. The pro
 object store's ranged read, and 10% in a database query per request. This path answers the
 two plain requests, ``format=png16`` (or none) and ``format=raw``, in front of all that:
 
-- It keeps a session's png16 locations and frame hashes in memory. Each session's are loaded
-  by one query when first asked for, and looked at again only when the session's index row
-  changes (at most every ``CHECK_S``).
+- It keeps a session's frame hashes in memory, loaded by one query when first asked for and
+  looked at again only when the session's index row changes (at most every ``CHECK_S``). A
+  frame's place in the png16 ZIP comes from that ZIP's central directory, read once per file
+  (``api.reading.zip_index``).
 - Bytes come by ``os.pread`` on the archive file, through a cache of open descriptors.
 - A PNG is checked against the ZIP directory's CRC-32 before it goes out, as on the full path.
 - Raw counts come from the tiff-lzw copy where there is one: its strips are decoded on two
@@ -46,6 +47,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from api import db
+from api.reading.zip_index import ArchiveLocations
 from api.security import given_token, scopes_for_token
 from archive.codecs import get_codec
 
@@ -68,11 +70,6 @@ _ROUTE = _Route()
 class _Session:
     indexed_at: int
     frames: int
-    files: list[str]  # png16 ZIP keys
-    file_of: np.ndarray  # int32 [n]: index into files, -1 where frame n has no png16 copy
-    offset: np.ndarray  # int64 [n]
-    length: np.ndarray  # int64 [n]
-    crc32: np.ndarray  # int64 [n], -1 unknown
     sha256: list[bytes | None]  # the frame's pixel hash (raw LE bytes)
     checked: float
     tiff: list[tuple[str, int]]  # tiff-lzw files (key, frames), in session order
@@ -91,8 +88,9 @@ class _Pages:
 
 class FrameFastPath:
     def __init__(self, app: Any, *, engine: Engine, root: Path, store_kind: str, tokens: dict[str, frozenset[str]],
-                 state: Any = None, keep_sessions: int = 16, keep_files: int = 64) -> None:
+                 locations: ArchiveLocations, state: Any = None, keep_sessions: int = 16, keep_files: int = 64) -> None:
         self.app, self.engine, self.root, self.tokens = app, engine, Path(root), tokens
+        self.locations = locations  # the frame reader's: one cache of central directories
         if state is not None:
             state.fast_frames = self  # for /metrics-style counts and the tests
         self.local = store_kind == "local"
@@ -151,10 +149,13 @@ class FrameFastPath:
 
     def _answer(self, sid: str, n: int, fmt: str) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
         s = self._session(sid)
-        if s is None or not 0 <= n < s.frames or s.file_of[n] < 0:
+        if s is None or not 0 <= n < s.frames:
             return None
-        data = self._read(s.files[s.file_of[n]], int(s.offset[n]), int(s.length[n]))
-        if data is None or (s.crc32[n] >= 0 and zlib.crc32(data) != s.crc32[n]):
+        blob = self.locations.blob(sid, "png16", n)
+        if blob is None:
+            return None
+        data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
+        if data is None or zlib.crc32(data) != blob["crc32"]:
             return None  # missing or damaged: the full path reports it and serves another copy
         if fmt == "png16":
             etag = b'"' + hashlib.sha256(data).hexdigest()[:40].encode() + b'"'
@@ -273,35 +274,19 @@ class FrameFastPath:
             if s is not None and s.indexed_at == row[0]:
                 s.checked = now
                 return s
-            blobs = conn.execute(select(db.frame_blobs.c.idx, db.frame_blobs.c.file, db.frame_blobs.c.offset,
-                                        db.frame_blobs.c.length, db.frame_blobs.c.crc32)
-                                 .where(db.frame_blobs.c.session_id == sid, db.frame_blobs.c.format == "png16")).all()
             hashes = conn.execute(select(db.frames.c.idx, db.frames.c.sha256)
                                   .where(db.frames.c.session_id == sid)).all()
             tiff_files = conn.execute(select(db.archives.c.files).where(
                 db.archives.c.session_id == sid, db.archives.c.format == "tiff-lzw",
                 db.archives.c.verified.is_(True))).scalar()
         frames = int(row[1])
-        files: list[str] = []
-        where: dict[str, int] = {}
-        file_of = np.full(frames, -1, np.int32)
-        offset, length, crc = (np.zeros(frames, np.int64) for _ in range(3))
-        crc[:] = -1
-        for idx, file, off, ln, c in blobs:
-            if not 0 <= idx < frames:
-                continue
-            key = f"sessions/{sid}/archive/png16/{file}"
-            file_of[idx] = where.setdefault(key, len(files))
-            if file_of[idx] == len(files):
-                files.append(key)
-            offset[idx], length[idx], crc[idx] = off, ln, -1 if c is None else c
         sha: list[bytes | None] = [None] * frames
         for idx, h in hashes:
             if 0 <= idx < frames and h:
                 sha[idx] = bytes.fromhex(h)
         tiff = [(f"sessions/{sid}/archive/tiff-lzw/{r['path']}", int(r["frames"]))
                 for r in json.loads(tiff_files)] if tiff_files else []
-        s = _Session(int(row[0]), frames, files, file_of, offset, length, crc, sha, now, tiff)
+        s = _Session(int(row[0]), frames, sha, now, tiff)
         with self._lock:
             self._sessions[sid] = s
             while len(self._sessions) > self._keep_sessions:

@@ -54,7 +54,7 @@ _LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
 
 
 #: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
-INDEX_RULES_VERSION = 3  # 2: frames with no graded target have no grade; 3: the frame summary
+INDEX_RULES_VERSION = 4  # 2: frames with no graded target have no grade; 3: the frame summary; 4: no frame_blobs
 
 
 def fingerprint(session_dir: Path) -> str:
@@ -89,24 +89,19 @@ def zip_entries(path: Path) -> Iterator[tuple[zipfile.ZipInfo, int]]:
             yield info, info.header_offset + _LOCAL_HEADER.size + n + e
 
 
-def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]], *,
-                       read_sidecars: bool = True) -> tuple[list[dict], list[dict]]:
-    """(sidecars, blob rows) from a zipped archive: the JSON entries are read (unless another archive
-    already gave them), the images only located."""
-    sidecars, blobs = [], []
-    idx = 0
+def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]]) -> list[dict]:
+    """The sidecars of a zipped archive, in session order, from its JSON entries. Where each frame
+    sits is not copied into the index: the ZIP's own central directory says it
+    (``api.reading.zip_index``)."""
+    sidecars = []
     for rec in files:
         path = SessionLayout.of(session_dir).format_dir(fmt) / rec["path"]
         entries = list(zip_entries(path))
         with open(path, "rb") as f:
-            for (img, img_off), (js, js_off) in zip(entries[::2], entries[1::2], strict=True):
-                if read_sidecars:
-                    f.seek(js_off)
-                    sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
-                blobs.append({"format": fmt, "idx": idx, "file": rec["path"], "offset": img_off, "crc32": img.CRC,
-                              "length": img.file_size, "sidecar_offset": js_off, "sidecar_length": js.file_size})
-                idx += 1
-    return sidecars, blobs
+            for js, js_off in entries[1::2]:
+                f.seek(js_off)
+                sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
+    return sidecars
 
 
 def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
@@ -165,12 +160,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
                                                       {}).items() if e.get("verified") and not e.get("damaged")}
     layout = SessionLayout.of(session_dir)
     zipped = next((f for f in ZIPPED_FORMATS if f in verified and layout.format_dir(f).is_dir()), None)
-    blobs: list[dict[str, Any]] = []
     if zipped:
-        sidecars, blobs = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
-        for other in ZIPPED_FORMATS:
-            if other != zipped and other in verified and layout.format_dir(other).is_dir():
-                blobs += _sidecars_from_zip(session_dir, other, verified[other]["files"], read_sidecars=False)[1]
+        sidecars = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
         segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
         times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
     elif session_segments(session_dir):
@@ -247,12 +238,12 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         except (ValueError, KeyError, TypeError):
             pass
     with engine.begin() as conn:
-        for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+        for table in (db.frames, db.archives, db.segments, db.events):
             conn.execute(delete(table).where(table.c.session_id == sid))
         conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
         conn.execute(insert(db.sessions), [row])
         for table, rows in ((db.segments, seg_rows), (db.archives, arch_rows), (db.frames, frame_rows),
-                            (db.frame_blobs, [{"session_id": sid, **b} for b in blobs]), (db.events, event_rows)):
+                            (db.events, event_rows)):
             for i in range(0, len(rows), 5000):
                 conn.execute(insert(table), rows[i:i + 5000])
     return True
@@ -285,7 +276,7 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
             in_store = {sid for sid in gone if store.head(f"sessions/{sid}/archive/manifest.json") is not None}
             gone = [sid for sid in gone if sid not in in_store]
         for sid in gone:
-            for table in (db.frame_blobs, db.frames, db.archives, db.segments, db.events):
+            for table in (db.frames, db.archives, db.segments, db.events):
                 conn.execute(delete(table).where(table.c.session_id == sid))
             conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
     report.removed = gone

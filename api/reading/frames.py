@@ -30,6 +30,7 @@ from sqlalchemy.engine import Engine
 
 from api import db
 from api.exceptions import FrameNotFound, FrameUnavailable
+from api.reading.zip_index import ArchiveLocations
 from api.storage import BlobStore
 from archive.codecs import get_codec
 from archive.formats import get_format
@@ -124,6 +125,7 @@ class FrameReader:
         self.store = store
         self.root = root
         self.damage = DamageLog()
+        self.locations = ArchiveLocations(engine, store)  # stored-ZIP copies, from their central directories
         # Recently decoded frames (a recorded frame never changes): the browser's temperature
         # readout and a scrubber going back and forth hit the same few frames again and again.
         self._cache: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
@@ -131,10 +133,7 @@ class FrameReader:
         self._lock = threading.Lock()
 
     def _blobs(self, session_id: str, idx: int) -> dict[str, dict[str, Any]]:
-        with self.engine.connect() as conn:
-            rows = conn.execute(select(db.frame_blobs).where(db.frame_blobs.c.session_id == session_id,
-                                                             db.frame_blobs.c.idx == idx)).mappings().all()
-        return {r["format"]: dict(r) for r in rows}
+        return self.locations.blobs(session_id, idx)
 
     def _ordered_blobs(self, session_id: str, idx: int) -> list[dict[str, Any]]:
         # For pixels: PNG (libpng, 4-5 ms) first; HTJ2K decodes faster but only one at a time
@@ -220,7 +219,7 @@ class FrameReader:
     def encoded(self, session_id: str, idx: int, fmt: str) -> bytes | None:
         """The archived bytes of a frame in ``fmt`` (e.g. the PNG itself), if archived that way and
         intact: checked against the ZIP directory's CRC-32 (cheap) before they go out."""
-        blob = self._blobs(session_id, idx).get(fmt)
+        blob = self.locations.blob(session_id, fmt, idx)
         if blob is None:
             return None
         try:

@@ -169,6 +169,41 @@ def list_frames(request: Request, session_id: str, start: str | None = None, end
     return {"items": items, "next_cursor": encode_cursor([rows[n - 1]["idx"]]) if len(rows) > n else None}
 
 
+@router.get("/frames")
+def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, le=1),
+                  min_target_c: float | None = Query(None, description="frames whose hottest target is at least this"),
+                  sensor: str | None = None, limit: int = 100, cursor: str | None = None) -> dict:
+    """Frames across every session: ``max_grade=0.3&min_target_c=40`` finds frames in thermal
+    crossover with a target above 40 °C. Hottest first; page with ``next_cursor``. Answered from
+    partial indexes (graded frames, frames with a target), so the frames without either cost
+    nothing however many there are."""
+    n = page_size(request, limit)
+    f, s = db.frames.c, db.sessions.c
+    where: list[Any] = [f.max_target_temp_c.is_not(None)]
+    if min_target_c is not None:
+        where.append(f.max_target_temp_c >= min_target_c)
+    if max_grade is not None:
+        where.append(f.grade <= max_grade)
+    q = select(f.session_id, f.idx, f.timestamp_ns, f.grade, f.target_count, f.max_target_temp_c)
+    if sensor:
+        q = q.join(db.sessions, s.id == f.session_id)
+        where.append(or_(s.sensor_id == sensor, s.sensor == sensor))
+    after = decode_cursor(cursor, (float, str, int))
+    if after:
+        t, sid, idx = after
+        where.append(or_(f.max_target_temp_c < t, and_(f.max_target_temp_c == t, or_(
+            f.session_id > sid, and_(f.session_id == sid, f.idx > idx)))))
+    order = [f.max_target_temp_c.desc(), f.session_id, f.idx]
+    with request.app.state.engine.connect() as conn:
+        rows = conn.execute(q.where(*where).order_by(*order).limit(n + 1)).mappings().all()
+    items = [{"session_id": r["session_id"], "index": r["idx"], "timestamp": iso(r["timestamp_ns"]),
+              "thermal_contrast_grade": r["grade"], "target_count": r["target_count"],
+              "max_target_temp_c": r["max_target_temp_c"]} for r in rows[:n]]
+    last = rows[n - 1] if len(rows) > n else None
+    nxt = encode_cursor([float(last["max_target_temp_c"]), last["session_id"], last["idx"]]) if last else None
+    return {"items": items, "next_cursor": nxt}
+
+
 @router.get("/sessions/{session_id}/timeline")
 def timeline(request: Request, session_id: str, bins: int = Query(400, ge=1, le=4000)) -> dict:
     """The contrast grade over the session in ``bins`` buckets (min, mean, max): for the browser view."""

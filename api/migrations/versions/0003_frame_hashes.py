@@ -21,6 +21,8 @@ def upgrade() -> None:
     # 0001 creates tables from the current api.db metadata, so a fresh database may have them already.
     inspector = sa.inspect(op.get_bind())
     for table, columns in _COLUMNS.items():
+        if table not in inspector.get_table_names():  # frame_blobs is gone from a fresh schema (0006)
+            continue
         have = {c["name"] for c in inspector.get_columns(table)}
         for name, type_ in columns:
             if name not in have:

@@ -72,7 +72,7 @@ def test_indexing_is_idempotent_and_picks_up_new_archives(data_root, tmp_path):
     def snapshot():
         with engine.connect() as conn:
             return {t.name: conn.execute(select(func.count()).select_from(t)).scalar()
-                    for t in (db.sessions, db.frames, db.archives, db.frame_blobs)}
+                    for t in (db.sessions, db.frames, db.archives)}
 
     before = snapshot()
     again = index_root(engine, root)
@@ -83,7 +83,7 @@ def test_indexing_is_idempotent_and_picks_up_new_archives(data_root, tmp_path):
                 env={"THERMCAP_DATABASE_URL": f"sqlite:///{tmp_path / 'other.sqlite'}"})
     assert r.returncode == 0, r.stderr
     assert index_root(engine, root).indexed == ["s-crossover"]
-    assert snapshot()["frame_blobs"] == before["frame_blobs"] + 120
+    assert snapshot()["archives"] == before["archives"] + 1  # one row per format, none per frame
     shutil.rmtree(root / "sessions" / "s-mcap-only")
     assert index_root(engine, root).removed == ["s-mcap-only"]
 
@@ -95,7 +95,8 @@ def test_archive_indexes_through_the_hook(data_root, tmp_path):
     assert r.returncode == 0, r.stderr
     engine = make_engine(f"sqlite:///{root / 'index.sqlite'}")
     with engine.connect() as conn:
-        assert conn.execute(select(func.count()).select_from(db.frame_blobs)).scalar() == 30
+        assert conn.execute(select(func.count()).select_from(db.archives)).scalar() == 1
+        assert conn.execute(select(func.count()).select_from(db.frames)).scalar() == 30
 
 
 def test_postgresql_index_same_code_and_migrations(postgres_url, data_root):

@@ -1,0 +1,31 @@
+"""Indexes for a fleet-sized catalog: the session list's order (newest first) without a sort of
+every session, and the frames a search asks for (graded frames, frames with a target) without a
+scan of every frame. Partial indexes: most frames have no target, so those entries cost nothing.
+
+Revision ID: 0007
+Revises: 0006
+"""
+
+import sqlalchemy as sa
+from alembic import op
+
+revision = "0007"
+down_revision = "0006"
+
+
+def upgrade() -> None:
+    have = {i["name"] for t in ("sessions", "frames") for i in sa.inspect(op.get_bind()).get_indexes(t)}
+    if "ix_sessions_start" not in have:
+        op.create_index("ix_sessions_start", "sessions", [sa.text("coalesce(start_ns, 0)"), "id"])
+    if "ix_frames_hot" not in have:
+        op.create_index("ix_frames_hot", "frames", ["max_target_temp_c"],
+                        sqlite_where=sa.text("max_target_temp_c IS NOT NULL"),
+                        postgresql_where=sa.text("max_target_temp_c IS NOT NULL"))
+    if "ix_frames_graded" not in have:
+        op.create_index("ix_frames_graded", "frames", ["grade"], sqlite_where=sa.text("grade IS NOT NULL"),
+                        postgresql_where=sa.text("grade IS NOT NULL"))
+
+
+def downgrade() -> None:
+    for name, table in (("ix_frames_graded", "frames"), ("ix_frames_hot", "frames"), ("ix_sessions_start", "sessions")):
+        op.drop_index(name, table)
