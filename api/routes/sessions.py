@@ -7,7 +7,7 @@ from itertools import pairwise
 from typing import Any, Literal
 
 from fastapi import APIRouter, Depends, Query, Request
-from sqlalchemy import and_, func, or_, select
+from sqlalchemy import and_, func, literal, literal_column, or_, select, tuple_
 
 from api import db
 from api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
@@ -39,6 +39,11 @@ def _session_summary(row: dict[str, Any], full_model: bool = False) -> dict[str,
     }
 
 
+# The catalog's order, spelt as the index ix_sessions_catalog is (a bound 0 would not match it, and
+# every page would sort every session)
+_START = func.coalesce(db.sessions.c.start_ns, literal_column("0"))
+
+
 @router.get("/sessions")
 def list_sessions(request: Request, sensor: str | None = None, start: str | None = None, end: str | None = None,
                   min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),
@@ -66,11 +71,11 @@ def list_sessions(request: Request, sensor: str | None = None, start: str | None
         where.append(s.has_slew_to_cue == slew_to_cue)
     desc = sort.startswith("-")
     after = decode_cursor(cursor, (int, str))
-    if after:
-        key = func.coalesce(s.start_ns, 0)
-        where.append(or_(key < after[0], and_(key == after[0], s.id < after[1])) if desc
-                     else or_(key > after[0], and_(key == after[0], s.id > after[1])))
-    order = [func.coalesce(s.start_ns, 0).desc(), s.id.desc()] if desc else [func.coalesce(s.start_ns, 0), s.id]
+    if after:  # a row-value bound: an index range from there, however deep the page
+        key = tuple_(_START, s.id)
+        where.append(key < tuple_(literal(after[0]), literal(after[1])) if desc
+                     else key > tuple_(literal(after[0]), literal(after[1])))
+    order = [_START.desc(), s.id.desc()] if desc else [_START, s.id]
     with request.app.state.engine.connect() as conn:
         rows = conn.execute(select(db.sessions).where(*where).order_by(*order).limit(n + 1)).mappings().all()
     items = [_session_summary(dict(r)) for r in rows[:n]]

@@ -15,8 +15,8 @@ down_revision = "0006"
 
 def upgrade() -> None:
     have = {i["name"] for t in ("sessions", "frames") for i in sa.inspect(op.get_bind()).get_indexes(t)}
-    if "ix_sessions_start" not in have:
-        op.create_index("ix_sessions_start", "sessions", [sa.text("coalesce(start_ns, 0)"), "id"])
+    if "ix_sessions_catalog" not in have:
+        op.create_index("ix_sessions_catalog", "sessions", [sa.text("coalesce(start_ns, 0)"), "id"])
     if "ix_frames_hot" not in have:
         op.create_index("ix_frames_hot", "frames", ["max_target_temp_c"],
                         sqlite_where=sa.text("max_target_temp_c IS NOT NULL"),
@@ -27,5 +27,6 @@ def upgrade() -> None:
 
 
 def downgrade() -> None:
-    for name, table in (("ix_frames_graded", "frames"), ("ix_frames_hot", "frames"), ("ix_sessions_start", "sessions")):
+    for name, table in (("ix_frames_graded", "frames"), ("ix_frames_hot", "frames"),
+                        ("ix_sessions_catalog", "sessions")):
         op.drop_index(name, table)
