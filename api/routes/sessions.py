@@ -199,7 +199,12 @@ def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, 
         where.append(or_(f.max_target_temp_c < t, and_(f.max_target_temp_c == t, or_(
             f.session_id > sid, and_(f.session_id == sid, f.idx > idx)))))
     order = [f.max_target_temp_c.desc(), f.session_id, f.idx]
-    with request.app.state.engine.connect() as conn:
+    with request.app.state.engine.begin() as conn:
+        if conn.dialect.name == "postgresql":
+            # PostgreSQL takes the grade and the target as independent and expects a few dozen
+            # matches, so it gathers every match in a bitmap and sorts them (538 ms at 10 M frames).
+            # The index is in the search's own order: walking it stops at a page (0.4 ms).
+            conn.exec_driver_sql("SET LOCAL enable_bitmapscan = off")
         rows = conn.execute(q.where(*where).order_by(*order).limit(n + 1)).mappings().all()
     items = [{"session_id": r["session_id"], "index": r["idx"], "timestamp": iso(r["timestamp_ns"]),
               "thermal_contrast_grade": r["grade"], "target_count": r["target_count"],

@@ -18,7 +18,9 @@ def upgrade() -> None:
     if "ix_sessions_catalog" not in have:
         op.create_index("ix_sessions_catalog", "sessions", [sa.text("coalesce(start_ns, 0)"), "id"])
     if "ix_frames_hot" not in have:
-        op.create_index("ix_frames_hot", "frames", ["max_target_temp_c"],
+        # In the search's own order (hottest first, then session and frame), with the grade in it:
+        # a search walks it from the top and stops at a page, never fetching the frames it skips.
+        op.create_index("ix_frames_hot", "frames", [sa.text("max_target_temp_c DESC"), "session_id", "idx", "grade"],
                         sqlite_where=sa.text("max_target_temp_c IS NOT NULL"),
                         postgresql_where=sa.text("max_target_temp_c IS NOT NULL"))
     if "ix_frames_graded" not in have:
