@@ -158,10 +158,11 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 
 
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
-    from api.indexing import zip_entries
+    from api.reading.zip_index import read_zip_file
 
     zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
-    spans = [(z, off, info.file_size) for z in zips for info, off in zip_entries(z) if info.filename.endswith(".png")]
+    spans = [(z, int(off), int(n)) for z, e in ((z, read_zip_file(z)) for z in zips)
+             for off, n in zip(e.offset, e.length, strict=True)]
     rng = random.Random(1)
     lat = []
     t0 = time.perf_counter()

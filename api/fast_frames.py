@@ -40,7 +40,6 @@ from typing import Any
 from urllib.parse import parse_qsl
 
 import anyio
-import imagecodecs
 import numpy as np
 import tifffile
 from sqlalchemy import select
@@ -50,6 +49,8 @@ from api import db
 from api.reading.zip_index import ArchiveLocations
 from api.security import given_token, scopes_for_token
 from archive.codecs import get_codec
+from archive.formats.base import locate
+from archive.formats.tiff_lzw import decode_strip
 
 __all__ = ["FrameFastPath"]
 
@@ -72,7 +73,7 @@ class _Session:
     frames: int
     sha256: list[bytes | None]  # the frame's pixel hash (raw LE bytes)
     checked: float
-    tiff: list[tuple[str, int]]  # tiff-lzw files (key, frames), in session order
+    tiff: list[dict[str, Any]]  # tiff-lzw files ({path: key, frames}), in session order
 
 
 @dataclass
@@ -182,19 +183,17 @@ class FrameFastPath:
             (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
 
     def _tiff_pixels(self, s: _Session, n: int) -> np.ndarray | None:
-        first = 0
-        for key, count in s.tiff:
-            if n < first + count:
-                pages = self._tiff_pages(key)
-                k = n - first
-                if pages is None or k >= len(pages.offsets):
-                    return None
-                try:
-                    return self._strips(key, pages, k)
-                except Exception:  # a damaged strip: the PNG, then the sha256, decide
-                    return None
-            first += count
-        return None
+        try:
+            key, k = locate(s.tiff, n)
+        except IndexError:
+            return None
+        pages = self._tiff_pages(key)
+        if pages is None or k >= len(pages.offsets):
+            return None
+        try:
+            return self._strips(key, pages, k)
+        except Exception:  # a damaged strip: the PNG, then the sha256, decide
+            return None
 
     def _strips(self, key: str, pages: _Pages, k: int) -> np.ndarray | None:
         h, w = pages.shape[k]
@@ -206,8 +205,7 @@ class FrameFastPath:
             if data is None:
                 raise OSError(f"{key}: strip {i} of page {k} is short")
             rows = min(rps, h - i * rps)
-            a = np.frombuffer(imagecodecs.lzw_decode(data), "<u2")[: rows * w].reshape(rows, w)
-            out[i * rps:i * rps + rows] = imagecodecs.delta_decode(a, axis=-1) if predictor == 2 else a
+            out[i * rps:i * rps + rows] = decode_strip(data, rows, w, predictor, f"{key}: page {k}, strip {i}")
 
         list(self._pool.map(strip, range(len(pages.offsets[k]))))
         return out
@@ -284,7 +282,7 @@ class FrameFastPath:
         for idx, h in hashes:
             if 0 <= idx < frames and h:
                 sha[idx] = bytes.fromhex(h)
-        tiff = [(f"sessions/{sid}/archive/tiff-lzw/{r['path']}", int(r["frames"]))
+        tiff = [{"path": f"sessions/{sid}/archive/tiff-lzw/{r['path']}", "frames": int(r["frames"])}
                 for r in json.loads(tiff_files)] if tiff_files else []
         s = _Session(int(row[0]), frames, sha, now, tiff)
         with self._lock:

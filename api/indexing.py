@@ -13,10 +13,7 @@ from __future__ import annotations
 import hashlib
 import json
 import statistics
-import struct
 import time
-import zipfile
-from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from datetime import UTC
 from itertools import pairwise
@@ -50,7 +47,6 @@ class IndexReport:
         return asdict(self)
 
 ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
-_LOCAL_HEADER = struct.Struct("<4sHHHHHIIIHH")
 
 
 #: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
@@ -78,29 +74,20 @@ def _load_manifest(session_dir: Path) -> dict[str, Any] | None:
         return None
 
 
-def zip_entries(path: Path) -> Iterator[tuple[zipfile.ZipInfo, int]]:
-    """(entry, offset of its data) for each entry of a stored ZIP."""
-    with open(path, "rb") as f, zipfile.ZipFile(f) as zf:
-        for info in zf.infolist():
-            f.seek(info.header_offset)
-            sig, *_rest, n, e = _LOCAL_HEADER.unpack(f.read(_LOCAL_HEADER.size))
-            if sig != b"PK\x03\x04":
-                raise ValueError(f"{path}: bad local header for {info.filename}")
-            yield info, info.header_offset + _LOCAL_HEADER.size + n + e
-
-
 def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]]) -> list[dict]:
     """The sidecars of a zipped archive, in session order, from its JSON entries. Where each frame
     sits is not copied into the index: the ZIP's own central directory says it
     (``api.reading.zip_index``)."""
+    from api.reading.zip_index import read_zip_file
+
     sidecars = []
     for rec in files:
         path = SessionLayout.of(session_dir).format_dir(fmt) / rec["path"]
-        entries = list(zip_entries(path))
+        entries = read_zip_file(path)
         with open(path, "rb") as f:
-            for js, js_off in entries[1::2]:
-                f.seek(js_off)
-                sidecars.append(json.loads(f.read(js.file_size) or b"{}"))
+            for off, n in zip(entries.sidecar_offset, entries.sidecar_length, strict=True):
+                f.seek(int(off))
+                sidecars.append(json.loads(f.read(int(n)) or b"{}"))
     return sidecars
 
 

@@ -36,7 +36,7 @@ from api import db
 from api.reading.frames import BlobFile, Damage, FrameReader
 from api.storage import BlobStore
 from archive.formats import get_format
-from archive.formats.base import RowBlock, positions_in
+from archive.formats.base import RowBlock, locate, positions_in
 from archive.frame_summary import FrameSummary, load_summary
 from recorder.thermography.measure import Box, Tool, bounds, shifted
 from recorder.thermography.series import STATS, series_point
@@ -211,7 +211,7 @@ class RegionReader:
                         nxt, read_any = block.index + todo.step, True
                     todo = range(0)
                 except Exception as exc:
-                    name = f"{_ROW_FORMAT}:{self._file_of(files, nxt)}"
+                    name = f"{_ROW_FORMAT}:{_file_of(files, nxt)}"
                     self.frames.damage.report(Damage(sid, nxt, name, f"unreadable rows ({type(exc).__name__}: "
                                                                      f"{exc})"))
                     with lock:
@@ -240,7 +240,7 @@ class RegionReader:
                 result.strip_frames += 1
             return series_point(i, times.get(i, 0), rows[y0 - first:y1 - first, x0:x1], local, stat, to_celsius)
         if summary.checkable(first, rows.shape[0]):  # not merely strips of another height: damage
-            name = f"{_ROW_FORMAT}:{self._file_of(files, i)}"
+            name = f"{_ROW_FORMAT}:{_file_of(files, i)}"
             self.frames.damage.report(Damage(sid, i, name, f"rows {first}..{first + rows.shape[0]} CRC-32 differs "
                                                            f"from the frame summary"))
             with lock:
@@ -255,13 +255,13 @@ class RegionReader:
             result.frames_decoded += 1
         return point
 
-    @staticmethod
-    def _file_of(files: list[dict[str, Any]], index: int) -> str:
-        first = 0
-        for rec in files:
-            if index < first + int(rec["frames"]):
-                return str(rec["path"])
-            first += int(rec["frames"])
+
+
+def _file_of(files: list[dict[str, Any]], index: int) -> str:
+    """The file a damaged frame is in, to name in the damage log."""
+    try:
+        return locate(files, index)[0]
+    except IndexError:
         return "?"
 
 

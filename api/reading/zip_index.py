@@ -15,16 +15,20 @@ local header read instead. The CRC-32 is checked again on every read before byte
 
 from __future__ import annotations
 
+import os
 import struct
 import threading
 from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["ArchiveLocations", "ZipEntries", "ZipIndexCache", "read_zip_entries"]
+from archive.formats.base import locate
+
+__all__ = ["ArchiveLocations", "ZipEntries", "ZipIndexCache", "read_zip_entries", "read_zip_file"]
 
 _EOCD = struct.Struct("<4sHHHHIIH")
 _ZIP64_LOCATOR = struct.Struct("<4sIQI")
@@ -137,6 +141,13 @@ def _data_start(read: ReadRange, header_offset: int, name: str) -> int:
     return header_offset + _LOCAL.size + nlen + elen
 
 
+def read_zip_file(path: Path) -> ZipEntries:
+    """The entries of an archive ZIP on local disk (the indexer reads its sidecars by them)."""
+    with open(path, "rb") as f:
+        fd = f.fileno()
+        return read_zip_entries(lambda a, b: os.pread(fd, b - a, a), os.fstat(fd).st_size, str(path))
+
+
 class ZipIndexCache:
     """Entries per archive file (key and size: a rewritten file is another entry), bounded."""
 
@@ -169,7 +180,8 @@ def _range_reader(store: Any, key: str) -> ReadRange:
 class _SessionZips:
     indexed_at: int
     checked: float
-    files: dict[str, list[tuple[str, int, int]]]  # format -> [(file, frames, bytes)], session order
+    files: dict[str, list[dict[str, Any]]]  # format -> the manifest's file list ({path, frames}), session order
+    sizes: dict[tuple[str, str], int]  # (format, file) -> bytes, as the manifest says
 
 
 class ArchiveLocations:
@@ -209,9 +221,9 @@ class ArchiveLocations:
             rows = conn.execute(select(db.archives.c.format, db.archives.c.files).where(
                 db.archives.c.session_id == session_id, db.archives.c.verified.is_(True),
                 db.archives.c.format.in_(ZIPPED_FORMATS))).all()
-        files = {fmt: [(str(r["path"]), int(r["frames"]), int(r.get("bytes") or 0)) for r in json.loads(text)]
-                 for fmt, text in rows}
-        s = _SessionZips(int(indexed_at), now, files)
+        files = {fmt: json.loads(text) for fmt, text in rows}
+        sizes = {(fmt, str(r["path"])): int(r.get("bytes") or 0) for fmt, recs in files.items() for r in recs}
+        s = _SessionZips(int(indexed_at), now, files, sizes)
         with self._lock:
             self._sessions[session_id] = s
             while len(self._sessions) > self._keep:
@@ -227,25 +239,24 @@ class ArchiveLocations:
         this format has no readable copy of the frame (a missing file is not an error here: the
         reader tries the next copy)."""
         s = self._session(session_id)
-        if s is None or fmt not in s.files or idx < 0:
+        if s is None or fmt not in s.files:
             return None
-        first = 0
-        for rel, n, size in s.files[fmt]:
-            if idx < first + n:
-                key = f"sessions/{session_id}/archive/{fmt}/{rel}"
-                try:
-                    if not size:
-                        head = self.store.head(key)
-                        if head is None:
-                            return None
-                        size = int(head["size"])
-                    entries = self.entries.get(key, size, _range_reader(self.store, key))
-                except (FileNotFoundError, ValueError, OSError):
+        try:
+            rel, k = locate(s.files[fmt], idx)
+        except IndexError:
+            return None
+        key = f"sessions/{session_id}/archive/{fmt}/{rel}"
+        try:
+            size = s.sizes.get((fmt, rel)) or 0
+            if not size:
+                head = self.store.head(key)
+                if head is None:
                     return None
-                k = idx - first
-                return {"format": fmt, "file": rel, **entries.blob(k)} if k < entries.frames else None
-            first += n
-        return None
+                size = int(head["size"])
+            entries = self.entries.get(key, size, _range_reader(self.store, key))
+        except (FileNotFoundError, ValueError, OSError):
+            return None
+        return {"format": fmt, "file": rel, **entries.blob(k)} if k < entries.frames else None
 
     def blobs(self, session_id: str, idx: int) -> dict[str, dict[str, Any]]:
         out = {}

@@ -35,7 +35,7 @@ from archive.formats.base import (
 )
 from recorder.storage.reader import SessionFrame
 
-__all__ = ["TiffLzw"]
+__all__ = ["TiffLzw", "decode_strip"]
 
 _BIGTIFF_ABOVE = 3_500_000_000  # classic TIFF offsets are 32-bit
 #: A private tag (ASCII) holding the frame's log time in Unix ns, so the time survives apart from
@@ -128,13 +128,19 @@ def _strips(fh: Any, page: Any, y0: int, y1: int) -> tuple[int, np.ndarray]:
     for s in range(s0, s1):
         fh.seek(page.dataoffsets[s])
         rows = min(rps, h - s * rps)
-        strip = np.frombuffer(imagecodecs.lzw_decode(fh.read(page.databytecounts[s])), "<u2")
-        if strip.size < rows * w:
-            raise ValueError(f"page {page.index}, strip {s}: {strip.size} samples, {rows * w} expected")
-        strip = strip[: rows * w].reshape(rows, w)
-        out[(s - s0) * rps:(s - s0) * rps + rows] = imagecodecs.delta_decode(strip, axis=-1) \
-            if page.predictor == 2 else strip
+        out[(s - s0) * rps:(s - s0) * rps + rows] = decode_strip(fh.read(page.databytecounts[s]), rows, w,
+                                                                 page.predictor, f"page {page.index}, strip {s}")
     return s0 * rps, out
+
+
+def decode_strip(data: bytes, rows: int, width: int, predictor: int, where: str) -> np.ndarray:
+    """One LZW strip of uint16 samples undone as the TIFF says: LZW, then the horizontal
+    predictor (2) where there is one. What tifffile does for a whole page, for one strip."""
+    strip = np.frombuffer(imagecodecs.lzw_decode(data), "<u2")
+    if strip.size < rows * width:
+        raise ValueError(f"{where}: {strip.size} samples, {rows * width} expected")
+    strip = strip[: rows * width].reshape(rows, width)
+    return imagecodecs.delta_decode(strip, axis=-1) if predictor == 2 else strip
 
 
 def _decoded(page) -> DecodedFrame:
