@@ -149,22 +149,24 @@ def read_zip_file(path: Path) -> ZipEntries:
 
 
 class ZipIndexCache:
-    """Entries per archive file (key and size: a rewritten file is another entry), bounded."""
+    """Entries per archive file, bounded. Keyed by the file's key, size and sha256 (from the
+    manifest): a copy that ``scrub --repair`` rewrote is another entry, even at the same size."""
 
     def __init__(self, keep: int = 256) -> None:
-        self._entries: OrderedDict[tuple[str, int], ZipEntries] = OrderedDict()
+        self._entries: OrderedDict[tuple[str, int, str], ZipEntries] = OrderedDict()
         self._keep = keep
         self._lock = threading.Lock()
 
-    def get(self, key: str, size: int, read: ReadRange) -> ZipEntries:
+    def get(self, key: str, size: int, read: ReadRange, sha256: str = "") -> ZipEntries:
+        ident = (key, size, sha256)
         with self._lock:
-            got = self._entries.get((key, size))
+            got = self._entries.get(ident)
             if got is not None:
-                self._entries.move_to_end((key, size))
+                self._entries.move_to_end(ident)
                 return got
         got = read_zip_entries(read, size, key)
         with self._lock:
-            self._entries[(key, size)] = got
+            self._entries[ident] = got
             while len(self._entries) > self._keep:
                 self._entries.popitem(last=False)
         return got
@@ -181,7 +183,7 @@ class _SessionZips:
     indexed_at: int
     checked: float
     files: dict[str, list[dict[str, Any]]]  # format -> the manifest's file list ({path, frames}), session order
-    sizes: dict[tuple[str, str], int]  # (format, file) -> bytes, as the manifest says
+    sizes: dict[tuple[str, str], tuple[int, str]]  # (format, file) -> (bytes, sha256), as the manifest says
 
 
 class ArchiveLocations:
@@ -222,7 +224,8 @@ class ArchiveLocations:
                 db.archives.c.session_id == session_id, db.archives.c.verified.is_(True),
                 db.archives.c.format.in_(ZIPPED_FORMATS))).all()
         files = {fmt: json.loads(text) for fmt, text in rows}
-        sizes = {(fmt, str(r["path"])): int(r.get("bytes") or 0) for fmt, recs in files.items() for r in recs}
+        sizes = {(fmt, str(r["path"])): (int(r.get("bytes") or 0), str(r.get("sha256") or ""))
+                 for fmt, recs in files.items() for r in recs}
         s = _SessionZips(int(indexed_at), now, files, sizes)
         with self._lock:
             self._sessions[session_id] = s
@@ -247,13 +250,13 @@ class ArchiveLocations:
             return None
         key = f"sessions/{session_id}/archive/{fmt}/{rel}"
         try:
-            size = s.sizes.get((fmt, rel)) or 0
+            size, sha = s.sizes.get((fmt, rel), (0, ""))
             if not size:
                 head = self.store.head(key)
                 if head is None:
                     return None
                 size = int(head["size"])
-            entries = self.entries.get(key, size, _range_reader(self.store, key))
+            entries = self.entries.get(key, size, _range_reader(self.store, key), sha)
         except (FileNotFoundError, ValueError, OSError):
             return None
         return {"format": fmt, "file": rel, **entries.blob(k)} if k < entries.frames else None
