@@ -29,6 +29,7 @@ __all__ = [
     "JpegXl",
     "Png16",
     "codec_registry",
+    "decode_up_png",
     "get_codec",
     "library_versions",
     "register_codec",
@@ -109,6 +110,73 @@ class Png16(FrameCodec):
 
     def decode(self, buf: bytes) -> np.ndarray:
         return self._as_frame(imagecodecs.png_decode(buf))
+
+
+def decode_up_png(buf: bytes) -> np.ndarray | None:
+    """The counts of a PNG as ``Png16`` writes it (16-bit gray, not interlaced, every row
+    filtered Up), or None for any other PNG. libdeflate inflates the IDAT stream and the Up
+    filter is undone as a prefix sum down the columns, blocked so numpy does it in a few dozen
+    calls: about 2.5x faster than libpng, which is why raw frames are served from it. It checks
+    the chunk layout and each row's filter byte but not the chunks' CRCs: a caller serving its
+    output proves it against the frame's sha256 (verification keeps using libpng)."""
+    view = memoryview(buf)
+    if len(buf) < 45 or bytes(view[:16]) != b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR":
+        return None
+    w, h, depth, color, comp, filt, interlace = struct.unpack(">IIBBBBB", view[16:29])
+    if (depth, color, comp, filt, interlace) != (16, 0, 0, 0, 0) or not (w and h):
+        return None
+    parts, pos = [], 33
+    while pos + 12 <= len(buf):
+        (length,) = struct.unpack(">I", view[pos:pos + 4])
+        kind = bytes(view[pos + 4:pos + 8])
+        if kind == b"IDAT":
+            parts.append(view[pos + 8:pos + 8 + length])
+        elif kind == b"IEND":
+            break
+        elif not kind[:1].islower():  # a critical chunk this reader does not know
+            return None
+        pos += 12 + length
+    if not parts:
+        return None
+    stride = 2 * w + 1
+    try:
+        raw = imagecodecs.deflate_decode(parts[0] if len(parts) == 1 else b"".join(parts), out=h * stride)
+    except Exception:
+        return None
+    rows = np.frombuffer(raw, np.uint8)
+    if rows.size != h * stride:
+        return None
+    rows = rows.reshape(h, stride)
+    if not (rows[:, 0] == 2).all():
+        return None
+    px = _prefix_sum_rows(rows[:, 1:])
+    px.view(">u2").byteswap(inplace=True)  # PNG's big-endian samples, now little-endian in place
+    return px.view("<u2")
+
+
+def _prefix_sum_rows(filtered: np.ndarray, block: int = 16) -> np.ndarray:
+    """Each row plus every row above it, modulo 256 (undoing PNG's Up filter), into a new
+    array: within blocks of ``block`` rows, then each block's last row carried into the blocks
+    below. That is a few dozen numpy calls where a row at a time would be ``h``."""
+    h = filtered.shape[0]
+    px = np.empty(filtered.shape, np.uint8)
+    full = h - h % block
+    if full:
+        src = filtered[:full].reshape(full // block, block, -1)
+        b = px[:full].reshape(src.shape)
+        b[:, 0] = src[:, 0]
+        for j in range(1, block):
+            np.add(b[:, j - 1], src[:, j], out=b[:, j])
+        ends = b[:, -1].copy()
+        for i in range(1, len(ends)):
+            np.add(ends[i - 1], ends[i], out=ends[i])
+        b[1:] += ends[:-1, None, :]
+    for i in range(full, h):
+        if i == 0:
+            px[0] = filtered[0]
+        else:
+            np.add(px[i - 1], filtered[i], out=px[i])
+    return px
 
 
 def _png_chunk(kind: bytes, data: bytes) -> bytes:

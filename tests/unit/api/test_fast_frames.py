@@ -85,18 +85,25 @@ def test_tokens_cors_and_damage_go_to_the_full_application(tmp_path):
         assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
 
 
-def test_raw_from_tiff_strips_and_a_damaged_strip_falls_back_to_the_png(tmp_path):
+def test_raw_from_thermcaps_own_png_then_the_strips_then_libpng(tmp_path, monkeypatch):
+    """Raw counts come from the PNG's IDAT where thermcap wrote it (rows filtered Up). A PNG
+    libpng wrote (as thermcap did before it wrote its own; its filters vary by row) falls to
+    the tiff-lzw strips, and a damaged strip to libpng: each answer proved by its sha256."""
     import tifffile
 
     from archive.archiver import archive_session
+    from archive.codecs import Png16
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources.sim import SimSource
 
-    Recorder(SimSource(width=160, height=150, frames=12, paced=False, seed=8), tmp_path, session_id="t",
-             analysis=False).run()
-    frames = [f.pixels.copy() for f in iter_session_frames(tmp_path / "sessions" / "t")]
-    archive_session(tmp_path / "sessions" / "t", ["png16", "tiff-lzw"], delete_source=True)
-    tif = next((tmp_path / "sessions" / "t" / "archive" / "tiff-lzw").glob("*.tif"))
+    for sid, writer in (("ours", "up-libdeflate"), ("libpng", "libpng")):
+        Recorder(SimSource(width=160, height=150, frames=12, paced=False, seed=8), tmp_path, session_id=sid,
+                 analysis=False).run()
+        with monkeypatch.context() as m:
+            m.setattr(Png16.__init__, "__defaults__", (4, writer))  # the archive's png16 writer
+            archive_session(tmp_path / "sessions" / sid, ["png16", "tiff-lzw"], delete_source=False)
+    frames = [f.pixels.copy() for f in iter_session_frames(tmp_path / "sessions" / "ours")]
+    tif = next((tmp_path / "sessions" / "libpng" / "archive" / "tiff-lzw").glob("*.tif"))
     with tifffile.TiffFile(tif) as t:
         off, n = t.pages[3].dataoffsets[1], t.pages[3].databytecounts[1]
     data = bytearray(tif.read_bytes())
@@ -104,12 +111,13 @@ def test_raw_from_tiff_strips_and_a_damaged_strip_falls_back_to_the_png(tmp_path
     tif.write_bytes(bytes(data))
     with TestClient(create_app(Settings(root=tmp_path, tokens={}, rescan_interval_s=0))) as c:
         fast = c.app.state.fast_frames
-        for k, want in enumerate(frames):
-            r = c.get(f"/api/v1/sessions/t/frames/{k}", params={"format": "raw"})
-            assert r.status_code == 200
-            assert np.array_equal(np.frombuffer(r.content, "<u2").reshape(want.shape), want), k
-        assert fast.served == len(frames)  # frame 3 too: its PNG proved itself
-        assert fast.raw_from_strips == len(frames) - 1
+        for sid in ("ours", "libpng"):
+            for k, want in enumerate(frames):
+                r = c.get(f"/api/v1/sessions/{sid}/frames/{k}", params={"format": "raw"})
+                assert r.status_code == 200
+                assert np.array_equal(np.frombuffer(r.content, "<u2").reshape(want.shape), want), (sid, k)
+        assert fast.served == 2 * len(frames)  # frame 3 too: libpng's decode of its PNG proved itself
+        assert fast.raw_from == {"png-up": len(frames), "strips": len(frames) - 1, "libpng": 1}
 
 
 def test_a_rewritten_copy_of_the_same_size_is_read_afresh():

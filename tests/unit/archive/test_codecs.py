@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import imagecodecs
 import numpy as np
 import pytest
 
@@ -67,3 +68,28 @@ def test_real_sample_frames_roundtrip(samples):
             assert np.array_equal(codec.decode(codec.encode(frame)), frame), codec.codec_id
 
 
+
+
+@pytest.mark.parametrize("name,frame", list(_frames()), ids=lambda x: x if isinstance(x, str) else "")
+def test_the_up_png_reader_gives_libpngs_counts(name, frame):
+    png = get_codec("png16").encode(frame)
+    assert np.array_equal(C.decode_up_png(png), imagecodecs.png_decode(png))
+
+
+@pytest.mark.parametrize("h", [1, 2, 15, 16, 17, 33])
+def test_the_up_png_reader_at_every_block_remainder(h):
+    frame = np.random.default_rng(h).integers(0, 65536, (h, 7), dtype=np.uint16)
+    assert np.array_equal(C.decode_up_png(get_codec("png16").encode(frame)), frame)
+
+
+def test_the_up_png_reader_declines_what_it_does_not_read():
+    frame = next(iter(SimSource(paced=False, frames=1, width=160, height=120).frames())).pixels
+    png = get_codec("png16").encode(frame)
+    assert C.decode_up_png(imagecodecs.png_encode(frame, level=6)) is None  # libpng's own filters
+    assert C.decode_up_png(imagecodecs.png_encode(frame.astype(np.uint8))) is None  # 8-bit
+    assert C.decode_up_png(png[:60]) is None  # truncated IDAT
+    assert C.decode_up_png(b"GIF89a" + png[6:]) is None
+    broken = bytearray(png)
+    broken[41 + 5] ^= 0xFF  # inside the deflate stream: an error or wrong counts, never a crash
+    got = C.decode_up_png(bytes(broken))
+    assert got is None or not np.array_equal(got, frame)
