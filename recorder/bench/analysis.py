@@ -8,6 +8,7 @@ target-free frames, and the detector's frames per second on one core.
 
 from __future__ import annotations
 
+import statistics
 import time
 from typing import Any
 
@@ -24,6 +25,9 @@ SIZES = (3, 5, 10, 20, 40)
 
 def _band(delta: float) -> str:
     return "< 5 K" if delta < 5 else ("5-10 K" if delta < 10 else ">= 10 K")
+
+
+SPEED_ROUNDS = 5
 
 
 def score(truth: list[list[int]], dets: list[list[int]]) -> tuple[int, int, int, list[int]]:
@@ -94,22 +98,27 @@ def bench_analysis(frames_per_scene: int = 12) -> dict[str, Any]:
               for f in xo.frames()]
     agree = sum((a < 0.3) == (b < 0.3) for a, b in grades) / len(grades)
     # Speed on one core, 640x512, in CPU time (the host is shared: wall time says more of the
-    # neighbours than of the detector); the goal is <= 0.15 cores for a camera at 60 fps.
+    # neighbours than of the detector); the goal is <= 0.15 cores for a camera at 60 fps. CPU
+    # time moves with the neighbours too (caches, the sibling hyperthread), so it is the best
+    # of five rounds, as timeit reports, with the median beside it.
     pre = [f.pixels for f in SimSource(frames=120, paced=False, seed=3, start_time_ns=0).frames()]
     det = HotSpotDetector(SimSource(frames=1).model)
     for px in pre[:10]:
         det.detect(px)
-    t = time.thread_time()
-    for _ in range(3):
+    rounds = []
+    for _ in range(SPEED_ROUNDS):
+        t = time.thread_time()
         for px in pre:
             det.detect(px)
-    fps = 3 * len(pre) / (time.thread_time() - t)
+        rounds.append(len(pre) / (time.thread_time() - t))
+    fps, fps_median = max(rounds), statistics.median(rounds)
     return {"bands": bands, "cells": cells,
             "centroid_error_px": {"mean": round(float(np.mean(cerr)), 3) if cerr else None,
                                   "p95": round(float(np.percentile(cerr, 95)), 3) if cerr else None},
             "false_per_100_empty_frames": round(false, 2),
             "crossover_agreement_with_truth": round(agree, 4),
-            "fps_640x512_one_core": round(fps, 1), "cores_per_camera_640x512_at_60fps": round(60 / fps, 3)}
+            "fps_640x512_one_core": round(fps, 1), "cores_per_camera_640x512_at_60fps": round(60 / fps, 3),
+            "cores_per_camera_median_of_rounds": round(60 / fps_median, 3), "speed_rounds": SPEED_ROUNDS}
 
 
 def print_table(res: dict[str, Any]) -> str:
@@ -128,8 +137,9 @@ def print_table(res: dict[str, Any]) -> str:
     lines.append(f"centroid error: mean {err['mean']} px, p95 {err['p95']} px")
     lines.append(f"false detections per 100 target-free frames: {res['false_per_100_empty_frames']}")
     lines.append(f"crossover (grade < 0.3) agreement with ground truth: {res['crossover_agreement_with_truth']}")
-    lines.append(f"detector speed, 640x512, one core: {res['fps_640x512_one_core']} fps (CPU time), "
-                 f"{res['cores_per_camera_640x512_at_60fps']} cores for a camera at 60 fps")
+    lines.append(f"detector speed, 640x512, one core: {res['fps_640x512_one_core']} fps (CPU time, best of "
+                 f"{res['speed_rounds']} rounds), {res['cores_per_camera_640x512_at_60fps']} cores for a camera at "
+                 f"60 fps (median round {res['cores_per_camera_median_of_rounds']}; goal 0.15)")
     return "\n".join(lines)
 
 

@@ -165,3 +165,23 @@ def test_analyze_is_idempotent_and_matches_the_recorder(tmp_path):
     rows = [json.loads(line) for line in body.splitlines()]
     assert len(rows) == 60 == first["frames"]
     assert all(r["thermal_analysis"]["source"] == "detector" and len(r["targets"]) == 3 for r in rows)
+
+
+@pytest.mark.parametrize("shape", [(128, 160), (7, 9), (1, 1), (40, 3)])
+@pytest.mark.parametrize("k", [1, 2, 5, 13, 14])
+def test_the_sliding_extremes_are_scipys_filters(shape, k):
+    from scipy import ndimage
+
+    from recorder.analysis.detector import sliding_extreme
+
+    x = np.random.default_rng(k).standard_normal(shape).astype(np.float32)
+    assert np.array_equal(sliding_extreme(x, k, np.minimum), ndimage.minimum_filter(x, size=k, mode="nearest"))
+    assert np.array_equal(sliding_extreme(x, k, np.maximum), ndimage.maximum_filter(x, size=k, mode="nearest"))
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 10, 101])
+def test_the_ring_median_is_numpys(n):
+    from recorder.analysis.detector import _median
+
+    x = np.random.default_rng(n).standard_normal(n).astype(np.float32) * 30
+    assert _median(x) == float(np.median(x))
