@@ -35,6 +35,21 @@ frame is ``P + residual``. Then the frame is added to ``S``, and once ``S`` hold
 replicated in one step), is subtracted. The encoder does exactly the same, so ``S`` and ``P`` are
 bit-identical on both sides whatever the edges do.
 
+Bitstream, version 2 (magic ``b"TPF2"``, the same record layout; what thermcap writes): the
+same key frames, and a better prediction where the view moves. Version 1 shifts the sum of the
+window with edge replication, so in a pan the columns that entered over the last ``w`` frames
+are predicted from copies of the edge, and a sweep pays for a band as wide as the window's whole
+motion. Version 2 predicts each pixel only from the frames that saw its part of the scene.
+Each frame ``j`` of the window has a cumulative motion ``(cx_j, cy_j)`` since its key frame (the
+sum of the records' ``dx``, ``dy``; 0 for the key) and saw scene point ``(y, x)`` at its pixel
+``(y + cy_j, x + cx_j)`` when that lies inside it. For pixel ``(r, c)`` of a record whose
+cumulative motion is ``(cx, cy)``, the scene point is ``(r - cy, c - cx)``; ``S`` is the sum of the
+window frames' values at that point and ``N`` the number of frames that saw it. The prediction
+is ``P = (S + N // 2) // N`` (floor division, int64) where ``N > 0``, and otherwise the previous
+frame moved by the record's ``(dx, dy)`` with edge replication (content no frame has seen). The
+window is kept and trimmed as in version 1. A decoder reads both versions; a sequence keeps the
+version of its key frame.
+
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference on every 8th line), columns over +-``max_shift`` pixels,
 then rows over +-8, kept only when it lowers the residual.
@@ -53,19 +68,21 @@ import numpy as np
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_records",
            "parse_header"]
 
-BITSTREAM_VERSION = 1
-MAGIC = b"TPF1"
+BITSTREAM_VERSION = 2  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2"}
+_VERSION_OF = {m: v for v, m in MAGICS.items()}
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
 KEY, PREDICTED = 0, 1
 _INT16, _INT32 = 1, 2
 
 
 class TpredError(ValueError):
-    """A record that is not a tpred v1 frame, or one that does not follow from the ones before."""
+    """A record that is not a tpred frame, or one that does not follow from the ones before."""
 
 
 @dataclass(frozen=True)
 class RecordHeader:
+    version: int
     kind: int
     window: int
     width: int
@@ -80,13 +97,14 @@ def parse_header(buf: bytes | memoryview) -> RecordHeader:
     if len(buf) < HEADER.size:
         raise TpredError(f"a tpred record needs {HEADER.size} header bytes, got {len(buf)}")
     magic, kind, window, w, h, dx, dy, ptype, _, n = HEADER.unpack_from(buf)
-    if magic != MAGIC:
-        raise TpredError(f"not a tpred v{BITSTREAM_VERSION} record (magic {bytes(magic)!r})")
+    version = _VERSION_OF.get(bytes(magic))
+    if version is None:
+        raise TpredError(f"not a tpred record of version 1..{BITSTREAM_VERSION} (magic {bytes(magic)!r})")
     if kind not in (KEY, PREDICTED) or ptype not in (_INT16, _INT32) or (kind == PREDICTED and window == 0):
         raise TpredError(f"a tpred record with kind {kind}, window {window}, payload type {ptype}")
     if len(buf) != HEADER.size + n:
         raise TpredError(f"a tpred record says {n} payload bytes and holds {len(buf) - HEADER.size}")
-    return RecordHeader(kind, window, w, h, dx, dy, ptype, n)
+    return RecordHeader(version, kind, window, w, h, dx, dy, ptype, n)
 
 
 def _shift(a: np.ndarray, dx: int, dy: int) -> np.ndarray:
@@ -150,34 +168,142 @@ class _Window:
             self.sum -= _shift(old, self.cx - ox, self.cy - oy)
 
 
+class _SceneWindow:
+    """Version 2's state: the window's frames summed on a canvas in scene coordinates, with
+    the number of frames that saw each scene point. Placing and removing a frame are slice
+    additions (no shifted copies of the sum), and the canvas is rebuilt larger, from the
+    frames, when the view leaves it: how large it is never changes a prediction."""
+
+    MARGIN = 128  # pixels of scene around the window's frames when the canvas is (re)built
+
+    def __init__(self) -> None:
+        self.frames: deque[tuple[np.ndarray, int, int]] = deque()  # (frame int64, cum dx, cum dy)
+        self.sum: np.ndarray | None = None
+        self.count: np.ndarray | None = None
+        self.oy = self.ox = 0  # the scene point of canvas[0, 0]
+        self.cx = self.cy = 0
+        self.last: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self.frames.clear()
+        self.sum = self.count = self.last = None
+        self.oy = self.ox = self.cx = self.cy = 0
+
+    def _at(self, shape: tuple[int, int], cx: int, cy: int) -> tuple[slice, slice] | None:
+        """The canvas slices a frame with cumulative motion (cx, cy) covers, or None if it
+        does not fit (its pixel (r, c) sees scene point (r - cy, c - cx))."""
+        assert self.sum is not None
+        r0, c0 = -cy - self.oy, -cx - self.ox
+        if r0 < 0 or c0 < 0 or r0 + shape[0] > self.sum.shape[0] or c0 + shape[1] > self.sum.shape[1]:
+            return None
+        return slice(r0, r0 + shape[0]), slice(c0, c0 + shape[1])
+
+    def _fit(self, shape: tuple[int, int], cx: int, cy: int) -> tuple[slice, slice]:
+        where = self._at(shape, cx, cy) if self.sum is not None else None
+        if where is not None:
+            return where
+        spots = [(-fy, -fx) for _, fx, fy in self.frames] + [(-cy, -cx)]
+        m = self.MARGIN
+        self.oy, self.ox = min(y for y, _ in spots) - m, min(x for _, x in spots) - m
+        size = (max(y for y, _ in spots) - self.oy + shape[0] + m, max(x for _, x in spots) - self.ox + shape[1] + m)
+        # float64 holds these sums exactly (below 2**24), and divides 4x faster than int64
+        self.sum, self.count = np.zeros(size, np.float64), np.zeros(size, np.float64)
+        for f, fx, fy in self.frames:
+            sl = self._at(f.shape, fx, fy)
+            assert sl is not None
+            self.sum[sl] += f
+            self.count[sl] += 1
+        where = self._at(shape, cx, cy)
+        assert where is not None
+        return where
+
+    def predict(self, dx: int, dy: int) -> tuple[np.ndarray, int]:
+        assert self.last is not None
+        self.cx += dx
+        self.cy += dy
+        sl = self._fit(self.last.shape, self.cx, self.cy)
+        assert self.sum is not None and self.count is not None
+        s, n = self.sum[sl], self.count[sl]
+        unseen = n == 0
+        some_unseen = bool(unseen.any())
+        if some_unseen:
+            n = np.maximum(n, 1)
+        # (S + N // 2) // N exactly, in float64: S < 2**24 and N < 256, so a quotient below an
+        # integer stays below it after rounding, and truncation is floor (S >= 0)
+        pred = ((s + np.floor(n * 0.5)) / n).astype(np.int64)
+        if some_unseen:  # content no frame has seen: the previous frame, moved, edge replicated
+            rows, cols = np.nonzero(unseen)
+            h, w = self.last.shape
+            pred[rows, cols] = self.last[np.clip(rows - dy, 0, h - 1), np.clip(cols - dx, 0, w - 1)]
+        return pred, len(self.frames)
+
+    def push(self, frame: np.ndarray) -> None:
+        f = frame.astype(np.int64)
+        sl = self._fit(f.shape, self.cx, self.cy)
+        assert self.sum is not None and self.count is not None
+        self.sum[sl] += f
+        self.count[sl] += 1
+        self.frames.append((f, self.cx, self.cy))
+        self.last = f
+
+    def trim(self, keep: int) -> None:
+        while len(self.frames) > keep:
+            assert self.sum is not None and self.count is not None
+            old, ox, oy = self.frames.popleft()
+            sl = self._at(old.shape, ox, oy)
+            assert sl is not None  # a rebuilt canvas holds every frame of the window
+            self.sum[sl] -= old
+            self.count[sl] -= 1
+
+
+def _window_for(version: int) -> _Window | _SceneWindow:
+    return _Window() if version == 1 else _SceneWindow()
+
+
 def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, other: int = 0) -> int:
     """The shift along ``axis`` (1: columns, dx; 0: rows, dy) that best maps ``prev`` onto
     ``cur``: the least mean absolute difference over the overlap, on every 8th line across it
-    (the other axis shifted by ``other``)."""
+    (the other axis shifted by ``other``). The candidates come from the frames' profiles
+    along the axis (the mean of those lines): every shift is tried on the profiles, and only
+    the best few on the lines themselves, which is 1/10 of trying every shift on the lines."""
     if axis == 0:  # rows: work on the transpose
         cur, prev = cur.T, prev.T
     lines = slice(None, None, 8)
     c = cur[lines]
     p = prev[lines] if other == 0 else np.roll(prev, other, axis=0)[lines]
     n = c.shape[1]
+    shifts = [s for s in range(-max_shift, max_shift + 1) if n - abs(s) >= n // 2]
+    if not shifts:
+        return 0
+
+    def cost(x: np.ndarray, y: np.ndarray, s: int) -> float:
+        a = x[..., s:] if s >= 0 else x[..., :s]
+        b = y[..., :n - s] if s >= 0 else y[..., -s:]
+        return float(np.abs(a - b).mean())
+
+    cp, pp = c.mean(axis=0), p.mean(axis=0)
+    by_profile = sorted(shifts, key=lambda s: cost(cp, pp, s))
     best, best_cost = 0, np.inf
-    for s in range(-max_shift, max_shift + 1):
-        if n - abs(s) < n // 2:
-            continue
-        x = c[:, s:] if s >= 0 else c[:, :s]
-        y = p[:, :n - s] if s >= 0 else p[:, -s:]
-        cost = float(np.abs(x - y).mean())
-        if cost < best_cost - 1e-9:
-            best, best_cost = s, cost
+    for s in sorted(set(by_profile[:_CANDIDATES]) | {0}):
+        k = cost(c, p, s)
+        if k < best_cost - 1e-9:
+            best, best_cost = s, k
     return best
 
 
+_CANDIDATES = 3  # shifts the profiles propose, each then measured on the lines
+
+
 class TemporalEncoder:
-    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24) -> None:
+    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24,
+                 bitstream: int = BITSTREAM_VERSION) -> None:
         if not 1 <= window <= 255 or key_interval < 1:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
+        if bitstream not in MAGICS:
+            raise ValueError(f"tpred writes bitstream versions {sorted(MAGICS)}, got {bitstream}")
         self.window, self.key_interval, self.max_shift = window, key_interval, max_shift
-        self._state = _Window()
+        self.bitstream, self._magic = bitstream, MAGICS[bitstream]
+        self._state = _window_for(bitstream)
         self._prev: np.ndarray | None = None
         self._since_key = 0
 
@@ -194,7 +320,7 @@ class TemporalEncoder:
             self._state.push(f)
             self._state.trim(self.window)
             self._prev, self._since_key = f, 1
-            return HEADER.pack(MAGIC, KEY, 0, w, h, 0, 0, ptype, 0, len(payload)) + payload
+            return HEADER.pack(self._magic, KEY, 0, w, h, 0, 0, ptype, 0, len(payload)) + payload
         dx, dy = self._motion(f)
         pred, used = self._state.predict(dx, dy)
         ptype, payload = _pack(f - pred)
@@ -202,7 +328,7 @@ class TemporalEncoder:
         self._state.trim(self.window)
         self._prev = f
         self._since_key += 1
-        return HEADER.pack(MAGIC, PREDICTED, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
+        return HEADER.pack(self._magic, PREDICTED, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
 
     def _motion(self, f: np.ndarray) -> tuple[int, int]:
         assert self._prev is not None
@@ -220,7 +346,8 @@ class TemporalEncoder:
 
 class TemporalDecoder:
     def __init__(self) -> None:
-        self._state = _Window()
+        self._state: _Window | _SceneWindow = _Window()
+        self._version = 0  # of the sequence's key frame; 0 before any
         self._shape: tuple[int, int] | None = None
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
@@ -230,10 +357,15 @@ class TemporalDecoder:
         if hdr.kind == KEY:
             d = _unpack(hdr.payload_type, payload, shape)
             f = np.cumsum(d, axis=0)
+            if hdr.version != self._version:
+                self._state, self._version = _window_for(hdr.version), hdr.version
             self._state.reset()
         else:
-            if self._shape != shape or self._state.sum is None:
+            if self._shape != shape or not self._state.frames:
                 raise TpredError("a predicted frame without the frames before it (decode from its key frame)")
+            if hdr.version != self._version:
+                raise TpredError(f"a version {hdr.version} record in a sequence whose key frame is version "
+                                 f"{self._version}")
             self._state.trim(hdr.window)
             if hdr.window != len(self._state.frames):
                 raise TpredError(f"the record averages {hdr.window} frames, the decoder holds "

@@ -19,7 +19,7 @@ import numpy as np
 from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 from archive.formats.zipped import _time_from_name, write_zip_segments
-from archive.temporal import KEY, TemporalDecoder, TemporalEncoder, TpredError, parse_header
+from archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TemporalDecoder, TemporalEncoder, TpredError, parse_header
 from recorder.storage.reader import SessionFrame
 
 __all__ = ["TemporalFrames"]
@@ -29,20 +29,24 @@ EXT = ".tpf"
 
 class TemporalFrames(ArchiveFormat):
     format_id = "tpred"
-    description = "one stored ZIP per segment of temporally predicted frames (tpred v1) + ICD JSON sidecars"
+    description = "one stored ZIP per segment of temporally predicted frames (tpred) + ICD JSON sidecars"
 
-    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24, bitstream: int = 1) -> None:
-        if bitstream != 1:
-            raise ArchiveError(f"tpred bitstream version {bitstream} is newer than this thermcap reads (1)")
-        self.window, self.key_interval, self.max_shift = window, key_interval, max_shift
+    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24,
+                 bitstream: int = BITSTREAM_VERSION) -> None:
+        if bitstream not in MAGICS:
+            raise ArchiveError(f"tpred bitstream version {bitstream} is not one this thermcap reads "
+                               f"({', '.join(map(str, sorted(MAGICS)))})")
+        self.window, self.key_interval, self.max_shift, self.bitstream = window, key_interval, max_shift, bitstream
 
     def get_config(self) -> dict[str, Any]:
+        # the version written: a session archived as v1 says so, and a re-archive keeps it
         return {"id": self.format_id, "window": self.window, "key_interval": self.key_interval,
-                "max_shift": self.max_shift, "bitstream": 1}
+                "max_shift": self.max_shift, "bitstream": self.bitstream}
 
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
         def sequence(run: Iterator[SessionFrame]) -> Iterator[tuple[SessionFrame, bytes]]:
-            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift)  # every segment starts a key
+            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift,
+                                  self.bitstream)  # every segment starts a key
             for frame in run:
                 yield frame, enc.encode(np.asarray(frame.pixels))
 

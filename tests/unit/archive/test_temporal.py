@@ -17,7 +17,7 @@ from archive.manifest import frame_sha256
 from archive.temporal import HEADER, TemporalDecoder, TemporalEncoder, TpredError, decode_records, parse_header
 from recorder.capture.sources.sim import SimSource
 
-GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"
+GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and tpred-v2 beside it
 
 
 def _frames(view: str, n: int = 48, **kw) -> list[np.ndarray]:
@@ -61,15 +61,18 @@ def test_the_extremes_and_a_frame_that_changes_size():
     assert all(np.array_equal(x, y) for x, y in zip(seq, decode_records(records), strict=True))
 
 
-def test_the_v1_golden_records_decode_bit_exact_today():
-    if not GOLDEN.is_dir():
-        pytest.fail(f"{GOLDEN} is missing: python -m tests.fixture.write_golden writes it (once)")
-    g = json.loads((GOLDEN / "golden.json").read_text())
-    data = (GOLDEN / "records.bin").read_bytes()
+@pytest.mark.parametrize("version", [1, 2])
+def test_each_versions_golden_records_decode_bit_exact_today(version):
+    golden = GOLDEN.parent / f"tpred-v{version}"
+    if not golden.is_dir():
+        pytest.fail(f"{golden} is missing: python -m tests.fixture.write_golden writes it (once)")
+    g = json.loads((golden / "golden.json").read_text())
+    data = (golden / "records.bin").read_bytes()
     records, pos = [], 0
     for n in g["record_bytes"]:
         records.append(data[pos:pos + n])
         pos += n
+    assert {parse_header(r).version for r in records} == {version}
     assert any(parse_header(r).dx for r in records), "the golden sequence must exercise motion"
     assert [frame_sha256(f) for f in decode_records(records)] == g["sha256"]
     # any frame from its key: frame 21 from the key at 16, in 6 steps
@@ -108,7 +111,7 @@ def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
     assert rec.run().ok
     m = archive_session(rec.session_dir, ["tpred"])
     entry = m["formats"]["tpred"]
-    assert entry["verified"] and entry["config"]["bitstream"] == 1
+    assert entry["verified"] and entry["config"]["bitstream"] == 2
     fmt = get_format(entry["config"])
     folder = rec.session_dir / "archive" / "tpred"
     def open_file(rel: str):
@@ -122,3 +125,36 @@ def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
     with pytest.raises(ArchiveError, match="cannot read frame"):
         fmt.read_frame(open_file, entry["files"], 3)
     assert load_manifest(rec.session_dir)["formats"]["tpred"]["verified"]
+
+
+def test_version_2_predicts_entering_content_from_the_frames_that_saw_it():
+    """In a sweep, v1 predicts the columns that entered over the window from copies of the
+    edge; v2 only from frames that saw them. Same frames, same motion: v2 is smaller, and a
+    decoder reads both, each sequence in its key frame's version."""
+    frames = [f.pixels for f in SimSource(width=640, height=512, frames=16, paced=False, seed=5, view="patrol",
+                                          pixel_fpn_mk=15.0, drift_mk=30.0, patrol_deg_s=20.0).frames()]
+    sizes = {}
+    for v in (1, 2):
+        enc = TemporalEncoder(window=16, key_interval=40, bitstream=v)
+        records = [enc.encode(f) for f in frames]
+        assert {parse_header(r).version for r in records} == {v}
+        assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
+        sizes[v] = sum(map(len, records))
+    assert sizes[2] < 0.985 * sizes[1], sizes  # about 3% at 640x512
+    e1, e2 = TemporalEncoder(bitstream=1, key_interval=8), TemporalEncoder(bitstream=2, key_interval=8)
+    v1, v2 = [e1.encode(f) for f in frames[:8]], [e2.encode(f) for f in frames[8:16]]
+    assert [parse_header(r).kind for r in v1 + v2] == ([0] + [1] * 7) * 2
+    assert all(np.array_equal(a, b) for a, b in zip(frames[:16], decode_records(v1 + v2), strict=True))
+    with pytest.raises(TpredError, match="version 1 record in a sequence whose key frame is version 2"):
+        list(decode_records(v2[:2] + v1[1:2]))
+
+
+def test_the_float_division_is_floor_division():
+    """v2 divides in float64 for speed; the bitstream says floor division of integers."""
+    rng = np.random.default_rng(3)
+    n = rng.integers(1, 256, 200_000).astype(np.int64)
+    s = np.concatenate([rng.integers(0, 255 * 65536, 100_000), (rng.integers(1, 65536, 100_000) * n[100_000:]) - 1])
+    s = np.maximum(s, 0)
+    want = (s + n // 2) // n
+    got = ((s.astype(np.float64) + np.floor(n.astype(np.float64) * 0.5)) / n.astype(np.float64)).astype(np.int64)
+    assert np.array_equal(got, want)
