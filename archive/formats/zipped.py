@@ -56,19 +56,10 @@ class ZippedFrames(ArchiveFormat):
             path = out_dir / rel
             try:
                 with zipfile.ZipFile(path) as zf:
-                    names = set(zf.namelist())
-
-                    def entries() -> Iterator[tuple[bytes, bytes, str]]:
-                        for info in zf.infolist():
-                            if info.filename.endswith(ext):
-                                base = info.filename[: -len(ext)]
-                                sidecar = zf.read(base + ".json") if base + ".json" in names else b""
-                                yield zf.read(info), sidecar, base
-
                     # the ZIP is read here, in order; the images decode on two threads (the
                     # codecs release the GIL), so verifying a copy takes half the wall time
                     for pixels, sidecar, base in ordered_map(lambda e: (codec.decode(e[0]), e[1], e[2]),
-                                                             entries(), 2):
+                                                             _members(zf, ext), 2):
                         yield DecodedFrame(pixels, sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
@@ -87,6 +78,15 @@ class ZippedFrames(ArchiveFormat):
                     return DecodedFrame(self.codec.decode(zf.read(images[k])), sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError, IndexError) as exc:
                 raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
+
+
+def _members(zf: zipfile.ZipFile, ext: str) -> Iterator[tuple[bytes, bytes, str]]:
+    """(image bytes, sidecar bytes, base name) of each image in the ZIP, in order."""
+    names = set(zf.namelist())
+    for info in zf.infolist():
+        if info.filename.endswith(ext):
+            base = info.filename[: -len(ext)]
+            yield zf.read(info), zf.read(base + ".json") if base + ".json" in names else b"", base
 
 
 def write_zip_segments(frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext, ext: str,
