@@ -140,7 +140,7 @@ def decode_up_png(buf: bytes) -> np.ndarray | None:
         return None
     stride = 2 * w + 1
     try:
-        raw = imagecodecs.deflate_decode(parts[0] if len(parts) == 1 else b"".join(parts), out=h * stride)
+        raw = imagecodecs.deflate_decode(cast(Any, parts[0] if len(parts) == 1 else b"".join(parts)), out=h * stride)
     except Exception:
         return None
     rows = np.frombuffer(raw, np.uint8)

@@ -153,3 +153,23 @@ def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url
     log_text = (server.proc.stderr.read() or b"").decode()
     assert seaweedfs["AWS_SECRET_ACCESS_KEY"] not in log_text
     assert "thermcap-test-secret" not in log_text
+
+
+def test_binary_hashes_on_postgresql(postgres_url):
+    """Migration 0008 on PostgreSQL (bytea via decode/encode), on a database of its own."""
+    from sqlalchemy import create_engine, text
+
+    from tests.unit.api.test_hash_migration import check_binary_hashes
+
+    admin = create_engine(postgres_url, isolation_level="AUTOCOMMIT")
+    with admin.connect() as conn:
+        conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
+        conn.execute(text("CREATE DATABASE thermcap_migration_0008"))
+    try:
+        engine = make_engine(postgres_url.rsplit("/", 1)[0] + "/thermcap_migration_0008")
+        check_binary_hashes(engine)
+        engine.dispose()
+    finally:
+        with admin.connect() as conn:
+            conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
+        admin.dispose()
