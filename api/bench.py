@@ -56,7 +56,9 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
         with socket.socket() as s:
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
-        proc = subprocess.Popen([sys.executable, "-m", "recorder", "serve", "--root", str(base), "--port", str(port)],
+        # no access log, as nginx here (access_log off): the same work on both sides
+        proc = subprocess.Popen([sys.executable, "-m", "recorder", "serve", "--root", str(base), "--port", str(port),
+                                 "--no-access-log"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         url = f"http://127.0.0.1:{port}"
         for _ in range(300):

@@ -25,7 +25,9 @@ __all__ = ["index", "jobs", "on_archived", "serve", "upload"]
 @click.option("--workers", type=int, default=1, show_default=True)
 @click.option("--get", "get_path", default=None,
               help="Answer one GET request in-process, print it, exit (1 unless 200).")
-def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -> None:
+@click.option("--access-log/--no-access-log", default=True, show_default=True,
+              help="A line a request on stderr (uvicorn's); /metrics counts requests either way.")
+def serve(root: str, host: str, port: int, workers: int, get_path: str | None, access_log: bool) -> None:
     """Serve the data root over HTTP (catalog, frames, exports, archives, browser view)."""
     import os
 
@@ -54,9 +56,10 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None) -
     import uvicorn
 
     if workers > 1:
-        uvicorn.run("api.app:create_app", factory=True, host=host, port=port, workers=workers, log_level="info")
+        uvicorn.run("api.app:create_app", factory=True, host=host, port=port, workers=workers, log_level="info",
+                    access_log=access_log)
     else:
-        uvicorn.run(create_app(settings), host=host, port=port, log_level="info")
+        uvicorn.run(create_app(settings), host=host, port=port, log_level="info", access_log=access_log)
 
 
 @click.command("index")
