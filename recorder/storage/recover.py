@@ -282,7 +282,9 @@ def _copy(src: Path, dst: Path) -> None:
 
 
 def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> list[RecoveryResult]:
-    """A file, a session folder, or a data root: recover every ``.active`` segment found.
+    """A file, a session folder, or a data root: recover every ``.active`` segment found, and
+    mark every session whose recorder died (``session.json`` still says it is recording), also
+    one killed between two segments, which leaves no ``.active`` file behind.
 
     Each session is recovered under its lock; a session some live process holds (a recorder
     still writing it) is skipped and reported, never touched."""
@@ -293,6 +295,9 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
         by_session = {}
         for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
             by_session.setdefault(active.parent, []).append(active)
+        for meta in sorted(p.rglob(SessionLayout.of(p).session_json.name)):
+            if _left_recording(meta.parent):
+                by_session.setdefault(meta.parent, [])
     else:
         raise McapFileError(f"{p}: no such file or folder")
     results = []
@@ -312,6 +317,15 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
         finally:
             lock.release()
     return results
+
+
+def _left_recording(session_dir: Path) -> bool:
+    """Whether the session's own record still says a recorder is writing it (true or not)."""
+    try:
+        return json.loads(SessionLayout.of(session_dir).session_json.read_text()).get("status") in (
+            "recording", "interrupted")
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def _mark_session(session_dir: Path) -> None:
@@ -339,7 +353,7 @@ def recover_leftovers(root: str | os.PathLike) -> list[Path]:
         return done
     for session in sorted(base.iterdir()):
         actives = sorted(session.glob(f"*.mcap{ACTIVE_SUFFIX}")) if session.is_dir() else []
-        if not actives:
+        if not actives and not (session.is_dir() and _left_recording(session)):
             continue
         lock = lock_session(session, "recover")
         if lock is None:

@@ -185,3 +185,26 @@ def test_status_is_interrupted_when_no_live_recorder_holds_the_session(tmp_path)
     info = json.loads(r.stdout)
     assert info["status"] == "interrupted"
     assert "recover" in info.get("hint", "")
+
+
+def test_recover_marks_a_recorder_killed_between_segments(tmp_path):
+    """A recorder killed after closing a segment and before opening the next leaves no
+    ``.active`` file, only a session.json that still says "recording" (found by the lifecycle
+    test in CI). `recover` must still mark it, with the count the segments hold, whether it is
+    given the session or the data root."""
+    for n, target in enumerate(("session", "root")):
+        sid = f"s{n}"
+        Recorder(SimSource(width=96, height=64, frames=90, paced=False, seed=n), tmp_path, session_id=sid,
+                 analysis=False, recover_leftovers=False, policy=SegmentPolicy(max_duration_s=0.5)).run()
+        session = tmp_path / "sessions" / sid
+        meta = json.loads((session / "session.json").read_text())
+        written = meta["frames_written"]
+        for key in ("frames_written", "frames_captured", "ended_ns"):
+            meta.pop(key, None)
+        meta["status"] = "recording"  # what session.json says while the recorder runs
+        (session / "session.json").write_text(json.dumps(meta))
+        assert not list(session.glob("*.active")) and len(list(session.glob("*.mcap"))) >= 2
+        recover_path(session if target == "session" else tmp_path)
+        after = json.loads((session / "session.json").read_text())
+        assert after["status"] == "recovered", target
+        assert after["frames_written"] == written == _images(session), target
