@@ -44,6 +44,32 @@ def test_the_same_answer_as_the_route(client, root, fmt):
         head = client.head(f"/api/v1/sessions/{SID}/frames/{n}", params={"format": fmt})
         assert head.status_code == 200 and head.content == b"" and head.headers["etag"] == a.headers["etag"]
     assert fast.served >= before + 9  # answered here, not by the route
+    if fmt == "raw":  # proved against the frame summary's band CRC-32s (the archive has one)
+        assert fast.raw_checked["crc32"] >= 3
+
+
+def test_raw_counts_that_fail_the_band_checksums_are_not_served(client, root, monkeypatch):
+    """A decoder bug (here: one count off in the PNG's decode) is caught by the summary's band
+    CRC-32s: the frame comes from the next copy that proves itself, bit-exact."""
+    import api.fast_frames as ff
+
+    frames = [f.pixels for f in iter_session_frames(root / "sessions" / SID)]
+    real = ff.decode_up_png
+
+    def off_by_one(data):
+        px = real(data)
+        if px is not None:
+            px = px.copy()
+            px[px.shape[0] - 1, 0] ^= 1
+        return px
+
+    monkeypatch.setattr(ff, "decode_up_png", off_by_one)
+    fast = client.app.state.fast_frames
+    before = dict(fast.raw_from)
+    r = client.get(f"/api/v1/sessions/{SID}/frames/5", params={"format": "raw"})
+    assert r.status_code == 200
+    assert np.array_equal(np.frombuffer(r.content, "<u2").reshape(frames[5].shape), frames[5])
+    assert fast.raw_from["png-up"] == before.get("png-up", 0)  # the wrong counts were not served
 
 
 def test_a_frame_out_of_range_or_an_unknown_session_is_the_routes_404(client):
