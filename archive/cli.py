@@ -11,7 +11,7 @@ import click
 
 from archive.archiver import DEFAULT_FORMATS
 from recorder.cli.options import fail, json_option, root_option
-from recorder.exceptions import ThermcapError
+from recorder.exceptions import SessionBusyError, ThermcapError
 from recorder.storage.layout import SessionLayout
 
 __all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
@@ -302,7 +302,10 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
         fail("give one source: --bucket (with --endpoint) or --from DIR")
     store = open_store(Path(from_dir or "."), bucket=bucket, endpoint=endpoint, region=region, prefix=prefix)
     report = confirm_synced(store)
-    landed = land_synced(store, Path(into)) if into else None
+    try:
+        landed = land_synced(store, Path(into)) if into else None
+    except SessionBusyError as exc:  # the receipts above are written; only the landing waits
+        fail(str(exc))
     if as_json:
         click.echo(json.dumps({**report.__dict__, **({"landing": landed.__dict__} if landed else {})}, indent=2))
     else:

@@ -23,7 +23,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from archive.blobs import BlobStore
+from recorder.exceptions import SessionBusyError
 from recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON
+from recorder.storage.lock import holder, lock_session
 from recorder.storage.segments import fsync_dir
 from recorder.sync.targets import receipt_key
 
@@ -51,6 +53,22 @@ def _read_json(store: BlobStore, key: str) -> dict | None:
 
 
 def land_synced(store: BlobStore, root: Path, prefix: str = "sessions/") -> LandReport:
+    """Land every whole, receipted session in ``root/sessions``, one landing at a time: two at
+    once would download the same session into the same ``.partial`` folder, and one could give
+    the other's half-written folder the session's name. Raises SessionBusyError naming the
+    holder while another landing holds the root's lock."""
+    root.mkdir(parents=True, exist_ok=True)
+    lock = lock_session(root, "landing", wait_s=0.0)
+    if lock is None:
+        raise SessionBusyError(f"{root}: {holder(root) or 'another process'} is landing sessions here; "
+                               "try again when it is done")
+    try:
+        return _land(store, root, prefix)
+    finally:
+        lock.release()
+
+
+def _land(store: BlobStore, root: Path, prefix: str) -> LandReport:
     report = LandReport()
     by_session: dict[str, dict[str, int]] = {}
     for key, size in store.list(prefix):

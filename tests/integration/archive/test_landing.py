@@ -47,3 +47,29 @@ def test_only_whole_receipted_sessions_land(tmp_path):
         assert (cloud / "sessions/a" / p.name).read_bytes() == p.read_bytes()
     again = land_synced(store, cloud)
     assert again.already == 1
+
+
+def test_a_second_landing_on_the_same_root_waits_its_turn(tmp_path):
+    """Two `sync-confirm --into` runs on one root used to download the same session into the
+    same ``.partial`` folder, the second deleting the first's half-written files under it, so
+    the first could rename the second's half folder into place. One lands at a time; the other
+    is refused, naming who holds the root, and touches nothing."""
+    import pytest
+
+    from recorder.exceptions import SessionBusyError
+    from recorder.storage.lock import lock_session
+
+    _vehicle, depot = _depot(tmp_path)
+    store = open_store(depot)
+    confirm_synced(store)
+    cloud = tmp_path / "cloud"
+    (cloud / "sessions").mkdir(parents=True)
+    held = lock_session(cloud, "landing")  # another run, landing here now
+    assert held is not None
+    try:
+        with pytest.raises(SessionBusyError, match="landing"):
+            land_synced(store, cloud)
+        assert list((cloud / "sessions").iterdir()) == []
+    finally:
+        held.release()
+    assert sorted(land_synced(store, cloud).landed) == ["a", "b"]
