@@ -256,7 +256,6 @@ class RegionReader:
         return point
 
 
-
 def _file_of(files: list[dict[str, Any]], index: int) -> str:
     """The file a damaged frame is in, to name in the damage log."""
     try:

@@ -39,7 +39,7 @@ class TemporalFrames(ArchiveFormat):
         self.window, self.key_interval, self.max_shift, self.bitstream = window, key_interval, max_shift, bitstream
 
     def get_config(self) -> dict[str, Any]:
-        # the version written: a session archived as v1 says so, and a re-archive keeps it
+        # the version written, so each archive's manifest says which one it holds
         return {"id": self.format_id, "window": self.window, "key_interval": self.key_interval,
                 "max_shift": self.max_shift, "bitstream": self.bitstream}
 

@@ -28,7 +28,7 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import breakup_chunk
 
 from recorder.exceptions import McapFileError
-from recorder.storage.layout import SessionLayout
+from recorder.storage.layout import SESSION_JSON, SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import count_frames
 from recorder.storage.rosbag2 import write_bag_metadata
@@ -295,7 +295,7 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
         by_session = {}
         for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
             by_session.setdefault(active.parent, []).append(active)
-        for meta in sorted(p.rglob(SessionLayout.of(p).session_json.name)):
+        for meta in sorted(p.rglob(SESSION_JSON)):
             if _left_recording(meta.parent):
                 by_session.setdefault(meta.parent, [])
     else:
@@ -319,11 +319,13 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
     return results
 
 
+_UNFINISHED = ("recording", "interrupted")  # what session.json says of a recorder that never wrote its end
+
+
 def _left_recording(session_dir: Path) -> bool:
     """Whether the session's own record still says a recorder is writing it (true or not)."""
     try:
-        return json.loads(SessionLayout.of(session_dir).session_json.read_text()).get("status") in (
-            "recording", "interrupted")
+        return json.loads(SessionLayout.of(session_dir).session_json.read_text()).get("status") in _UNFINISHED
     except (OSError, ValueError, AttributeError):
         return False
 
@@ -334,7 +336,7 @@ def _mark_session(session_dir: Path) -> None:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError):
         return
-    if meta.get("status") in ("recording", "interrupted"):
+    if meta.get("status") in _UNFINISHED:
         # The recorder died before its summary: the counts come from what the segments now hold,
         # so session.json, `info` and the catalog agree.
         meta["status"] = "recovered"
