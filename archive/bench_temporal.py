@@ -5,7 +5,9 @@ patrol sweep and its turret following radar cues), the ratio and encode rate of 
 beside JPEG-XL effort 2 (the intra anchor the goal is stated against), PNG16 and FFV1 in
 Matroska (what film and video archives trust; through PyAV when installed). Every codec is
 checked bit-exact on the same frames before its figure counts. ``tpred``'s rate on two cores is
-two sequences encoded at once on two threads (each camera, or each segment, is a sequence).
+two sequences encoded at once on two threads (each camera, or each segment, is a sequence). The
+previous bitstream (v2) is measured beside the current one, so the trade between ratio and
+speed shows in one run.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from archive.codecs import get_codec
-from archive.temporal import TemporalEncoder, decode_records
+from archive.temporal import BITSTREAM_VERSION, TemporalEncoder, decode_records
 from recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_temporal"]
@@ -38,8 +40,8 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
     }
 
 
-def _tpred(frames: list[np.ndarray]) -> tuple[float, float, float]:
-    enc = TemporalEncoder()
+def _tpred(frames: list[np.ndarray], bitstream: int = BITSTREAM_VERSION) -> tuple[float, float, float]:
+    enc = TemporalEncoder(bitstream=bitstream)
     t = time.perf_counter()
     records = [enc.encode(f) for f in frames]
     one = len(frames) / (time.perf_counter() - t)
@@ -48,7 +50,7 @@ def _tpred(frames: list[np.ndarray]) -> tuple[float, float, float]:
     half = len(frames) // 2
 
     def run(part: list[np.ndarray]) -> None:
-        e = TemporalEncoder()
+        e = TemporalEncoder(bitstream=bitstream)
         for f in part:
             e.encode(f)
 
@@ -105,13 +107,16 @@ def bench_temporal(frames: int = 240) -> list[dict[str, Any]]:
     for name, seq in _sequences(frames).items():
         jxl_ratio, jxl_fps = _intra({"id": "jxl", "effort": 2}, seq)
         t_ratio, t_one, t_two = _tpred(seq)
+        v2_ratio, _, v2_two = _tpred(seq, bitstream=2)
         png_ratio, png_fps = _intra({"id": "png16"}, seq)
         row: dict[str, Any] = {
             "sequence": name, "frames": len(seq),
             "tpred_ratio": round(t_ratio, 3), "jxl_e2_ratio": round(jxl_ratio, 3),
             "x_jxl_e2": round(t_ratio / jxl_ratio, 3), "goal_x_jxl_e2": 1.25,
             "tpred_fps_1_core": round(t_one, 1), "tpred_fps_2_cores": round(t_two, 1), "goal_fps_2_cores": 120,
-            "jxl_e2_fps": round(jxl_fps, 1), "png16_ratio": round(png_ratio, 3), "png16_fps": round(png_fps, 1)}
+            "jxl_e2_fps": round(jxl_fps, 1), "png16_ratio": round(png_ratio, 3), "png16_fps": round(png_fps, 1),
+            "bitstream": BITSTREAM_VERSION, "tpred_v2_ratio": round(v2_ratio, 3),
+            "tpred_v2_x_jxl_e2": round(v2_ratio / jxl_ratio, 3), "tpred_v2_fps_2_cores": round(v2_two, 1)}
         ffv1 = _ffv1(seq)
         if ffv1 is not None:
             row.update(ffv1_ratio=round(ffv1[0], 3), ffv1_fps=round(ffv1[1], 1),

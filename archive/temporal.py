@@ -4,11 +4,11 @@ Every codec before it was intra-only, and a thermal camera's frames differ mostl
 frame here is predicted from the mean of up to ``window`` (16) frames before it, each aligned to
 it by the view's global motion (a pan), and only the residual is stored, entropy-coded by
 pcodec (``pco``), which reaches within 1% of the residual's zeroth-order entropy. A key frame
-every ``key_interval`` (32) frames is coded alone (pcodec of its vertical differences), so any
+every ``key_interval`` (64, about a second at 60 fps) frames is coded alone (pcodec of its vertical differences), so any
 frame decodes in at most ``key_interval`` steps from its key.
 
 Bitstream, version 1 (stable: files written with it decode forever; golden files in
-``tests/fixture/codecs/tpred``). Each frame is one record, little-endian:
+``tests/fixture/bitstreams/tpred-v<N>``). Each frame is one record, little-endian:
 
     offset size  field
     0      4     magic b"TPF1"
@@ -35,7 +35,7 @@ frame is ``P + residual``. Then the frame is added to ``S``, and once ``S`` hold
 replicated in one step), is subtracted. The encoder does exactly the same, so ``S`` and ``P`` are
 bit-identical on both sides whatever the edges do.
 
-Bitstream, version 2 (magic ``b"TPF2"``, the same record layout; what thermcap writes): the
+Bitstream, version 2 (magic ``b"TPF2"``, the same record layout): the
 same key frames, and a better prediction where the view moves. Version 1 shifts the sum of the
 window with edge replication, so in a pan the columns that entered over the last ``w`` frames
 are predicted from copies of the edge, and a sweep pays for a band as wide as the window's whole
@@ -50,14 +50,47 @@ frame moved by the record's ``(dx, dy)`` with edge replication (content no frame
 window is kept and trimmed as in version 1. A decoder reads both versions; a sequence keeps the
 version of its key frame.
 
+Bitstream, version 3 (magic ``b"TPF3"``; what thermcap writes): version 2's scene window
+and key frames, and three more things both sides compute the same way, in integers, from the
+frames already decoded since the key frame. Values in 1/64 counts are written ``x64``.
+
+- The window holds each frame less the pattern estimate ``E`` at the time it was added
+  (``64 * F - E``), so its mean ``M`` (version 2's ``P`` of those values, or, where no frame saw
+  the scene point, the previous of those values moved with edge replication) is the scene
+  without the sensor's pattern. The key frame enters as ``64 * F``, and ``E`` starts at 0.
+- The pattern estimate ``E`` (``_Pattern``): after each predicted frame, its residual against
+  the scene ``R = 64 * F - M``, clipped to +-512, and set to 0 at the pixels not predicted from
+  the scene (block modes, unseen points), is added to a per-pixel sum ``A`` and per column to
+  ``Cs`` (with ``Cn``, the number of pixels that were predicted from the scene). With ``n`` the
+  number of frames learned since the key, ``C = (Cs + Cn // 2) // Cn`` (0 where ``Cn`` is 0)
+  and ``E = C + (A - n * C) // (n + 16)`` (floor division).
+- The prediction is ``P = (M + E + 32) >> 6`` (floor), except in blocks with a mode.
+
+A predicted record's payload is, in order: ``u32`` length ``L`` and ``L`` bytes, the zlib stream
+of the block-mode map (one ``uint8`` per 16x16 block, row-major, ``ceil(h/16) x ceil(w/16)``;
+``L = 0``: no block has a mode). A block with mode ``k`` (1..25) is predicted by the previous
+decoded frame moved by ``(vx, vy) = VECTORS[k - 1]``, which is ``(k - 1) % 5 - 2`` columns right
+and ``(k - 1) // 5 - 2`` rows down, with edge replication, in the block's pixels inside the frame.
+Then the residual streams, each a ``u32`` length and one pcodec chunk of its values (length 0
+for a stream with no pixel), each listing its pixels in row-major order. A frame of at least
+131072 pixels has five: stream ``q`` (0..3) holds the residuals of the pixels predicted from
+the scene whose ``(M + E + 32) & 63`` lies in ``[16q, 16q + 16)`` (the fraction of the
+prediction: their residuals are distributed differently), and stream 4 those of the block-mode
+and unseen pixels. A smaller frame has two: the scene's, then the others. The frame is ``P +
+residual``. Payload type 1 or 2 says whether every stream holds int16 or int32.
+
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference on every 8th line), columns over +-``max_shift`` pixels,
-then rows over +-8, kept only when it lowers the residual.
+then rows over +-8, kept only when it lowers the residual. In version 3 it also picks the block
+modes: blocks whose residual against the scene is well above the frame's typical block try
+every vector on the previous frame and keep the best when clearly better (a vehicle that moves
+across a panned view).
 """
 
 from __future__ import annotations
 
 import struct
+import zlib
 from collections import deque
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
@@ -68,8 +101,8 @@ import numpy as np
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_records",
            "parse_header"]
 
-BITSTREAM_VERSION = 2  # what the encoder writes by default; every earlier version decodes
-MAGICS = {1: b"TPF1", 2: b"TPF2"}
+BITSTREAM_VERSION = 3  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
 KEY, PREDICTED = 0, 1
@@ -183,10 +216,11 @@ class _SceneWindow:
         self.oy = self.ox = 0  # the scene point of canvas[0, 0]
         self.cx = self.cy = 0
         self.last: np.ndarray | None = None
+        self.unseen: np.ndarray | None = None  # of the last prediction: where no frame saw the scene
 
     def reset(self) -> None:
         self.frames.clear()
-        self.sum = self.count = self.last = None
+        self.sum = self.count = self.last = self.unseen = None
         self.oy = self.ox = self.cx = self.cy = 0
 
     def _at(self, shape: tuple[int, int], cx: int, cy: int) -> tuple[slice, slice] | None:
@@ -206,7 +240,7 @@ class _SceneWindow:
         m = self.MARGIN
         self.oy, self.ox = min(y for y, _ in spots) - m, min(x for _, x in spots) - m
         size = (max(y for y, _ in spots) - self.oy + shape[0] + m, max(x for _, x in spots) - self.ox + shape[1] + m)
-        # float64 holds these sums exactly (below 2**24), and divides 4x faster than int64
+        # float64 holds these sums exactly (below 2**31 in version 3), and divides 4x faster than int64
         self.sum, self.count = np.zeros(size, np.float64), np.zeros(size, np.float64)
         for f, fx, fy in self.frames:
             sl = self._at(f.shape, fx, fy)
@@ -226,11 +260,12 @@ class _SceneWindow:
         s, n = self.sum[sl], self.count[sl]
         unseen = n == 0
         some_unseen = bool(unseen.any())
+        self.unseen = unseen if some_unseen else None
         if some_unseen:
             n = np.maximum(n, 1)
-        # (S + N // 2) // N exactly, in float64: S < 2**24 and N < 256, so a quotient below an
-        # integer stays below it after rounding, and truncation is floor (S >= 0)
-        pred = ((s + np.floor(n * 0.5)) / n).astype(np.int64)
+        # (S + N // 2) // N exactly, in float64: |S| < 2**31 and N < 256, so a quotient just off
+        # an integer stays on its side of it after rounding (version 3's sums can be negative)
+        pred = np.floor((s + np.floor(n * 0.5)) / n).astype(np.int64)
         if some_unseen:  # content no frame has seen: the previous frame, moved, edge replicated
             rows, cols = np.nonzero(unseen)
             h, w = self.last.shape
@@ -238,7 +273,7 @@ class _SceneWindow:
         return pred, len(self.frames)
 
     def push(self, frame: np.ndarray) -> None:
-        f = frame.astype(np.int64)
+        f = np.asarray(frame, np.int64)  # kept, not copied: callers hand over a frame they no longer change
         sl = self._fit(f.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         self.sum[sl] += f
@@ -256,8 +291,242 @@ class _SceneWindow:
             self.count[sl] -= 1
 
 
-def _window_for(version: int) -> _Window | _SceneWindow:
-    return _Window() if version == 1 else _SceneWindow()
+# Version 3: the sensor-fixed pattern learned, blocks that move on their own, residual streams by
+# the prediction's fraction. Fixed point: 1/64 of a count.
+SCALE_BITS = 6
+_HALF = 1 << (SCALE_BITS - 1)
+BLOCK = 16
+VECTORS = tuple((vx, vy) for vy in range(-2, 3) for vx in range(-2, 3))  # block mode k >= 1 uses VECTORS[k - 1]
+#: Frames of at least this many pixels split their scene residuals by the prediction's fraction,
+#: in quarters (0.3-0.4% smaller at 640x512); smaller ones keep one stream, because pcodec codes
+#: a stream of a few thousand values 5-6% above its entropy, which costs more than the split gains.
+PHASE_SPLIT_PIXELS = 1 << 17
+
+
+def _phase_bits(shape: tuple[int, int]) -> int:
+    return 2 if shape[0] * shape[1] >= PHASE_SPLIT_PIXELS else 0
+
+
+def _streams(shape: tuple[int, int]) -> int:
+    """Residual streams of a version 3 record: the scene's (by fraction) and a last one for
+    block-mode and unseen pixels."""
+    return (1 << _phase_bits(shape)) + 1
+_U32 = struct.Struct("<I")
+
+
+class _Pattern:
+    """Version 3's estimate of the sensor-fixed pattern (what stays put on the sensor while the
+    scene pans: column offsets and each pixel's offset), learned since the key frame from every
+    decoded frame's residual against the scene prediction, in 1/64 counts. Integer arithmetic
+    only, so both sides hold the same estimate on any machine. Under a pan the scene canvas mixes
+    many sensor columns, so without this the pattern is paid for again in every frame.
+
+    After ``n`` frames, with ``E`` the sum of a pixel's residuals (clipped to +-8 counts, 0
+    where the pixel was not predicted from the scene) and ``C`` its column's mean residual over
+    the pixels that were (rounded half up), the estimate is ``C + (E - n * C) // (n + SHRINK)``."""
+
+    CLIP = 8 << SCALE_BITS  # a residual beyond 8 counts is the scene, not the sensor
+    SHRINK = 16  # a pixel's own estimate is pulled toward its column's, as if 16 frames had said 0
+
+    def __init__(self, shape: tuple[int, int]) -> None:
+        self.n = 0
+        self.colsum = np.zeros(shape[1], np.int64)
+        self.colcnt = np.zeros(shape[1], np.int64)
+        self.pixsum = np.zeros(shape, np.int64)
+        self.est = np.zeros(shape, np.int64)
+
+    def learn(self, e64: np.ndarray, off_scene: tuple[np.ndarray, ...] | None) -> None:
+        """Add one frame's residuals against the scene (``e64``, consumed); ``off_scene`` are the
+        (rows, cols) of the pixels not predicted from the scene."""
+        h = e64.shape[0]
+        e = np.clip(e64, -self.CLIP, self.CLIP, out=e64)
+        cnt = np.full(e.shape[1], h, np.int64)
+        if off_scene is not None:
+            e[off_scene] = 0
+            cnt -= np.bincount(off_scene[1], minlength=e.shape[1])
+        self.n += 1
+        self.colsum += e.sum(axis=0)
+        self.colcnt += cnt
+        self.pixsum += e
+        col = np.zeros_like(self.colsum)
+        have = self.colcnt > 0
+        col[have] = (self.colsum[have] + self.colcnt[have] // 2) // self.colcnt[have]
+        est = self.pixsum - self.n * col
+        est //= self.n + self.SHRINK
+        est += col
+        self.est = est
+
+
+class _State3:
+    """Everything version 3 carries from frame to frame, the same on both sides."""
+
+    def __init__(self) -> None:
+        self.window = _SceneWindow()
+        self.pattern: _Pattern | None = None
+        self.prev: np.ndarray | None = None  # the last frame, int64 counts
+
+    @property
+    def frames(self) -> deque:
+        return self.window.frames
+
+    def reset(self) -> None:
+        self.window.reset()
+        self.pattern = None
+        self.prev = None
+
+    def trim(self, keep: int) -> None:
+        self.window.trim(keep)
+
+    def key(self, f: np.ndarray) -> None:
+        self.window.reset()
+        self.pattern = _Pattern(f.shape)
+        self.window.push(f << SCALE_BITS)
+        self.prev = f
+
+    def scene(self, dx: int, dy: int) -> np.ndarray:
+        """The scene part of the next prediction, in 1/64 counts: the window's mean where the
+        scene was seen, the previous frame moved where it was not (both less the pattern)."""
+        m64, _ = self.window.predict(dx, dy)
+        return m64
+
+    def predict(self, m64: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(prediction in counts, the stream of each pixel, where the scene part is used) before
+        any block mode: ``with_modes`` then changes the moving blocks in place."""
+        assert self.pattern is not None
+        p = m64 + self.pattern.est
+        p += _HALF
+        pred = p >> SCALE_BITS
+        bits = _phase_bits(p.shape)
+        if bits:
+            stream = ((p & ((1 << SCALE_BITS) - 1)) >> (SCALE_BITS - bits)).astype(np.uint8)
+        else:
+            stream = np.zeros(p.shape, np.uint8)
+        scene = ~self.window.unseen if self.window.unseen is not None else np.ones(p.shape, bool)
+        stream[~scene] = _streams(p.shape) - 1
+        return pred, stream, scene
+
+    def with_modes(self, modes: np.ndarray, pred: np.ndarray, stream: np.ndarray, scene: np.ndarray) -> None:
+        """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
+        (edge replicated), its pixels in the last stream and out of the pattern's learning."""
+        assert self.prev is not None
+        h, w = pred.shape
+        other = _streams(pred.shape) - 1
+        for bi, bj in zip(*np.nonzero(modes), strict=True):
+            vx, vy = VECTORS[int(modes[bi, bj]) - 1]
+            r0, c0 = int(bi) * BLOCK, int(bj) * BLOCK
+            r1, c1 = min(r0 + BLOCK, h), min(c0 + BLOCK, w)
+            rows = np.clip(np.arange(r0, r1) - vy, 0, h - 1)
+            cols = np.clip(np.arange(c0, c1) - vx, 0, w - 1)
+            pred[r0:r1, c0:c1] = self.prev[rows[:, None], cols[None, :]]
+            stream[r0:r1, c0:c1] = other
+            scene[r0:r1, c0:c1] = False
+
+    def push(self, f: np.ndarray, m64: np.ndarray, scene: np.ndarray) -> None:
+        assert self.pattern is not None
+        f64 = f << SCALE_BITS
+        off = None if scene.all() else np.nonzero(~scene)
+        self.pattern.learn(f64 - m64, off)
+        f64 -= self.pattern.est
+        self.window.push(f64)
+        self.prev = f
+
+
+def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int = 128) -> np.ndarray | None:
+    """The encoder's choice of blocks that move on their own (a vehicle crossing a panned
+    view): blocks whose residual against the scene is well above the frame's typical block are
+    tried against the previous frame moved by each of ``VECTORS``, and take the best when it
+    is clearly better. None when no block does."""
+    h, w = f.shape
+    hb, wb = -(-h // BLOCK), -(-w // BLOCK)
+    a = np.subtract(f, pred, dtype=np.int64)
+    np.abs(a, out=a)
+    np.minimum(a, 20, out=a)
+    if (h, w) != (hb * BLOCK, wb * BLOCK):
+        a = np.pad(a, ((0, hb * BLOCK - h), (0, wb * BLOCK - w)))
+    sad = a.reshape(hb, BLOCK, wb, BLOCK).sum(axis=(1, 3)).ravel()
+    cand = np.flatnonzero(sad > 1.5 * float(np.median(sad)) + 64)
+    if not cand.size:
+        return None
+    cand = cand[np.argsort(-sad[cand], kind="stable")[:most]]
+    bi, bj = np.divmod(cand, wb)
+    rows = np.minimum(bi[:, None] * BLOCK + np.arange(BLOCK), h - 1)[:, :, None]
+    cols = np.minimum(bj[:, None] * BLOCK + np.arange(BLOCK), w - 1)[:, None, :]
+    x = f[rows, cols]
+    best = np.minimum(np.abs(x - pred[rows, cols]), 20).sum(axis=(1, 2))
+    choice = np.zeros(cand.size, np.uint8)
+    for k, (vx, vy) in enumerate(VECTORS, 1):
+        q = prev[np.clip(rows - vy, 0, h - 1), np.clip(cols - vx, 0, w - 1)]
+        cost = np.minimum(np.abs(x - q), 20).sum(axis=(1, 2)) + 2 * BLOCK
+        better = cost < best
+        best[better] = cost[better]
+        choice[better] = k
+    if not choice.any():
+        return None
+    modes = np.zeros(hb * wb, np.uint8)
+    modes[cand] = choice
+    return modes.reshape(hb, wb)
+
+
+def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, stream: np.ndarray) -> tuple[int, bytes]:
+    lo, hi = int(resid.min()), int(resid.max())
+    ptype, dtype = (_INT16, np.int16) if lo >= -32768 and hi <= 32767 else (_INT32, np.int32)
+    mode_bytes = b"" if modes is None else zlib.compress(modes.tobytes(), 9)
+    parts = [_U32.pack(len(mode_bytes)), mode_bytes]
+    counts = np.bincount(stream.ravel(), minlength=_streams(stream.shape))
+    ordered = resid.astype(dtype).ravel()[np.argsort(stream.ravel(), kind="stable")]
+    start = 0
+    for n in counts.tolist():
+        chunk = bytes(imagecodecs.pcodec_encode(ordered[start:start + n], level=8)) if n else b""
+        parts += [_U32.pack(len(chunk)), chunk]
+        start += n
+    return ptype, b"".join(parts)
+
+
+def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarray | None, int]:
+    (n,) = _U32.unpack_from(payload, 0)
+    if n == 0:
+        return None, _U32.size
+    hb, wb = -(-shape[0] // BLOCK), -(-shape[1] // BLOCK)
+    try:
+        modes = np.frombuffer(zlib.decompress(bytes(payload[_U32.size:_U32.size + n])), np.uint8)
+    except zlib.error as exc:
+        raise TpredError(f"the block modes do not decode ({exc})") from None
+    if modes.size != hb * wb or int(modes.max()) > len(VECTORS):
+        raise TpredError(f"the block modes hold {modes.size} values up to {int(modes.max())}, "
+                         f"{hb * wb} up to {len(VECTORS)} expected")
+    return modes.reshape(hb, wb), _U32.size + n
+
+
+def _unpack_streams(ptype: int, payload: memoryview, pos: int, stream: np.ndarray) -> np.ndarray:
+    """The residuals, from the streams in which ``_pack_streams`` ordered them (each stream's
+    pixels in row-major order)."""
+    dtype = np.int16 if ptype == _INT16 else np.int32
+    counts = np.bincount(stream.ravel(), minlength=_streams(stream.shape))
+    parts = []
+    for k, count in enumerate(counts.tolist()):
+        if pos + _U32.size > len(payload):
+            raise TpredError("the payload ends before its residual streams do")
+        (n,) = _U32.unpack_from(payload, pos)
+        pos += _U32.size
+        if not n or not count:
+            if n or count:
+                raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
+            continue
+        try:
+            vals = np.asarray(imagecodecs.pcodec_decode(bytes(payload[pos:pos + n]), shape=(count,), dtype=dtype))
+        except Exception as exc:  # a damaged payload may fail anywhere inside the decoder
+            raise TpredError(f"residual stream {k} does not decode ({type(exc).__name__}: {exc})") from None
+        parts.append(vals)
+        pos += n
+    if pos != len(payload):
+        raise TpredError(f"the payload holds {len(payload) - pos} bytes after its residual streams")
+    out = np.empty(stream.size, np.int64)
+    out[np.argsort(stream.ravel(), kind="stable")] = np.concatenate(parts) if parts else np.empty(0, dtype)
+    return out.reshape(stream.shape)
+
+
+def _window_for(version: int) -> _Window | _SceneWindow | _State3:
+    return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3()
 
 
 def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, other: int = 0) -> int:
@@ -295,7 +564,7 @@ _CANDIDATES = 3  # shifts the profiles propose, each then measured on the lines
 
 
 class TemporalEncoder:
-    def __init__(self, window: int = 16, key_interval: int = 32, max_shift: int = 24,
+    def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 24,
                  bitstream: int = BITSTREAM_VERSION) -> None:
         if not 1 <= window <= 255 or key_interval < 1:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
@@ -317,15 +586,30 @@ class TemporalEncoder:
             d[1:] -= f[:-1]
             ptype, payload = _pack(d)
             self._state.reset()
-            self._state.push(f)
+            if isinstance(self._state, _State3):
+                self._state.key(f)
+            else:
+                self._state.push(f)
             self._state.trim(self.window)
             self._prev, self._since_key = f, 1
             return HEADER.pack(self._magic, KEY, 0, w, h, 0, 0, ptype, 0, len(payload)) + payload
         dx, dy = self._motion(f)
-        pred, used = self._state.predict(dx, dy)
-        ptype, payload = _pack(f - pred)
-        self._state.push(f)
-        self._state.trim(self.window)
+        st = self._state
+        if isinstance(st, _State3):
+            used = len(st.frames)
+            m64 = st.scene(dx, dy)
+            pred, stream, scene = st.predict(m64)
+            assert st.prev is not None
+            modes = _choose_modes(f, pred, st.prev)
+            if modes is not None:
+                st.with_modes(modes, pred, stream, scene)
+            ptype, payload = _pack_streams(modes, f - pred, stream)
+            st.push(f, m64, scene)
+        else:
+            pred, used = st.predict(dx, dy)
+            ptype, payload = _pack(f - pred)
+            st.push(f)
+        st.trim(self.window)
         self._prev = f
         self._since_key += 1
         return HEADER.pack(self._magic, PREDICTED, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
@@ -346,7 +630,7 @@ class TemporalEncoder:
 
 class TemporalDecoder:
     def __init__(self) -> None:
-        self._state: _Window | _SceneWindow = _Window()
+        self._state: _Window | _SceneWindow | _State3 = _Window()
         self._version = 0  # of the sequence's key frame; 0 before any
         self._shape: tuple[int, int] | None = None
 
@@ -360,6 +644,12 @@ class TemporalDecoder:
             if hdr.version != self._version:
                 self._state, self._version = _window_for(hdr.version), hdr.version
             self._state.reset()
+            if f.min() < 0 or f.max() > 65535:
+                raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
+            if isinstance(self._state, _State3):
+                self._state.key(f)
+                self._shape = shape
+                return f.astype(np.uint16)
         else:
             if self._shape != shape or not self._state.frames:
                 raise TpredError("a predicted frame without the frames before it (decode from its key frame)")
@@ -370,10 +660,24 @@ class TemporalDecoder:
             if hdr.window != len(self._state.frames):
                 raise TpredError(f"the record averages {hdr.window} frames, the decoder holds "
                                  f"{len(self._state.frames)}")
-            pred, _ = self._state.predict(hdr.dx, hdr.dy)
+            st = self._state
+            if isinstance(st, _State3):
+                modes, pos = _unpack_modes(payload, shape)
+                m64 = st.scene(hdr.dx, hdr.dy)
+                pred, stream, scene = st.predict(m64)
+                if modes is not None:
+                    st.with_modes(modes, pred, stream, scene)
+                f = pred + _unpack_streams(hdr.payload_type, payload, pos, stream)
+                if f.min() < 0 or f.max() > 65535:
+                    raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
+                st.push(f, m64, scene)
+                self._shape = shape
+                return f.astype(np.uint16)
+            pred, _ = st.predict(hdr.dx, hdr.dy)
             f = pred + _unpack(hdr.payload_type, payload, shape)
         if f.min() < 0 or f.max() > 65535:
             raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
+        assert not isinstance(self._state, _State3)  # version 3 returned above
         self._state.push(f)
         self._shape = shape
         return f.astype(np.uint16)

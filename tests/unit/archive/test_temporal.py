@@ -17,7 +17,7 @@ from archive.manifest import frame_sha256
 from archive.temporal import HEADER, TemporalDecoder, TemporalEncoder, TpredError, decode_records, parse_header
 from recorder.capture.sources.sim import SimSource
 
-GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and tpred-v2 beside it
+GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and v2, v3 beside it
 
 
 def _frames(view: str, n: int = 48, **kw) -> list[np.ndarray]:
@@ -61,7 +61,7 @@ def test_the_extremes_and_a_frame_that_changes_size():
     assert all(np.array_equal(x, y) for x, y in zip(seq, decode_records(records), strict=True))
 
 
-@pytest.mark.parametrize("version", [1, 2])
+@pytest.mark.parametrize("version", [1, 2, 3])
 def test_each_versions_golden_records_decode_bit_exact_today(version):
     golden = GOLDEN.parent / f"tpred-v{version}"
     if not golden.is_dir():
@@ -111,7 +111,7 @@ def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
     assert rec.run().ok
     m = archive_session(rec.session_dir, ["tpred"])
     entry = m["formats"]["tpred"]
-    assert entry["verified"] and entry["config"]["bitstream"] == 2
+    assert entry["verified"] and entry["config"]["bitstream"] == 3
     fmt = get_format(entry["config"])
     folder = rec.session_dir / "archive" / "tpred"
     def open_file(rel: str):
@@ -150,11 +150,97 @@ def test_version_2_predicts_entering_content_from_the_frames_that_saw_it():
 
 
 def test_the_float_division_is_floor_division():
-    """v2 divides in float64 for speed; the bitstream says floor division of integers."""
+    """The scene window divides in float64 for speed; the bitstream says floor division of
+    integers, over the whole range version 3's sums take (negative too, below 2**31)."""
     rng = np.random.default_rng(3)
-    n = rng.integers(1, 256, 200_000).astype(np.int64)
-    s = np.concatenate([rng.integers(0, 255 * 65536, 100_000), (rng.integers(1, 65536, 100_000) * n[100_000:]) - 1])
-    s = np.maximum(s, 0)
+    n = rng.integers(1, 256, 300_000).astype(np.int64)
+    just_below = rng.integers(1, 65536, 100_000) * n[100_000:200_000] - 1
+    s = np.concatenate([rng.integers(0, 255 * 65536, 100_000), just_below,
+                        rng.integers(-(1 << 31) + 1, 1 << 31, 100_000)])
+    s[200_000:250_000] = (s[200_000:250_000] // n[200_000:250_000]) * n[200_000:250_000] - n[200_000:250_000] // 2
     want = (s + n // 2) // n
-    got = ((s.astype(np.float64) + np.floor(n.astype(np.float64) * 0.5)) / n.astype(np.float64)).astype(np.int64)
+    nf = n.astype(np.float64)
+    got = np.floor((s.astype(np.float64) + np.floor(nf * 0.5)) / nf).astype(np.int64)
     assert np.array_equal(got, want)
+
+
+def test_version_3_learns_the_sensor_pattern_under_a_pan():
+    """The column pattern stays put on the sensor while the scene pans; version 3 learns it
+    from the decoded frames alone, so the same frames cost less than in version 2."""
+    import archive.temporal as tp
+
+    src = SimSource(width=640, height=512, frames=16, paced=False, seed=5, view="patrol", pixel_fpn_mk=15.0,
+                    drift_mk=30.0, patrol_deg_s=10.0)
+    frames = [f.pixels for f in src.frames()]
+    sizes = {}
+    for v in (2, 3):
+        enc = TemporalEncoder(bitstream=v)
+        records = [enc.encode(f) for f in frames]
+        assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
+        sizes[v] = sum(map(len, records))
+    assert sizes[3] < 0.975 * sizes[2], sizes  # 3.7% over these 16 frames, 8% over 240
+    state = enc._state
+    assert isinstance(state, tp._State3) and state.pattern is not None
+    learned = state.pattern.est.mean(axis=0) / 64
+    true = src._fpn_counts.mean(axis=0)
+    assert np.corrcoef(learned, true)[0, 1] > 0.9
+
+
+def _moving_square(n: int = 12) -> list[np.ndarray]:
+    """A panned textured scene with a warm square crossing it on its own: the view pans 3 px a
+    frame, the square moves 1 px a frame down and right on the sensor."""
+    rng = np.random.default_rng(2)
+    scene = rng.normal(0, 40, (128, 400)).cumsum(axis=1) / 2 + 3000
+    out = []
+    for t in range(n):
+        f = scene[:, 3 * t:3 * t + 160] + rng.normal(0, 1.4, (128, 160))
+        f[40 + t:64 + t, 40 + t:64 + t] = 3300 + rng.normal(0, 1.4, (24, 24))
+        out.append(np.clip(np.rint(f), 0, 65535).astype(np.uint16))
+    return out
+
+
+def test_version_3_predicts_a_block_that_moves_on_its_own():
+    import archive.temporal as tp
+
+    frames = _moving_square()
+    enc = TemporalEncoder()
+    records = [enc.encode(f) for f in frames]
+    with_modes = [r for r in records[1:] if tp._U32.unpack_from(r, HEADER.size)[0] > 0]
+    assert len(with_modes) >= len(records) // 2, "the square's blocks take their own motion"
+    assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
+    original = tp._choose_modes
+    try:
+        tp._choose_modes = lambda *a, **k: None
+        plain = TemporalEncoder()
+        without = sum(len(plain.encode(f)) for f in frames)
+    finally:
+        tp._choose_modes = original
+    assert sum(map(len, records)) < 0.97 * without
+
+
+def test_version_3_damage_is_refused_with_the_reason():
+    import archive.temporal as tp
+
+    frames = _moving_square(4)
+    enc = TemporalEncoder()
+    records = [enc.encode(f) for f in frames]
+    rec = records[1]
+    hdr = parse_header(rec)
+    (modes_len,) = tp._U32.unpack_from(rec, HEADER.size)
+    assert modes_len > 0
+
+    def with_payload(payload: bytes) -> bytes:
+        return HEADER.pack(tp.MAGICS[3], hdr.kind, hdr.window, hdr.width, hdr.height, hdr.dx, hdr.dy,
+                           hdr.payload_type, 0, len(payload)) + payload
+
+    payload = rec[HEADER.size:]
+    cases = {
+        "block modes do not decode": payload[:4] + b"\x00" * modes_len + payload[4 + modes_len:],
+        "ends before its residual streams": payload[:4 + modes_len + 2],
+        "bytes after its residual streams": payload + b"\x00\x00",
+    }
+    for reason, damaged in cases.items():
+        dec = TemporalDecoder()
+        dec.decode(records[0])
+        with pytest.raises(TpredError, match=reason):
+            dec.decode(with_payload(damaged))
