@@ -50,14 +50,15 @@ frame moved by the record's ``(dx, dy)`` with edge replication (content no frame
 window is kept and trimmed as in version 1. A decoder reads both versions; a sequence keeps the
 version of its key frame.
 
-Bitstream, version 3 (magic ``b"TPF3"``; what thermcap writes): version 2's scene window
-and key frames, and three more things both sides compute the same way, in integers, from the
+Bitstream, version 3 (magic ``b"TPF3"``; what thermcap writes): version 2's key frames and
+scene window, and two more things both sides compute the same way, in integers, from the
 frames already decoded since the key frame. Values in 1/64 counts are written ``x64``.
 
 - The window holds each frame less the pattern estimate ``E`` at the time it was added
-  (``64 * F - E``), so its mean ``M`` (version 2's ``P`` of those values, or, where no frame saw
-  the scene point, the previous of those values moved with edge replication) is the scene
-  without the sensor's pattern. The key frame enters as ``64 * F``, and ``E`` starts at 0.
+  (``64 * F - E``). Its mean ``M`` is ``S / N`` truncated toward zero where frames saw the
+  scene point (``S``, ``N`` as in version 2), and otherwise the last of those values moved by
+  the record's ``(dx, dy)`` with edge replication. So ``M`` is the scene without the sensor's
+  pattern. The key frame enters as ``64 * F``, and ``E`` starts at 0.
 - The pattern estimate ``E`` (``_Pattern``): after each predicted frame, its residual against
   the scene ``R = 64 * F - M``, clipped to +-512, and set to 0 at the pixels not predicted from
   the scene (block modes, unseen points), is added to a per-pixel sum ``A`` and per column to
@@ -71,13 +72,11 @@ of the block-mode map (one ``uint8`` per 16x16 block, row-major, ``ceil(h/16) x 
 ``L = 0``: no block has a mode). A block with mode ``k`` (1..25) is predicted by the previous
 decoded frame moved by ``(vx, vy) = VECTORS[k - 1]``, which is ``(k - 1) % 5 - 2`` columns right
 and ``(k - 1) // 5 - 2`` rows down, with edge replication, in the block's pixels inside the frame.
-Then the residual streams, each a ``u32`` length and one pcodec chunk of its values (length 0
-for a stream with no pixel), each listing its pixels in row-major order. A frame of at least
-131072 pixels has five: stream ``q`` (0..3) holds the residuals of the pixels predicted from
-the scene whose ``(M + E + 32) & 63`` lies in ``[16q, 16q + 16)`` (the fraction of the
-prediction: their residuals are distributed differently), and stream 4 those of the block-mode
-and unseen pixels. A smaller frame has two: the scene's, then the others. The frame is ``P +
-residual``. Payload type 1 or 2 says whether every stream holds int16 or int32.
+Then two residual streams, each a ``u32`` length and one pcodec chunk of its values (length 0
+for a stream with no pixel), each listing its pixels in row-major order: first the pixels
+predicted from the scene, then the others (block modes and unseen points, whose residuals are
+larger). The frame is ``P + residual``. Payload type 1 or 2 says whether both streams hold
+int16 or int32.
 
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference on every 8th line), columns over +-``max_shift`` pixels,
@@ -208,6 +207,7 @@ class _SceneWindow:
     frames, when the view leaves it: how large it is never changes a prediction."""
 
     MARGIN = 128  # pixels of scene around the window's frames when the canvas is (re)built
+    DTYPE: type = np.int64  # of the frames it keeps and the predictions it makes
 
     def __init__(self) -> None:
         self.frames: deque[tuple[np.ndarray, int, int]] = deque()  # (frame int64, cum dx, cum dy)
@@ -258,22 +258,27 @@ class _SceneWindow:
         sl = self._fit(self.last.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         s, n = self.sum[sl], self.count[sl]
-        unseen = n == 0
-        some_unseen = bool(unseen.any())
-        self.unseen = unseen if some_unseen else None
+        some_unseen = bool(n.min() == 0)
+        unseen = n == 0 if some_unseen else None
+        self.unseen = unseen
         if some_unseen:
             n = np.maximum(n, 1)
-        # (S + N // 2) // N exactly, in float64: |S| < 2**31 and N < 256, so a quotient just off
-        # an integer stays on its side of it after rounding (version 3's sums can be negative)
-        pred = np.floor((s + np.floor(n * 0.5)) / n).astype(np.int64)
-        if some_unseen:  # content no frame has seen: the previous frame, moved, edge replicated
+        pred = self._mean(s, n)
+        if unseen is not None:  # content no frame has seen: the previous frame, moved, edge replicated
             rows, cols = np.nonzero(unseen)
             h, w = self.last.shape
             pred[rows, cols] = self.last[np.clip(rows - dy, 0, h - 1), np.clip(cols - dx, 0, w - 1)]
         return pred, len(self.frames)
 
+    @staticmethod
+    def _mean(s: np.ndarray, n: np.ndarray) -> np.ndarray:
+        # (S + N // 2) // N exactly, in float64: 0 <= S < 2**24 and N < 256, so a quotient just
+        # below an integer stays below it after rounding, and truncation is floor
+        return ((s + np.floor(n * 0.5)) / n).astype(np.int64)
+
     def push(self, frame: np.ndarray) -> None:
-        f = np.asarray(frame, np.int64)  # kept, not copied: callers hand over a frame they no longer change
+        # kept, not copied: callers hand over a frame they no longer change
+        f: np.ndarray = np.asarray(frame, self.DTYPE)
         sl = self._fit(f.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         self.sum[sl] += f
@@ -291,26 +296,26 @@ class _SceneWindow:
             self.count[sl] -= 1
 
 
-# Version 3: the sensor-fixed pattern learned, blocks that move on their own, residual streams by
-# the prediction's fraction. Fixed point: 1/64 of a count.
+class _SceneWindow3(_SceneWindow):
+    """Version 3's window: frames in 1/64 counts, as int32 (half the memory traffic), and the
+    mean ``S / N`` truncated toward zero: at 1/64 of a count its rounding does not matter, and
+    that is one division and a cast."""
+
+    DTYPE = np.int32
+
+    @staticmethod
+    def _mean(s: np.ndarray, n: np.ndarray) -> np.ndarray:
+        # float64 holds S exactly (|S| < 2**31) and N < 256, so the correctly rounded quotient
+        # never crosses the integer the exact one truncates to
+        return (s / n).astype(np.int32)
+
+
+# Version 3: the sensor-fixed pattern learned, and blocks that move on their own. Fixed point:
+# 1/64 of a count.
 SCALE_BITS = 6
 _HALF = 1 << (SCALE_BITS - 1)
 BLOCK = 16
 VECTORS = tuple((vx, vy) for vy in range(-2, 3) for vx in range(-2, 3))  # block mode k >= 1 uses VECTORS[k - 1]
-#: Frames of at least this many pixels split their scene residuals by the prediction's fraction,
-#: in quarters (0.3-0.4% smaller at 640x512); smaller ones keep one stream, because pcodec codes
-#: a stream of a few thousand values 5-6% above its entropy, which costs more than the split gains.
-PHASE_SPLIT_PIXELS = 1 << 17
-
-
-def _phase_bits(shape: tuple[int, int]) -> int:
-    return 2 if shape[0] * shape[1] >= PHASE_SPLIT_PIXELS else 0
-
-
-def _streams(shape: tuple[int, int]) -> int:
-    """Residual streams of a version 3 record: the scene's (by fraction) and a last one for
-    block-mode and unseen pixels."""
-    return (1 << _phase_bits(shape)) + 1
 _U32 = struct.Struct("<I")
 
 
@@ -332,38 +337,40 @@ class _Pattern:
         self.n = 0
         self.colsum = np.zeros(shape[1], np.int64)
         self.colcnt = np.zeros(shape[1], np.int64)
-        self.pixsum = np.zeros(shape, np.int64)
-        self.est = np.zeros(shape, np.int64)
+        self.pixsum = np.zeros(shape, np.int32)  # |sum| <= 512 a frame: int32 holds 4 million frames
+        self.est = np.zeros(shape, np.int32)
 
-    def learn(self, e64: np.ndarray, off_scene: tuple[np.ndarray, ...] | None) -> None:
-        """Add one frame's residuals against the scene (``e64``, consumed); ``off_scene`` are the
-        (rows, cols) of the pixels not predicted from the scene."""
+    def learn(self, e64: np.ndarray, off_scene: np.ndarray | None) -> None:
+        """Add one frame's residuals against the scene (``e64``, consumed); ``off_scene`` marks
+        the pixels not predicted from the scene (None: there are none)."""
         h = e64.shape[0]
         e = np.clip(e64, -self.CLIP, self.CLIP, out=e64)
         cnt = np.full(e.shape[1], h, np.int64)
         if off_scene is not None:
             e[off_scene] = 0
-            cnt -= np.bincount(off_scene[1], minlength=e.shape[1])
+            cnt -= np.count_nonzero(off_scene, axis=0)
         self.n += 1
-        self.colsum += e.sum(axis=0)
+        self.colsum += e.sum(axis=0, dtype=np.int64)
         self.colcnt += cnt
         self.pixsum += e
         col = np.zeros_like(self.colsum)
         have = self.colcnt > 0
         col[have] = (self.colsum[have] + self.colcnt[have] // 2) // self.colcnt[have]
-        est = self.pixsum - self.n * col
+        col32 = col.astype(np.int32)
+        est = self.pixsum - self.n * col32
         est //= self.n + self.SHRINK
-        est += col
+        est += col32
         self.est = est
 
 
 class _State3:
-    """Everything version 3 carries from frame to frame, the same on both sides."""
+    """Everything version 3 carries from frame to frame, the same on both sides. Frames are
+    int32 here (counts, or 1/64 counts), which halves the memory traffic of every step."""
 
     def __init__(self) -> None:
-        self.window = _SceneWindow()
+        self.window = _SceneWindow3()
         self.pattern: _Pattern | None = None
-        self.prev: np.ndarray | None = None  # the last frame, int64 counts
+        self.prev: np.ndarray | None = None  # the last frame, int32 counts
 
     @property
     def frames(self) -> deque:
@@ -378,6 +385,7 @@ class _State3:
         self.window.trim(keep)
 
     def key(self, f: np.ndarray) -> None:
+        f = f.astype(np.int32)
         self.window.reset()
         self.pattern = _Pattern(f.shape)
         self.window.push(f << SCALE_BITS)
@@ -389,28 +397,24 @@ class _State3:
         m64, _ = self.window.predict(dx, dy)
         return m64
 
-    def predict(self, m64: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(prediction in counts, the stream of each pixel, where the scene part is used) before
-        any block mode: ``with_modes`` then changes the moving blocks in place."""
+    def predict(self, m64: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """(prediction in counts, the pixels not predicted from the scene or None) before any
+        block mode: ``with_modes`` then changes the moving blocks."""
         assert self.pattern is not None
         p = m64 + self.pattern.est
         p += _HALF
-        pred = p >> SCALE_BITS
-        bits = _phase_bits(p.shape)
-        if bits:
-            stream = ((p & ((1 << SCALE_BITS) - 1)) >> (SCALE_BITS - bits)).astype(np.uint8)
-        else:
-            stream = np.zeros(p.shape, np.uint8)
-        scene = ~self.window.unseen if self.window.unseen is not None else np.ones(p.shape, bool)
-        stream[~scene] = _streams(p.shape) - 1
-        return pred, stream, scene
+        p >>= SCALE_BITS
+        other = self.window.unseen
+        return p, (other.copy() if other is not None else None)
 
-    def with_modes(self, modes: np.ndarray, pred: np.ndarray, stream: np.ndarray, scene: np.ndarray) -> None:
+    def with_modes(self, modes: np.ndarray, pred: np.ndarray, other: np.ndarray | None) -> np.ndarray:
         """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
-        (edge replicated), its pixels in the last stream and out of the pattern's learning."""
+        (edge replicated), its pixels in the second stream and out of the pattern's learning.
+        Returns the pixels not predicted from the scene."""
         assert self.prev is not None
         h, w = pred.shape
-        other = _streams(pred.shape) - 1
+        if other is None:
+            other = np.zeros(pred.shape, bool)
         for bi, bj in zip(*np.nonzero(modes), strict=True):
             vx, vy = VECTORS[int(modes[bi, bj]) - 1]
             r0, c0 = int(bi) * BLOCK, int(bj) * BLOCK
@@ -418,14 +422,14 @@ class _State3:
             rows = np.clip(np.arange(r0, r1) - vy, 0, h - 1)
             cols = np.clip(np.arange(c0, c1) - vx, 0, w - 1)
             pred[r0:r1, c0:c1] = self.prev[rows[:, None], cols[None, :]]
-            stream[r0:r1, c0:c1] = other
-            scene[r0:r1, c0:c1] = False
+            other[r0:r1, c0:c1] = True
+        return other
 
-    def push(self, f: np.ndarray, m64: np.ndarray, scene: np.ndarray) -> None:
+    def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
+        """Learn from decoded frame ``f`` (int32 counts) and add it to the window."""
         assert self.pattern is not None
         f64 = f << SCALE_BITS
-        off = None if scene.all() else np.nonzero(~scene)
-        self.pattern.learn(f64 - m64, off)
+        self.pattern.learn(f64 - m64, other)
         f64 -= self.pattern.est
         self.window.push(f64)
         self.prev = f
@@ -438,13 +442,15 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     is clearly better. None when no block does."""
     h, w = f.shape
     hb, wb = -(-h // BLOCK), -(-w // BLOCK)
-    a = np.subtract(f, pred, dtype=np.int64)
+    # which blocks to try: their residual on every other row and column (a quarter of the work)
+    a = np.subtract(f[::2, ::2], pred[::2, ::2], dtype=np.int64)
     np.abs(a, out=a)
     np.minimum(a, 20, out=a)
-    if (h, w) != (hb * BLOCK, wb * BLOCK):
-        a = np.pad(a, ((0, hb * BLOCK - h), (0, wb * BLOCK - w)))
-    sad = a.reshape(hb, BLOCK, wb, BLOCK).sum(axis=(1, 3)).ravel()
-    cand = np.flatnonzero(sad > 1.5 * float(np.median(sad)) + 64)
+    half = BLOCK // 2
+    if a.shape != (hb * half, wb * half):
+        a = np.pad(a, ((0, hb * half - a.shape[0]), (0, wb * half - a.shape[1])))
+    sad = a.reshape(hb, half, wb, half).sum(axis=(1, 3)).ravel()
+    cand = np.flatnonzero(sad > 1.5 * float(np.median(sad)) + 16)
     if not cand.size:
         return None
     cand = cand[np.argsort(-sad[cand], kind="stable")[:most]]
@@ -454,8 +460,13 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     x = f[rows, cols]
     best = np.minimum(np.abs(x - pred[rows, cols]), 20).sum(axis=(1, 2))
     choice = np.zeros(cand.size, np.uint8)
+    # each candidate block of the previous frame with a margin of 2 (edge replicated): every
+    # vector is then a view of it
+    span = np.arange(-2, BLOCK + 2)
+    around = prev[np.clip(bi[:, None] * BLOCK + span, 0, h - 1)[:, :, None],
+                  np.clip(bj[:, None] * BLOCK + span, 0, w - 1)[:, None, :]]
     for k, (vx, vy) in enumerate(VECTORS, 1):
-        q = prev[np.clip(rows - vy, 0, h - 1), np.clip(cols - vx, 0, w - 1)]
+        q = around[:, 2 - vy:2 - vy + BLOCK, 2 - vx:2 - vx + BLOCK]
         cost = np.minimum(np.abs(x - q), 20).sum(axis=(1, 2)) + 2 * BLOCK
         better = cost < best
         best[better] = cost[better]
@@ -467,18 +478,15 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     return modes.reshape(hb, wb)
 
 
-def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, stream: np.ndarray) -> tuple[int, bytes]:
+def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
     lo, hi = int(resid.min()), int(resid.max())
     ptype, dtype = (_INT16, np.int16) if lo >= -32768 and hi <= 32767 else (_INT32, np.int32)
     mode_bytes = b"" if modes is None else zlib.compress(modes.tobytes(), 9)
     parts = [_U32.pack(len(mode_bytes)), mode_bytes]
-    counts = np.bincount(stream.ravel(), minlength=_streams(stream.shape))
-    ordered = resid.astype(dtype).ravel()[np.argsort(stream.ravel(), kind="stable")]
-    start = 0
-    for n in counts.tolist():
-        chunk = bytes(imagecodecs.pcodec_encode(ordered[start:start + n], level=8)) if n else b""
+    r = resid.astype(dtype)
+    for vals in ((r.ravel(), r[:0, 0]) if other is None else (r[~other], r[other])):
+        chunk = bytes(imagecodecs.pcodec_encode(vals, level=8)) if vals.size else b""
         parts += [_U32.pack(len(chunk)), chunk]
-        start += n
     return ptype, b"".join(parts)
 
 
@@ -497,13 +505,13 @@ def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarr
     return modes.reshape(hb, wb), _U32.size + n
 
 
-def _unpack_streams(ptype: int, payload: memoryview, pos: int, stream: np.ndarray) -> np.ndarray:
-    """The residuals, from the streams in which ``_pack_streams`` ordered them (each stream's
-    pixels in row-major order)."""
+def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray | None,
+                    shape: tuple[int, int]) -> np.ndarray:
+    """The residuals, from the scene's stream and the others' (each in row-major order)."""
     dtype = np.int16 if ptype == _INT16 else np.int32
-    counts = np.bincount(stream.ravel(), minlength=_streams(stream.shape))
-    parts = []
-    for k, count in enumerate(counts.tolist()):
+    n_other = int(np.count_nonzero(other)) if other is not None else 0
+    streams = []
+    for k, count in enumerate((shape[0] * shape[1] - n_other, n_other)):
         if pos + _U32.size > len(payload):
             raise TpredError("the payload ends before its residual streams do")
         (n,) = _U32.unpack_from(payload, pos)
@@ -511,18 +519,23 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, stream: np.ndarra
         if not n or not count:
             if n or count:
                 raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
+            streams.append(np.empty(0, dtype))
             continue
         try:
             vals = np.asarray(imagecodecs.pcodec_decode(bytes(payload[pos:pos + n]), shape=(count,), dtype=dtype))
         except Exception as exc:  # a damaged payload may fail anywhere inside the decoder
             raise TpredError(f"residual stream {k} does not decode ({type(exc).__name__}: {exc})") from None
-        parts.append(vals)
+        streams.append(vals)
         pos += n
     if pos != len(payload):
         raise TpredError(f"the payload holds {len(payload) - pos} bytes after its residual streams")
-    out = np.empty(stream.size, np.int64)
-    out[np.argsort(stream.ravel(), kind="stable")] = np.concatenate(parts) if parts else np.empty(0, dtype)
-    return out.reshape(stream.shape)
+    out = np.empty(shape, np.int32 if ptype == _INT16 else np.int64)  # int16 + int32 prediction cannot overflow
+    if other is None:
+        out.ravel()[:] = streams[0]
+    else:
+        out[~other] = streams[0]
+        out[other] = streams[1]
+    return out
 
 
 def _window_for(version: int) -> _Window | _SceneWindow | _State3:
@@ -539,7 +552,8 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
         cur, prev = cur.T, prev.T
     lines = slice(None, None, 8)
     c = cur[lines]
-    p = prev[lines] if other == 0 else np.roll(prev, other, axis=0)[lines]
+    # np.roll(prev, other, axis=0)[lines], without rolling the lines that are not looked at
+    p = prev[lines] if other == 0 else prev[(np.arange(0, prev.shape[0], 8) - other) % prev.shape[0]]
     n = c.shape[1]
     shifts = [s for s in range(-max_shift, max_shift + 1) if n - abs(s) >= n // 2]
     if not shifts:
@@ -580,7 +594,7 @@ class TemporalEncoder:
         if frame.dtype != np.uint16 or frame.ndim != 2:
             raise ValueError(f"tpred encodes 2-D uint16 frames, got {frame.dtype} {frame.shape}")
         h, w = frame.shape
-        f = frame.astype(np.int64)
+        f: np.ndarray = frame.astype(np.int32 if isinstance(self._state, _State3) else np.int64)
         if self._prev is None or self._prev.shape != frame.shape or self._since_key >= self.key_interval:
             d = f.copy()
             d[1:] -= f[:-1]
@@ -598,13 +612,13 @@ class TemporalEncoder:
         if isinstance(st, _State3):
             used = len(st.frames)
             m64 = st.scene(dx, dy)
-            pred, stream, scene = st.predict(m64)
+            pred, other = st.predict(m64)
             assert st.prev is not None
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
-                st.with_modes(modes, pred, stream, scene)
-            ptype, payload = _pack_streams(modes, f - pred, stream)
-            st.push(f, m64, scene)
+                other = st.with_modes(modes, pred, other)
+            ptype, payload = _pack_streams(modes, f - pred, other)
+            st.push(f, m64, other)
         else:
             pred, used = st.predict(dx, dy)
             ptype, payload = _pack(f - pred)
@@ -623,8 +637,11 @@ class TemporalEncoder:
         if (dx, dy) == (0, 0):
             return 0, 0
         sub = (slice(None, None, 4), slice(None, None, 4))
+        h, w = f.shape
+        rows = np.clip(np.arange(0, h, 4) - dy, 0, h - 1)
+        cols = np.clip(np.arange(0, w, 4) - dx, 0, w - 1)
         still = np.abs(f[sub] - self._prev[sub]).sum()
-        moved = np.abs(f[sub] - _shift(self._prev, dx, dy)[sub]).sum()
+        moved = np.abs(f[sub] - self._prev[rows[:, None], cols[None, :]]).sum()  # _shift(prev)[sub]
         return (dx, dy) if moved < still else (0, 0)
 
 
@@ -664,13 +681,13 @@ class TemporalDecoder:
             if isinstance(st, _State3):
                 modes, pos = _unpack_modes(payload, shape)
                 m64 = st.scene(hdr.dx, hdr.dy)
-                pred, stream, scene = st.predict(m64)
+                pred, other = st.predict(m64)
                 if modes is not None:
-                    st.with_modes(modes, pred, stream, scene)
-                f = pred + _unpack_streams(hdr.payload_type, payload, pos, stream)
+                    other = st.with_modes(modes, pred, other)
+                f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape)
                 if f.min() < 0 or f.max() > 65535:
                     raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
-                st.push(f, m64, scene)
+                st.push(f.astype(np.int32, copy=False), m64, other)
                 self._shape = shape
                 return f.astype(np.uint16)
             pred, _ = st.predict(hdr.dx, hdr.dy)
