@@ -258,12 +258,13 @@ class _SceneWindow:
         sl = self._fit(self.last.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         s, n = self.sum[sl], self.count[sl]
-        some_unseen = bool(n.min() == 0)
-        unseen = n == 0 if some_unseen else None
+        unseen: np.ndarray | None = n == 0
+        assert unseen is not None
+        if not unseen.any():
+            unseen = None
         self.unseen = unseen
-        if some_unseen:
-            n = np.maximum(n, 1)
-        pred = self._mean(s, n)
+        with np.errstate(divide="ignore", invalid="ignore"):  # 0/0 where unseen: replaced below
+            pred = self._mean(s, n)
         if unseen is not None:  # content no frame has seen: the previous frame, moved, edge replicated
             rows, cols = np.nonzero(unseen)
             h, w = self.last.shape
