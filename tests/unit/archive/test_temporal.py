@@ -218,6 +218,17 @@ def test_version_3_predicts_a_block_that_moves_on_its_own():
     assert sum(map(len, records)) < 0.97 * without
 
 
+def test_version_3_block_modes_on_a_frame_that_is_not_a_whole_number_of_blocks():
+    """117x151: the last block row and column are partial, in the block map and in the moves."""
+    import archive.temporal as tp
+
+    frames = [f[5:122, 3:154].copy() for f in _moving_square()]
+    enc = TemporalEncoder(window=8, key_interval=64)
+    records = [enc.encode(f) for f in frames]
+    assert sum(tp._U32.unpack_from(r, HEADER.size)[0] > 0 for r in records[1:]) >= len(records) // 2
+    assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
+
+
 def test_version_3_damage_is_refused_with_the_reason():
     import archive.temporal as tp
 
