@@ -149,20 +149,28 @@ def _shift(a: np.ndarray, dx: int, dy: int) -> np.ndarray:
     return a[rows[:, None], cols[None, :]]
 
 
-def _pack(arr: np.ndarray) -> tuple[int, bytes]:
+def _payload_type(arr: np.ndarray) -> tuple[int, type]:
+    """The record's payload type and dtype: int16 when every value fits, else int32."""
     lo, hi = int(arr.min()), int(arr.max())
-    if lo >= -32768 and hi <= 32767:
-        return _INT16, bytes(imagecodecs.pcodec_encode(arr.astype(np.int16), level=8))
-    return _INT32, bytes(imagecodecs.pcodec_encode(arr.astype(np.int32), level=8))
+    return (_INT16, np.int16) if lo >= -32768 and hi <= 32767 else (_INT32, np.int32)
+
+
+def _decode_chunk(ptype: int, chunk: bytes | memoryview, shape: tuple[int, ...], what: str) -> np.ndarray:
+    """One pcodec chunk of ``shape`` values of the payload type, or a ``TpredError`` naming ``what``."""
+    try:
+        out = imagecodecs.pcodec_decode(bytes(chunk), shape=shape, dtype=np.int16 if ptype == _INT16 else np.int32)
+    except Exception as exc:  # a damaged payload may fail anywhere inside the decoder
+        raise TpredError(f"{what} does not decode ({type(exc).__name__}: {exc})") from None
+    return np.asarray(out)
+
+
+def _pack(arr: np.ndarray) -> tuple[int, bytes]:
+    ptype, dtype = _payload_type(arr)
+    return ptype, bytes(imagecodecs.pcodec_encode(arr.astype(dtype), level=8))
 
 
 def _unpack(ptype: int, payload: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray:
-    dtype = np.int16 if ptype == _INT16 else np.int32
-    try:
-        out = imagecodecs.pcodec_decode(bytes(payload), shape=shape, dtype=dtype)
-    except Exception as exc:  # a damaged payload may fail anywhere inside the decoder
-        raise TpredError(f"the payload does not decode ({type(exc).__name__}: {exc})") from None
-    return np.asarray(out).astype(np.int64)
+    return _decode_chunk(ptype, payload, shape, "the payload").astype(np.int64)
 
 
 class _Window:
@@ -216,11 +224,10 @@ class _SceneWindow:
         self.oy = self.ox = 0  # the scene point of canvas[0, 0]
         self.cx = self.cy = 0
         self.last: np.ndarray | None = None
-        self.unseen: np.ndarray | None = None  # of the last prediction: where no frame saw the scene
 
     def reset(self) -> None:
         self.frames.clear()
-        self.sum = self.count = self.last = self.unseen = None
+        self.sum = self.count = self.last = None
         self.oy = self.ox = self.cx = self.cy = 0
 
     def _at(self, shape: tuple[int, int], cx: int, cy: int) -> tuple[slice, slice] | None:
@@ -252,24 +259,27 @@ class _SceneWindow:
         return where
 
     def predict(self, dx: int, dy: int) -> tuple[np.ndarray, int]:
+        pred, _ = self.scene_mean(dx, dy)
+        return pred, len(self.frames)
+
+    def scene_mean(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """The prediction for a record moving ``(dx, dy)``, and where no frame saw the scene
+        (None: everywhere was seen)."""
         assert self.last is not None
         self.cx += dx
         self.cy += dy
         sl = self._fit(self.last.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         s, n = self.sum[sl], self.count[sl]
-        unseen: np.ndarray | None = n == 0
-        assert unseen is not None
-        if not unseen.any():
-            unseen = None
-        self.unseen = unseen
+        zero = n == 0
+        unseen = zero if zero.any() else None
         with np.errstate(divide="ignore", invalid="ignore"):  # 0/0 where unseen: replaced below
             pred = self._mean(s, n)
         if unseen is not None:  # content no frame has seen: the previous frame, moved, edge replicated
             rows, cols = np.nonzero(unseen)
             h, w = self.last.shape
             pred[rows, cols] = self.last[np.clip(rows - dy, 0, h - 1), np.clip(cols - dx, 0, w - 1)]
-        return pred, len(self.frames)
+        return pred, unseen
 
     @staticmethod
     def _mean(s: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -386,27 +396,23 @@ class _State3:
         self.window.trim(keep)
 
     def key(self, f: np.ndarray) -> None:
+        """Start the sequence at key frame ``f`` (after ``reset``)."""
         f = f.astype(np.int32)
-        self.window.reset()
         self.pattern = _Pattern(f.shape)
         self.window.push(f << SCALE_BITS)
         self.prev = f
 
-    def scene(self, dx: int, dy: int) -> np.ndarray:
-        """The scene part of the next prediction, in 1/64 counts: the window's mean where the
-        scene was seen, the previous frame moved where it was not (both less the pattern)."""
-        m64, _ = self.window.predict(dx, dy)
-        return m64
-
-    def predict(self, m64: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """(prediction in counts, the pixels not predicted from the scene or None) before any
-        block mode: ``with_modes`` then changes the moving blocks."""
+    def predict(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """(prediction in counts, its scene part in 1/64 counts, the pixels not predicted from the
+        scene or None) before any block mode: ``with_modes`` then changes the moving blocks. The
+        scene part is the window's mean where the scene was seen, the previous frame moved where
+        it was not (both less the pattern)."""
         assert self.pattern is not None
+        m64, other = self.window.scene_mean(dx, dy)
         p = m64 + self.pattern.est
         p += _HALF
         p >>= SCALE_BITS
-        other = self.window.unseen
-        return p, (other.copy() if other is not None else None)
+        return p, m64, other
 
     def with_modes(self, modes: np.ndarray, pred: np.ndarray, other: np.ndarray | None) -> np.ndarray:
         """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
@@ -480,11 +486,10 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
 
 
 def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
-    lo, hi = int(resid.min()), int(resid.max())
-    ptype, dtype = (_INT16, np.int16) if lo >= -32768 and hi <= 32767 else (_INT32, np.int32)
+    ptype, dtype = _payload_type(resid)
     mode_bytes = b"" if modes is None else zlib.compress(modes.tobytes(), 9)
     parts = [_U32.pack(len(mode_bytes)), mode_bytes]
-    r = resid.astype(dtype)
+    r: np.ndarray = resid.astype(dtype)
     for vals in ((r.ravel(), r[:0, 0]) if other is None else (r[~other], r[other])):
         chunk = bytes(imagecodecs.pcodec_encode(vals, level=8)) if vals.size else b""
         parts += [_U32.pack(len(chunk)), chunk]
@@ -509,7 +514,6 @@ def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarr
 def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray | None,
                     shape: tuple[int, int]) -> np.ndarray:
     """The residuals, from the scene's stream and the others' (each in row-major order)."""
-    dtype = np.int16 if ptype == _INT16 else np.int32
     n_other = int(np.count_nonzero(other)) if other is not None else 0
     streams = []
     for k, count in enumerate((shape[0] * shape[1] - n_other, n_other)):
@@ -520,13 +524,9 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray
         if not n or not count:
             if n or count:
                 raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
-            streams.append(np.empty(0, dtype))
+            streams.append(np.empty(0, np.int16))
             continue
-        try:
-            vals = np.asarray(imagecodecs.pcodec_decode(bytes(payload[pos:pos + n]), shape=(count,), dtype=dtype))
-        except Exception as exc:  # a damaged payload may fail anywhere inside the decoder
-            raise TpredError(f"residual stream {k} does not decode ({type(exc).__name__}: {exc})") from None
-        streams.append(vals)
+        streams.append(_decode_chunk(ptype, payload[pos:pos + n], (count,), f"residual stream {k}"))
         pos += n
     if pos != len(payload):
         raise TpredError(f"the payload holds {len(payload) - pos} bytes after its residual streams")
@@ -612,8 +612,7 @@ class TemporalEncoder:
         st = self._state
         if isinstance(st, _State3):
             used = len(st.frames)
-            m64 = st.scene(dx, dy)
-            pred, other = st.predict(m64)
+            pred, m64, other = st.predict(dx, dy)
             assert st.prev is not None
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
@@ -662,12 +661,6 @@ class TemporalDecoder:
             if hdr.version != self._version:
                 self._state, self._version = _window_for(hdr.version), hdr.version
             self._state.reset()
-            if f.min() < 0 or f.max() > 65535:
-                raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
-            if isinstance(self._state, _State3):
-                self._state.key(f)
-                self._shape = shape
-                return f.astype(np.uint16)
         else:
             if self._shape != shape or not self._state.frames:
                 raise TpredError("a predicted frame without the frames before it (decode from its key frame)")
@@ -681,22 +674,21 @@ class TemporalDecoder:
             st = self._state
             if isinstance(st, _State3):
                 modes, pos = _unpack_modes(payload, shape)
-                m64 = st.scene(hdr.dx, hdr.dy)
-                pred, other = st.predict(m64)
+                pred, m64, other = st.predict(hdr.dx, hdr.dy)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
                 f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape)
-                if f.min() < 0 or f.max() > 65535:
-                    raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
-                st.push(f.astype(np.int32, copy=False), m64, other)
-                self._shape = shape
-                return f.astype(np.uint16)
-            pred, _ = st.predict(hdr.dx, hdr.dy)
-            f = pred + _unpack(hdr.payload_type, payload, shape)
+            else:
+                pred, _ = st.predict(hdr.dx, hdr.dy)
+                f = pred + _unpack(hdr.payload_type, payload, shape)
         if f.min() < 0 or f.max() > 65535:
             raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
-        assert not isinstance(self._state, _State3)  # version 3 returned above
-        self._state.push(f)
+        if not isinstance(self._state, _State3):
+            self._state.push(f)
+        elif hdr.kind == KEY:
+            self._state.key(f)
+        else:
+            self._state.push(f.astype(np.int32, copy=False), m64, other)
         self._shape = shape
         return f.astype(np.uint16)
 
