@@ -97,11 +97,13 @@ from dataclasses import dataclass
 import imagecodecs
 import numpy as np
 
+from archive import rans, tpred_key
+
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_records",
            "parse_header"]
 
-BITSTREAM_VERSION = 3  # what the encoder writes by default; every earlier version decodes
-MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3"}
+BITSTREAM_VERSION = 4  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
 KEY, PREDICTED = 0, 1
@@ -169,6 +171,13 @@ def _pack(arr: np.ndarray) -> tuple[int, bytes]:
     return ptype, bytes(imagecodecs.pcodec_encode(arr.astype(dtype), level=8))
 
 
+def _pack_vertical(f: np.ndarray) -> tuple[int, bytes]:
+    """A version 1-3 key frame: its vertical differences, one pcodec chunk."""
+    d = f.copy()
+    d[1:] -= f[:-1]
+    return _pack(d)
+
+
 def _unpack(ptype: int, payload: bytes | memoryview, shape: tuple[int, int]) -> np.ndarray:
     return _decode_chunk(ptype, payload, shape, "the payload").astype(np.int64)
 
@@ -224,11 +233,17 @@ class _SceneWindow:
         self.oy = self.ox = 0  # the scene point of canvas[0, 0]
         self.cx = self.cy = 0
         self.last: np.ndarray | None = None
+        # how much each pixel of a frame counts towards N (version 4: 0 at the listed defects);
+        # None: every pixel counts 1
+        self.weight: np.ndarray | None = None
 
     def reset(self) -> None:
         self.frames.clear()
-        self.sum = self.count = self.last = None
+        self.sum = self.count = self.last = self.weight = None
         self.oy = self.ox = self.cx = self.cy = 0
+
+    def _counted(self) -> np.ndarray | int:
+        return 1 if self.weight is None else self.weight
 
     def _at(self, shape: tuple[int, int], cx: int, cy: int) -> tuple[slice, slice] | None:
         """The canvas slices a frame with cumulative motion (cx, cy) covers, or None if it
@@ -253,7 +268,7 @@ class _SceneWindow:
             sl = self._at(f.shape, fx, fy)
             assert sl is not None
             self.sum[sl] += f
-            self.count[sl] += 1
+            self.count[sl] += self._counted()
         where = self._at(shape, cx, cy)
         assert where is not None
         return where
@@ -293,7 +308,7 @@ class _SceneWindow:
         sl = self._fit(f.shape, self.cx, self.cy)
         assert self.sum is not None and self.count is not None
         self.sum[sl] += f
-        self.count[sl] += 1
+        self.count[sl] += self._counted()
         self.frames.append((f, self.cx, self.cy))
         self.last = f
 
@@ -304,7 +319,7 @@ class _SceneWindow:
             sl = self._at(old.shape, ox, oy)
             assert sl is not None  # a rebuilt canvas holds every frame of the window
             self.sum[sl] -= old
-            self.count[sl] -= 1
+            self.count[sl] -= self._counted()
 
 
 class _SceneWindow3(_SceneWindow):
@@ -442,6 +457,114 @@ class _State3:
         self.prev = f
 
 
+class _State4(_State3):
+    """Version 4: version 3 with the sensor's defects left out of the scene. A dead or stuck
+    pixel stays put on the sensor while the view pans, so in version 3 it wrote its value into
+    every scene point it crossed and the window's mean carried it there for ``window`` frames
+    (about 140 polluted pixels a frame for 12 defects). Here the key frame lists the defects;
+    each is predicted by its own previous value, counts 0 towards ``N`` in the scene window,
+    and stays out of the pattern's learning."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.defects = np.empty(0, np.int64)  # flat pixel indices, increasing
+        self.defect_mask: np.ndarray | None = None
+
+    def reset(self) -> None:
+        super().reset()
+        self.defects = np.empty(0, np.int64)
+        self.defect_mask = None
+
+    def key(self, f: np.ndarray, defects: np.ndarray | None = None) -> None:
+        f = f.astype(np.int32)
+        if defects is not None and defects.size:
+            self.defects = defects.astype(np.int64)
+            self.defect_mask = np.zeros(f.shape, bool)
+            self.defect_mask.ravel()[self.defects] = True
+            self.window.weight = (~self.defect_mask).astype(np.float64)
+        self.pattern = _Pattern(f.shape)
+        f64 = f << SCALE_BITS
+        f64.ravel()[self.defects] = 0
+        self.window.push(f64)
+        self.prev = f
+
+    def predict(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        p, m64, other = super().predict(dx, dy)
+        if self.defect_mask is None:
+            return p, m64, other
+        assert self.prev is not None
+        p.ravel()[self.defects] = self.prev.ravel()[self.defects]
+        if other is None:
+            other = self.defect_mask.copy()
+        else:
+            other |= self.defect_mask
+        return p, m64, other
+
+    def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
+        assert self.pattern is not None
+        f64 = f << SCALE_BITS
+        self.pattern.learn(f64 - m64, other)
+        f64 -= self.pattern.est
+        f64.ravel()[self.defects] = 0
+        self.window.push(f64)
+        self.prev = f
+
+
+class _StuckPixels:
+    """The encoder's watch for defects (version 4): pixels whose value has not changed for
+    ``RUN`` frames in a row. A pixel with the simulator's 1.4 counts of noise stays equal
+    that long about once in 10**8 frames; a dead, hot or stuck one always does. Listed at
+    the next key frame (so a stream's first key lists none), at most one pixel in ``CAP``:
+    beyond that the view is still or saturated and leaving pixels out would buy nothing.
+    Only the encoder runs this: the record says which pixels are excluded, so the decoder
+    never guesses."""
+
+    RUN = 15
+    CAP = 256
+
+    def __init__(self) -> None:
+        self.last: np.ndarray | None = None
+        self.run: np.ndarray | None = None
+
+    def see(self, f: np.ndarray) -> None:
+        if self.last is None or self.last.shape != f.shape or self.run is None:
+            self.run = np.zeros(f.shape, np.uint8)
+        else:
+            same = f == self.last
+            np.minimum(self.run, 254, out=self.run)
+            self.run += 1
+            self.run *= same
+        self.last = f
+
+    def listed(self) -> np.ndarray:
+        assert self.run is not None
+        idx = np.flatnonzero(self.run >= self.RUN)
+        return idx if idx.size <= self.run.size // self.CAP else idx[:0]
+
+
+def _pack_defects(defects: np.ndarray) -> bytes:
+    blob = zlib.compress(defects.astype("<u4").tobytes(), 9) if defects.size else b""
+    return _U32.pack(len(blob)) + blob
+
+
+def _unpack_defects(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarray, int]:
+    if len(payload) < _U32.size:
+        raise TpredError("the key frame ends before its defect list")
+    (n,) = _U32.unpack_from(payload, 0)
+    if n == 0:
+        return np.empty(0, np.int64), _U32.size
+    try:
+        raw = zlib.decompress(bytes(payload[_U32.size:_U32.size + n]))
+    except zlib.error as exc:
+        raise TpredError(f"the defect list does not decode ({exc})") from None
+    if len(raw) % 4:
+        raise TpredError(f"the defect list holds {len(raw)} bytes, not whole uint32 values")
+    idx = np.frombuffer(raw, "<u4").astype(np.int64)
+    if idx.size and (int(idx[-1]) >= shape[0] * shape[1] or (np.diff(idx) <= 0).any()):
+        raise TpredError(f"the defect list is not increasing pixel indices below {shape[0] * shape[1]}")
+    return idx, _U32.size + n
+
+
 def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int = 128) -> np.ndarray | None:
     """The encoder's choice of blocks that move on their own (a vehicle crossing a panned
     view): blocks whose residual against the scene is well above the frame's typical block are
@@ -485,13 +608,19 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     return modes.reshape(hb, wb)
 
 
-def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
+def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None,
+                  version: int = 3) -> tuple[int, bytes]:
     ptype, dtype = _payload_type(resid)
     mode_bytes = b"" if modes is None else zlib.compress(modes.tobytes(), 9)
     parts = [_U32.pack(len(mode_bytes)), mode_bytes]
     r: np.ndarray = resid.astype(dtype)
     for vals in ((r.ravel(), r[:0, 0]) if other is None else (r[~other], r[other])):
-        chunk = bytes(imagecodecs.pcodec_encode(vals, level=8)) if vals.size else b""
+        if not vals.size:
+            chunk = b""
+        elif version >= 4:
+            chunk = rans.encode(vals)
+        else:
+            chunk = bytes(imagecodecs.pcodec_encode(vals, level=8))
         parts += [_U32.pack(len(chunk)), chunk]
     return ptype, b"".join(parts)
 
@@ -512,7 +641,7 @@ def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarr
 
 
 def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray | None,
-                    shape: tuple[int, int]) -> np.ndarray:
+                    shape: tuple[int, int], version: int = 3) -> np.ndarray:
     """The residuals, from the scene's stream and the others' (each in row-major order)."""
     n_other = int(np.count_nonzero(other)) if other is not None else 0
     streams = []
@@ -526,7 +655,13 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray
                 raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
             streams.append(np.empty(0, np.int16))
             continue
-        streams.append(_decode_chunk(ptype, payload[pos:pos + n], (count,), f"residual stream {k}"))
+        if version >= 4:
+            try:
+                streams.append(rans.decode(payload[pos:pos + n], count))
+            except rans.RansError as exc:
+                raise TpredError(f"residual stream {k}: {exc}") from None
+        else:
+            streams.append(_decode_chunk(ptype, payload[pos:pos + n], (count,), f"residual stream {k}"))
         pos += n
     if pos != len(payload):
         raise TpredError(f"the payload holds {len(payload) - pos} bytes after its residual streams")
@@ -540,7 +675,7 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray
 
 
 def _window_for(version: int) -> _Window | _SceneWindow | _State3:
-    return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3()
+    return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3() if version == 3 else _State4()
 
 
 def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, other: int = 0) -> int:
@@ -563,9 +698,12 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     def cost(x: np.ndarray, y: np.ndarray, s: int) -> float:
         a = x[..., s:] if s >= 0 else x[..., :s]
         b = y[..., :n - s] if s >= 0 else y[..., -s:]
-        return float(np.abs(a - b).mean())
+        d = np.abs(a - b)
+        return float(np.minimum(d, _CLIP, out=d).mean())
 
-    cp, pp = c.mean(axis=0), p.mean(axis=0)
+    # medians, not means, and clipped differences: a hot target that moves on its own (fixed on
+    # the sensor while the view pans) must not outvote the scene
+    cp, pp = np.median(c, axis=0), np.median(p, axis=0)
     by_profile = sorted(shifts, key=lambda s: cost(cp, pp, s))
     best, best_cost = 0, np.inf
     for s in sorted(set(by_profile[:_CANDIDATES]) | {0}):
@@ -576,10 +714,11 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
 
 
 _CANDIDATES = 3  # shifts the profiles propose, each then measured on the lines
+_CLIP = 16  # counts: a difference beyond it is something moving on its own, not the view
 
 
 class TemporalEncoder:
-    def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 24,
+    def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 32,
                  bitstream: int = BITSTREAM_VERSION) -> None:
         if not 1 <= window <= 255 or key_interval < 1:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
@@ -590,20 +729,27 @@ class TemporalEncoder:
         self._state = _window_for(bitstream)
         self._prev: np.ndarray | None = None
         self._since_key = 0
+        self._stuck = _StuckPixels() if bitstream >= 4 else None
 
     def encode(self, frame: np.ndarray) -> bytes:
         if frame.dtype != np.uint16 or frame.ndim != 2:
             raise ValueError(f"tpred encodes 2-D uint16 frames, got {frame.dtype} {frame.shape}")
         h, w = frame.shape
         f: np.ndarray = frame.astype(np.int32 if isinstance(self._state, _State3) else np.int64)
+        if self._stuck is not None:
+            self._stuck.see(f)
         if self._prev is None or self._prev.shape != frame.shape or self._since_key >= self.key_interval:
-            d = f.copy()
-            d[1:] -= f[:-1]
-            ptype, payload = _pack(d)
             self._state.reset()
-            if isinstance(self._state, _State3):
+            if isinstance(self._state, _State4):
+                assert self._stuck is not None
+                defects = self._stuck.listed()
+                ptype, payload = _INT32, _pack_defects(defects) + tpred_key.encode_key(f)
+                self._state.key(f, defects)
+            elif isinstance(self._state, _State3):
+                ptype, payload = _pack_vertical(f)
                 self._state.key(f)
             else:
+                ptype, payload = _pack_vertical(f)
                 self._state.push(f)
             self._state.trim(self.window)
             self._prev, self._since_key = f, 1
@@ -617,7 +763,7 @@ class TemporalEncoder:
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
                 other = st.with_modes(modes, pred, other)
-            ptype, payload = _pack_streams(modes, f - pred, other)
+            ptype, payload = _pack_streams(modes, f - pred, other, self.bitstream)
             st.push(f, m64, other)
         else:
             pred, used = st.predict(dx, dy)
@@ -640,8 +786,8 @@ class TemporalEncoder:
         h, w = f.shape
         rows = np.clip(np.arange(0, h, 4) - dy, 0, h - 1)
         cols = np.clip(np.arange(0, w, 4) - dx, 0, w - 1)
-        still = np.abs(f[sub] - self._prev[sub]).sum()
-        moved = np.abs(f[sub] - self._prev[rows[:, None], cols[None, :]]).sum()  # _shift(prev)[sub]
+        still = np.minimum(np.abs(f[sub] - self._prev[sub]), _CLIP).sum()
+        moved = np.minimum(np.abs(f[sub] - self._prev[rows[:, None], cols[None, :]]), _CLIP).sum()  # _shift(prev)[sub]
         return (dx, dy) if moved < still else (0, 0)
 
 
@@ -655,9 +801,16 @@ class TemporalDecoder:
         hdr = parse_header(record)
         payload = memoryview(record)[HEADER.size:]
         shape = (hdr.height, hdr.width)
+        defects = None
         if hdr.kind == KEY:
-            d = _unpack(hdr.payload_type, payload, shape)
-            f = np.cumsum(d, axis=0)
+            if hdr.version >= 4:
+                defects, pos = _unpack_defects(payload, shape)
+                try:
+                    f = tpred_key.decode_key(payload[pos:], shape)
+                except tpred_key.KeyFrameError as exc:
+                    raise TpredError(str(exc)) from None
+            else:
+                f = np.cumsum(_unpack(hdr.payload_type, payload, shape), axis=0)
             if hdr.version != self._version:
                 self._state, self._version = _window_for(hdr.version), hdr.version
             self._state.reset()
@@ -677,7 +830,7 @@ class TemporalDecoder:
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
-                f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape)
+                f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape, hdr.version)
             else:
                 pred, _ = st.predict(hdr.dx, hdr.dy)
                 f = pred + _unpack(hdr.payload_type, payload, shape)
@@ -686,7 +839,10 @@ class TemporalDecoder:
         if not isinstance(self._state, _State3):
             self._state.push(f)
         elif hdr.kind == KEY:
-            self._state.key(f)
+            if isinstance(self._state, _State4):
+                self._state.key(f, defects)
+            else:
+                self._state.key(f)
         else:
             self._state.push(f.astype(np.int32, copy=False), m64, other)
         self._shape = shape

@@ -31,7 +31,7 @@ class TemporalFrames(ArchiveFormat):
     format_id = "tpred"
     description = "one stored ZIP per segment of temporally predicted frames (tpred) + ICD JSON sidecars"
 
-    def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 24,
+    def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 32,
                  bitstream: int = BITSTREAM_VERSION) -> None:
         if bitstream not in MAGICS:
             raise ArchiveError(f"tpred bitstream version {bitstream} is not one this thermcap reads "
