@@ -97,7 +97,7 @@ from dataclasses import dataclass
 import imagecodecs
 import numpy as np
 
-from archive import rans, tpred_key
+from archive import rans, tpred_kernels, tpred_key
 
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_records",
            "parse_header"]
@@ -225,6 +225,7 @@ class _SceneWindow:
 
     MARGIN = 128  # pixels of scene around the window's frames when the canvas is (re)built
     DTYPE: type = np.int64  # of the frames it keeps and the predictions it makes
+    CANVAS: tuple[type, type] = (np.float64, np.float64)  # of the sum and the count
 
     def __init__(self) -> None:
         self.frames: deque[tuple[np.ndarray, int, int]] = deque()  # (frame int64, cum dx, cum dy)
@@ -263,7 +264,7 @@ class _SceneWindow:
         self.oy, self.ox = min(y for y, _ in spots) - m, min(x for _, x in spots) - m
         size = (max(y for y, _ in spots) - self.oy + shape[0] + m, max(x for _, x in spots) - self.ox + shape[1] + m)
         # float64 holds these sums exactly (below 2**31 in version 3), and divides 4x faster than int64
-        self.sum, self.count = np.zeros(size, np.float64), np.zeros(size, np.float64)
+        self.sum, self.count = np.zeros(size, self.CANVAS[0]), np.zeros(size, self.CANVAS[1])
         for f, fx, fy in self.frames:
             sl = self._at(f.shape, fx, fy)
             assert sl is not None
@@ -334,6 +335,13 @@ class _SceneWindow3(_SceneWindow):
         # float64 holds S exactly (|S| < 2**31) and N < 256, so the correctly rounded quotient
         # never crosses the integer the exact one truncates to
         return (s / n).astype(np.int32)
+
+
+class _SceneWindow4(_SceneWindow3):
+    """Version 4's window: the same sums, held as int32 and uint8 (|S| < 2**31, N < 256), which
+    the compiled steps read and write at a third of float64's memory traffic."""
+
+    CANVAS = (np.int32, np.uint8)
 
 
 # Version 3: the sensor-fixed pattern learned, and blocks that move on their own. Fixed point:
@@ -463,12 +471,16 @@ class _State4(_State3):
     every scene point it crossed and the window's mean carried it there for ``window`` frames
     (about 140 polluted pixels a frame for 12 defects). Here the key frame lists the defects;
     each is predicted by its own previous value, counts 0 towards ``N`` in the scene window,
-    and stays out of the pattern's learning."""
+    and stays out of the pattern's learning. Each per-pixel step is one compiled pass
+    (``archive.tpred_kernels``) instead of version 3's dozen numpy calls."""
 
     def __init__(self) -> None:
         super().__init__()
+        self.window = _SceneWindow4()
         self.defects = np.empty(0, np.int64)  # flat pixel indices, increasing
         self.defect_mask: np.ndarray | None = None
+        self._defect = np.zeros((0, 0), bool)  # the mask, all False when nothing is listed
+        self._ones = np.zeros((0, 0), np.uint8)  # stands in for a weight when there is none
 
     def reset(self) -> None:
         super().reset()
@@ -477,11 +489,12 @@ class _State4(_State3):
 
     def key(self, f: np.ndarray, defects: np.ndarray | None = None) -> None:
         f = f.astype(np.int32)
+        self._defect = np.zeros(f.shape, bool)
         if defects is not None and defects.size:
             self.defects = defects.astype(np.int64)
-            self.defect_mask = np.zeros(f.shape, bool)
-            self.defect_mask.ravel()[self.defects] = True
-            self.window.weight = (~self.defect_mask).astype(np.float64)
+            self._defect.ravel()[self.defects] = True
+            self.defect_mask = self._defect
+            self.window.weight = (~self._defect).astype(np.uint8)
         self.pattern = _Pattern(f.shape)
         f64 = f << SCALE_BITS
         f64.ravel()[self.defects] = 0
@@ -489,25 +502,45 @@ class _State4(_State3):
         self.prev = f
 
     def predict(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        p, m64, other = super().predict(dx, dy)
-        if self.defect_mask is None:
-            return p, m64, other
-        assert self.prev is not None
-        p.ravel()[self.defects] = self.prev.ravel()[self.defects]
-        if other is None:
-            other = self.defect_mask.copy()
-        else:
-            other |= self.defect_mask
-        return p, m64, other
+        win, pat = self.window, self.pattern
+        assert win.last is not None and pat is not None and self.prev is not None
+        win.cx += dx
+        win.cy += dy
+        shape = win.last.shape
+        sl = win._fit(shape, win.cx, win.cy)
+        assert win.sum is not None and win.count is not None
+        p = np.empty(shape, np.int32)
+        m64 = np.empty(shape, np.int32)
+        other = np.empty(shape, bool)
+        k = tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self._defect,
+                                  p, m64, other)
+        return p, m64, (other if k else None)
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
-        assert self.pattern is not None
-        f64 = f << SCALE_BITS
-        self.pattern.learn(f64 - m64, other)
-        f64 -= self.pattern.est
-        f64.ravel()[self.defects] = 0
-        self.window.push(f64)
+        win, pat = self.window, self.pattern
+        assert pat is not None
+        sl = win._at(f.shape, win.cx, win.cy)  # predict fitted the canvas to this frame
+        assert sl is not None and win.sum is not None and win.count is not None
+        pat.n += 1
+        kept = np.empty(f.shape, np.int32)
+        tpred_kernels.learn_and_push(
+            f, m64, np.zeros(f.shape, bool) if other is None else other, self._defect, pat.pixsum, pat.colsum,
+            pat.colcnt, pat.n, pat.SHRINK, pat.est, win.sum[sl], win.count[sl], *self._weight(), kept)
+        win.frames.append((kept, win.cx, win.cy))
+        win.last = kept
         self.prev = f
+
+    def trim(self, keep: int) -> None:
+        win = self.window
+        while len(win.frames) > keep:
+            old, ox, oy = win.frames.popleft()
+            sl = win._at(old.shape, ox, oy)
+            assert sl is not None and win.sum is not None and win.count is not None
+            tpred_kernels.trim(win.sum[sl], win.count[sl], old, *self._weight())
+
+    def _weight(self) -> tuple[np.ndarray, bool]:
+        w = self.window.weight
+        return (self._ones, False) if w is None else (w, True)
 
 
 class _StuckPixels:
@@ -608,21 +641,32 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     return modes.reshape(hb, wb)
 
 
-def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None,
-                  version: int = 3) -> tuple[int, bytes]:
+def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
     ptype, dtype = _payload_type(resid)
+    r: np.ndarray = resid.astype(dtype)
+    chunks = [bytes(imagecodecs.pcodec_encode(v, level=8)) if v.size else b""
+              for v in ((r.ravel(), r[:0, 0]) if other is None else (r[~other], r[other]))]
+    return ptype, _with_lengths(modes, chunks)
+
+
+def _with_lengths(modes: np.ndarray | None, chunks: list[bytes]) -> bytes:
+    """The block-mode map, then each stream, each behind its ``u32`` length."""
     mode_bytes = b"" if modes is None else zlib.compress(modes.tobytes(), 9)
     parts = [_U32.pack(len(mode_bytes)), mode_bytes]
-    r: np.ndarray = resid.astype(dtype)
-    for vals in ((r.ravel(), r[:0, 0]) if other is None else (r[~other], r[other])):
-        if not vals.size:
-            chunk = b""
-        elif version >= 4:
-            chunk = rans.encode(vals)
-        else:
-            chunk = bytes(imagecodecs.pcodec_encode(vals, level=8))
+    for chunk in chunks:
         parts += [_U32.pack(len(chunk)), chunk]
-    return ptype, b"".join(parts)
+    return b"".join(parts)
+
+
+def _pack_streams4(modes: np.ndarray | None, f: np.ndarray, pred: np.ndarray,
+                   other: np.ndarray | None) -> tuple[int, bytes]:
+    """Version 4: the same two streams, split in one pass and each coded by ``archive.rans``."""
+    scene = np.empty(f.size, np.int32)
+    rest = np.empty(f.size, np.int32)
+    n0, n1, lo, hi = tpred_kernels.split_residuals(f, pred, np.zeros(f.shape, bool) if other is None else other,
+                                                   scene, rest)
+    ptype = _INT16 if lo >= -32768 and hi <= 32767 else _INT32
+    return ptype, _with_lengths(modes, [rans.encode(scene[:n0]) if n0 else b"", rans.encode(rest[:n1]) if n1 else b""])
 
 
 def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarray | None, int]:
@@ -640,31 +684,48 @@ def _unpack_modes(payload: memoryview, shape: tuple[int, int]) -> tuple[np.ndarr
     return modes.reshape(hb, wb), _U32.size + n
 
 
-def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray | None,
-                    shape: tuple[int, int], version: int = 3) -> np.ndarray:
-    """The residuals, from the scene's stream and the others' (each in row-major order)."""
-    n_other = int(np.count_nonzero(other)) if other is not None else 0
-    streams = []
-    for k, count in enumerate((shape[0] * shape[1] - n_other, n_other)):
+def _stream_chunks(payload: memoryview, pos: int, counts: tuple[int, int]) -> list[memoryview]:
+    """The two residual streams' bytes, each checked against the values it must hold."""
+    chunks = []
+    for k, count in enumerate(counts):
         if pos + _U32.size > len(payload):
             raise TpredError("the payload ends before its residual streams do")
         (n,) = _U32.unpack_from(payload, pos)
         pos += _U32.size
-        if not n or not count:
-            if n or count:
-                raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
-            streams.append(np.empty(0, np.int16))
-            continue
-        if version >= 4:
-            try:
-                streams.append(rans.decode(payload[pos:pos + n], count))
-            except rans.RansError as exc:
-                raise TpredError(f"residual stream {k}: {exc}") from None
-        else:
-            streams.append(_decode_chunk(ptype, payload[pos:pos + n], (count,), f"residual stream {k}"))
+        if bool(n) != bool(count):
+            raise TpredError(f"residual stream {k} holds {n} bytes for {count} values")
+        chunks.append(payload[pos:pos + n])
         pos += n
     if pos != len(payload):
         raise TpredError(f"the payload holds {len(payload) - pos} bytes after its residual streams")
+    return chunks
+
+
+def _unpack_streams4(payload: memoryview, pos: int, pred: np.ndarray, other: np.ndarray | None) -> np.ndarray:
+    """Version 4: the frame, from the prediction and the two ``archive.rans`` streams."""
+    n_other = int(np.count_nonzero(other)) if other is not None else 0
+    counts = (pred.size - n_other, n_other)
+    streams = []
+    for k, (chunk, count) in enumerate(zip(_stream_chunks(payload, pos, counts), counts, strict=True)):
+        try:
+            streams.append(rans.decode(chunk, count))
+        except rans.RansError as exc:
+            raise TpredError(f"residual stream {k}: {exc}") from None
+    f = np.empty(pred.shape, np.int32)
+    status = tpred_kernels.merge_residuals(pred, np.zeros(pred.shape, bool) if other is None else other,
+                                           streams[0], streams[1], f)
+    if status:
+        raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
+    return f
+
+
+def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray | None,
+                    shape: tuple[int, int]) -> np.ndarray:
+    """The residuals, from the scene's stream and the others' (each in row-major order)."""
+    n_other = int(np.count_nonzero(other)) if other is not None else 0
+    counts = (shape[0] * shape[1] - n_other, n_other)
+    streams = [_decode_chunk(ptype, chunk, (count,), f"residual stream {k}") if count else np.empty(0, np.int16)
+               for k, (chunk, count) in enumerate(zip(_stream_chunks(payload, pos, counts), counts, strict=True))]
     out = np.empty(shape, np.int32 if ptype == _INT16 else np.int64)  # int16 + int32 prediction cannot overflow
     if other is None:
         out.ravel()[:] = streams[0]
@@ -680,10 +741,11 @@ def _window_for(version: int) -> _Window | _SceneWindow | _State3:
 
 def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, other: int = 0) -> int:
     """The shift along ``axis`` (1: columns, dx; 0: rows, dy) that best maps ``prev`` onto
-    ``cur``: the least mean absolute difference over the overlap, on every 8th line across it
-    (the other axis shifted by ``other``). The candidates come from the frames' profiles
-    along the axis (the mean of those lines): every shift is tried on the profiles, and only
-    the best few on the lines themselves, which is 1/10 of trying every shift on the lines."""
+    ``cur``: the least mean absolute difference (each clipped at ``_CLIP``) over the overlap, on
+    every 8th line across it (the other axis shifted by ``other``). The candidates come from the
+    frames' profiles along the axis (the median of those lines): every shift is tried on the
+    profiles, and only the best few on the lines themselves, which is 1/10 of trying every shift
+    on the lines."""
     if axis == 0:  # rows: work on the transpose
         cur, prev = cur.T, prev.T
     lines = slice(None, None, 8)
@@ -695,19 +757,16 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     if not shifts:
         return 0
 
-    def cost(x: np.ndarray, y: np.ndarray, s: int) -> float:
-        a = x[..., s:] if s >= 0 else x[..., :s]
-        b = y[..., :n - s] if s >= 0 else y[..., -s:]
-        d = np.abs(a - b)
-        return float(np.minimum(d, _CLIP, out=d).mean())
-
     # medians, not means, and clipped differences: a hot target that moves on its own (fixed on
     # the sensor while the view pans) must not outvote the scene
     cp, pp = np.median(c, axis=0), np.median(p, axis=0)
-    by_profile = sorted(shifts, key=lambda s: cost(cp, pp, s))
+    by_profile = tpred_kernels.shift_costs(cp[None, :], pp[None, :], np.asarray(shifts), _CLIP)
+    order = np.argsort(by_profile, kind="stable")[:_CANDIDATES]
+    tried = np.asarray(sorted({shifts[i] for i in order} | {0}))
+    costs = tpred_kernels.shift_costs(np.ascontiguousarray(c, np.float64), np.ascontiguousarray(p, np.float64),
+                                      tried, _CLIP)
     best, best_cost = 0, np.inf
-    for s in sorted(set(by_profile[:_CANDIDATES]) | {0}):
-        k = cost(c, p, s)
+    for s, k in zip(tried.tolist(), costs.tolist(), strict=True):
         if k < best_cost - 1e-9:
             best, best_cost = s, k
     return best
@@ -763,7 +822,10 @@ class TemporalEncoder:
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
                 other = st.with_modes(modes, pred, other)
-            ptype, payload = _pack_streams(modes, f - pred, other, self.bitstream)
+            if isinstance(st, _State4):
+                ptype, payload = _pack_streams4(modes, f, pred, other)
+            else:
+                ptype, payload = _pack_streams(modes, f - pred, other)
             st.push(f, m64, other)
         else:
             pred, used = st.predict(dx, dy)
@@ -830,7 +892,10 @@ class TemporalDecoder:
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
-                f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape, hdr.version)
+                if isinstance(st, _State4):
+                    f = _unpack_streams4(payload, pos, pred, other)
+                else:
+                    f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape)
             else:
                 pred, _ = st.predict(hdr.dx, hdr.dy)
                 f = pred + _unpack(hdr.payload_type, payload, shape)

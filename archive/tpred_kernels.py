@@ -1,0 +1,168 @@
+"""tpred version 4's per-pixel steps, each one pass over the frame, compiled by numba (nogil).
+
+Versions 1-3 run the same arithmetic as a dozen numpy calls a step, each a pass over the frame
+and each holding the GIL between calls, which kept the encoder near 60 frames a second on one
+core. These loops do exactly what ``archive.temporal``'s docstring specifies for version 4 (the
+v4 golden records were written by the numpy code before these existed, and decode through
+them); integer arithmetic throughout, except the scene mean's float64 division, which is
+IEEE-exact on every machine.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+__all__ = ["learn_and_push", "merge_residuals", "predict", "shift_costs", "split_residuals", "trim"]
+
+_CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
+_HALF = 32
+_SCALE = 6
+
+
+@numba.njit(cache=True, nogil=True)
+def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, est: np.ndarray, prev: np.ndarray,
+            defect: np.ndarray, p: np.ndarray, m64: np.ndarray, other: np.ndarray) -> int:  # pragma: no cover
+    """The scene mean ``m64`` (``S / N`` truncated, or ``last`` moved where no frame saw the
+    point), the prediction ``p`` (``(m64 + est + 32) >> 6``, or a defect's own previous value)
+    and ``other`` (unseen or defect); returns how many pixels are ``other``."""
+    h, w = p.shape
+    k = 0
+    for r in range(h):
+        rr = min(max(r - dy, 0), h - 1)
+        for c in range(w):
+            nn = n[r, c]
+            o = False
+            if nn > 0:
+                m = np.int64(s[r, c] / nn)
+            else:
+                m = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
+                o = True
+            m64[r, c] = m
+            if defect[r, c]:
+                p[r, c] = prev[r, c]
+                o = True
+            else:
+                p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
+            other[r, c] = o
+            k += o
+    return k
+
+
+@numba.njit(cache=True, nogil=True)
+def split_residuals(f: np.ndarray, p: np.ndarray, other: np.ndarray, scene: np.ndarray,
+                    rest: np.ndarray) -> tuple[int, int, int, int]:  # pragma: no cover
+    """``f - p`` in raster order, the scene's pixels into ``scene`` and the others into ``rest``;
+    returns both counts and the residuals' least and greatest value."""
+    h, w = f.shape
+    i0 = 0
+    i1 = 0
+    lo = np.int64(1) << 40
+    hi = -lo
+    for r in range(h):
+        for c in range(w):
+            v = np.int64(f[r, c]) - p[r, c]
+            lo = min(lo, v)
+            hi = max(hi, v)
+            if other[r, c]:
+                rest[i1] = v
+                i1 += 1
+            else:
+                scene[i0] = v
+                i0 += 1
+    return i0, i1, lo, hi
+
+
+@numba.njit(cache=True, nogil=True)
+def merge_residuals(p: np.ndarray, other: np.ndarray, scene: np.ndarray, rest: np.ndarray,
+                    f: np.ndarray) -> int:  # pragma: no cover
+    """The decoder's side of ``split_residuals``: ``f = p + residual``. Returns 0, or -1 if the
+    streams do not hold one value a pixel, -2 if a pixel leaves uint16."""
+    h, w = p.shape
+    i0 = 0
+    i1 = 0
+    for r in range(h):
+        for c in range(w):
+            if other[r, c]:
+                if i1 >= rest.size:
+                    return -1
+                v = p[r, c] + np.int64(rest[i1])
+                i1 += 1
+            else:
+                if i0 >= scene.size:
+                    return -1
+                v = p[r, c] + np.int64(scene[i0])
+                i0 += 1
+            if v < 0 or v > 65535:
+                return -2
+            f[r, c] = v
+    if i0 != scene.size or i1 != rest.size:
+        return -1
+    return 0
+
+
+@numba.njit(cache=True, nogil=True)
+def learn_and_push(f: np.ndarray, m64: np.ndarray, other: np.ndarray, defect: np.ndarray, pixsum: np.ndarray,
+                   colsum: np.ndarray, colcnt: np.ndarray, n: int, shrink: int, est: np.ndarray,
+                   wsum: np.ndarray, wcount: np.ndarray, weight: np.ndarray, use_weight: bool,
+                   kept: np.ndarray) -> None:  # pragma: no cover
+    """The pattern learns frame ``f``'s residual against the scene (``n`` frames learned, this
+    one included) and ``est`` becomes the new estimate; then ``64 f - est`` (0 at a defect)
+    goes into ``kept`` and onto the window's canvas slices ``wsum``/``wcount``."""
+    h, w = f.shape
+    for r in range(h):
+        for c in range(w):
+            if other[r, c]:
+                continue
+            e = (np.int64(f[r, c]) << _SCALE) - m64[r, c]
+            e = min(max(e, -_CLIP), _CLIP)
+            pixsum[r, c] += e
+            colsum[c] += e
+            colcnt[c] += 1
+    col = np.zeros(w, np.int64)
+    for c in range(w):
+        if colcnt[c] > 0:
+            col[c] = (colsum[c] + colcnt[c] // 2) // colcnt[c]
+    # floor division by n + shrink, in float64: exact while |numerator| < 2**53 (a quotient that
+    # is not an integer is at least 1/div from one, beyond float64's rounding there), and a
+    # pipelined division where an int64 one takes ~40 cycles a pixel
+    div = np.float64(n + shrink)
+    for r in range(h):
+        for c in range(w):
+            x = np.int64(np.floor(np.float64(np.int64(pixsum[r, c]) - n * col[c]) / div)) + col[c]
+            est[r, c] = x
+            v = 0 if defect[r, c] else (np.int64(f[r, c]) << _SCALE) - x
+            kept[r, c] = v
+            wsum[r, c] += v
+            wcount[r, c] += weight[r, c] if use_weight else 1
+
+
+@numba.njit(cache=True, nogil=True)
+def trim(wsum: np.ndarray, wcount: np.ndarray, old: np.ndarray, weight: np.ndarray,
+         use_weight: bool) -> None:  # pragma: no cover
+    """A frame leaves the window: its values and counts off the canvas slices."""
+    h, w = old.shape
+    for r in range(h):
+        for c in range(w):
+            wsum[r, c] -= old[r, c]
+            wcount[r, c] -= weight[r, c] if use_weight else 1
+
+
+@numba.njit(cache=True, nogil=True)
+def shift_costs(x: np.ndarray, y: np.ndarray, shifts: np.ndarray, clip: float) -> np.ndarray:  # pragma: no cover
+    """For each shift ``s`` of ``y`` along the last axis, the mean of ``min(|x - y moved|, clip)``
+    over the overlap (the motion search's measure; encoder only)."""
+    rows, n = x.shape
+    out = np.empty(shifts.size)
+    for k in range(shifts.size):
+        s = shifts[k]
+        total = 0.0
+        for r in range(rows):
+            if s >= 0:
+                for c in range(s, n):
+                    total += min(abs(x[r, c] - y[r, c - s]), clip)
+            else:
+                for c in range(0, n + s):
+                    total += min(abs(x[r, c] - y[r, c - s]), clip)
+        out[k] = total / (rows * (n - abs(s)))
+    return out
