@@ -70,7 +70,7 @@ def split_residuals(f: np.ndarray, p: np.ndarray, other: np.ndarray, scene: np.n
             else:
                 scene[i0] = v
                 i0 += 1
-    return i0, i1, lo, hi
+    return i0, i1, int(lo), int(hi)
 
 
 @numba.njit(cache=True, nogil=True)
