@@ -47,7 +47,10 @@ class RansError(ValueError):
 
 
 @numba.njit(cache=True, nogil=True)
-def _tokens(values: np.ndarray, tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray) -> None:  # pragma: no cover
+def _tokens(values: np.ndarray, tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray,
+            counts: np.ndarray) -> int:  # pragma: no cover
+    """Each value's token and extra bits, the tokens' counts; returns the extra bits' total."""
+    bits = 0
     for i in range(values.size):
         v = np.int64(values[i])
         u = 2 * v if v >= 0 else -2 * v - 1
@@ -62,12 +65,16 @@ def _tokens(values: np.ndarray, tok: np.ndarray, extra: np.ndarray, nbits: np.nd
             tok[i] = DIRECT + 2 * (k - 5) + ((u >> (k - 1)) & 1)
             nbits[i] = k - 1
             extra[i] = u & ((np.int64(1) << (k - 1)) - 1)
+            bits += k - 1
+        counts[tok[i]] += 1
+    return bits
 
 
 @numba.njit(cache=True, nogil=True)
 def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndarray, cum: np.ndarray,
             out: np.ndarray) -> int:  # pragma: no cover
-    """rANS-encode backwards into the tail of ``out``; returns where the stream starts. The
+    """rANS-encode backwards into the tail of ``out``; returns where the stream starts (-1 if
+    ``out`` was too small, which its sizing rules out). The
     division by a token's frequency is a multiplication by its reciprocal (ryg_rans's exact
     method), which is what makes the encoder as fast as pcodec."""
     nt = freq.size
@@ -103,6 +110,8 @@ def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndar
                 v = (e >> np.uint64(shift)) & np.uint64((1 << k) - 1)
                 xm = np.uint64((RANS_L >> k) << 8)
                 while x >= xm:
+                    if pos == 4:  # never: the buffer is sized for the worst case
+                        return -1
                     pos -= 1
                     out[pos] = np.uint8(x & np.uint64(0xFF))
                     x >>= np.uint64(8)
@@ -111,6 +120,8 @@ def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndar
         t = tok[i]
         xm = x_max[t]
         while x >= xm:
+            if pos == 4:
+                return -1
             pos -= 1
             out[pos] = np.uint8(x & np.uint64(0xFF))
             x >>= np.uint64(8)
@@ -209,14 +220,16 @@ def encode(values: np.ndarray) -> bytes:
     tok = np.empty(n, np.uint8)
     extra = np.empty(n, np.int64)
     nbits = np.empty(n, np.uint8)
-    _tokens(vals, tok, extra, nbits)
-    counts = np.bincount(tok, minlength=1)
-    freq = _normalise(counts)
+    counts = np.zeros(MAX_TOKENS, np.int64)
+    extra_bits = _tokens(vals, tok, extra, nbits, counts)
+    freq = _normalise(counts[:int(np.flatnonzero(counts)[-1]) + 1])
     cum = np.zeros(freq.size, np.int64)
     np.cumsum(freq[:-1], out=cum[1:])
-    # at most 8 bytes a value (a 32-bit extra, the token) plus the final state
-    out = np.empty(8 * n + 16, np.uint8)
+    # a token costs at most 12 bits plus a byte of renormalisation slack, then the extra bits
+    out = np.empty(3 * n + extra_bits // 8 + 64, np.uint8)
     start = _encode(tok, extra, nbits, freq, cum, out)
+    if start < 0:
+        raise RuntimeError("rans: the output buffer was too small (a bug)")
     return bytes([freq.size]) + _varints(freq) + out[start:].tobytes()
 
 

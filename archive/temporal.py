@@ -350,6 +350,7 @@ SCALE_BITS = 6
 _HALF = 1 << (SCALE_BITS - 1)
 BLOCK = 16
 VECTORS = tuple((vx, vy) for vy in range(-2, 3) for vx in range(-2, 3))  # block mode k >= 1 uses VECTORS[k - 1]
+_VECTOR_ARRAY = np.asarray(VECTORS, np.int64)
 _U32 = struct.Struct("<I")
 
 
@@ -606,34 +607,12 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     h, w = f.shape
     hb, wb = -(-h // BLOCK), -(-w // BLOCK)
     # which blocks to try: their residual on every other row and column (a quarter of the work)
-    a = np.subtract(f[::2, ::2], pred[::2, ::2], dtype=np.int64)
-    np.abs(a, out=a)
-    np.minimum(a, 20, out=a)
-    half = BLOCK // 2
-    if a.shape != (hb * half, wb * half):
-        a = np.pad(a, ((0, hb * half - a.shape[0]), (0, wb * half - a.shape[1])))
-    sad = a.reshape(hb, half, wb, half).sum(axis=(1, 3)).ravel()
+    sad = tpred_kernels.block_sads(f, pred, hb, wb, BLOCK)
     cand = np.flatnonzero(sad > 1.5 * float(np.median(sad)) + 16)
     if not cand.size:
         return None
     cand = cand[np.argsort(-sad[cand], kind="stable")[:most]]
-    bi, bj = np.divmod(cand, wb)
-    rows = np.minimum(bi[:, None] * BLOCK + np.arange(BLOCK), h - 1)[:, :, None]
-    cols = np.minimum(bj[:, None] * BLOCK + np.arange(BLOCK), w - 1)[:, None, :]
-    x = f[rows, cols]
-    best = np.minimum(np.abs(x - pred[rows, cols]), 20).sum(axis=(1, 2))
-    choice = np.zeros(cand.size, np.uint8)
-    # each candidate block of the previous frame with a margin of 2 (edge replicated): every
-    # vector is then a view of it
-    span = np.arange(-2, BLOCK + 2)
-    around = prev[np.clip(bi[:, None] * BLOCK + span, 0, h - 1)[:, :, None],
-                  np.clip(bj[:, None] * BLOCK + span, 0, w - 1)[:, None, :]]
-    for k, (vx, vy) in enumerate(VECTORS, 1):
-        q = around[:, 2 - vy:2 - vy + BLOCK, 2 - vx:2 - vx + BLOCK]
-        cost = np.minimum(np.abs(x - q), 20).sum(axis=(1, 2)) + 2 * BLOCK
-        better = cost < best
-        best[better] = cost[better]
-        choice[better] = k
+    choice = tpred_kernels.block_choices(f, pred, prev, cand, wb, BLOCK, _VECTOR_ARRAY)
     if not choice.any():
         return None
     modes = np.zeros(hb * wb, np.uint8)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["learn_and_push", "merge_residuals", "predict", "shift_costs", "split_residuals", "trim"]
+__all__ = ["block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs", "split_residuals", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -166,3 +166,49 @@ def shift_costs(x: np.ndarray, y: np.ndarray, shifts: np.ndarray, clip: float) -
                     total += min(abs(x[r, c] - y[r, c - s]), clip)
         out[k] = total / (rows * (n - abs(s)))
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def block_sads(f: np.ndarray, pred: np.ndarray, hb: int, wb: int, block: int) -> np.ndarray:  # pragma: no cover
+    """Each block's residual on every other row and column, each clipped at 20 (encoder only)."""
+    h, w = f.shape
+    sad = np.zeros(hb * wb, np.int64)
+    for r in range(0, h, 2):
+        bi = r // block
+        for c in range(0, w, 2):
+            sad[bi * wb + c // block] += min(abs(np.int64(f[r, c]) - pred[r, c]), 20)
+    return sad
+
+
+@numba.njit(cache=True, nogil=True)
+def block_choices(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, cand: np.ndarray, wb: int, block: int,
+                  vectors: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """For each candidate block, the first vector (1-based) whose moved previous frame beats the
+    scene by more than ``2 * block`` (0: none does); pixels of a partial block repeat the
+    frame's last row or column, the moved frame is edge replicated (encoder only)."""
+    h, w = f.shape
+    choice = np.zeros(cand.size, np.uint8)
+    for n in range(cand.size):
+        r0 = (cand[n] // wb) * block
+        c0 = (cand[n] % wb) * block
+        best = 0
+        for i in range(block):
+            xr = min(r0 + i, h - 1)
+            for j in range(block):
+                xc = min(c0 + j, w - 1)
+                best += min(abs(np.int64(f[xr, xc]) - pred[xr, xc]), 20)
+        for k in range(vectors.shape[0]):
+            vx = vectors[k, 0]
+            vy = vectors[k, 1]
+            cost = 2 * block
+            for i in range(block):
+                xr = min(r0 + i, h - 1)
+                qr = min(max(r0 + i - vy, 0), h - 1)
+                for j in range(block):
+                    xc = min(c0 + j, w - 1)
+                    qc = min(max(c0 + j - vx, 0), w - 1)
+                    cost += min(abs(np.int64(f[xr, xc]) - prev[qr, qc]), 20)
+            if cost < best:
+                best = cost
+                choice[n] = k + 1
+    return choice
