@@ -50,7 +50,7 @@ frame moved by the record's ``(dx, dy)`` with edge replication (content no frame
 window is kept and trimmed as in version 1. A decoder reads both versions; a sequence keeps the
 version of its key frame.
 
-Bitstream, version 3 (magic ``b"TPF3"``; what thermcap writes): version 2's key frames and
+Bitstream, version 3 (magic ``b"TPF3"``): version 2's key frames and
 scene window, and two more things both sides compute the same way, in integers, from the
 frames already decoded since the key frame. Values in 1/64 counts are written ``x64``.
 
@@ -78,12 +78,28 @@ predicted from the scene, then the others (block modes and unseen points, whose 
 larger). The frame is ``P + residual``. Payload type 1 or 2 says whether both streams hold
 int16 or int32.
 
+Bitstream, version 4 (magic ``b"TPF4"``; what thermcap writes): version 3 with three changes.
+
+- A key record's payload starts with the sensor's defect list: ``u32`` length ``L`` and ``L``
+  bytes, the zlib stream of the defects' flat pixel indices (``r * width + c``) as ``u32``,
+  strictly increasing (``L = 0``: none). The frame follows, coded by ``archive.tpred_key`` (a
+  four-neighbour spatial predictor and five rANS contexts, specified there) instead of
+  pcodec's vertical differences; the header's payload type is 2 and says nothing.
+- Until the next key, each defect is predicted by its own value in the previous frame and is
+  one of the "others" (second residual stream, out of the pattern's learning). The window
+  holds it as 0 and counts it 0 towards ``N`` (the key frame too), so no scene point is
+  predicted from a defect; where only defects saw a point, it is unseen.
+- Both residual streams are ``archive.rans`` streams (specified there) instead of pcodec
+  chunks; the payload type is the residuals' range as before.
+
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
-one (least mean absolute difference on every 8th line), columns over +-``max_shift`` pixels,
-then rows over +-8, kept only when it lowers the residual. In version 3 it also picks the block
-modes: blocks whose residual against the scene is well above the frame's typical block try
-every vector on the previous frame and keep the best when clearly better (a vehicle that moves
-across a panned view).
+one (least mean absolute difference, each difference clipped at 16 counts, on every 8th line;
+candidates from the lines' median profiles), columns over +-``max_shift`` (32) pixels, then
+rows over +-8, kept only when it lowers the (clipped) residual. In version 3 it also picks the
+block modes: blocks whose residual against the scene is well above the frame's typical block
+try every vector on the previous frame and keep the best when clearly better (a vehicle that
+moves across a panned view). In version 4 it also watches for defects (``_StuckPixels``): a
+pixel whose value has not changed for 15 frames is listed at the next key frame.
 """
 
 from __future__ import annotations

@@ -18,7 +18,8 @@ def test_bench_temporal_reports_every_sequence_against_its_anchors():
     for row in rows:
         assert row["tpred_ratio"] > 0 and row["jxl_e2_ratio"] > 0 and row["tpred_fps_2_cores"] > 0
         assert row["x_jxl_e2"] == round(row["tpred_ratio"] / row["jxl_e2_ratio"], 3)
-        assert row["bitstream"] == 3 and row["tpred_v2_ratio"] > 0 and row["tpred_v2_fps_2_cores"] > 0
+        assert row["bitstream"] == 4 and row["previous_bitstream"] == 3
+        assert row["tpred_previous_ratio"] > 0 and row["tpred_previous_fps_2_cores"] > 0
 
 
 def test_bench_archive_session_reports_x_real_time_beside_its_floors():
