@@ -340,4 +340,5 @@ def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
     for r in rows:
         click.echo(f"{r['sequence']:32} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
                    f"{r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} {r['tpred_fps_1_core']:>7} "
-                   f"{r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} {r['tpred_previous_fps_2_cores']:>6}")
+                   f"{r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
+                   f"{r['tpred_previous_fps_2_cores']:>6}")

@@ -13,7 +13,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs", "split_residuals", "trim"]
+__all__ = ["block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs",
+           "split_residuals", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
