@@ -757,7 +757,7 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     # np.roll(prev, other, axis=0)[lines], without rolling the lines that are not looked at
     p = prev[lines] if other == 0 else prev[(np.arange(0, prev.shape[0], 8) - other) % prev.shape[0]]
     n = c.shape[1]
-    shifts = [s for s in range(-max_shift, max_shift + 1) if n - abs(s) >= n // 2]
+    shifts = [s for s in range(-max_shift, max_shift + 1) if n - abs(s) >= max(1, n // 2)]
     if not shifts:
         return 0
 

@@ -338,3 +338,18 @@ def test_the_encoder_follows_a_pan_past_hot_targets():
     dxs = [parse_header(enc.encode(f)).dx for f in frames]
     true = [src.view_offset_px(i / 60) - src.view_offset_px((i - 1) / 60) for i in range(1, 12)]
     assert sum(d == -t for d, t in zip(dxs[1:], true, strict=True)) >= 10, (dxs, true)
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 17), (17, 1), (3, 3)])
+def test_frames_one_pixel_wide_or_high(shape):
+    """The motion search tried shifts that left no overlap on a 1-pixel-wide frame (a division
+    by zero once compiled); such frames, with a pixel stuck and then freed, round-trip."""
+    rng = np.random.default_rng(9)
+    frames = []
+    for t in range(20):
+        f = rng.integers(990, 1010, shape)
+        f.ravel()[0] = 0 if t < 15 else 4000
+        frames.append(f.astype(np.uint16))
+    enc = TemporalEncoder(window=4, key_interval=16)
+    records = [enc.encode(f) for f in frames]
+    assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
