@@ -107,8 +107,9 @@ from __future__ import annotations
 import struct
 import zlib
 from collections import deque
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from typing import TypeVar
 
 import imagecodecs
 import numpy as np
@@ -117,12 +118,13 @@ import numpy as np
 # 0.35 s to import: they are imported inside the functions that use them, so every ``thermcap``
 # command does not pay for it at start-up.
 
-__all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_records",
-           "parse_header"]
+__all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_gops",
+           "decode_records", "encode_gops", "parse_header"]
 
 BITSTREAM_VERSION = 4  # what the encoder writes by default; every earlier version decodes
 MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
+T = TypeVar("T")
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
 KEY, PREDICTED = 0, 1
 _INT16, _INT32 = 1, 2
@@ -782,7 +784,9 @@ _CLIP = 16  # counts: a difference beyond it is something moving on its own, not
 
 class TemporalEncoder:
     def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 32,
-                 bitstream: int = BITSTREAM_VERSION) -> None:
+                 bitstream: int = BITSTREAM_VERSION, defects: np.ndarray | None = None) -> None:
+        """``defects``: the list for the first key frame (version 4), where the frames before it
+        were seen by another watch (``encode_gops``); otherwise the encoder's own watch lists them."""
         if not 1 <= window <= 255 or key_interval < 1:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
         if bitstream not in MAGICS:
@@ -793,6 +797,7 @@ class TemporalEncoder:
         self._prev: np.ndarray | None = None
         self._since_key = 0
         self._stuck = _StuckPixels() if bitstream >= 4 else None
+        self._first_defects = defects
 
     def encode(self, frame: np.ndarray) -> bytes:
         from archive import tpred_key
@@ -806,7 +811,8 @@ class TemporalEncoder:
             self._state.reset()
             if isinstance(self._state, _State4):
                 assert self._stuck is not None
-                defects = self._stuck.listed()
+                defects = self._stuck.listed() if self._first_defects is None else self._first_defects
+                self._first_defects = None
                 ptype, payload = _INT32, _pack_defects(defects) + tpred_key.encode_key(f)
                 self._state.key(f, defects)
             elif isinstance(self._state, _State3):
@@ -918,6 +924,77 @@ class TemporalDecoder:
             self._state.push(f.astype(np.int32, copy=False), m64, other)
         self._shape = shape
         return f.astype(np.uint16)
+
+
+def encode_gops(items: Iterable[T], pixels: Callable[[T], np.ndarray], *, workers: int = 2, window: int = 16,
+                key_interval: int = 64, max_shift: int = 32,
+                bitstream: int = BITSTREAM_VERSION) -> Iterator[tuple[T, bytes]]:
+    """Each item with its record, byte for byte what one ``TemporalEncoder`` writes for the
+    sequence, each run from a key frame to the next (a GOP) encoded on its own thread: a GOP
+    needs nothing from before it but its key's defect list, which this thread's watch keeps.
+    At most ``workers + 1`` GOPs are held at once, however long the sequence."""
+    watch = _StuckPixels() if bitstream >= 4 else None
+
+    def gops() -> Iterator[tuple[list[T], np.ndarray | None]]:
+        gop: list[T] = []
+        shape: tuple[int, ...] | None = None
+        defects: np.ndarray | None = None
+        for item in items:
+            f = pixels(item)
+            if watch is not None and f.ndim == 2:
+                watch.see(f)
+            if gop and (len(gop) >= key_interval or f.shape != shape):
+                yield gop, defects
+                gop = []
+            if not gop:
+                shape = f.shape
+                defects = watch.listed() if watch is not None and watch.run is not None else None
+            gop.append(item)
+        if gop:
+            yield gop, defects
+
+    def encode(job: tuple[list[T], np.ndarray | None]) -> list[tuple[T, bytes]]:
+        run, defects = job
+        enc = TemporalEncoder(window, key_interval, max_shift, bitstream, defects=defects)
+        return [(item, enc.encode(pixels(item))) for item in run]
+
+    from archive.formats.base import ordered_map
+
+    for done in ordered_map(encode, gops(), workers, window=workers + 1):
+        yield from done
+
+
+def decode_gops(items: Iterable[T], record: Callable[[T], bytes], *, workers: int = 2,
+                name: Callable[[T], str] = str) -> Iterator[tuple[T, np.ndarray]]:
+    """Each item with its frame, a GOP (a key frame and the records up to the next) on each
+    thread; the records are read on this thread. A ``TpredError`` names (``name``) the item it
+    arose in."""
+
+    def gops() -> Iterator[list[tuple[T, bytes]]]:
+        gop: list[tuple[T, bytes]] = []
+        for item in items:
+            rec = record(item)
+            if gop and len(rec) >= HEADER.size and rec[4] == KEY and rec[:4] in _VERSION_OF:
+                yield gop
+                gop = []
+            gop.append((item, rec))
+        if gop:
+            yield gop
+
+    def decode(run: list[tuple[T, bytes]]) -> list[tuple[T, np.ndarray]]:
+        dec = TemporalDecoder()
+        out = []
+        for item, rec in run:
+            try:
+                out.append((item, dec.decode(rec)))
+            except TpredError as exc:
+                raise TpredError(f"{name(item)}: {exc}") from None
+        return out
+
+    from archive.formats.base import ordered_map
+
+    for done in ordered_map(decode, gops(), workers, window=workers + 1):
+        yield from done
 
 
 def decode_records(records: Iterable[bytes | memoryview]) -> Iterator[np.ndarray]:

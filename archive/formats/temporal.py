@@ -19,7 +19,7 @@ import numpy as np
 from archive.exceptions import ArchiveError
 from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 from archive.formats.zipped import _time_from_name, write_zip_segments
-from archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TemporalDecoder, TemporalEncoder, TpredError, parse_header
+from archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TpredError, decode_gops, encode_gops, parse_header
 from recorder.storage.reader import SessionFrame
 
 __all__ = ["TemporalFrames"]
@@ -45,19 +45,19 @@ class TemporalFrames(ArchiveFormat):
 
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]:
         def sequence(run: Iterator[SessionFrame]) -> Iterator[tuple[SessionFrame, bytes]]:
-            enc = TemporalEncoder(self.window, self.key_interval, self.max_shift,
-                                  self.bitstream)  # every segment starts a key
-            for frame in run:
-                yield frame, enc.encode(np.asarray(frame.pixels))
+            # every segment starts a key; its GOPs are encoded on the archive's threads at once
+            return encode_gops(run, lambda frame: np.asarray(frame.pixels), workers=ctx.workers, window=self.window,
+                               key_interval=self.key_interval, max_shift=self.max_shift, bitstream=self.bitstream)
 
         return write_zip_segments(frames, out_dir, ctx, EXT, sequence)
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+        """Every frame, a GOP on each of two threads (verification decodes every frame)."""
         for rel in files:
             path = out_dir / rel
             try:
                 with zipfile.ZipFile(path) as zf:
-                    yield from _decode_run(zf, 0, None)
+                    yield from _decode_run(zf, 0, None, workers=2)
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
 
@@ -76,15 +76,13 @@ class TemporalFrames(ArchiveFormat):
                 raise ArchiveError(f"{rel}: cannot read frame {k} ({exc})") from exc
 
 
-def _decode_run(zf: zipfile.ZipFile, start: int, stop: int | None) -> Iterator[DecodedFrame]:
+def _decode_run(zf: zipfile.ZipFile, start: int, stop: int | None, workers: int = 1) -> Iterator[DecodedFrame]:
     names = set(zf.namelist())
     members = [i for i in zf.infolist() if i.filename.endswith(EXT)][start:stop]
-    dec = TemporalDecoder()
-    for info in members:
-        base = info.filename[: -len(EXT)]
-        try:
-            pixels = dec.decode(zf.read(info))
-        except TpredError as exc:
-            raise ArchiveError(f"{info.filename}: {exc}") from None
-        sidecar = zf.read(base + ".json") if base + ".json" in names else b""
-        yield DecodedFrame(pixels, sidecar, _time_from_name(base))
+    try:
+        for info, pixels in decode_gops(members, zf.read, workers=workers, name=lambda i: i.filename):
+            base = info.filename[: -len(EXT)]
+            sidecar = zf.read(base + ".json") if base + ".json" in names else b""
+            yield DecodedFrame(pixels, sidecar, _time_from_name(base))
+    except TpredError as exc:
+        raise ArchiveError(str(exc)) from None

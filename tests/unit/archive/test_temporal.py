@@ -353,3 +353,26 @@ def test_frames_one_pixel_wide_or_high(shape):
     enc = TemporalEncoder(window=4, key_interval=16)
     records = [enc.encode(f) for f in frames]
     assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
+
+
+def test_gops_on_two_threads_write_the_sequential_encoders_bytes():
+    """``encode_gops`` cuts the sequence where the encoder would start a key (every
+    ``key_interval`` frames, and at a change of size) and hands each GOP its defect list: the
+    records are the sequential encoder's, byte for byte, and ``decode_gops`` reads them back."""
+    from archive.temporal import decode_gops, encode_gops
+
+    frames = [f.pixels for f in SimSource(width=160, height=128, frames=80, paced=False, seed=5, view="patrol",
+                                          patrol_deg_s=10.0, pixel_fpn_mk=15.0, bad_pixels=6).frames()]
+    frames = frames[:45] + [f[:100, :120].copy() for f in frames[45:60]] + frames[60:]
+    for key_interval, window in ((16, 8), (7, 4)):
+        enc = TemporalEncoder(window=window, key_interval=key_interval)
+        sequential = [enc.encode(f) for f in frames]
+        pairs = list(encode_gops(range(len(frames)), lambda i: frames[i], window=window, key_interval=key_interval))
+        assert [i for i, _ in pairs] == list(range(len(frames)))
+        assert [r for _, r in pairs] == sequential
+        decoded = [f for _, f in decode_gops(sequential, lambda r: r)]
+        assert all(np.array_equal(a, b) for a, b in zip(frames, decoded, strict=True))
+    damaged = list(sequential)
+    damaged[20] = damaged[20][:-3]
+    with pytest.raises(TpredError, match="record 20: a tpred record says"):
+        list(decode_gops(range(len(damaged)), lambda i: damaged[i], name=lambda i: f"record {i}"))
