@@ -462,18 +462,13 @@ class _State3:
         """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
         (edge replicated), its pixels in the second stream and out of the pattern's learning.
         Returns the pixels not predicted from the scene."""
+        from archive import tpred_kernels
+
         assert self.prev is not None
-        h, w = pred.shape
         if other is None:
             other = np.zeros(pred.shape, bool)
-        for bi, bj in zip(*np.nonzero(modes), strict=True):
-            vx, vy = VECTORS[int(modes[bi, bj]) - 1]
-            r0, c0 = int(bi) * BLOCK, int(bj) * BLOCK
-            r1, c1 = min(r0 + BLOCK, h), min(c0 + BLOCK, w)
-            rows = np.clip(np.arange(r0, r1) - vy, 0, h - 1)
-            cols = np.clip(np.arange(c0, c1) - vx, 0, w - 1)
-            pred[r0:r1, c0:c1] = self.prev[rows[:, None], cols[None, :]]
-            other[r0:r1, c0:c1] = True
+        tpred_kernels.apply_modes(modes, pred, self.prev.astype(pred.dtype, copy=False), other, BLOCK,
+                                  _VECTOR_ARRAY)
         return other
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
@@ -534,7 +529,7 @@ class _State4(_State3):
         p = np.empty(shape, np.int32)
         m64 = np.empty(shape, np.int32)
         other = np.empty(shape, bool)
-        k = tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self._defect,
+        k = tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self.defects,
                                   p, m64, other)
         return p, m64, (other if k else None)
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs",
+__all__ = ["apply_modes", "block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs",
            "split_residuals", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
@@ -23,30 +23,37 @@ _SCALE = 6
 
 @numba.njit(cache=True, nogil=True)
 def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, est: np.ndarray, prev: np.ndarray,
-            defect: np.ndarray, p: np.ndarray, m64: np.ndarray, other: np.ndarray) -> int:  # pragma: no cover
+            defects: np.ndarray, p: np.ndarray, m64: np.ndarray, other: np.ndarray) -> int:  # pragma: no cover
     """The scene mean ``m64`` (``S / N`` truncated, or ``last`` moved where no frame saw the
     point), the prediction ``p`` (``(m64 + est + 32) >> 6``, or a defect's own previous value)
-    and ``other`` (unseen or defect); returns how many pixels are ``other``."""
+    and ``other`` (unseen or defect); returns how many pixels are ``other``. The main pass has
+    no branch, so it vectorises; the unseen points and the defects (few) are patched after."""
     h, w = p.shape
-    k = 0
+    unseen = 0
     for r in range(h):
-        rr = min(max(r - dy, 0), h - 1)
         for c in range(w):
             nn = n[r, c]
-            o = False
-            if nn > 0:
-                m = np.int64(s[r, c] / nn)
-            else:
-                m = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
-                o = True
+            m = np.int64(s[r, c] / max(nn, 1))
             m64[r, c] = m
-            if defect[r, c]:
-                p[r, c] = prev[r, c]
-                o = True
-            else:
-                p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
-            other[r, c] = o
-            k += o
+            p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
+            other[r, c] = nn == 0
+            unseen += nn == 0
+    if unseen:
+        for r in range(h):
+            rr = min(max(r - dy, 0), h - 1)
+            for c in range(w):
+                if n[r, c] == 0:
+                    m = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
+                    m64[r, c] = m
+                    p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
+    k = unseen
+    for i in range(defects.size):
+        r = defects[i] // w
+        c = defects[i] % w
+        p[r, c] = prev[r, c]
+        if not other[r, c]:
+            other[r, c] = True
+            k += 1
     return k
 
 
@@ -109,17 +116,17 @@ def learn_and_push(f: np.ndarray, m64: np.ndarray, other: np.ndarray, defect: np
                    kept: np.ndarray) -> None:  # pragma: no cover
     """The pattern learns frame ``f``'s residual against the scene (``n`` frames learned, this
     one included) and ``est`` becomes the new estimate; then ``64 f - est`` (0 at a defect)
-    goes into ``kept`` and onto the window's canvas slices ``wsum``/``wcount``."""
+    goes into ``kept`` and onto the window's canvas slices ``wsum``/``wcount``. Branch-free
+    passes (the masks multiply), so they vectorise."""
     h, w = f.shape
     for r in range(h):
         for c in range(w):
-            if other[r, c]:
-                continue
+            keep = np.int64(1 - np.int64(other[r, c]))
             e = (np.int64(f[r, c]) << _SCALE) - m64[r, c]
-            e = min(max(e, -_CLIP), _CLIP)
+            e = min(max(e, -_CLIP), _CLIP) * keep
             pixsum[r, c] += e
             colsum[c] += e
-            colcnt[c] += 1
+            colcnt[c] += keep
     col = np.zeros(w, np.int64)
     for c in range(w):
         if colcnt[c] > 0:
@@ -132,7 +139,7 @@ def learn_and_push(f: np.ndarray, m64: np.ndarray, other: np.ndarray, defect: np
         for c in range(w):
             x = np.int64(np.floor(np.float64(np.int64(pixsum[r, c]) - n * col[c]) / div)) + col[c]
             est[r, c] = x
-            v = 0 if defect[r, c] else (np.int64(f[r, c]) << _SCALE) - x
+            v = ((np.int64(f[r, c]) << _SCALE) - x) * np.int64(1 - np.int64(defect[r, c]))
             kept[r, c] = v
             wsum[r, c] += v
             wcount[r, c] += weight[r, c] if use_weight else 1
@@ -213,3 +220,23 @@ def block_choices(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, cand: np.nd
                 best = cost
                 choice[n] = k + 1
     return choice
+
+
+@numba.njit(cache=True, nogil=True)
+def apply_modes(modes: np.ndarray, pred: np.ndarray, prev: np.ndarray, other: np.ndarray, block: int,
+                vectors: np.ndarray) -> None:  # pragma: no cover
+    """Each block with mode ``k`` predicted by ``prev`` moved by ``vectors[k - 1]`` (edge
+    replicated) and marked in ``other``, in the block's pixels inside the frame."""
+    h, w = pred.shape
+    for bi in range(modes.shape[0]):
+        for bj in range(modes.shape[1]):
+            k = modes[bi, bj]
+            if k == 0:
+                continue
+            vx = vectors[k - 1, 0]
+            vy = vectors[k - 1, 1]
+            for r in range(bi * block, min(bi * block + block, h)):
+                rr = min(max(r - vy, 0), h - 1)
+                for c in range(bj * block, min(bj * block + block, w)):
+                    pred[r, c] = prev[rr, min(max(c - vx, 0), w - 1)]
+                    other[r, c] = True
