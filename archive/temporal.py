@@ -927,7 +927,7 @@ def encode_gops(items: Iterable[T], pixels: Callable[[T], np.ndarray], *, worker
     """Each item with its record, byte for byte what one ``TemporalEncoder`` writes for the
     sequence, each run from a key frame to the next (a GOP) encoded on its own thread: a GOP
     needs nothing from before it but its key's defect list, which this thread's watch keeps.
-    At most ``workers + 1`` GOPs are held at once, however long the sequence."""
+    At most ``workers`` GOPs are encoding and one being gathered, however long the sequence."""
     watch = _StuckPixels() if bitstream >= 4 else None
 
     def gops() -> Iterator[tuple[list[T], np.ndarray | None]]:
@@ -955,7 +955,7 @@ def encode_gops(items: Iterable[T], pixels: Callable[[T], np.ndarray], *, worker
 
     from archive.formats.base import ordered_map
 
-    for done in ordered_map(encode, gops(), workers, window=workers + 1):
+    for done in ordered_map(encode, gops(), workers, window=workers):
         yield from done
 
 
@@ -988,7 +988,7 @@ def decode_gops(items: Iterable[T], record: Callable[[T], bytes], *, workers: in
 
     from archive.formats.base import ordered_map
 
-    for done in ordered_map(decode, gops(), workers, window=workers + 1):
+    for done in ordered_map(decode, gops(), workers, window=workers):
         yield from done
 
 
