@@ -10,25 +10,29 @@ Stream format, stable (tpred's golden records in ``tests/fixture/bitstreams/tpre
     u8           T: the number of tokens in the table (1..86)
     T x varint   the frequency of tokens 0..T-1 (LEB128, 7 bits a byte, low first); they sum to
                  4096 (12-bit probabilities), and a token of frequency 0 never occurs
-    u32          the rANS state the decoder starts from (little-endian)
-    bytes        the renormalisation bytes, in the order the decoder reads them
+    2 x u32      the two rANS states the decoder starts from, x0 then x1 (little-endian)
+    bytes        the renormalisation bytes of both, in the order the decoder reads them
 
 Values become tokens as JPEG XL's hybrid integers do (split 32, one mantissa bit in the token):
 ``u = 2v`` for ``v >= 0`` and ``-2v - 1`` otherwise; ``u < 32`` is token ``u``; otherwise, with
 ``k = floor(log2 u)``, the token is ``32 + 2 (k - 5) + (bit k-1 of u)`` and the ``k - 1`` low bits
 of ``u`` follow it, coded as uniform symbols of at most 8 bits, lowest chunk first.
 
-The coder is ryg_rans's byte-wise rANS: state ``x`` in ``[2**23, 2**31)``. Decoding a token:
+The coder is ryg_rans's byte-wise rANS, two states interleaved (value ``i`` and its extra bits
+use state ``x0`` for even ``i``, ``x1`` for odd), so a decoder's two dependency chains overlap.
+A state ``x`` is in ``[2**23, 2**31)``. Decoding a token:
 ``s = x & 4095``, the token ``t`` whose cumulative range holds ``s``, ``x = f[t] * (x >> 12) + s -
 c[t]``; a uniform chunk of ``k`` bits: ``bits = x & (2**k - 1)``, ``x >>= k``. After each, while
-``x < 2**23``: ``x = (x << 8) | next byte``. The encoder starts at ``x = 2**23`` and works
-backwards, so a decoder that has read every byte ends at ``2**23``: a stream that does not is
-damaged, and says so.
+``x < 2**23``: ``x = (x << 8) | next byte`` (the one byte stream both states share). The encoder
+starts both at ``2**23`` and works backwards, so a decoder that has read every byte ends with both
+at ``2**23``: a stream that does not is damaged, and says so.
 
 The loops are compiled by numba (nogil), so two sequences code on two cores at once.
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numba
 import numpy as np
@@ -98,9 +102,11 @@ def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndar
             rcp[t] = ((np.uint64(1) << (sh + np.uint64(31))) + f - np.uint64(1)) // f
             rshift[t] = sh - np.uint64(1)
             bias[t] = np.uint64(cum[t])
-    x = np.uint64(RANS_L)
+    x0 = np.uint64(RANS_L)
+    x1 = np.uint64(RANS_L)
     pos = out.size
     for i in range(tok.size - 1, -1, -1):
+        x = x1 if i & 1 else x0
         nb = np.int64(nbits[i])
         if nb:  # the extra bits, last chunk first (the decoder reads the lowest chunk first)
             e = np.uint64(extra[i])
@@ -110,7 +116,7 @@ def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndar
                 v = (e >> np.uint64(shift)) & np.uint64((1 << k) - 1)
                 xm = np.uint64((RANS_L >> k) << 8)
                 while x >= xm:
-                    if pos == 4:  # never: the buffer is sized for the worst case
+                    if pos == 8:  # never: the buffer is sized for the worst case
                         return -1
                     pos -= 1
                     out[pos] = np.uint8(x & np.uint64(0xFF))
@@ -120,17 +126,54 @@ def _encode(tok: np.ndarray, extra: np.ndarray, nbits: np.ndarray, freq: np.ndar
         t = tok[i]
         xm = x_max[t]
         while x >= xm:
-            if pos == 4:
+            if pos == 8:
                 return -1
             pos -= 1
             out[pos] = np.uint8(x & np.uint64(0xFF))
             x >>= np.uint64(8)
         q = ((x * rcp[t]) >> np.uint64(32)) >> rshift[t]
         x = x + bias[t] + q * cmpl[t]
-    for b in range(3, -1, -1):
-        pos -= 1
-        out[pos] = np.uint8((x >> np.uint64(8 * b)) & np.uint64(0xFF))
+        if i & 1:
+            x1 = x
+        else:
+            x0 = x
+    for x in (x1, x0):  # written backwards: the stream starts with x0, then x1
+        for b in range(3, -1, -1):
+            pos -= 1
+            out[pos] = np.uint8((x >> np.uint64(8 * b)) & np.uint64(0xFF))
     return pos
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _decode_value(x: Any, pos: int, buf: np.ndarray, slot: np.ndarray, slot_freq: np.ndarray,
+                  slot_off: np.ndarray) -> tuple[Any, Any, int]:  # pragma: no cover
+    """One value from state ``x``: (value, new state, new position; -1 if the bytes ran out)."""
+    n = buf.size
+    s = x & (PROB_SCALE - 1)
+    t = slot[s]
+    x = slot_freq[s] * (x >> PROB_BITS) + slot_off[s]
+    while x < RANS_L:
+        if pos >= n:
+            return 0, x, -1
+        x = (x << 8) | buf[pos]
+        pos += 1
+    u = np.int64(t)
+    if t >= DIRECT:
+        k = (t - DIRECT) // 2 + 5
+        nb = k - 1
+        u = (np.int64(1) << k) | (np.int64((t - DIRECT) & 1) << nb)
+        shift = 0
+        while shift < nb:
+            kk = 8 if nb - shift > 8 else nb - shift
+            u |= (x & ((1 << kk) - 1)) << shift
+            x >>= kk
+            while x < RANS_L:
+                if pos >= n:
+                    return 0, x, -1
+                x = (x << 8) | buf[pos]
+                pos += 1
+            shift += 8
+    return ((u >> 1) if (u & 1) == 0 else -((u + 1) >> 1)), x, pos
 
 
 @numba.njit(cache=True, nogil=True)
@@ -139,44 +182,36 @@ def _decode(buf: np.ndarray, start: int, freq: np.ndarray, cum: np.ndarray, slot
     """Fill ``out``; returns 0, or -1 if the bytes ran out, -2 if the state does not end where the
     encoder began, -3 if bytes are left over."""
     n = buf.size
-    if start + 4 > n:
+    if start + 8 > n:
         return -1
-    x = (np.int64(buf[start]) | (np.int64(buf[start + 1]) << 8) | (np.int64(buf[start + 2]) << 16)
-         | (np.int64(buf[start + 3]) << 24))
-    pos = start + 4
-    mask = PROB_SCALE - 1
+    x0 = (np.int64(buf[start]) | (np.int64(buf[start + 1]) << 8) | (np.int64(buf[start + 2]) << 16)
+          | (np.int64(buf[start + 3]) << 24))
+    x1 = (np.int64(buf[start + 4]) | (np.int64(buf[start + 5]) << 8) | (np.int64(buf[start + 6]) << 16)
+          | (np.int64(buf[start + 7]) << 24))
+    pos = start + 8
     slot_freq = np.empty(PROB_SCALE, np.int64)  # per slot: its token's frequency, and the slot less
     slot_off = np.empty(PROB_SCALE, np.int64)  # the token's cumulative start: one lookup a value
     for j in range(PROB_SCALE):
         slot_freq[j] = freq[slot[j]]
         slot_off[j] = j - cum[slot[j]]
-    for i in range(out.size):
-        s = x & mask
-        t = slot[s]
-        x = slot_freq[s] * (x >> PROB_BITS) + slot_off[s]
-        while x < RANS_L:
-            if pos >= n:
-                return -1
-            x = (x << 8) | buf[pos]
-            pos += 1
-        u = np.int64(t)
-        if t >= DIRECT:
-            k = (t - DIRECT) // 2 + 5
-            nb = k - 1
-            u = (np.int64(1) << k) | (np.int64((t - DIRECT) & 1) << nb)
-            shift = 0
-            while shift < nb:
-                kk = 8 if nb - shift > 8 else nb - shift
-                u |= (x & ((1 << kk) - 1)) << shift
-                x >>= kk
-                while x < RANS_L:
-                    if pos >= n:
-                        return -1
-                    x = (x << 8) | buf[pos]
-                    pos += 1
-                shift += 8
-        out[i] = (u >> 1) if (u & 1) == 0 else -((u + 1) >> 1)
-    if x != RANS_L:
+    i = 0
+    count = out.size
+    while i + 1 < count:  # two independent states: the CPU overlaps their dependency chains
+        v0, x0, pos = _decode_value(x0, pos, buf, slot, slot_freq, slot_off)
+        if pos < 0:
+            return -1
+        v1, x1, pos = _decode_value(x1, pos, buf, slot, slot_freq, slot_off)
+        if pos < 0:
+            return -1
+        out[i] = v0
+        out[i + 1] = v1
+        i += 2
+    if i < count:
+        v0, x0, pos = _decode_value(x0, pos, buf, slot, slot_freq, slot_off)
+        if pos < 0:
+            return -1
+        out[i] = v0
+    if x0 != RANS_L or x1 != RANS_L:
         return -2
     if pos != n:
         return -3
@@ -226,7 +261,7 @@ def encode(values: np.ndarray) -> bytes:
     cum = np.zeros(freq.size, np.int64)
     np.cumsum(freq[:-1], out=cum[1:])
     # a token costs at most 12 bits plus a byte of renormalisation slack, then the extra bits
-    out = np.empty(3 * n + extra_bits // 8 + 64, np.uint8)
+    out = np.empty(3 * n + extra_bits // 8 + 72, np.uint8)
     start = _encode(tok, extra, nbits, freq, cum, out)
     if start < 0:
         raise RuntimeError("rans: the output buffer was too small (a bug)")

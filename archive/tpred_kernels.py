@@ -2,10 +2,10 @@
 
 Versions 1-3 run the same arithmetic as a dozen numpy calls a step, each a pass over the frame
 and each holding the GIL between calls, which kept the encoder near 60 frames a second on one
-core. These loops do exactly what ``archive.temporal``'s docstring specifies for version 4 (the
-v4 golden records were written by the numpy code before these existed, and decode through
-them); integer arithmetic throughout, except the scene mean's float64 division, which is
-IEEE-exact on every machine.
+core. These loops do exactly what ``archive.temporal``'s docstring specifies for version 4 (a
+first v4 written by numpy steps decoded bit-exact through them, and the block-mode passes serve
+version 3 too, whose golden records still decode); integer arithmetic throughout, except
+float64 divisions whose results are exact on every machine.
 """
 
 from __future__ import annotations
