@@ -494,14 +494,12 @@ class _State4(_State3):
         super().__init__()
         self.window = _SceneWindow4()
         self.defects = np.empty(0, np.int64)  # flat pixel indices, increasing
-        self.defect_mask: np.ndarray | None = None
         self._defect = np.zeros((0, 0), bool)  # the mask, all False when nothing is listed
         self._ones = np.zeros((0, 0), np.uint8)  # stands in for a weight when there is none
 
     def reset(self) -> None:
         super().reset()
         self.defects = np.empty(0, np.int64)
-        self.defect_mask = None
 
     def key(self, f: np.ndarray, defects: np.ndarray | None = None) -> None:
         f = f.astype(np.int32)
@@ -509,7 +507,6 @@ class _State4(_State3):
         if defects is not None and defects.size:
             self.defects = defects.astype(np.int64)
             self._defect.ravel()[self.defects] = True
-            self.defect_mask = self._defect
             self.window.weight = (~self._defect).astype(np.uint8)
         self.pattern = _Pattern(f.shape)
         f64 = f << SCALE_BITS
@@ -529,9 +526,9 @@ class _State4(_State3):
         p = np.empty(shape, np.int32)
         m64 = np.empty(shape, np.int32)
         other = np.empty(shape, bool)
-        k = tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self.defects,
-                                  p, m64, other)
-        return p, m64, (other if k else None)
+        tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self.defects,
+                              p, m64, other)
+        return p, m64, other  # the mask even where it is all False: every later step takes it as it is
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
         from archive import tpred_kernels
@@ -780,8 +777,9 @@ _CLIP = 16  # counts: a difference beyond it is something moving on its own, not
 class TemporalEncoder:
     def __init__(self, window: int = 16, key_interval: int = 64, max_shift: int = 32,
                  bitstream: int = BITSTREAM_VERSION, defects: np.ndarray | None = None) -> None:
-        """``defects``: the list for the first key frame (version 4), where the frames before it
-        were seen by another watch (``encode_gops``); otherwise the encoder's own watch lists them."""
+        """``defects`` (version 4): the sensor's defects as the caller knows them (``encode_gops``
+        keeps one watch for the whole sequence); every key frame lists them and the encoder keeps
+        no watch of its own. Otherwise its own watch lists them."""
         if not 1 <= window <= 255 or key_interval < 1:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
         if bitstream not in MAGICS:
@@ -791,8 +789,8 @@ class TemporalEncoder:
         self._state = _window_for(bitstream)
         self._prev: np.ndarray | None = None
         self._since_key = 0
-        self._stuck = _StuckPixels() if bitstream >= 4 else None
-        self._first_defects = defects
+        self._known_defects = defects
+        self._stuck = _StuckPixels() if bitstream >= 4 and defects is None else None
 
     def encode(self, frame: np.ndarray) -> bytes:
         from archive import tpred_key
@@ -805,9 +803,8 @@ class TemporalEncoder:
         if self._prev is None or self._prev.shape != frame.shape or self._since_key >= self.key_interval:
             self._state.reset()
             if isinstance(self._state, _State4):
-                assert self._stuck is not None
-                defects = self._stuck.listed() if self._first_defects is None else self._first_defects
-                self._first_defects = None
+                defects = self._stuck.listed() if self._stuck is not None else self._known_defects
+                assert defects is not None
                 ptype, payload = _INT32, _pack_defects(defects) + tpred_key.encode_key(f)
                 self._state.key(f, defects)
             elif isinstance(self._state, _State3):
@@ -900,13 +897,13 @@ class TemporalDecoder:
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
                 if isinstance(st, _State4):
-                    f = _unpack_streams4(payload, pos, pred, other)
+                    f = _unpack_streams4(payload, pos, pred, other)  # range checked as it is merged
                 else:
                     f = pred + _unpack_streams(hdr.payload_type, payload, pos, other, shape)
             else:
                 pred, _ = st.predict(hdr.dx, hdr.dy)
                 f = pred + _unpack(hdr.payload_type, payload, shape)
-        if f.min() < 0 or f.max() > 65535:
+        if not (isinstance(self._state, _State4) and hdr.kind == PREDICTED) and (f.min() < 0 or f.max() > 65535):
             raise TpredError("the record decodes outside uint16: damaged, or not from this sequence")
         if not isinstance(self._state, _State3):
             self._state.push(f)

@@ -23,10 +23,10 @@ _SCALE = 6
 
 @numba.njit(cache=True, nogil=True)
 def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, est: np.ndarray, prev: np.ndarray,
-            defects: np.ndarray, p: np.ndarray, m64: np.ndarray, other: np.ndarray) -> int:  # pragma: no cover
+            defects: np.ndarray, p: np.ndarray, m64: np.ndarray, other: np.ndarray) -> None:  # pragma: no cover
     """The scene mean ``m64`` (``S / N`` truncated, or ``last`` moved where no frame saw the
     point), the prediction ``p`` (``(m64 + est + 32) >> 6``, or a defect's own previous value)
-    and ``other`` (unseen or defect); returns how many pixels are ``other``. The main pass has
+    and ``other`` (unseen or defect). The main pass has
     no branch, so it vectorises; the unseen points and the defects (few) are patched after."""
     h, w = p.shape
     unseen = 0
@@ -46,15 +46,11 @@ def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, es
                     m = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
                     m64[r, c] = m
                     p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
-    k = unseen
     for i in range(defects.size):
         r = defects[i] // w
         c = defects[i] % w
         p[r, c] = prev[r, c]
-        if not other[r, c]:
-            other[r, c] = True
-            k += 1
-    return k
+        other[r, c] = True
 
 
 @numba.njit(cache=True, nogil=True)
