@@ -27,7 +27,7 @@ import tifffile
 from archive.codecs import get_codec
 from recorder.capture.sources.sim import SimSource
 
-__all__ = ["bench_archive", "noise_entropy_bound", "print_table"]
+__all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
 SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
 
@@ -38,14 +38,21 @@ def noise_entropy_bound(sigma_counts: float, bits: int = 16) -> float:
     return bits / h
 
 
-def _frame_sets(n: int) -> dict[str, list[np.ndarray]]:
-    sets = {"sim 640x512": [f.pixels for f in SimSource(frames=n, paced=False, seed=11).frames()]}
+def real_frames() -> dict[str, np.ndarray]:
+    """The real frames in ``../shared/samples`` the benchmarks measure on (none where it is absent)."""
+    out: dict[str, np.ndarray] = {}
     bins = sorted((SAMPLES / "terraref").glob("*_ir.bin")) if SAMPLES.is_dir() else []
     if bins:
-        sets["real TERRA-REF 640x480"] = [np.fromfile(bins[0], "<u2").reshape(480, 640)]
+        out["real TERRA-REF 640x480"] = np.fromfile(bins[0], "<u2").reshape(480, 640)
     tif = SAMPLES / "flir" / "example_radiometric.tiff"
     if tif.is_file():
-        sets["real FLIR Duo 640x512"] = [tifffile.imread(tif)]
+        out["real FLIR Duo 640x512"] = np.asarray(tifffile.imread(tif), np.uint16)
+    return out
+
+
+def _frame_sets(n: int) -> dict[str, list[np.ndarray]]:
+    sets = {"sim 640x512": [f.pixels for f in SimSource(frames=n, paced=False, seed=11).frames()]}
+    sets.update((name, [frame]) for name, frame in real_frames().items())
     return sets
 
 

@@ -44,18 +44,9 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
 def _real_frames() -> dict[str, list[np.ndarray]]:
     """The real frames in ``../shared/samples``: single stills (no sample is a sequence yet), so
     tpred codes each as a key frame; its goal there is JPEG-XL e2's ratio."""
-    from archive.bench import SAMPLES
+    from archive.bench import real_frames
 
-    out: dict[str, list[np.ndarray]] = {}
-    bins = sorted((SAMPLES / "terraref").glob("*_ir.bin")) if SAMPLES.is_dir() else []
-    if bins:
-        out["real TERRA-REF 640x480 (one frame)"] = [np.fromfile(bins[0], "<u2").reshape(480, 640)]
-    tif = SAMPLES / "flir" / "example_radiometric.tiff"
-    if tif.is_file():
-        import tifffile
-
-        out["real FLIR Duo 640x512 (one frame)"] = [np.asarray(tifffile.imread(tif), np.uint16)]
-    return out
+    return {f"{name} (one frame)": [frame] for name, frame in real_frames().items()}
 
 
 def _tpred(frames: list[np.ndarray], bitstream: int = BITSTREAM_VERSION) -> tuple[float, float, float]:
