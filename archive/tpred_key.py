@@ -22,6 +22,7 @@ context the gradient ``g = |a - c| + |b - c| + |d - b|`` against 6, 12, 24 and 4
 from __future__ import annotations
 
 import struct
+from typing import Any
 
 import numba
 import numpy as np
@@ -39,29 +40,38 @@ class KeyFrameError(ValueError):
     """A key frame payload that does not decode, with the reason."""
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _predict(img: np.ndarray, r: int, col: int) -> tuple[Any, int]:  # pragma: no cover
+    """Pixel ``(r, col)``'s prediction and context from its decoded neighbours in ``img`` (the
+    rule in this module's docstring); the one place both sides take it from."""
+    w = img.shape[1]
+    if r == 0:
+        a = np.int64(img[0, col - 1]) if col > 0 else np.int64(0)
+        b = a
+        c = a
+        d = a
+    else:
+        b = np.int64(img[r - 1, col])
+        if col > 0:
+            a = np.int64(img[r, col - 1])
+            c = np.int64(img[r - 1, col - 1])
+        else:
+            a = b
+            c = b
+        d = np.int64(img[r - 1, col + 1]) if col < w - 1 else b
+    g = abs(a - c) + abs(b - c) + abs(d - b)
+    return (2 * a + 2 * b - c + d) >> 2, 0 if g < 6 else 1 if g < 12 else 2 if g < 24 else 3 if g < 48 else 4
+
+
 @numba.njit(cache=True, nogil=True)
 def _residuals(f: np.ndarray, resid: np.ndarray, ctx: np.ndarray) -> None:  # pragma: no cover
-    """Each pixel's residual and context, from the frame's own neighbours (as ``_rebuild``)."""
+    """Each pixel's residual and context, from the frame's own neighbours."""
     h, w = f.shape
     for r in range(h):
         for col in range(w):
-            if r == 0:
-                a = np.int64(f[0, col - 1]) if col > 0 else np.int64(0)
-                b = a
-                c = a
-                d = a
-            else:
-                b = np.int64(f[r - 1, col])
-                if col > 0:
-                    a = np.int64(f[r, col - 1])
-                    c = np.int64(f[r - 1, col - 1])
-                else:
-                    a = b
-                    c = b
-                d = np.int64(f[r - 1, col + 1]) if col < w - 1 else b
-            g = abs(a - c) + abs(b - c) + abs(d - b)
-            ctx[r, col] = 0 if g < 6 else 1 if g < 12 else 2 if g < 24 else 3 if g < 48 else 4
-            resid[r, col] = np.int64(f[r, col]) - ((2 * a + 2 * b - c + d) >> 2)
+            p, k = _predict(f, r, col)
+            ctx[r, col] = k
+            resid[r, col] = np.int64(f[r, col]) - p
 
 
 def encode_key(frame: np.ndarray) -> bytes:
@@ -82,27 +92,12 @@ def _rebuild(h: int, w: int, values: np.ndarray, starts: np.ndarray, counts: np.
     """The frame from its context streams, pixel by pixel; -1 where a stream runs out."""
     for r in range(h):
         for col in range(w):
-            if r == 0:
-                a = out[0, col - 1] if col > 0 else 0
-                b = a
-                c = a
-                d = a
-            else:
-                b = out[r - 1, col]
-                if col > 0:
-                    a = out[r, col - 1]
-                    c = out[r - 1, col - 1]
-                else:
-                    a = b
-                    c = b
-                d = out[r - 1, col + 1] if col < w - 1 else b
-            g = abs(a - c) + abs(b - c) + abs(d - b)
-            k = 0 if g < 6 else 1 if g < 12 else 2 if g < 24 else 3 if g < 48 else 4
+            p, k = _predict(out, r, col)
             i = used[k]
             if i >= counts[k]:
                 return -1
             used[k] = i + 1
-            out[r, col] = ((2 * a + 2 * b - c + d) >> 2) + values[starts[k] + i]
+            out[r, col] = p + values[starts[k] + i]
     return 0
 
 
