@@ -1,0 +1,96 @@
+"""archive.lzw writes TIFF LZW that every reader decodes: the bytes libtiff itself writes."""
+
+from __future__ import annotations
+
+import io
+
+import imagecodecs
+import numpy as np
+import pytest
+import tifffile
+
+from archive.formats.tiff_lzw import encode_page
+from archive.lzw import lzw_encode, lzw_encode_strips
+
+
+def _cases() -> list[bytes]:
+    rng = np.random.default_rng(1)
+    cases = [b"", b"a", b"ab", b"aaa", bytes(100_000), bytes(range(256)) * 400,
+             rng.integers(0, 256, 200_000, dtype=np.uint8).tobytes(),  # clears at 4094 many times
+             rng.integers(0, 4, 300_000, dtype=np.uint8).tobytes()]
+    # every length around the code-width steps (511, 1023, 2047) and the Clear at 4094
+    cases += [rng.integers(0, 256, n, dtype=np.uint8).tobytes() for n in (253, 254, 255, 256, 257, 765, 766,
+                                                                           767, 1790, 1791, 1792, 3836, 3837,
+                                                                           3838, 3839, 3840)]
+    cases += [rng.integers(0, 3, n, dtype=np.uint8).tobytes() for n in range(0, 2000, 13)]
+    return cases
+
+
+@pytest.mark.parametrize("data", _cases(), ids=lambda d: f"{len(d)}B")
+def test_imagecodecs_decodes_every_stream(data: bytes) -> None:
+    assert imagecodecs.lzw_decode(lzw_encode(data)) == data
+
+
+def test_strips_are_independent_streams_of_the_given_size() -> None:
+    data = np.random.default_rng(2).integers(0, 5, 100_003, dtype=np.uint8).tobytes()
+    parts = lzw_encode_strips(data, 777)
+    assert len(parts) == -(-len(data) // 777)
+    assert [imagecodecs.lzw_decode(p) for p in parts] == [data[i:i + 777] for i in range(0, len(data), 777)]
+    assert parts[3] == lzw_encode(data[3 * 777:4 * 777])  # no state leaks from one strip to the next
+    with pytest.raises(ValueError, match="strip_bytes"):
+        lzw_encode_strips(data, 0)
+
+
+def _pillow_libtiff():
+    pil = pytest.importorskip("PIL")
+    from PIL import Image, TiffImagePlugin, features
+
+    if not features.check("libtiff"):
+        pytest.skip("this Pillow is built without libtiff")
+    return pil, Image, TiffImagePlugin
+
+
+@pytest.mark.parametrize("kind", ["smooth", "noise", "low-noise"])
+def test_strips_are_the_bytes_libtiff_writes(kind: str) -> None:
+    """libtiff (through Pillow) writes an LZW TIFF; each of its strips, encoded here from the
+    same rows, is byte for byte the same stream."""
+    _, Image, TiffImagePlugin = _pillow_libtiff()
+    rng = np.random.default_rng(0)
+    frame = {"smooth": (np.add.outer(np.arange(200), np.arange(300)) // 3),
+             "noise": rng.integers(0, 16384, (200, 300)),
+             "low-noise": 1000 + rng.integers(0, 4, (200, 300))}[kind].astype("<u2")
+    buf = io.BytesIO()
+    old = TiffImagePlugin.WRITE_LIBTIFF
+    TiffImagePlugin.WRITE_LIBTIFF = True
+    try:
+        Image.frombytes("I;16", (frame.shape[1], frame.shape[0]), frame.tobytes()).save(
+            buf, format="TIFF", compression="tiff_lzw")
+    finally:
+        TiffImagePlugin.WRITE_LIBTIFF = old
+    buf.seek(0)
+    with tifffile.TiffFile(buf) as tif:
+        page = tif.pages[0]
+        assert page.compression == 5
+        for k, (offset, count) in enumerate(zip(page.dataoffsets, page.databytecounts, strict=True)):
+            buf.seek(offset)
+            rows = frame[k * page.rowsperstrip:(k + 1) * page.rowsperstrip]
+            assert lzw_encode(rows.tobytes()) == buf.read(count), f"strip {k}"
+
+
+def test_a_page_libtiff_and_tifffile_read_back_exactly() -> None:
+    """A page written as the archive writes it (predictor 2, 64-row strips, a short last strip)
+    reads back bit-exact in tifffile and in libtiff."""
+    _, Image, _ = _pillow_libtiff()
+    frame = np.random.default_rng(3).integers(0, 1 << 14, (150, 96)).astype("<u2")
+    buf = io.BytesIO()
+    with tifffile.TiffWriter(buf, byteorder="<") as writer:
+        writer.write(iter(encode_page(frame, 64)), shape=frame.shape, dtype="<u2", compression="lzw",
+                     predictor=True, photometric="minisblack", rowsperstrip=64)
+    buf.seek(0)
+    with tifffile.TiffFile(buf) as tif:
+        assert (tif.pages[0].predictor, len(tif.pages[0].dataoffsets)) == (2, 3)
+        assert np.array_equal(tif.pages[0].asarray(), frame)
+    buf.seek(0)
+    assert np.array_equal(np.array(Image.open(buf)), frame)
+    with pytest.raises(ValueError, match="little-endian uint16"):
+        encode_page(frame.astype(np.int32), 64)
