@@ -20,110 +20,12 @@ it writes with tifffile and imagecodecs' decoder, and the tests decode it with l
 from __future__ import annotations
 
 import threading
-from typing import Any
 
 import numpy as np
 
 __all__ = ["lzw_encode", "lzw_encode_strips"]
 
-_KERNEL: Any = None
 _TABLES = threading.local()
-
-
-def _kernel() -> Any:
-    global _KERNEL
-    if _KERNEL is None:
-        from numba import njit
-
-        @njit(nogil=True, cache=True)
-        def put(out, pos, acc, held):  # pragma: no cover - compiled
-            held -= 32
-            v = acc >> np.uint64(held)
-            out[pos] = np.uint8((v >> np.uint64(24)) & np.uint64(255))
-            out[pos + 1] = np.uint8((v >> np.uint64(16)) & np.uint64(255))
-            out[pos + 2] = np.uint8((v >> np.uint64(8)) & np.uint64(255))
-            out[pos + 3] = np.uint8(v & np.uint64(255))
-            return pos + 4, held
-
-        @njit(nogil=True, cache=True)
-        def strip(src, out, pos, table, used):  # pragma: no cover - compiled
-            acc = np.uint64(256)  # Clear opens every strip
-            held = 9
-            nbits = 9
-            free = 258
-            maxcode = 511
-            nused = 0
-            n = src.shape[0]
-            if n > 0:
-                ent = np.uint64(src[0])
-                for i in range(1, n):
-                    c = np.uint64(src[i])
-                    idx = (ent << np.uint64(8)) | c
-                    nxt = table[idx]
-                    if nxt != 0:
-                        ent = np.uint64(nxt)
-                        continue
-                    acc = (acc << np.uint64(nbits)) | ent
-                    held += nbits
-                    if held >= 32:
-                        pos, held = put(out, pos, acc, held)
-                    table[idx] = np.uint16(free)
-                    used[nused] = idx
-                    nused += 1
-                    free += 1
-                    if free == 4094:  # the table is full: Clear, and start again at 9 bits
-                        acc = (acc << np.uint64(nbits)) | np.uint64(256)
-                        held += nbits
-                        if held >= 32:
-                            pos, held = put(out, pos, acc, held)
-                        for j in range(nused):
-                            table[used[j]] = 0
-                        nused = 0
-                        nbits = 9
-                        free = 258
-                        maxcode = 511
-                    elif free > maxcode:
-                        nbits += 1
-                        maxcode = (1 << nbits) - 1
-                    ent = c
-                acc = (acc << np.uint64(nbits)) | ent
-                held += nbits
-                if held >= 32:
-                    pos, held = put(out, pos, acc, held)
-                free += 1  # as libtiff's LZWPostEncode: the last code's entry counts before End
-                if free == 4094:
-                    acc = (acc << np.uint64(nbits)) | np.uint64(256)
-                    held += nbits
-                    if held >= 32:
-                        pos, held = put(out, pos, acc, held)
-                    nbits = 9
-                elif free > maxcode:
-                    nbits += 1
-            for j in range(nused):
-                table[used[j]] = 0
-            acc = (acc << np.uint64(nbits)) | np.uint64(257)
-            held += nbits
-            while held >= 8:
-                held -= 8
-                out[pos] = np.uint8((acc >> np.uint64(held)) & np.uint64(255))
-                pos += 1
-            if held > 0:
-                out[pos] = np.uint8((acc << np.uint64(8 - held)) & np.uint64(255))
-                pos += 1
-            return pos
-
-        @njit(nogil=True, cache=True)
-        def strips(src, size, out, ends, table, used):  # pragma: no cover - compiled
-            pos = 0
-            k = 0
-            for start in range(0, max(src.shape[0], 1), max(size, 1)):
-                pos = strip(src[start:start + size], out, pos, table, used)
-                ends[k] = pos
-                k += 1
-            return k
-
-        _KERNEL = strips
-    return _KERNEL
 
 
 def _tables() -> tuple[np.ndarray, np.ndarray]:
@@ -151,7 +53,9 @@ def lzw_encode_strips(data: bytes | bytearray | memoryview | np.ndarray, strip_b
     out = np.empty(src.size * 3 // 2 + count * 16 + (src.size // 3836 + 1) * 2 + 8, np.uint8)
     ends = np.empty(count, np.int64)
     table, used = _tables()
-    _kernel()(src, strip_bytes, out, ends, table, used)
+    from archive.lzw_kernels import encode_strips
+
+    encode_strips(src, strip_bytes, out, ends, table, used)
     starts = [0, *ends[:-1].tolist()]
     return [out[s:e].tobytes() for s, e in zip(starts, ends.tolist(), strict=True)]
 
