@@ -29,6 +29,7 @@ __all__ = [
     "SIDECAR",
     "RosMessage",
     "TargetMark",
+    "annotations_doc",
     "annotations_message",
     "json_payload",
     "message_for_topic",
@@ -55,9 +56,9 @@ class RosMessage:
 
 @cache
 def _encoder(name: str, text: str) -> Callable[[Any], bytes]:
-    from mcap_ros2._dynamic import serialize_dynamic
+    from recorder.icd.cdr import compile_encoder
 
-    return serialize_dynamic(name, text)[name]
+    return compile_encoder(name, text)
 
 
 def _f(v: Any) -> float:
@@ -325,6 +326,11 @@ def target_marks(targets: list[dict[str, Any]], scale: float = 1.0) -> list[Targ
 
 def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
     """The targets' marks as CDR ``foxglove_msgs/msg/ImageAnnotations``, for Foxglove's Image panel."""
+    return _encoder(ANNOTATIONS.name, ANNOTATIONS.text)(annotations_doc(stamp_ns, targets))
+
+
+def annotations_doc(stamp_ns: int, targets: list[dict[str, Any]]) -> dict[str, Any]:
+    """The fields of ``annotations_message``."""
     sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
     t = {"sec": sec, "nanosec": nsec}
 
@@ -339,4 +345,4 @@ def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
     texts = [{"timestamp": t, "position": {"x": m.label_at[0], "y": m.label_at[1]}, "text": m.label,
               "font_size": 12.0, "text_color": rgba(LABEL_RGBA), "background_color": rgba(LABEL_BACKGROUND_RGBA)}
              for m in marks]
-    return _encoder(ANNOTATIONS.name, ANNOTATIONS.text)({"circles": [], "points": points, "texts": texts})
+    return {"circles": [], "points": points, "texts": texts}
