@@ -37,7 +37,7 @@ from archive.formats.base import (
 from archive.lzw import lzw_encode_strips
 from recorder.storage.reader import SessionFrame
 
-__all__ = ["TiffLzw", "decode_strip", "encode_page"]
+__all__ = ["TiffLzw", "decode_strip", "encode_page", "write_page"]
 
 _BIGTIFF_ABOVE = 3_500_000_000  # classic TIFF offsets are 32-bit
 #: A private tag (ASCII) holding the frame's log time in Unix ns, so the time survives apart from
@@ -68,12 +68,9 @@ class TiffLzw(ArchiveFormat):
                         raw = frame.pixels.nbytes * max(1, ctx.frames_per_segment.get(segment, 1))
                         big = raw > _BIGTIFF_ABOVE
                         writer = tifffile.TiffWriter(fh, byteorder="<", bigtiff=big)
-                    pixels = np.ascontiguousarray(frame.pixels, "<u2")
-                    writer.write(iter(encode_page(pixels, self.rowsperstrip)), shape=pixels.shape, dtype="<u2",
-                                 compression="lzw", predictor=True,
-                                 photometric="minisblack", planarconfig="contig", rowsperstrip=self.rowsperstrip,
-                                 description=sidecar_text(frame), metadata=None, software="thermcap",
-                                 extratags=[(LOG_TIME_TAG, "s", 0, str(frame.log_time), True)])
+                    write_page(writer, frame.pixels, self.rowsperstrip, description=sidecar_text(frame),
+                               metadata=None, software="thermcap",
+                               extratags=[(LOG_TIME_TAG, "s", 0, str(frame.log_time), True)])
                     n += 1
                     if ctx.on_frame:
                         ctx.on_frame()
@@ -120,6 +117,14 @@ class TiffLzw(ArchiveFormat):
                     except (tifffile.TiffFileError, OSError, ValueError, IndexError) as exc:
                         raise ArchiveError(f"{rec['path']}: cannot read rows {y0}..{y1} ({exc})") from exc
             first += n
+
+
+def write_page(writer: tifffile.TiffWriter, pixels: np.ndarray, rowsperstrip: int, **tags: Any) -> None:
+    """One page as the archive stores it: little-endian uint16, LZW with the horizontal
+    predictor, ``rowsperstrip``-row strips encoded by ``encode_page``; ``tags`` go to tifffile."""
+    pixels = np.ascontiguousarray(pixels, "<u2")
+    writer.write(iter(encode_page(pixels, rowsperstrip)), shape=pixels.shape, dtype="<u2", compression="lzw",
+                 predictor=True, photometric="minisblack", planarconfig="contig", rowsperstrip=rowsperstrip, **tags)
 
 
 def encode_page(pixels: np.ndarray, rowsperstrip: int) -> list[bytes]:

@@ -29,3 +29,16 @@ def test_bench_archive_session_reports_x_real_time_beside_its_floors():
     assert res["frames"] == 30 and res["formats"] == ["png16", "hdf5"]
     assert res["x_real_time"] > 0 and res["cpu_bound_x_real_time"] >= res["x_real_time"] * 0.5
     assert set(res["x_real_time_one_format"]) == {"png16", "hdf5"} and res["compression_ratio"]["hdf5"] > 1
+
+
+def test_bench_archive_codecs_sets_the_archive_s_lzw_beside_tifffile_s():
+    """The tiff-lzw row is the format's own encoder (archive.lzw), its anchor tifffile with
+    imagecodecs' LZW on the same frames: the same kind of stream, so the same size within 0.2%."""
+    r = CliRunner().invoke(cli, ["bench", "archive", "--frames", "2", "--json"])
+    assert r.exit_code == 0, r.output
+    rows = json.loads(r.output)
+    for frames in {row["frames"] for row in rows}:
+        by = {row["codec"]: row for row in rows if row["frames"] == frames}
+        ours, theirs = by["tiff-lzw + predictor (archive.lzw)"], by["tifffile LZW + predictor (baseline)"]
+        assert ours["kind"] == "thermcap" and theirs["kind"] == "baseline"
+        assert abs(ours["ratio"] / theirs["ratio"] - 1) < 0.002 and ours["encode_fps"] > 0
