@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import os
 import shutil
+import statistics
 import tempfile
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -98,11 +100,35 @@ def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -
     return (_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
 
 
+def _against_sdk(record: Callable[[Path], tuple[Any, float, float]], first: float, frames: list[CapturedFrame],
+                 n: int, base: Path, level: int, rounds: int) -> tuple[tuple[float, float, int], float, list[float]]:
+    """The recorder and the SDK in alternating order, ``rounds`` runs each (R S S R R S ...), the
+    files removed after each: whichever runs second had found the page cache warmer or fuller,
+    which moved one run's ratio by several percent. Returns the SDK's median run (CPU s a frame,
+    wall s, bytes), the recorder's median CPU s a frame, and each round's ratio."""
+    ours, theirs = [first], []
+    order = "".join("RS" if i % 2 == 0 else "SR" for i in range(rounds))[1:]  # the first R has run
+    for k, who in enumerate(order):
+        if who == "S":
+            path = base / f"sdk-{k}.mcap"
+            theirs.append(_foxglove_sdk(frames, n, path, level))
+            path.unlink(missing_ok=True)
+        else:
+            root = base / f"again-{k}"
+            ours.append(record(root)[2])
+            shutil.rmtree(root, ignore_errors=True)
+    sdk = sorted(theirs)[len(theirs) // 2]
+    return sdk, statistics.median(ours), [round(a / b[0], 3) for a, b in zip(ours, theirs, strict=True)]
+
+
 def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: str | None = None,
                  progress: bool = True, fps: float = 60.0,
-                 compressions: tuple[str, ...] = ("auto", "auto+analysis", "lz4")) -> list[dict[str, Any]]:
+                 compressions: tuple[str, ...] = ("auto", "auto+analysis", "lz4"),
+                 sdk_rounds: int = 3) -> list[dict[str, Any]]:
     """One row per frame size and mode: "auto" is ``thermcap record``'s compression with analysis off,
-    "auto+analysis" the same with the detector running beside it (at the camera's 60 fps)."""
+    "auto+analysis" the same with the detector running beside it (at the camera's 60 fps). Where
+    the SDK anchors a row, both writers run ``sdk_rounds`` times in alternating order and the row
+    gives each one's median CPU."""
     rows = []
     base = Path(workdir) if workdir else Path(tempfile.mkdtemp(prefix="thermcap-bench-"))
     base.mkdir(parents=True, exist_ok=True)
@@ -119,21 +145,26 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
                 print(f"  {width}x{height} {name} ({comp.value}-{level}): {n_frames} frames ...", flush=True)
             baseline_fps = _baseline(rendered, n_frames, base / f"baseline-{width}.zst", 1)
             root = base / f"root-{width}-{name}"
-            rec = Recorder(MemorySource(sim, rendered, n_frames), root, queue_frames=max(120, n_frames),
-                           policy=SegmentPolicy(compression=comp, compression_level=level), recover_leftovers=False,
-                           analysis=analysis, analysis_max_fps=fps)
-            cpu = _cpu_s()
-            t = time.perf_counter()
-            res = rec.run()
-            dt = time.perf_counter() - t
-            cpu_per_frame = (_cpu_s() - cpu) / n_frames
+
+            def record(where: Path) -> tuple[Any, float, float]:
+                rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
+                               policy=SegmentPolicy(compression=comp, compression_level=level),
+                               recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
+                cpu = _cpu_s()
+                t = time.perf_counter()
+                res = rec.run()
+                dt = time.perf_counter() - t
+                # +analysis: the detector is capped at the camera's rate while the frames come as fast
+                # as the recorder takes them, so most frames are (rightly) marked skipped: no failure
+                if res.error is not None or res.dropped or res.frames_written != n_frames:
+                    raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
+                return res, dt, (_cpu_s() - cpu) / n_frames
+
+            res, dt, cpu_per_frame = record(root)
             sdk = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
-                sdk = _foxglove_sdk(rendered, n_frames, base / f"sdk-{width}.mcap", level)
-            # +analysis: the detector is capped at the camera's rate while the frames come as fast as
-            # the recorder takes them, so most frames are (rightly) marked skipped; that is not a failure
-            if res.error is not None or res.dropped or res.frames_written != n_frames:
-                raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
+                sdk, cpu_per_frame, pairs = _against_sdk(record, cpu_per_frame, rendered, n_frames, base, level,
+                                                         sdk_rounds)
             rec_fps = n_frames / dt
             size = sum(s["bytes"] for s in res.segments)
             frame_mb = width * height * 2 / 1e6
@@ -148,7 +179,8 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
                 "cores_at_60fps": round(cpu_per_frame * fps, 3),
                 **({"sdk_cpu_ms_per_frame": round(sdk[0] * 1e3, 3), "sdk_fps": round(n_frames / sdk[1], 1),
                     "sdk_ratio": round(n_frames * width * height * 2 / sdk[2], 3),
-                    "cpu_vs_sdk": round(cpu_per_frame / sdk[0], 3)} if sdk else {}),
+                    "cpu_vs_sdk": round(cpu_per_frame / sdk[0], 3), "sdk_rounds": sdk_rounds,
+                    "cpu_vs_sdk_each_round": pairs} if sdk else {}),
             })
             shutil.rmtree(root, ignore_errors=True)
     finally:
