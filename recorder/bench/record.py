@@ -9,6 +9,7 @@ a file. Ratios against it, not absolute timings, are what to compare across mach
 
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import statistics
@@ -100,6 +101,23 @@ def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -
     return (_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
 
 
+def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, comp: Compression, level: int,
+                 analysis: bool, fps: float, where: Path) -> tuple[Any, float, float]:
+    """One recording of the frames into ``where``: (result, wall s, CPU s a frame)."""
+    rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
+                   policy=SegmentPolicy(compression=comp, compression_level=level),
+                   recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
+    cpu = _cpu_s()
+    t = time.perf_counter()
+    res = rec.run()
+    dt = time.perf_counter() - t
+    # +analysis: the detector is capped at the camera's rate while the frames come as fast as the
+    # recorder takes them, so most frames are (rightly) marked skipped: that is no failure
+    if res.error is not None or res.dropped or res.frames_written != n_frames:
+        raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
+    return res, dt, (_cpu_s() - cpu) / n_frames
+
+
 def _against_sdk(record: Callable[[Path], tuple[Any, float, float]], first: float, frames: list[CapturedFrame],
                  n: int, base: Path, level: int, rounds: int) -> tuple[tuple[float, float, int], float, list[float]]:
     """The recorder and the SDK in alternating order, ``rounds`` runs each (R S S R R S ...), the
@@ -146,20 +164,7 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             baseline_fps = _baseline(rendered, n_frames, base / f"baseline-{width}.zst", 1)
             root = base / f"root-{width}-{name}"
 
-            def record(where: Path) -> tuple[Any, float, float]:
-                rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
-                               policy=SegmentPolicy(compression=comp, compression_level=level),
-                               recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
-                cpu = _cpu_s()
-                t = time.perf_counter()
-                res = rec.run()
-                dt = time.perf_counter() - t
-                # +analysis: the detector is capped at the camera's rate while the frames come as fast
-                # as the recorder takes them, so most frames are (rightly) marked skipped: no failure
-                if res.error is not None or res.dropped or res.frames_written != n_frames:
-                    raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
-                return res, dt, (_cpu_s() - cpu) / n_frames
-
+            record = functools.partial(_record_once, sim, rendered, n_frames, comp, level, analysis, fps)
             res, dt, cpu_per_frame = record(root)
             sdk = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
