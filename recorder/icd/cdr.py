@@ -124,22 +124,36 @@ def _struct_writer(msgdef: Any, msgdefs: dict[str, Any]) -> Writer:
     return write
 
 
+def _parser() -> tuple[Any, Callable[..., None]] | None:
+    """mcap_ros2's definition parser (its Time definition, its walk over a concatenated
+    definition), or None where a release no longer has them: they are not its public API."""
+    try:
+        from mcap_ros2._dynamic import TimeDefinition, _for_each_msgdef
+    except ImportError:
+        return None
+    return TimeDefinition, _for_each_msgdef
+
+
 def compile_encoder(schema_name: str, schema_text: str) -> Callable[[dict[str, Any]], bytes]:
     """``encode(doc) -> bytes`` for the message ``schema_name`` of a concatenated ros2msg
     definition, as mcap_ros2's ``serialize_dynamic`` would encode ``doc`` (a dict; missing
     fields take their zero value)."""
-    from mcap_ros2._dynamic import TimeDefinition, _for_each_msgdef, serialize_dynamic
+    from mcap_ros2._dynamic import serialize_dynamic
 
-    msgdefs: dict[str, Any] = {"builtin_interfaces/Time": TimeDefinition,
-                               "builtin_interfaces/Duration": TimeDefinition}
+    parser = _parser()
+    if parser is None:
+        return serialize_dynamic(schema_name, schema_text)[schema_name]
+    time_definition, for_each_msgdef = parser
+    msgdefs: dict[str, Any] = {"builtin_interfaces/Time": time_definition,
+                               "builtin_interfaces/Duration": time_definition}
 
     def keep(full: str, short: str, msgdef: Any) -> None:
         msgdefs[full] = msgdefs[short] = msgdef
 
-    _for_each_msgdef(schema_name, schema_text, keep)
     try:
+        for_each_msgdef(schema_name, schema_text, keep)
         body = _struct_writer(msgdefs[schema_name], msgdefs)
-    except _Unsupported:
+    except (_Unsupported, AttributeError, KeyError):  # AttributeError: a parser of another shape
         return serialize_dynamic(schema_name, schema_text)[schema_name]
 
     def encode(doc: dict[str, Any]) -> bytes:

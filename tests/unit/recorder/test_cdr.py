@@ -80,3 +80,20 @@ def test_what_the_plan_does_not_cover_falls_back_to_mcap_ros2() -> None:
     text = "float64[3] fixed\nint32[<=4] bounded\nstring<=5 short\n"
     fields = {"fixed": [1.0, 2.0, 3.0], "bounded": [1, 2], "short": "abcdefgh"}
     assert compile_encoder("t/msg/Fixed", text)(fields) == serialize_dynamic("t/msg/Fixed", text)["t/msg/Fixed"](fields)
+
+
+def test_without_mcap_ros2_s_parser_helpers_its_own_encoder_is_used(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The helpers compile_encoder parses with are private to mcap_ros2: a release without them,
+    or with a parser of another shape, must leave recording working on mcap_ros2's encoder."""
+    import recorder.icd.cdr as cdr
+
+    name, text = rosmsg.ANNOTATIONS.name, rosmsg.ANNOTATIONS.text
+    doc = rosmsg.annotations_doc(5, [{"target_id": "T1", "bbox": [1, 2, 30, 40]}])
+    theirs = serialize_dynamic(name, text)[name](doc)
+
+    def other_shape(*_args: Any) -> None:
+        raise AttributeError("'MessageSpecification' object has no attribute 'fields'")
+
+    for parser in (None, (object(), other_shape)):
+        monkeypatch.setattr(cdr, "_parser", lambda parser=parser: parser)
+        assert compile_encoder(name, text)(doc) == theirs
