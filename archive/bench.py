@@ -10,6 +10,7 @@ ratio near 6x on simulated frames.
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import os
@@ -174,22 +175,48 @@ def print_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
+def _cpu_s() -> float:
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float]:
+    """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` and to read them
+    back with its reader, alone, in memory: the part of archiving no scheduling can remove."""
+    from archive.formats import ArchiveContext, get_format
+
+    fmt = get_format(fid)
+    out = Path(tempfile.mkdtemp(prefix=f"floor-{fid}-", dir=workdir))
+    per_segment: dict[str, int] = {}
+    for f in frames:
+        per_segment[f.segment] = per_segment.get(f.segment, 0) + 1
+    ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment)
+    c = _cpu_s()
+    records = fmt.write(iter(frames), out, ctx)
+    write = _cpu_s() - c
+    c = _cpu_s()
+    n = sum(1 for _ in fmt.read(out, [r.path for r in records]))
+    read = _cpu_s() - c
+    if n != len(frames):
+        raise RuntimeError(f"{fid}: {n} frames read back of {len(frames)}")
+    return write / len(frames) * 1e3, read / len(frames) * 1e3
+
+
 def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
                   workdir: str | None = None) -> dict[str, Any]:
     """A whole session archived end to end (hash, every format, verification, extras) against the
-    time it covers, beside each format archived alone and two floors: the formats' encoders
+    time it covers, beside each format archived alone and three floors: the formats' encoders
     alone (their encode time per frame, measured when each was archived alone), one after
-    another; and the CPU the whole job took spread on every core, which is the best any
-    scheduling of the same work could do (encoding and the verification decode are most of it)."""
-    import resource
-
+    another; the CPU the whole job took spread on every core, which is the best any scheduling
+    of the same work could do; and the CPU of each format writing and then reading back a sample
+    of the frames, alone, which bounds any archiver that verifies with the formats' readers."""
     from archive.archiver import DEFAULT_FORMATS, archive_session
     from recorder.capture.recorder import Recorder
+    from recorder.storage.reader import iter_session_frames
 
-    def cpu_s() -> float:
-        r = resource.getrusage(resource.RUSAGE_SELF)
-        return r.ru_utime + r.ru_stime
-
+    cpu_s = _cpu_s
     fmts = tuple(formats or DEFAULT_FORMATS)
     n = int(seconds * 60)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
@@ -210,9 +237,20 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
             rate = float(alone["formats"][f].get("encode_fps") or 0.0)
             floor_s += n / rate if rate > 0 else 0.0
             ratios[f] = alone["formats"][f].get("compression_ratio")
+        # each format's own writing and reading CPU, on a sample of the session's frames
+        sample = [dataclasses.replace(fr, pixels=np.array(fr.pixels))
+                  for _, fr in zip(range(min(n, 120)), iter_session_frames(rec.session_dir), strict=False)]
+        for f in fmts:
+            format_cpu(f, sample[:4], Path(tmp))  # loads what a format compiles or imports on first use
+        codec_ms = {f: dict(zip(("write", "read"), (round(v, 2) for v in format_cpu(f, sample, Path(tmp))),
+                                strict=True)) for f in fmts}
+    codecs_ms = sum(v["write"] + v["read"] for v in codec_ms.values())
     return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts), "cores": cores,
             "archive_wall_s": round(wall, 2), "x_real_time": round(seconds / wall, 3),
             "cpu_s": round(cpu, 2), "cpu_ms_per_frame": round(cpu / n * 1000, 2),
             "cpu_bound_x_real_time": round(seconds * cores / cpu, 3) if cpu else None,
             "floor_encode_s": round(floor_s, 2), "floor_x_real_time": round(seconds / floor_s, 3) if floor_s else None,
-            "x_real_time_one_format": single, "compression_ratio": ratios}
+            "x_real_time_one_format": single, "compression_ratio": ratios,
+            # writing and reading back every frame in each format, alone: CPU that verification keeps
+            "format_cpu_ms_per_frame": codec_ms, "formats_cpu_ms_per_frame": round(codecs_ms, 2),
+            "formats_bound_x_real_time": round(1000 / 60 * cores / codecs_ms, 3) if codecs_ms else None}

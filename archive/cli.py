@@ -273,7 +273,9 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, a
                    f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "
                    f"{res['x_real_time']}x real time, {res['cpu_ms_per_frame']} CPU ms per frame (at best "
                    f"{res['cpu_bound_x_real_time']}x on {res['cores']} cores); the formats' own encoders alone: "
-                   f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}")
+                   f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}; "
+                   f"writing and reading back alone, {res['formats_cpu_ms_per_frame']} CPU ms per frame "
+                   f"{res['format_cpu_ms_per_frame']}: at best {res['formats_bound_x_real_time']}x")
         return
 
     rows = run(n_frames)

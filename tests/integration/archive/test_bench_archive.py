@@ -29,6 +29,13 @@ def test_bench_archive_session_reports_x_real_time_beside_its_floors():
     assert res["frames"] == 30 and res["formats"] == ["png16", "hdf5"]
     assert res["x_real_time"] > 0 and res["cpu_bound_x_real_time"] >= res["x_real_time"] * 0.5
     assert set(res["x_real_time_one_format"]) == {"png16", "hdf5"} and res["compression_ratio"]["hdf5"] > 1
+    # each format's own writing and reading CPU, and the bound they set on 2x real time
+    cpu = res["format_cpu_ms_per_frame"]
+    assert set(cpu) == {"png16", "hdf5"} and all(v["write"] > 0 and v["read"] > 0 for v in cpu.values())
+    total = sum(v["write"] + v["read"] for v in cpu.values())
+    assert abs(res["formats_cpu_ms_per_frame"] - total) < 0.05
+    assert res["formats_bound_x_real_time"] == round(1000 / 60 * res["cores"] / res["formats_cpu_ms_per_frame"], 3) \
+        or abs(res["formats_bound_x_real_time"] - 1000 / 60 * res["cores"] / total) < 0.01
 
 
 def test_bench_archive_codecs_sets_the_archive_s_lzw_beside_tifffile_s():
