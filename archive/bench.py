@@ -175,17 +175,11 @@ def print_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def _cpu_s() -> float:
-    import resource
-
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
-
-
 def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float]:
     """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` and to read them
     back with its reader, alone, in memory: the part of archiving no scheduling can remove."""
     from archive.formats import ArchiveContext, get_format
+    from recorder.bench.cpu import process_cpu_s
 
     fmt = get_format(fid)
     out = Path(tempfile.mkdtemp(prefix=f"floor-{fid}-", dir=workdir))
@@ -193,12 +187,12 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float
     for f in frames:
         per_segment[f.segment] = per_segment.get(f.segment, 0) + 1
     ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment)
-    c = _cpu_s()
+    c = process_cpu_s()
     records = fmt.write(iter(frames), out, ctx)
-    write = _cpu_s() - c
-    c = _cpu_s()
+    write = process_cpu_s() - c
+    c = process_cpu_s()
     n = sum(1 for _ in fmt.read(out, [r.path for r in records]))
-    read = _cpu_s() - c
+    read = process_cpu_s() - c
     if n != len(frames):
         raise RuntimeError(f"{fid}: {n} frames read back of {len(frames)}")
     return write / len(frames) * 1e3, read / len(frames) * 1e3
@@ -213,10 +207,10 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     of the same work could do; and the CPU of each format writing and then reading back a sample
     of the frames, alone, which bounds any archiver that verifies with the formats' readers."""
     from archive.archiver import DEFAULT_FORMATS, archive_session
+    from recorder.bench.cpu import process_cpu_s as cpu_s
     from recorder.capture.recorder import Recorder
     from recorder.storage.reader import iter_session_frames
 
-    cpu_s = _cpu_s
     fmts = tuple(formats or DEFAULT_FORMATS)
     n = int(seconds * 60)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)

@@ -21,6 +21,7 @@ from typing import Any
 
 import zstandard
 
+from recorder.bench.cpu import process_cpu_s
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.base import CapturedFrame, FrameSource
 from recorder.capture.sources.sim import SimSource
@@ -62,14 +63,6 @@ def _baseline(frames: list[CapturedFrame], n: int, path: Path, level: int) -> fl
     return n / (time.perf_counter() - t)
 
 
-def _cpu_s() -> float:
-    """This process's CPU seconds, every thread's (the SDK compresses on Rust threads)."""
-    import resource
-
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
-
-
 def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tuple[float, float, int]:
     """The same frames through foxglove-sdk's MCAP writer (Rust): each image as a RawImage
     (mono16), each sidecar as JSON, zstd at the same level. (CPU s per frame, wall s, bytes.)"""
@@ -83,7 +76,7 @@ def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -
     ctx = foxglove.Context()
     opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_level=level, chunk_size=4 << 20)
     sidecars = [json.dumps(f.sidecar).encode() for f in frames]
-    cpu, t = _cpu_s(), time.perf_counter()
+    cpu, t = process_cpu_s(), time.perf_counter()
     writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=ctx, writer_options=opts)
     images = RawImageChannel("/thermal/image", context=ctx)
     meta = foxglove.Channel("/thermal/metadata", message_encoding="json", context=ctx)
@@ -98,7 +91,7 @@ def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -
     writer.close()
     with open(path, "rb") as fh:
         os.fsync(fh.fileno())
-    return (_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
+    return (process_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
 
 
 def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, comp: Compression, level: int,
@@ -107,7 +100,7 @@ def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, c
     rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
                    policy=SegmentPolicy(compression=comp, compression_level=level),
                    recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
-    cpu = _cpu_s()
+    cpu = process_cpu_s()
     t = time.perf_counter()
     res = rec.run()
     dt = time.perf_counter() - t
@@ -115,7 +108,7 @@ def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, c
     # recorder takes them, so most frames are (rightly) marked skipped: that is no failure
     if res.error is not None or res.dropped or res.frames_written != n_frames:
         raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
-    return res, dt, (_cpu_s() - cpu) / n_frames
+    return res, dt, (process_cpu_s() - cpu) / n_frames
 
 
 def _against_sdk(record: Callable[[Path], tuple[Any, float, float]], first: float, frames: list[CapturedFrame],
