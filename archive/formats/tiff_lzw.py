@@ -121,8 +121,11 @@ class TiffLzw(ArchiveFormat):
 
 def write_page(writer: tifffile.TiffWriter, pixels: np.ndarray, rowsperstrip: int, **tags: Any) -> None:
     """One page as the archive stores it: little-endian uint16, LZW with the horizontal
-    predictor, ``rowsperstrip``-row strips encoded by ``encode_page``; ``tags`` go to tifffile."""
-    pixels = np.ascontiguousarray(pixels, "<u2")
+    predictor, ``rowsperstrip``-row strips encoded by ``encode_page``; ``tags`` go to tifffile.
+    Only the byte order is changed: any other dtype is refused by ``encode_page``, never cast."""
+    pixels = np.asarray(pixels)
+    if pixels.dtype.kind == "u" and pixels.dtype.itemsize == 2:
+        pixels = np.ascontiguousarray(pixels, "<u2")
     writer.write(iter(encode_page(pixels, rowsperstrip)), shape=pixels.shape, dtype="<u2", compression="lzw",
                  predictor=True, photometric="minisblack", planarconfig="contig", rowsperstrip=rowsperstrip, **tags)
 

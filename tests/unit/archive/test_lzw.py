@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import tifffile
 
-from archive.formats.tiff_lzw import encode_page
+from archive.formats.tiff_lzw import encode_page, write_page
 from archive.lzw import lzw_encode, lzw_encode_strips
 
 
@@ -94,6 +94,16 @@ def test_a_page_libtiff_and_tifffile_read_back_exactly() -> None:
     assert np.array_equal(np.array(Image.open(buf)), frame)
     with pytest.raises(ValueError, match="little-endian uint16"):
         encode_page(frame.astype(np.int32), 64)
+    # a big-endian frame is the same counts (written little-endian); any other dtype is refused,
+    # never cast (an int32 count above 65535 would wrap)
+    buf = io.BytesIO()
+    with tifffile.TiffWriter(buf, byteorder="<") as writer:
+        write_page(writer, frame.astype(">u2"), 64)
+        with pytest.raises(ValueError, match="little-endian uint16"):
+            write_page(writer, frame.astype(np.int32) + 70_000, 64)
+    buf.seek(0)
+    with tifffile.TiffFile(buf) as tif:
+        assert len(tif.pages) == 1 and np.array_equal(tif.pages[0].asarray(), frame)
 
 
 def test_a_second_process_loads_the_compiled_loops_from_numba_s_cache() -> None:
