@@ -48,8 +48,9 @@ def lzw_encode_strips(data: bytes | bytearray | memoryview | np.ndarray, strip_b
         raise ValueError(f"strip_bytes must be positive, got {strip_bytes}")
     src = _as_bytes(data)
     count = max(1, -(-src.size // strip_bytes))
-    # a code never exceeds 12 bits per input byte; each strip adds Clear codes (one per 3836
-    # codes), its End and padding, and the 32-bit flush writes ahead by up to 4 bytes
+    # at most one code of at most 12 bits per input byte; each strip adds its opening Clear, a
+    # Clear per 3836 codes, a last Clear, its End and padding (the kernel writes only whole bytes
+    # it has filled, and does not check bounds: this size is what keeps it inside ``out``)
     out = np.empty(src.size * 3 // 2 + count * 16 + (src.size // 3836 + 1) * 2 + 8, np.uint8)
     ends = np.empty(count, np.int64)
     table, used = _tables()

@@ -20,6 +20,7 @@ def put(out, pos, acc, held):
     out[pos + 3] = np.uint8(v & np.uint64(255))
     return pos + 4, held
 
+
 @njit(nogil=True, cache=True)
 def strip(src, out, pos, table, used):
     acc = np.uint64(256)  # Clear opens every strip
@@ -86,6 +87,7 @@ def strip(src, out, pos, table, used):
         out[pos] = np.uint8((acc << np.uint64(8 - held)) & np.uint64(255))
         pos += 1
     return pos
+
 
 @njit(nogil=True, cache=True)
 def encode_strips(src, size, out, ends, table, used):
