@@ -97,7 +97,7 @@ def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
     out, segs = [], []
     for seg in files:
         with open(seg, "rb") as f:
-            for _, ch, msg in make_reader(f).iter_messages(topics=[TOPIC_METADATA]):
+            for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA]):
                 out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
                 segs.append(seg.name)
     return out, segs

@@ -35,7 +35,7 @@ def _extra_records(path: Path, messages: bool = True) -> Iterator[tuple[str, Any
     ``messages=False``: only the attachments and metadata records, which the summary indexes
     (no chunk is decompressed)."""
     with open(path, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, validate_crcs=True)
         if messages:
             for schema, channel, msg in reader.iter_messages():
                 if channel.topic != TOPIC_IMAGE:

@@ -278,7 +278,7 @@ class FrameReader:
         t = row["timestamp_ns"]
         pixels = sidecar = None
         with open(seg, "rb") as f:
-            for _, ch, msg in make_reader(f).iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA], start_time=t,
+            for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA], start_time=t,
                                                            end_time=t + 1):
                 if ch.topic == TOPIC_IMAGE:
                     pixels = decode_image(msg.data)[1].copy()

@@ -85,7 +85,7 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
     kept = _Kept(writer)
     for seg in segs:
         with open(seg, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             if summary is None:
                 continue
@@ -175,7 +175,7 @@ def _from_archive(writer: ChunkedWriter, sink: _Sink, frames, topics: list[str] 
     stream: Iterator[tuple[int, int, Any]]
     with f if f is not None else contextlib.nullcontext():
         if f is not None:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             kept = _Kept(writer)
             for rec in reader.iter_metadata():
                 kept.metadata(rec.name, rec.metadata)

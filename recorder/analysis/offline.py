@@ -37,7 +37,7 @@ def _bad_pixel_map(session_dir: Path):
     if not files:
         return None
     with open(files[0], "rb") as f:
-        for att in make_reader(f).iter_attachments():
+        for att in make_reader(f, validate_crcs=True).iter_attachments():
             if att.name == "bad_pixel_map.json":
                 bpm = json.loads(att.data)
                 out = np.zeros((bpm["height"], bpm["width"]), bool)

@@ -47,7 +47,7 @@ def _import_vendor(session_dir: Path) -> dict[int, dict[str, Any]]:
     out: dict[int, dict[str, Any]] = {}
     for seg in sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap")):
         with open(seg, "rb") as f:
-            for _, ch, msg in make_reader(f).iter_messages(topics=["/import/source"]):
+            for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=["/import/source"]):
                 out[msg.log_time] = json.loads(json_payload(ch.message_encoding, msg.data)).get("vendor", {}) or {}
     return out
 

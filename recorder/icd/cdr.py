@@ -112,16 +112,96 @@ def _field_writer(ftype: Any, msgdefs: dict[str, Any]) -> Writer:
     return structs
 
 
-def _struct_writer(msgdef: Any, msgdefs: dict[str, Any]) -> Writer:
-    fields = [(f.name, _field_writer(f.type, msgdefs)) for f in msgdef.fields]
-    if not fields:  # ROS 2 gives an empty message one uint8 member
-        return lambda out, doc: out.append(0)
+def _flat_values(ftype: Any, msgdefs: dict[str, Any]) -> list[tuple[tuple[str, ...], str]] | None:
+    """The (path, primitive) leaves of a field that is one fixed-size record: a numeric scalar,
+    or a struct (not an array) of such fields. None for anything else (strings, arrays)."""
+    if ftype.is_array or getattr(ftype, "string_upper_bound", None):
+        return None
+    if ftype.is_primitive_type():
+        return [((), ftype.type)] if ftype.type in _PRIMITIVES else None
+    nested = msgdefs.get(f"{ftype.pkg_name}/{ftype.type}")
+    if nested is None or not nested.fields:
+        return None
+    leaves: list[tuple[tuple[str, ...], str]] = []
+    for f in nested.fields:
+        inner = _flat_values(f.type, msgdefs)
+        if inner is None:
+            return None
+        leaves += [((f.name, *path), kind) for path, kind in inner]
+    return leaves
+
+
+def _run_writer(leaves: list[tuple[tuple[str, ...], str]]) -> Writer:
+    """One writer for consecutive fixed-size fields (a Point2, a Color, a Time, the scalars
+    between two strings): a single struct pack instead of a call per field. CDR pads each
+    field to its own size counted from the stream's start, so the padding depends on where the
+    run starts modulo 8; the eight possible layouts are compiled ahead."""
+    layouts = []
+    for phase in range(8):
+        fmt, at = "<", phase
+        for _, kind in leaves:
+            code, size = _PRIMITIVES[kind]
+            gap = -at % size
+            fmt += "x" * gap + code
+            at += gap + size
+        layouts.append(struct.Struct(fmt))
+    coerces = [_coerce(kind) for _, kind in leaves]
+    exact = not any(kind == "bool" for _, kind in leaves)  # a bool is 0/1 whatever truthy value it had
+    tops = [path[0] for path, _ in leaves]
+    nested = any(len(path) > 1 for path, _ in leaves)
+
+    def values(doc: Any) -> list[Any]:
+        if not nested:
+            get = doc.get
+            return [get(name) for name in tops]
+        out = []
+        for path, _ in leaves:
+            v = doc
+            for key in path:
+                v = (v or {}).get(key)
+            out.append(v)
+        return out
 
     def write(out: bytearray, doc: Any) -> None:
-        get = doc.get
-        for name, w in fields:
-            w(out, get(name))
+        vals = values(doc)
+        layout = layouts[(len(out) - 4) % 8]
+        if exact and None not in vals:
+            try:
+                out += layout.pack(*vals)
+                return
+            except (struct.error, TypeError, OverflowError):
+                pass  # a value struct will not take as it is (a "1.5", a float for an int): coerce it
+        out += layout.pack(*[c(v) for c, v in zip(coerces, vals, strict=True)])
     return write
+
+
+def _struct_writer(msgdef: Any, msgdefs: dict[str, Any]) -> Writer:
+    if not msgdef.fields:  # ROS 2 gives an empty message one uint8 member
+        return lambda out, doc: out.append(0)
+    steps: list[Writer] = []
+    run: list[tuple[tuple[str, ...], str]] = []
+    for f in msgdef.fields:
+        leaves = _flat_values(f.type, msgdefs)
+        if leaves is not None:
+            run += [((f.name, *path), kind) for path, kind in leaves]
+            continue
+        if run:
+            steps.append(_run_writer(run))
+            run = []
+        steps.append(_field(f.name, _field_writer(f.type, msgdefs)))
+    if run:
+        steps.append(_run_writer(run))
+    if len(steps) == 1:
+        return steps[0]
+
+    def write(out: bytearray, doc: Any) -> None:
+        for step in steps:
+            step(out, doc)
+    return write
+
+
+def _field(name: str, w: Writer) -> Writer:
+    return lambda out, doc: w(out, doc.get(name))
 
 
 def _parser() -> tuple[Any, Callable[..., None]] | None:

@@ -61,7 +61,7 @@ def kept_rjpeg_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
     out: dict[int, tuple[str, bytes]] = {}
     for seg in files:
         with open(seg, "rb") as f:
-            for att in make_reader(f).iter_attachments():
+            for att in make_reader(f, validate_crcs=True).iter_attachments():
                 if att.name.endswith("/" + SEGMENTS_BLOB):
                     out[att.log_time] = (att.name[: -len(SEGMENTS_BLOB) - 1], att.data)
     return out

@@ -81,7 +81,7 @@ def _bad_pixel_map(session_dir: Path) -> np.ndarray | None:
     for path in frame_files(session_dir):
         try:
             with open(path, "rb") as f:
-                for att in make_reader(f).iter_attachments():
+                for att in make_reader(f, validate_crcs=True).iter_attachments():
                     if att.name.endswith("bad_pixel_map.json"):
                         bpm = json.loads(att.data)
                         mask = np.zeros((int(bpm["height"]), int(bpm["width"])), bool)

@@ -117,7 +117,7 @@ def segment_info(path: str | Path) -> SegmentInfo:
     path = Path(path)
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             if summary is None or summary.statistics is None:
                 raise McapFileError(f"{path}: no summary section (an unfinished segment? try `thermcap recover`)")

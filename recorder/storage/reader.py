@@ -94,7 +94,7 @@ def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None 
     wanted = (topics.image, topics.metadata)
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
             index = first_index
             for schema, channel, msg in reader.iter_messages(topics=None if others is not None else list(wanted)):

@@ -97,7 +97,7 @@ def _is_complete(path: Path) -> bool:
             if f.read(8) != MCAP_MAGIC:
                 return False
             f.seek(0)
-            reader = make_reader(f)
+            reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             n = sum(1 for _ in reader.iter_messages(log_time_order=False))
         return summary is not None and summary.statistics is not None and n == summary.statistics.message_count

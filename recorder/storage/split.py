@@ -75,7 +75,7 @@ def _copy_segment(src: Path, dst: Path, camera: str, session_meta: dict[str, str
     """Copy one camera's part of a segment; returns the frames copied."""
     frames = 0
     with open(src, "rb") as f:
-        reader = make_reader(f)
+        reader = make_reader(f, validate_crcs=True)
         summary = reader.get_summary()
         if summary is None:
             raise McapFileError(f"{src}: no summary; run `thermcap recover` first")
