@@ -34,7 +34,6 @@ import os
 import re
 import threading
 import time
-import zlib
 from collections import Counter, OrderedDict
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -42,6 +41,7 @@ from pathlib import Path
 from typing import Any
 from urllib.parse import parse_qsl
 
+import imagecodecs
 import numpy as np
 import tifffile
 from sqlalchemy import select
@@ -168,7 +168,7 @@ class FrameFastPath:
         if blob is None:
             return None
         data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
-        if data is None or zlib.crc32(data) != blob["crc32"]:
+        if data is None or imagecodecs.deflate_crc32(data) != blob["crc32"]:
             return None  # missing or damaged: the full path reports it and serves another copy
         if fmt == "png16":
             etag = b'"' + hashlib.sha256(data).hexdigest()[:40].encode() + b'"'

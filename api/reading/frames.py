@@ -14,13 +14,13 @@ import json
 import logging
 import threading
 import time
-import zlib
 from collections import OrderedDict, deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+import imagecodecs
 import numpy as np
 from mcap.reader import make_reader
 from mcap.records import Attachment
@@ -226,7 +226,7 @@ class FrameReader:
             data = self.store.get_range(self._key(session_id, blob), blob["offset"], blob["offset"] + blob["length"])
         except FileNotFoundError:
             return None
-        if blob.get("crc32") is not None and zlib.crc32(data) != blob["crc32"]:
+        if blob.get("crc32") is not None and imagecodecs.deflate_crc32(data) != blob["crc32"]:
             self.damage.report(Damage(session_id, idx, f"{fmt}:{blob['file']}",
                                       "CRC-32 differs from the ZIP directory"))
             return None
@@ -278,8 +278,9 @@ class FrameReader:
         t = row["timestamp_ns"]
         pixels = sidecar = None
         with open(seg, "rb") as f:
-            for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA], start_time=t,
-                                                           end_time=t + 1):
+            reader = make_reader(f, validate_crcs=True)
+            for _, ch, msg in reader.iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA], start_time=t,
+                                                   end_time=t + 1):
                 if ch.topic == TOPIC_IMAGE:
                     pixels = decode_image(msg.data)[1].copy()
                 else:

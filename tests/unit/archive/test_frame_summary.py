@@ -52,3 +52,15 @@ def test_exact_where_the_model_allows(frames):
     assert s.celsius("mean", idx, planck) is None
     assert s.celsius("max", idx, lambda c: np.cos(c / 500.0)) is None  # not monotonic
     assert s.celsius("min", idx, lambda c: np.where(c > 5000, np.nan, c * 1.0)) is None  # no temperature there
+
+
+def test_band_checksums_are_plain_crc32_of_each_band_s_little_endian_bytes():
+    import zlib
+
+    rng = np.random.default_rng(9)
+    for pixels in (rng.integers(0, 65536, (130, 33), dtype=np.uint16),
+                   rng.integers(0, 65536, (130, 66), dtype=np.uint16)[:, ::2],  # not contiguous
+                   rng.integers(0, 65536, (130, 33), dtype=np.uint16).astype(">u2")):  # big-endian input
+        le = np.ascontiguousarray(pixels, dtype="<u2")
+        want = [zlib.crc32(le[y:y + 64].tobytes()) for y in range(0, 130, 64)]
+        assert band_crc32(pixels).tolist() == want

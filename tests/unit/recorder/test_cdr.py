@@ -76,6 +76,20 @@ def test_alignment_after_odd_sized_fields() -> None:
                                       "f": ["", "xy", "z"]})
 
 
+def test_fixed_size_runs_start_at_every_offset_and_coerce_what_struct_refuses() -> None:
+    # a run of fixed-size fields (nested ones included) after a string of each length: every
+    # one of the eight layouts; values struct will not pack as given take the coerced path
+    text = ("string s\nuint8 a\nfloat64 x\nP p\nint32 n\nint16 h\nstring t\nbool b\nfloat32 g\n"
+            "================================================================================\n"
+            "MSG: t/P\nfloat32 u\nuint64 v\n")
+    for s in ("", "a", "ab", "abc", "abcd", "abcde", "abcdef", "abcdefg"):
+        _same("t/msg/Run", text, {"s": s, "a": 1, "x": 2.5, "p": {"u": 1.25, "v": 9}, "n": -3, "h": 4,
+                                          "t": s, "b": True, "g": 0.5})
+        _same("t/msg/Run", text, {"s": s, "a": True, "x": "1.5", "p": {"u": 3, "v": 2.0}, "n": 3.7, "h": None,
+                                          "t": "", "b": 2, "g": "2"})
+        _same("t/msg/Run", text, {"s": s, "p": None})
+
+
 def test_what_the_plan_does_not_cover_falls_back_to_mcap_ros2() -> None:
     text = "float64[3] fixed\nint32[<=4] bounded\nstring<=5 short\n"
     fields = {"fixed": [1.0, 2.0, 3.0], "bounded": [1, 2], "short": "abcdefgh"}
