@@ -37,7 +37,8 @@ def band_crc32(pixels: np.ndarray, band_rows: int = BAND_ROWS) -> np.ndarray:
     zlib's) runs at about 28 GB/s where zlib's runs at 5: 0.03 ms a 640x512 frame, not 0.12."""
     arr = np.ascontiguousarray(pixels, dtype="<u2")
     crc = imagecodecs.deflate_crc32
-    return np.array([crc(cast(bytes, arr[y:y + band_rows])) for y in range(0, arr.shape[0], band_rows)], dtype=np.uint32)
+    bands = range(0, arr.shape[0], band_rows)
+    return np.array([crc(cast(bytes, arr[y:y + band_rows])) for y in bands], dtype=np.uint32)
 
 
 @dataclass(frozen=True)
