@@ -68,6 +68,24 @@ def test_annotations_encode_as_mcap_ros2_does() -> None:
     _same(rosmsg.ANNOTATIONS.name, rosmsg.ANNOTATIONS.text, {})
 
 
+def test_annotations_of_random_targets_encode_as_mcap_ros2_does() -> None:
+    # the message's own layout: any number of targets, labels of every length (each text's
+    # padding depends on the label before it), unicode, stamps at the edges of a second
+    rng = random.Random(11)
+    for k in range(200):
+        targets = []
+        for _ in range(rng.randrange(0, 7)):
+            x, y = rng.randrange(0, 600), rng.randrange(0, 500)
+            targets.append({"target_id": rng.choice(["T", "TGT0", "ünï", "x" * rng.randrange(0, 12), 7, None]),
+                            "bbox": [x, y, x + rng.randrange(0, 40), y + rng.randrange(0, 40)],
+                            "max_temp_c": rng.choice([None, 41.5, -12.25, 1e6, rng.uniform(-40, 500)])})
+        if rng.random() < 0.1:
+            targets.append({"target_id": "no box", "bbox": [1, 2]})  # drawn by neither
+        stamp = rng.choice([0, 999_999_999, 1_000_000_000, 1_700_000_000_000_000_000 + k * 16_666_667])
+        assert rosmsg.annotations_message(stamp, targets) == \
+            _same(rosmsg.ANNOTATIONS.name, rosmsg.ANNOTATIONS.text, rosmsg.annotations_doc(stamp, targets))
+
+
 def test_alignment_after_odd_sized_fields() -> None:
     text = "uint8 a\nfloat64[] b\nstring s\nint16 c\nbool[] d\nuint64 e\nstring[] f\n"
     for b in ([], [1.5], [1.0, 2.0, 3.0]):
