@@ -15,13 +15,13 @@ import shutil
 import statistics
 import tempfile
 import time
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import zstandard
 
 from recorder.bench.cpu import process_cpu_s
+from recorder.bench.writer_run import WriterRun, run_isolated
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.base import CapturedFrame, FrameSource
 from recorder.capture.sources.sim import SimSource
@@ -119,25 +119,24 @@ def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, c
     return res, dt, (process_cpu_s() - cpu) / n_frames
 
 
-def _against_sdk(record: Callable[[Path], tuple[Any, float, float]], first: float, frames: list[CapturedFrame],
-                 n: int, base: Path, level: int, rounds: int) -> tuple[tuple[float, float, int], float, list[float]]:
-    """The recorder and the SDK in alternating order, ``rounds`` runs each (R S S R R S ...), the
-    files removed after each: whichever runs second had found the page cache warmer or fuller,
-    which moved one run's ratio by several percent. Returns the SDK's median run (CPU s a frame,
-    wall s, bytes), the recorder's median CPU s a frame, and each round's ratio."""
-    ours, theirs = [first], []
-    order = "".join("RS" if i % 2 == 0 else "SR" for i in range(rounds))[1:]  # the first R has run
+def _against_sdk(width: int, height: int, n: int, base: Path, level: int,
+                 rounds: int) -> tuple[WriterRun, float, list[float]]:
+    """The recorder and the SDK ``rounds`` times each in alternating order (R S S R R S ...), every
+    run in a process of its own (``writer_run``) with its files removed after it: whichever runs
+    second meets a different page cache, and in one process a recorder run after an SDK run
+    cost up to a third more. Returns the SDK's median run, the recorder's median CPU s a frame,
+    and each round's ratio."""
+    ours: list[float] = []
+    theirs: list[WriterRun] = []
+    order = "".join("RS" if i % 2 == 0 else "SR" for i in range(rounds))
     for k, who in enumerate(order):
-        if who == "S":
-            path = base / f"sdk-{k}.mcap"
-            theirs.append(_foxglove_sdk(frames, n, path, level))
-            path.unlink(missing_ok=True)
+        run = run_isolated("recorder" if who == "R" else "sdk", width, height, n, level, base / f"run-{k}")
+        if who == "R":
+            ours.append(run.cpu_s_per_frame)
         else:
-            root = base / f"again-{k}"
-            ours.append(record(root)[2])
-            shutil.rmtree(root, ignore_errors=True)
-    sdk = sorted(theirs)[len(theirs) // 2]
-    return sdk, statistics.median(ours), [round(a / b[0], 3) for a, b in zip(ours, theirs, strict=True)]
+            theirs.append(run)
+    sdk = sorted(theirs, key=lambda r: r.cpu_s_per_frame)[len(theirs) // 2]
+    return sdk, statistics.median(ours), [round(a / b.cpu_s_per_frame, 3) for a, b in zip(ours, theirs, strict=True)]
 
 
 def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: str | None = None,
@@ -175,11 +174,7 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             res, dt, cpu_per_frame = record(root)
             sdk = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
-                warm_sdk = base / "warm-sdk.mcap"
-                _foxglove_sdk(rendered, min(n_frames, 120), warm_sdk, level)
-                warm_sdk.unlink(missing_ok=True)
-                sdk, cpu_per_frame, pairs = _against_sdk(record, cpu_per_frame, rendered, n_frames, base, level,
-                                                         sdk_rounds)
+                sdk, cpu_per_frame, pairs = _against_sdk(width, height, n_frames, base, level, sdk_rounds)
             rec_fps = n_frames / dt
             size = sum(s["bytes"] for s in res.segments)
             frame_mb = width * height * 2 / 1e6
@@ -192,9 +187,10 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
                 "cpus": os.cpu_count(),
                 "cpu_ms_per_frame": round(cpu_per_frame * 1e3, 3),
                 "cores_at_60fps": round(cpu_per_frame * fps, 3),
-                **({"sdk_cpu_ms_per_frame": round(sdk[0] * 1e3, 3), "sdk_fps": round(n_frames / sdk[1], 1),
-                    "sdk_ratio": round(n_frames * width * height * 2 / sdk[2], 3),
-                    "cpu_vs_sdk": round(cpu_per_frame / sdk[0], 3), "sdk_rounds": sdk_rounds,
+                **({"sdk_cpu_ms_per_frame": round(sdk.cpu_s_per_frame * 1e3, 3),
+                    "sdk_fps": round(n_frames / sdk.wall_s, 1),
+                    "sdk_ratio": round(n_frames * width * height * 2 / sdk.bytes, 3),
+                    "cpu_vs_sdk": round(cpu_per_frame / sdk.cpu_s_per_frame, 3), "sdk_rounds": sdk_rounds,
                     "cpu_vs_sdk_each_round": pairs} if sdk else {}),
             })
             shutil.rmtree(root, ignore_errors=True)

@@ -23,3 +23,19 @@ def test_bench_record_short_with_the_sdk_anchor():
     # both writers run five times in alternating order (R S S R R S S R R S); the row has each round's ratio
     assert auto["sdk_rounds"] == 5 and len(auto["cpu_vs_sdk_each_round"]) == 5
     assert min(auto["cpu_vs_sdk_each_round"]) <= auto["cpu_vs_sdk"] + 0.01
+
+
+def test_each_writer_runs_in_a_process_of_its_own_and_a_failure_says_why(tmp_path):
+    import pytest
+
+    from recorder.bench.writer_run import run_isolated
+
+    run = run_isolated("recorder", 96, 64, 30, 1, tmp_path)
+    assert run.cpu_s_per_frame > 0 and run.bytes > 0
+    assert not any(tmp_path.rglob("*.mcap")), "the run's files are removed"
+    with pytest.raises(ValueError, match="writer must be"):
+        run_isolated("ffmpeg", 96, 64, 30, 1, tmp_path)
+    blocked = tmp_path / "a-file"
+    blocked.write_bytes(b"")  # the child cannot make its folder here: its error comes back
+    with pytest.raises(RuntimeError, match="bench recorder run failed"):
+        run_isolated("recorder", 96, 64, 30, 1, blocked / "run")
