@@ -245,7 +245,8 @@ def print_table(rows: list[dict[str, Any]]) -> str:
     head = (f"{'size':>10} {'mode':>13} {'chunks':>7} {'fps':>7} {'MB/s':>7} {'x real':>7} {'base fps':>9} "
             f"{'x base':>7} {'ratio':>6} {'CPU ms/f':>9} {'cores@60':>8} {'SDK ms/f':>9} {'vs SDK':>7}")
     lines = [head, "(base = each frame zstd-1 compressed and appended to a file, one thread; SDK = foxglove-sdk's "
-                   "MCAP writer, RawImage + JSON sidecar, same zstd level; both in the same run, CPU of all threads)"]
+                   "MCAP writer, RawImage + JSON sidecar and source messages, same zstd level; recorder and SDK "
+                   "medians of alternating runs, each in a process of its own; CPU of all threads)"]
     for r in rows:
         lines.append(f"{r['width']:>5}x{r['height']:<4} {r['mode']:>13} {r['compression']:>7} {r['fps']:>7} "
                      f"{r['mb_per_s']:>7} {r['x_realtime']:>7} {r['baseline_fps']:>9} {r['x_baseline']:>7} "
