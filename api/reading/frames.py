@@ -9,6 +9,7 @@ against the manifest's hashes before it is used; a damaged one is reported and s
 
 from __future__ import annotations
 
+import inspect
 import io
 import json
 import logging
@@ -22,7 +23,7 @@ from typing import Any
 
 import imagecodecs
 import numpy as np
-from mcap.reader import make_reader
+from mcap.reader import SeekingReader, make_reader
 from mcap.records import Attachment
 from mcap.stream_reader import StreamReader
 from sqlalchemy import select
@@ -43,7 +44,9 @@ __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "F
 
 log = logging.getLogger("thermcap.api")
 
-
+#: mcap 1.6 renamed iter_messages' bounds (``start_time``/``end_time`` warn and will go); older
+#: releases, which pyproject still allows, know only the old names
+_NEW_BOUNDS = "starting_at" in inspect.signature(SeekingReader.iter_messages).parameters
 
 
 class BlobFile(io.RawIOBase):
@@ -279,8 +282,10 @@ class FrameReader:
         pixels = sidecar = None
         with open(seg, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
-            for _, ch, msg in reader.iter_messages(topics=[TOPIC_IMAGE, TOPIC_METADATA], start_time=t,
-                                                   end_time=t + 1):
+            topics = [TOPIC_IMAGE, TOPIC_METADATA]
+            messages = reader.iter_messages(topics=topics, starting_at=t, ending_before=t + 1) if _NEW_BOUNDS \
+                else reader.iter_messages(topics=topics, start_time=t, end_time=t + 1)
+            for _, ch, msg in messages:
                 if ch.topic == TOPIC_IMAGE:
                     pixels = decode_image(msg.data)[1].copy()
                 else:
