@@ -20,36 +20,14 @@ from typing import Any
 
 import zstandard
 
-from recorder.bench.cpu import process_cpu_s
-from recorder.bench.writer_run import WriterRun, run_isolated
+from recorder.bench.writer_run import MemorySource, WriterRun, record_once, run_isolated
 from recorder.capture.recorder import Recorder
-from recorder.capture.sources.base import CapturedFrame, FrameSource
+from recorder.capture.sources.base import CapturedFrame
 from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy, auto_compression
+from recorder.storage.segments import auto_compression
 from recorder.storage.writer import Compression
 
 __all__ = ["MemorySource", "bench_record", "print_table", "run_soak"]
-
-
-class MemorySource(FrameSource):
-    """Replays pre-rendered frames (with their sidecar blocks) as fast as the recorder takes them."""
-
-    name = "memory"
-
-    def __init__(self, template: SimSource, frames: list[CapturedFrame], count: int) -> None:
-        self.sensor = template.sensor
-        self.model = template.model
-        self.bad_pixel_map = template.bad_pixel_map
-        self.extra_topics = template.extra_topics  # type: ignore[misc]  # mirrors its template's topics
-        self._frames = frames
-        self._count = count
-
-    def frames(self):
-        t0 = time.time_ns()
-        for i in range(self._count):
-            f = self._frames[i % len(self._frames)]
-            yield CapturedFrame(index=i, timestamp_ns=t0 + int(i * 1e9 / 60), pixels=f.pixels,
-                                capture_mono_ns=time.monotonic_ns(), sidecar=f.sidecar, messages=f.messages)
 
 
 def _baseline(frames: list[CapturedFrame], n: int, path: Path, level: int) -> float:
@@ -61,62 +39,6 @@ def _baseline(frames: list[CapturedFrame], n: int, path: Path, level: int) -> fl
         f.flush()
         os.fsync(f.fileno())
     return n / (time.perf_counter() - t)
-
-
-def _foxglove_sdk(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tuple[float, float, int]:
-    """The same frames through foxglove-sdk's MCAP writer (Rust): each image as a RawImage
-    (mono16), each sidecar and each of the frame's other messages (the source's, e.g. the
-    simulator's ground truth) as JSON, zstd at the same level. The JSON is serialised inside the
-    timed loop, as a user of the SDK would have to: the recorder is timed serialising its own.
-    (CPU s per frame, wall s, bytes.)"""
-    import json
-
-    import foxglove
-    from foxglove.channels import RawImageChannel
-    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
-    from foxglove.messages import RawImage, Timestamp
-
-    ctx = foxglove.Context()
-    opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_level=level, chunk_size=4 << 20)
-    cpu, t = process_cpu_s(), time.perf_counter()
-    writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=ctx, writer_options=opts)
-    images = RawImageChannel("/thermal/image", context=ctx)
-    meta = foxglove.Channel("/thermal/metadata", message_encoding="json", context=ctx)
-    others: dict[str, foxglove.Channel] = {}
-    t0 = time.time_ns()
-    for i in range(n):
-        f = frames[i % len(frames)]
-        ts = t0 + int(i * 1e9 / 60)
-        h, w = f.pixels.shape
-        images.log(RawImage(timestamp=Timestamp.from_epoch_secs(ts / 1e9), frame_id="thermal", width=w, height=h,
-                            encoding="mono16", step=w * 2, data=f.pixels.tobytes()), log_time=ts)
-        meta.log(json.dumps(f.sidecar, separators=(",", ":")).encode(), log_time=ts)
-        for topic, doc in f.messages:
-            channel = others.get(topic)
-            if channel is None:
-                channel = others[topic] = foxglove.Channel(topic, message_encoding="json", context=ctx)
-            channel.log(json.dumps(doc, separators=(",", ":")).encode(), log_time=ts)
-    writer.close()
-    with open(path, "rb") as fh:
-        os.fsync(fh.fileno())
-    return (process_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
-
-
-def _record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, comp: Compression, level: int,
-                 analysis: bool, fps: float, where: Path) -> tuple[Any, float, float]:
-    """One recording of the frames into ``where``: (result, wall s, CPU s a frame)."""
-    rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
-                   policy=SegmentPolicy(compression=comp, compression_level=level),
-                   recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
-    cpu = process_cpu_s()
-    t = time.perf_counter()
-    res = rec.run()
-    dt = time.perf_counter() - t
-    # +analysis: the detector is capped at the camera's rate while the frames come as fast as the
-    # recorder takes them, so most frames are (rightly) marked skipped: that is no failure
-    if res.error is not None or res.dropped or res.frames_written != n_frames:
-        raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
-    return res, dt, (process_cpu_s() - cpu) / n_frames
 
 
 def _against_sdk(width: int, height: int, n: int, base: Path, level: int,
@@ -164,12 +86,12 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             baseline_fps = _baseline(rendered, n_frames, base / f"baseline-{width}.zst", 1)
             root = base / f"root-{width}-{name}"
 
-            record = functools.partial(_record_once, sim, rendered, n_frames, comp, level, analysis, fps)
+            record = functools.partial(record_once, sim, rendered, n_frames, comp, level, analysis, fps)
             # Warm-up, not timed: what a process does once (imports, compiled message encoders and
             # validators, the detector's first call) must not be charged to per-frame CPU, as the
             # SDK's import and context are not.
             warm = base / f"warm-{width}-{name}"
-            _record_once(sim, rendered, min(n_frames, 120), comp, level, analysis, fps, warm)
+            record_once(sim, rendered, min(n_frames, 120), comp, level, analysis, fps, warm)
             shutil.rmtree(warm, ignore_errors=True)
             res, dt, cpu_per_frame = record(root)
             sdk = None

@@ -1,11 +1,13 @@
-"""One timed run of one writer (the recorder or foxglove-sdk's), in a process of its own.
+"""One timed run of one writer: the recorder (``record_once``, frames replayed from memory by
+``MemorySource``) or foxglove-sdk's MCAP writer (``sdk_once``), here or, through
+``run_isolated``, in a process of its own.
 
-Why a process each: run in one process, one after the other, a recorder run that came right
-after an SDK run cost 7-35% more CPU than one after another recorder run (2.51-3.15 against
-2.31-2.40 ms a frame at 640x512, in the same bench), while the SDK's runs did not move. A
-user's recorder never shares its process with the SDK, so neither writer is measured in the
-other's leftovers. Each process renders the same simulated frames, warms its writer up
-untimed, and prints one JSON line: ``{"cpu_s_per_frame", "wall_s", "bytes"}``.
+Why a process each when they are compared: run in one process, one after the other, a recorder
+run that came right after an SDK run cost 7-35% more CPU than one after another recorder run
+(2.51-3.15 against 2.31-2.40 ms a frame at 640x512, in the same bench), while the SDK's runs
+did not move. A user's recorder never shares its process with the SDK, so neither writer is
+measured in the other's leftovers. Each process renders the same simulated frames, warms its
+writer up untimed, and prints one JSON line: ``{"cpu_s_per_frame", "wall_s", "bytes"}``.
 
 ``python -m recorder.bench.writer_run recorder|sdk WIDTHxHEIGHT FRAMES LEVEL WORKDIR``
 """
@@ -13,15 +15,104 @@ untimed, and prints one JSON line: ``{"cpu_s_per_frame", "wall_s", "bytes"}``.
 from __future__ import annotations
 
 import json
+import os
 import shutil
 import subprocess
 import sys
+import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-__all__ = ["WriterRun", "run_isolated"]
+from recorder.bench.cpu import process_cpu_s
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.base import CapturedFrame, FrameSource
+from recorder.capture.sources.sim import SimSource
+from recorder.storage.segments import SegmentPolicy, auto_compression
+from recorder.storage.writer import Compression
+
+__all__ = ["MemorySource", "WriterRun", "record_once", "run_isolated", "sdk_once"]
 
 WRITERS = ("recorder", "sdk")
+
+
+class MemorySource(FrameSource):
+    """Replays pre-rendered frames (with their sidecar blocks) as fast as the recorder takes them."""
+
+    name = "memory"
+
+    def __init__(self, template: SimSource, frames: list[CapturedFrame], count: int) -> None:
+        self.sensor = template.sensor
+        self.model = template.model
+        self.bad_pixel_map = template.bad_pixel_map
+        self.extra_topics = template.extra_topics  # type: ignore[misc]  # mirrors its template's topics
+        self._frames = frames
+        self._count = count
+
+    def frames(self):
+        t0 = time.time_ns()
+        for i in range(self._count):
+            f = self._frames[i % len(self._frames)]
+            yield CapturedFrame(index=i, timestamp_ns=t0 + int(i * 1e9 / 60), pixels=f.pixels,
+                                capture_mono_ns=time.monotonic_ns(), sidecar=f.sidecar, messages=f.messages)
+
+
+def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tuple[float, float, int]:
+    """The same frames through foxglove-sdk's MCAP writer (Rust): each image as a RawImage
+    (mono16), each sidecar and each of the frame's other messages (the source's, e.g. the
+    simulator's ground truth) as JSON, zstd at the same level. The JSON is serialised inside the
+    timed loop, as a user of the SDK would have to: the recorder is timed serialising its own.
+    (CPU s per frame, wall s, bytes.)"""
+    import json
+
+    import foxglove
+    from foxglove.channels import RawImageChannel
+    from foxglove.mcap import MCAPCompression, MCAPWriteOptions
+    from foxglove.messages import RawImage, Timestamp
+
+    ctx = foxglove.Context()
+    opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_level=level, chunk_size=4 << 20)
+    cpu, t = process_cpu_s(), time.perf_counter()
+    writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=ctx, writer_options=opts)
+    images = RawImageChannel("/thermal/image", context=ctx)
+    meta = foxglove.Channel("/thermal/metadata", message_encoding="json", context=ctx)
+    others: dict[str, foxglove.Channel] = {}
+    t0 = time.time_ns()
+    for i in range(n):
+        f = frames[i % len(frames)]
+        ts = t0 + int(i * 1e9 / 60)
+        h, w = f.pixels.shape
+        images.log(RawImage(timestamp=Timestamp.from_epoch_secs(ts / 1e9), frame_id="thermal", width=w, height=h,
+                            encoding="mono16", step=w * 2, data=f.pixels.tobytes()), log_time=ts)
+        meta.log(json.dumps(f.sidecar, separators=(",", ":")).encode(), log_time=ts)
+        for topic, doc in f.messages:
+            channel = others.get(topic)
+            if channel is None:
+                channel = others[topic] = foxglove.Channel(topic, message_encoding="json", context=ctx)
+            channel.log(json.dumps(doc, separators=(",", ":")).encode(), log_time=ts)
+    writer.close()
+    with open(path, "rb") as fh:
+        os.fsync(fh.fileno())
+    return (process_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
+
+
+def record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, comp: Compression, level: int,
+                 analysis: bool, fps: float, where: Path) -> tuple[Any, float, float]:
+    """One recording of the frames into ``where``: (result, wall s, CPU s a frame)."""
+    rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
+                   policy=SegmentPolicy(compression=comp, compression_level=level),
+                   recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
+    cpu = process_cpu_s()
+    t = time.perf_counter()
+    res = rec.run()
+    dt = time.perf_counter() - t
+    # +analysis: the detector is capped at the camera's rate while the frames come as fast as the
+    # recorder takes them, so most frames are (rightly) marked skipped: that is no failure
+    if res.error is not None or res.dropped or res.frames_written != n_frames:
+        raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
+    return res, dt, (process_cpu_s() - cpu) / n_frames
+
+
 
 
 @dataclass(frozen=True)
@@ -45,10 +136,6 @@ def run_isolated(writer: str, width: int, height: int, frames: int, level: int, 
 
 
 def _main(argv: list[str]) -> int:
-    from recorder.bench.record import _foxglove_sdk, _record_once
-    from recorder.capture.sources.sim import SimSource
-    from recorder.storage.segments import auto_compression
-
     writer, size, frames, level, workdir = argv
     width, height = (int(v) for v in size.split("x"))
     n, lvl, base = int(frames), int(level), Path(workdir)
@@ -59,11 +146,11 @@ def _main(argv: list[str]) -> int:
     for warm, count in ((True, min(n, 120)), (False, n)):
         if writer == "sdk":
             path = base / "sdk.mcap"
-            cpu, wall, size_b = _foxglove_sdk(rendered, count, path, lvl)
+            cpu, wall, size_b = sdk_once(rendered, count, path, lvl)
             path.unlink(missing_ok=True)
         else:
             root = base / "recorder"
-            res, wall, cpu = _record_once(sim, rendered, count, comp, lvl, False, 60.0, root)
+            res, wall, cpu = record_once(sim, rendered, count, comp, lvl, False, 60.0, root)
             size_b = sum(s["bytes"] for s in res.segments)
             shutil.rmtree(root, ignore_errors=True)
         if not warm:
