@@ -9,7 +9,6 @@ a file. Ratios against it, not absolute timings, are what to compare across mach
 
 from __future__ import annotations
 
-import functools
 import os
 import shutil
 import statistics
@@ -85,15 +84,13 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
                 print(f"  {width}x{height} {name} ({comp.value}-{level}): {n_frames} frames ...", flush=True)
             baseline_fps = _baseline(rendered, n_frames, base / f"baseline-{width}.zst", 1)
             root = base / f"root-{width}-{name}"
-
-            record = functools.partial(record_once, sim, rendered, n_frames, comp, level, analysis, fps)
             # Warm-up, not timed: what a process does once (imports, compiled message encoders and
             # validators, the detector's first call) must not be charged to per-frame CPU, as the
             # SDK's import and context are not.
             warm = base / f"warm-{width}-{name}"
             record_once(sim, rendered, min(n_frames, 120), comp, level, analysis, fps, warm)
             shutil.rmtree(warm, ignore_errors=True)
-            res, dt, cpu_per_frame = record(root)
+            res, dt, cpu_per_frame = record_once(sim, rendered, n_frames, comp, level, analysis, fps, root)
             sdk = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
                 sdk, cpu_per_frame, pairs = _against_sdk(width, height, n_frames, base, level, sdk_rounds)

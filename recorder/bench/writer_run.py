@@ -63,8 +63,6 @@ def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tup
     simulator's ground truth) as JSON, zstd at the same level. The JSON is serialised inside the
     timed loop, as a user of the SDK would have to: the recorder is timed serialising its own.
     (CPU s per frame, wall s, bytes.)"""
-    import json
-
     import foxglove
     from foxglove.channels import RawImageChannel
     from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -111,8 +109,6 @@ def record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, co
     if res.error is not None or res.dropped or res.frames_written != n_frames:
         raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
     return res, dt, (process_cpu_s() - cpu) / n_frames
-
-
 
 
 @dataclass(frozen=True)

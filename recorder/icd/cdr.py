@@ -16,7 +16,7 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["compile_encoder"]
+__all__ = ["compile_encoder", "pad", "write_string"]
 
 #: ros2msg primitive -> (struct code, size); bool and byte are written as uint8, as ROS 2 does
 _PRIMITIVES: dict[str, tuple[str, int]] = {
@@ -34,16 +34,17 @@ class _Unsupported(Exception):
     pass
 
 
-def _pad(out: bytearray, size: int) -> None:
+def pad(out: bytearray, size: int) -> None:
+    """Public, with ``write_string``, so a message laid out by hand (the annotations) pads as the plan does."""
     # the four-byte encapsulation header does not count towards alignment
     gap = -(len(out) - 4) % size
     if gap:
         out += b"\0" * gap
 
 
-def _string(out: bytearray, value: Any) -> None:
+def write_string(out: bytearray, value: Any) -> None:
     data = ("" if value is None else str(value)).encode("utf-8")
-    _pad(out, 4)
+    pad(out, 4)
     out += _U32.pack(len(data) + 1)
     out += data
     out += b"\0"
@@ -66,14 +67,14 @@ def _field_writer(ftype: Any, msgdefs: dict[str, Any]) -> Writer:
     if ftype.is_primitive_type():
         if kind == "string":
             if not ftype.is_array:
-                return _string
+                return write_string
 
             def strings(out: bytearray, values: Any) -> None:
                 values = values or []
-                _pad(out, 4)
+                pad(out, 4)
                 out += _U32.pack(len(values))
                 for v in values:
-                    _string(out, v)
+                    write_string(out, v)
             return strings
         if kind not in _PRIMITIVES:
             raise _Unsupported(kind)
@@ -83,17 +84,17 @@ def _field_writer(ftype: Any, msgdefs: dict[str, Any]) -> Writer:
         if not ftype.is_array:
             def scalar(out: bytearray, value: Any) -> None:
                 if size > 1:
-                    _pad(out, size)
+                    pad(out, size)
                 out += one.pack(coerce(value))
             return scalar
 
         def scalars(out: bytearray, values: Any) -> None:
             values = list(values) if values is not None else []
-            _pad(out, 4)
+            pad(out, 4)
             out += _U32.pack(len(values))
             if values:
                 if size > 1:
-                    _pad(out, size)
+                    pad(out, size)
                 out += struct.pack(f"<{len(values)}{code}", *map(coerce, values))
         return scalars
     nested = msgdefs.get(f"{ftype.pkg_name}/{kind}")
@@ -105,7 +106,7 @@ def _field_writer(ftype: Any, msgdefs: dict[str, Any]) -> Writer:
 
     def structs(out: bytearray, values: Any) -> None:
         values = values or []
-        _pad(out, 4)
+        pad(out, 4)
         out += _U32.pack(len(values))
         for v in values:
             body(out, v or {})

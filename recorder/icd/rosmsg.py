@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any
 
+from recorder.icd.cdr import compile_encoder, pad, write_string
 from recorder.icd.topics import sum_image_topics
 
 __all__ = [
@@ -56,8 +57,6 @@ class RosMessage:
 
 @cache
 def _encoder(name: str, text: str) -> Callable[[Any], bytes]:
-    from recorder.icd.cdr import compile_encoder
-
     return compile_encoder(name, text)
 
 
@@ -354,15 +353,12 @@ def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
                           _THICKNESS)
     out += _U32.pack(len(marks))
     for m in marks:
-        out += b"\0" * (-(len(out) - 4) % 4)
+        pad(out, 4)
         out += _TIME.pack(sec, nsec)
-        out += b"\0" * (-(len(out) - 4) % 8)
+        pad(out, 8)
         out += _POINT.pack(*m.label_at)
-        text = m.label.encode("utf-8")
-        out += _U32.pack(len(text) + 1)
-        out += text
-        out += b"\0"
-        out += b"\0" * (-(len(out) - 4) % 8)
+        write_string(out, m.label)
+        pad(out, 8)
         out += _LABEL_STYLE.pack(_FONT_SIZE, *LABEL_RGBA, *LABEL_BACKGROUND_RGBA)
     return bytes(out)
 
