@@ -78,15 +78,9 @@ def _field_writer(ftype: Any, msgdefs: dict[str, Any]) -> Writer:
             return strings
         if kind not in _PRIMITIVES:
             raise _Unsupported(kind)
+        assert ftype.is_array, "a single number is packed with its neighbours by _run_writer"
         code, size = _PRIMITIVES[kind]
         coerce = _coerce(kind)
-        one = struct.Struct("<" + code)
-        if not ftype.is_array:
-            def scalar(out: bytearray, value: Any) -> None:
-                if size > 1:
-                    pad(out, size)
-                out += one.pack(coerce(value))
-            return scalar
 
         def scalars(out: bytearray, values: Any) -> None:
             values = list(values) if values is not None else []
