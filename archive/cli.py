@@ -275,7 +275,9 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, a
                    f"{res['cpu_bound_x_real_time']}x on {res['cores']} cores); the formats' own encoders alone: "
                    f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}; "
                    f"writing and reading back alone, {res['formats_cpu_ms_per_frame']} CPU ms per frame "
-                   f"{res['format_cpu_ms_per_frame']}: at best {res['formats_bound_x_real_time']}x")
+                   f"{res['format_cpu_ms_per_frame']}: at best {res['formats_bound_x_real_time']}x. Not in these "
+                   f"figures: the process's first archive (1 s of frames, imports and compiled kernels loaded), "
+                   f"{res['first_archive_of_1_s_wall_s']} s")
         return
 
     rows = run(n_frames)
