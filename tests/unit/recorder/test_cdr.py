@@ -56,6 +56,8 @@ def test_documents_of_every_shape_encode_as_mcap_ros2_does(message: rosmsg.RosMe
         data = _same(message.name, message.text, fields)
         decoded = generate_dynamic(message.name, message.text)[message.name](data)
         assert decoded.json == raw
+        # what the recorder calls: the sidecar's hand layout, the plan for the others
+        assert message.encode(doc, raw.encode()) == data
 
 
 def test_annotations_encode_as_mcap_ros2_does() -> None:
