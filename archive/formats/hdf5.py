@@ -36,8 +36,6 @@ from recorder.storage.reader import SessionFrame
 __all__ = ["LIBVER", "Hdf5"]
 
 LIBVER = ("earliest", "v110")
-#: Frames ``Hdf5.read`` takes from the file in one read (21 MB at 640x512).
-FRAMES_PER_READ = 32
 
 
 def _szip_encoder_available() -> bool:
@@ -159,14 +157,9 @@ class Hdf5(ArchiveFormat):
             try:
                 with h5py.File(path, "r") as f:
                     d, times, meta = f["frames"], f["timestamps_ns"], f["metadata"]
-                    # FRAMES_PER_READ frames a read: h5py's per-read cost is paid once for them
-                    # (3.0 -> 2.6 ms a 640x512 frame, SZIP included), still through HDF5's filter
-                    for i in range(0, d.shape[0], FRAMES_PER_READ):
-                        block, stamps, docs = (x[i:i + FRAMES_PER_READ] for x in (d, times, meta))
-                        for k in range(len(block)):
-                            doc = docs[k]
-                            yield DecodedFrame(block[k], doc.encode("utf-8") if isinstance(doc, str) else bytes(doc),
-                                               int(stamps[k]))
+                    for i in range(d.shape[0]):
+                        yield DecodedFrame(d[i], meta[i].encode("utf-8") if isinstance(meta[i], str)
+                                           else bytes(meta[i]), int(times[i]))
             except (OSError, KeyError) as exc:
                 raise ArchiveError(f"{path}: not a readable HDF5 archive ({exc})") from exc
 

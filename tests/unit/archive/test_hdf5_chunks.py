@@ -32,24 +32,3 @@ def test_our_szip_chunks_are_the_bytes_hdf5s_filter_writes(tmp_path, shape, cont
         # (filter mask, bytes): 1 and the raw frame where SZIP would not make it smaller
         assert f["ours"].id.read_direct_chunk((0, 0, 0)) == f["theirs"].id.read_direct_chunk((0, 0, 0))
         assert np.array_equal(f["ours"][0], frame)
-
-
-@pytest.mark.parametrize("filter_", ["szip", "gzip"])
-def test_the_reader_gives_every_frame_its_own_counts_sidecar_and_time_across_reads(tmp_path, monkeypatch, filter_):
-    """``Hdf5.read`` takes several frames a read: 11 frames in reads of 4 (two full, one short)."""
-    from archive.formats import ArchiveContext, hdf5
-    from recorder.storage.reader import SessionFrame
-
-    monkeypatch.setattr(hdf5, "FRAMES_PER_READ", 4)
-    rng = np.random.default_rng(3)
-    frames = [SessionFrame(i, "0000.mcap", 1_700_000_000_000_000_000 + i * 16_666_667,
-                           rng.integers(0, 1 << 14, (48, 64)).astype(np.uint16),
-                           f'{{"capture":{{"frame_index":{i},"note":"ünï"}}}}'.encode()) for i in range(11)]
-    fmt = hdf5.Hdf5(filter_)
-    records = fmt.write(iter(frames), tmp_path, ArchiveContext(session_id="s", total_frames=11,
-                                                               frames_per_segment={"0000.mcap": 11}))
-    got = list(fmt.read(tmp_path, [r.path for r in records]))
-    assert len(got) == 11
-    for want, frame in zip(frames, got, strict=True):
-        assert np.array_equal(frame.pixels, want.pixels), want.index
-        assert (frame.sidecar, frame.log_time) == (want.sidecar, want.log_time), want.index
