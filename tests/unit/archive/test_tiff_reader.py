@@ -16,9 +16,9 @@ from archive.formats import tiff_lzw
 from archive.formats.tiff_lzw import LOG_TIME_TAG, TiffLzw, write_page
 
 
-def _write(path: Path, frames: list[np.ndarray]) -> list[tuple[bytes, int]]:
+def _write(path: Path, frames: list[np.ndarray], bigtiff: bool = False) -> list[tuple[bytes, int]]:
     tags = []
-    with tifffile.TiffWriter(path, byteorder="<") as w:
+    with tifffile.TiffWriter(path, byteorder="<", bigtiff=bigtiff) as w:
         for i, px in enumerate(frames):
             sidecar, t = f'{{"capture":{{"frame_index":{i}}}}}', 1_700_000_000_000_000_000 + i * 16_666_667
             write_page(w, px, 64, description=sidecar, metadata=None, software="thermcap",
@@ -32,11 +32,12 @@ def _frames(n: int, shapes: list[tuple[int, int]]) -> list[np.ndarray]:
     return [rng.integers(0, 1 << 14, shapes[i % len(shapes)], dtype=np.uint16) for i in range(n)]
 
 
+@pytest.mark.parametrize("bigtiff", [False, True], ids=["classic", "BigTIFF"])  # a segment over 3.5 GB is BigTIFF
 @pytest.mark.parametrize("shapes", [[(48, 64)], [(48, 64), (32, 96)]], ids=["one shape", "two shapes"])
-def test_every_page_comes_back_across_batches(tmp_path, monkeypatch, shapes):
+def test_every_page_comes_back_across_batches(tmp_path, monkeypatch, shapes, bigtiff):
     monkeypatch.setattr(tiff_lzw, "PAGES_PER_CALL", 4)  # 11 pages: two full batches and a short one
     frames = _frames(11, shapes)
-    tags = _write(tmp_path / "0000.tif", frames)
+    tags = _write(tmp_path / "0000.tif", frames, bigtiff)
     got = list(TiffLzw().read(tmp_path, ["0000.tif"]))
     assert len(got) == len(frames)
     for k, (frame, want, (sidecar, t)) in enumerate(zip(got, frames, tags, strict=True)):
