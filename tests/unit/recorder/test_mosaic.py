@@ -53,7 +53,7 @@ def test_the_mosaic_puts_every_target_where_it_is(tmp_path):
         assert set(np.unique(sources)) <= set(range(12)) | {-1}
         assert np.isnan(temps[sources == -1]).all() and not np.isnan(temps[sources >= 0]).any()
         for target in _targets():
-            col, row = ~t * (target.easting, target.northing)
+            col, row = ~t @ (target.easting, target.northing)
             r0, c0 = int(row), int(col)
             win = temps[max(0, r0 - 30):r0 + 30, max(0, c0 - 30):c0 + 30]
             rr, cc = np.nonzero(win >= 44.0)
@@ -133,7 +133,7 @@ def test_a_flight_across_a_utm_zone_boundary_is_one_mosaic(tmp_path):
         assert m.crs.to_epsg() == 32611
         temps, t = m.read(1), m.transform
         for target in targets:
-            col, row = ~t * (target.easting, target.northing)
+            col, row = ~t @ (target.easting, target.northing)
             r0, c0 = int(row), int(col)
             win = temps[max(0, r0 - 30):r0 + 30, max(0, c0 - 30):c0 + 30]
             rr, cc = np.nonzero(win >= 44.0)
