@@ -224,8 +224,8 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
                 raise RuntimeError(f"the benchmark session did not record cleanly: {res.problems}")
             sessions.append(rec.session_dir)
         # One second archived first, untimed in the ratio: a process's first archive also imports
-        # the formats' libraries and loads the compiled LZW kernels (about 0.6 s here), which a
-        # 10 s session would count as 6% of its work and an hour's as nothing. Reported apart.
+        # the formats' libraries and loads the compiled LZW kernels (about 0.8 s here), which a
+        # 10 s session would count as 8% of its work and an hour's as nothing. Reported apart.
         t = time.perf_counter()
         archive_session(sessions[0], list(fmts))
         warm_up = time.perf_counter() - t

@@ -120,7 +120,8 @@ def _sidecar_layout(doc: dict[str, Any], raw: bytes) -> bytes:
     for ``_sidecar_fields(doc)``, tested on every shape of document the plan is.
 
     Why: the recorder writes one with every frame, and the plan's general machinery (a field
-    dict, then a writer per field) cost about 0.035 ms of the writer thread's 0.3 ms a frame."""
+    dict, then a writer per field) cost 0.033 ms a frame in isolation, twice that inside a
+    recording; laid out here, 0.016 ms, and the writer thread went from 0.45 to 0.40 ms a frame."""
     raw.decode("utf-8")  # the plan takes text: bytes that are not UTF-8 fail here as they did there
     cap, env = doc.get("capture") or {}, doc.get("environment") or {}
     ta, stc = doc.get("thermal_analysis") or {}, doc.get("slew_to_cue") or {}
