@@ -13,6 +13,7 @@ and handed to tifffile ready; tifffile, libtiff, ImageJ and GDAL all read them.
 
 from __future__ import annotations
 
+import itertools
 import mmap
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
@@ -83,7 +84,7 @@ class TiffLzw(ArchiveFormat):
 
     def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
         """Every page, in order: its tags (sidecar, time) as tifffile reads them, its pixels as
-        libtiff decodes them, ``PAGES_PER_CALL`` pages a call on two threads (see
+        libtiff decodes them, up to ``PAGES_PER_CALL`` pages a call on two threads (see
         ``_libtiff_pages``)."""
         for rel in files:
             path = out_dir / rel
@@ -173,10 +174,14 @@ def decode_strip(data: bytes, rows: int, width: int, predictor: int, where: str)
     return imagecodecs.delta_decode(strip, axis=-1) if predictor == 2 else strip
 
 
-#: Pages libtiff decodes in one call. Each call walks the IFD chain from the first page to its
-#: own (about 2 us a page), so a call a page would cost as much as the decoding by page 1,300
-#: of a 60 s segment; 32 pages (21 MB at 640x512) make the walk 0.1 ms a page there.
+#: Pages libtiff decodes in one call, at most. Each call walks the IFD chain from the first page
+#: to its own (about 2 us a page), so a call a page would cost as much as the decoding by page
+#: 1,300 of a 60 s segment; 32 pages make the walk 0.1 ms a page there.
 PAGES_PER_CALL = 32
+#: ... and no more pages than fit in this many bytes (the first page's size counts for all): a
+#: call's pages are held decoded, three calls in flight, so memory stays about 64 MB whatever
+#: the sensor (25 pages a call at 640x512, 6 at 1280x1024).
+BYTES_PER_CALL = 16 << 20
 
 
 def _libtiff_pages(view: mmap.mmap, tif: tifffile.TiffFile) -> Iterator[DecodedFrame]:
@@ -192,9 +197,13 @@ def _libtiff_pages(view: mmap.mmap, tif: tifffile.TiffFile) -> Iterator[DecodedF
 
     def batches() -> Iterator[tuple[int, list[tuple[Any, tuple[bytes, int | None]]]]]:
         # tags are read here, on the one thread that moves tifffile's file position
-        start = 0
+        first = next(pages, None)
+        if first is None:
+            return
+        per_call = max(1, min(PAGES_PER_CALL, BYTES_PER_CALL // max(1, int(first.nbytes))))
+        rest, start = itertools.chain([first], pages), 0
         while True:
-            batch = [(p, _page_tags(p)) for _, p in zip(range(PAGES_PER_CALL), pages, strict=False)]
+            batch = [(p, _page_tags(p)) for _, p in zip(range(per_call), rest, strict=False)]
             if not batch:
                 return
             yield start, batch

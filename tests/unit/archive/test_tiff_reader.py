@@ -80,3 +80,22 @@ def test_an_empty_file_fails_naming_it(tmp_path):
     (tmp_path / "0000.tif").write_bytes(b"")
     with pytest.raises(ArchiveError, match=r"0000\.tif"):
         list(TiffLzw().read(tmp_path, ["0000.tif"]))
+
+
+def test_big_pages_are_decoded_fewer_a_call(tmp_path, monkeypatch):
+    """However large the sensor, a call holds at most BYTES_PER_CALL of decoded pages (at least
+    one page): here three 48x64 pages a call, and every page still comes back as written."""
+    seen: list[int] = []
+    decode = tiff_lzw.imagecodecs.tiff_decode
+
+    def counting(view, index):
+        seen.append(index.stop - index.start if isinstance(index, slice) else 1)
+        return decode(view, index=index)
+
+    monkeypatch.setattr(tiff_lzw, "BYTES_PER_CALL", 3 * 48 * 64 * 2 + 5)
+    monkeypatch.setattr(tiff_lzw.imagecodecs, "tiff_decode", counting)
+    frames = _frames(10, [(48, 64)])
+    _write(tmp_path / "0000.tif", frames)
+    got = list(TiffLzw().read(tmp_path, ["0000.tif"]))
+    assert seen == [3, 3, 3, 1]
+    assert all(np.array_equal(g.pixels, f) for g, f in zip(got, frames, strict=True))
