@@ -117,49 +117,46 @@ _TWO_BOOLS = struct.Struct("<2B")
 
 def _sidecar_layout(doc: dict[str, Any], raw: bytes) -> bytes:
     """``ThermalSidecar`` laid out by hand: the bytes of the compiled plan (and of mcap_ros2)
-    for ``_sidecar_fields(doc)``, tested on every shape of document the plan is.
+    for ``_sidecar_fields(doc)``, whose values it packs, tested on every shape of document the
+    plan is.
 
-    Why: the recorder writes one with every frame, and the plan's general machinery (a field
-    dict, then a writer per field) cost 0.033 ms a frame in isolation, twice that inside a
-    recording; laid out here, 0.016 ms, and the writer thread went from 0.45 to 0.40 ms a frame."""
+    Why: the recorder writes one with every frame, and the plan's general machinery (a writer
+    per field) cost 0.033 ms a frame in isolation, twice that inside a recording; laid out here,
+    about 0.02 ms, and the writer thread went from 0.45 to 0.40 ms a frame."""
     raw.decode("utf-8")  # the plan takes text: bytes that are not UTF-8 fail here as they did there
-    cap, env = doc.get("capture") or {}, doc.get("environment") or {}
-    ta, stc = doc.get("thermal_analysis") or {}, doc.get("slew_to_cue") or {}
-    targets = doc.get("targets") or []
+    f = _sidecar_fields(doc)
     out = bytearray(b"\x00\x01\x00\x00")  # CDR_LE; alignment counts from after these four bytes
     out += _U32.pack(len(raw) + 1)  # json: at offset 0, aligned
     out += raw
     out += b"\0"
     pad(out, 8)
-    out += _U64.pack(int(cap.get("frame_index") or 0))
-    write_string(out, _s(cap.get("timestamp")))
+    out += _U64.pack(f["frame_index"])
+    write_string(out, f["timestamp"])
     pad(out, 8)
-    out += _F9.pack(_f(env.get("ambient_temp_c")), _f(env.get("humidity_percent")),
-                    _f(env.get("atmospheric_transmission")), _f(ta.get("thermal_contrast_grade")),
-                    _f(ta.get("max_target_temp_c")), _f(ta.get("min_background_temp_c")),
-                    _f(ta.get("delta_t_deg_c")), _f(ta.get("snr_db")), _f(ta.get("detection_confidence")))
-    write_string(out, _s(ta.get("source")))
+    out += _F9.pack(f["ambient_temp_c"], f["humidity_percent"], f["atmospheric_transmission"],
+                    f["thermal_contrast_grade"], f["max_target_temp_c"], f["min_background_temp_c"],
+                    f["delta_t_deg_c"], f["snr_db"], f["detection_confidence"])
+    write_string(out, f["analysis_source"])
     pad(out, 4)
-    out += _TWO_U32.pack(len(targets), len(targets))  # target_count, then the sequence's length
-    for t in targets:
-        write_string(out, _s(t.get("target_id")))
-        bbox = [int(v) for v in t.get("bbox") or []]
-        centroid = [_f(v) for v in t.get("centroid") or []]
+    out += _TWO_U32.pack(f["target_count"], len(f["targets"]))  # then the sequence's length
+    for t in f["targets"]:
+        write_string(out, t["target_id"])
+        bbox, centroid = t["bbox"], t["centroid"]
         pad(out, 4)
         out += struct.pack(f"<I{len(bbox)}i", len(bbox), *bbox)
         pad(out, 4)
         out += _U32.pack(len(centroid))
         pad(out, 8)  # the centroid's doubles, or else max_temp_c's
         out += struct.pack(f"<{len(centroid)}d", *centroid)
-        out += _F2.pack(_f(t.get("max_temp_c")), _f(t.get("mean_temp_c")))
-        write_string(out, _s(t.get("classification")))
+        out += _F2.pack(t["max_temp_c"], t["mean_temp_c"])
+        write_string(out, t["classification"])
         pad(out, 8)
-        out += _F1.pack(_f(t.get("confidence")))
-    out += _TWO_BOOLS.pack(_b(stc.get("slew_to_cue_active")), _b(stc.get("radar_cue_received")))
-    write_string(out, _s(stc.get("state")))
+        out += _F1.pack(t["confidence"])
+    out += _TWO_BOOLS.pack(f["slew_to_cue_active"], f["radar_cue_received"])
+    write_string(out, f["slew_state"])
     pad(out, 8)
-    out += _F5.pack(_f(stc.get("radar_azimuth_deg")), _f(stc.get("radar_elevation_deg")),
-                    _f(stc.get("radar_range_m")), _f(stc.get("turret_pan_deg")), _f(stc.get("turret_tilt_deg")))
+    out += _F5.pack(f["radar_azimuth_deg"], f["radar_elevation_deg"], f["radar_range_m"], f["turret_pan_deg"],
+                    f["turret_tilt_deg"])
     return bytes(out)
 
 
