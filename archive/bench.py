@@ -227,22 +227,23 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         # the formats' libraries and loads the compiled LZW kernels (about 0.8 s here), which a
         # 10 s session would count as 8% of its work and an hour's as nothing. Reported apart.
         t = time.perf_counter()
-        archive_session(sessions[0], list(fmts))
+        warm_up_dir, session_dir = sessions
+        archive_session(warm_up_dir, list(fmts))
         warm_up = time.perf_counter() - t
         t, c = time.perf_counter(), cpu_s()
-        archive_session(rec.session_dir, list(fmts))
+        archive_session(session_dir, list(fmts))
         wall, cpu = time.perf_counter() - t, cpu_s() - c
         single, floor_s, ratios = {}, 0.0, {}
         for f in fmts:
             t = time.perf_counter()
-            alone = archive_session(rec.session_dir, [f], force=True)
+            alone = archive_session(session_dir, [f], force=True)
             single[f] = round(seconds / (time.perf_counter() - t), 3)
             rate = float(alone["formats"][f].get("encode_fps") or 0.0)
             floor_s += n / rate if rate > 0 else 0.0
             ratios[f] = alone["formats"][f].get("compression_ratio")
         # each format's own writing and reading CPU, on a sample of the session's frames
         sample = [dataclasses.replace(fr, pixels=np.array(fr.pixels))
-                  for _, fr in zip(range(min(n, 120)), iter_session_frames(rec.session_dir), strict=False)]
+                  for _, fr in zip(range(min(n, 120)), iter_session_frames(session_dir), strict=False)]
         for f in fmts:
             format_cpu(f, sample[:4], Path(tmp))  # loads what a format compiles or imports on first use
         codec_ms = {f: dict(zip(("write", "read"), (round(v, 2) for v in format_cpu(f, sample, Path(tmp))),
