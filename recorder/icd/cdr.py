@@ -35,7 +35,7 @@ class _Unsupported(Exception):
 
 
 def pad(out: bytearray, size: int) -> None:
-    """Public, with ``write_string``, so a message laid out by hand (the annotations) pads as the plan does."""
+    """Public, with ``write_string``, so a message laid out by hand (the marks, the sidecar) pads as the plan does."""
     # the four-byte encapsulation header does not count towards alignment
     gap = -(len(out) - 4) % size
     if gap:
