@@ -59,7 +59,9 @@ def _parse_range(header: str, size: int) -> tuple[int, int] | None:
     return start, end
 
 
-@router.api_route("/{fmt}/{name}", methods=["GET", "HEAD"])
+# GET and HEAD as two routes of one function, so each operation has an OpenAPI ID of its own
+@router.get("/{fmt}/{name}")
+@router.head("/{fmt}/{name}", name="head_download")
 def download(request: Request, session_id: str, fmt: str, name: str, redirect: bool = False) -> Response:
     row = _archive(request, session_id, fmt)
     check_file_name(name)

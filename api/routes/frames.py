@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import hashlib
-from typing import Literal
+from typing import Any, Literal
 from urllib.parse import quote
 
 import numpy as np
@@ -43,9 +43,15 @@ def _check_index(row: dict, n: int) -> None:
         raise HTTPException(404, f"session {row['id']} has frames 0..{row['frames'] - 1}, not {n}")
 
 
-@router.api_route("/{n}", methods=["GET", "HEAD"],
-                  responses={200: {"content": {"image/png": {}, "image/tiff": {}, "application/octet-stream": {}}},
-                             304: {"description": "If-None-Match matched the ETag"}})
+_FRAME_RESPONSES: dict[int | str, dict[str, Any]] = {
+    200: {"content": {"image/png": {}, "image/tiff": {}, "application/octet-stream": {}}},
+    304: {"description": "If-None-Match matched the ETag"}}
+
+
+# GET and HEAD as two routes of one function: one route with both methods gives both operations
+# the same OpenAPI ID, and client generators then keep only one of them
+@router.get("/{n}", responses=_FRAME_RESPONSES)
+@router.head("/{n}", responses=_FRAME_RESPONSES, name="head_frame")
 def get_frame(request: Request, session_id: str, n: int,
               format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",
