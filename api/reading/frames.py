@@ -9,7 +9,6 @@ against the manifest's hashes before it is used; a damaged one is reported and s
 
 from __future__ import annotations
 
-import inspect
 import io
 import json
 import logging
@@ -23,7 +22,7 @@ from typing import Any
 
 import imagecodecs
 import numpy as np
-from mcap.reader import SeekingReader, make_reader
+from mcap.reader import make_reader
 from mcap.records import Attachment
 from mcap.stream_reader import StreamReader
 from sqlalchemy import select
@@ -31,23 +30,17 @@ from sqlalchemy.engine import Engine
 
 from api import db
 from api.exceptions import FrameNotFound, FrameUnavailable
+from api.reading.mcap_frames import McapFrames
 from api.reading.zip_index import ArchiveLocations
 from api.storage import BlobStore
 from archive.codecs import get_codec
 from archive.formats import get_format
 from archive.formats.base import locate
 from archive.manifest import frame_sha256, sidecar_sha256
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 
 log = logging.getLogger("thermcap.api")
-
-#: mcap 1.6 renamed iter_messages' bounds (``start_time``/``end_time`` warn and will go); older
-#: releases, which pyproject still allows, know only the old names
-_NEW_BOUNDS = "starting_at" in inspect.signature(SeekingReader.iter_messages).parameters
-
 
 class BlobFile(io.RawIOBase):
     """A stored blob as a seekable file (ranged reads), so mcap's seeking reader can fetch one
@@ -129,6 +122,7 @@ class FrameReader:
         self.root = root
         self.damage = DamageLog()
         self.locations = ArchiveLocations(engine, store)  # stored-ZIP copies, from their central directories
+        self.mcap = McapFrames()  # sessions not archived yet: their segments' chunk indexes and last chunks
         # Recently decoded frames (a recorded frame never changes): the browser's temperature
         # readout and a scrubber going back and forth hit the same few frames again and again.
         self._cache: OrderedDict[tuple[str, int], np.ndarray] = OrderedDict()
@@ -278,18 +272,7 @@ class FrameReader:
         seg = self.root / "sessions" / session_id / (row["segment"] or "")
         if not row["segment"] or not seg.is_file():
             raise FrameNotFound(f"{seg.name or 'segment'} is not on disk")
-        t = row["timestamp_ns"]
-        pixels = sidecar = None
-        with open(seg, "rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            topics = [TOPIC_IMAGE, TOPIC_METADATA]
-            messages = reader.iter_messages(topics=topics, starting_at=t, ending_before=t + 1) if _NEW_BOUNDS \
-                else reader.iter_messages(topics=topics, start_time=t, end_time=t + 1)
-            for _, ch, msg in messages:
-                if ch.topic == TOPIC_IMAGE:
-                    pixels = decode_image(msg.data)[1].copy()
-                else:
-                    sidecar = json_payload(ch.message_encoding, msg.data)
+        pixels, sidecar = self.mcap.frame(seg, row["timestamp_ns"])
         if pixels is None:
             raise FrameNotFound(f"frame {row['idx']} of {session_id} is not in {seg.name}")
         return pixels, sidecar or b""

@@ -68,3 +68,21 @@ def test_a_byte_changed_inside_a_chunk_is_refused_by_the_frame_reader(tmp_path, 
     seg.write_bytes(bytes(raw))
     with pytest.raises(McapFileError, match=seg.name):
         list(iter_segment_frames(seg))
+
+
+@pytest.mark.parametrize("compression", list(Compression))
+def test_a_byte_changed_inside_a_chunk_is_refused_by_the_chunk_reader(tmp_path, compression):
+    from recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
+
+    seg = _noise_session(tmp_path, compression)
+    first = next(iter_segment_frames(seg))
+    raw = bytearray(seg.read_bytes())
+    at = raw.find(first.pixels[24].tobytes()[:32])
+    assert at > 0
+    raw[at + 5] ^= 0x10
+    seg.write_bytes(bytes(raw))
+    index = SegmentIndex.load(seg)  # the summary is intact: only the chunk's data changed
+    assert index is not None
+    chunk = next(c for c in range(len(index.offsets)) if index.offsets[c] < at < index.offsets[c] + index.lengths[c])
+    with pytest.raises(McapFileError, match=f"{seg.name}: chunk at byte {index.offsets[chunk]}"):
+        list(messages_at(read_chunk(index, chunk), first.log_time, set(index.encodings)))

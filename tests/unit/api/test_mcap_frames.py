@@ -1,0 +1,71 @@
+"""Frames of a session not archived yet come from its segment's chunks, kept in memory between
+requests within a byte budget: neighbouring frames read their chunk once, memory stays bounded,
+a replaced segment is read anew, and a damaged chunk is refused."""
+
+from __future__ import annotations
+
+import os
+import shutil
+
+import pytest
+
+from api.reading.mcap_frames import McapFrames
+from recorder.exceptions import McapFileError
+from recorder.storage.chunks import SegmentIndex
+from recorder.storage.reader import iter_segment_frames
+from recorder.storage.writer import Compression
+from tests.unit.recorder.test_segment_chunks import small_chunk_session
+
+
+@pytest.fixture
+def segment(tmp_path):
+    return small_chunk_session(tmp_path, Compression.ZSTD)
+
+
+def test_every_frame_is_the_recorded_one_and_each_chunk_is_read_once(segment):
+    frames = list(iter_segment_frames(segment))
+    index = SegmentIndex.load(segment)
+    chunks = {c for f in frames for c in index.chunks_at(f.log_time)}
+    assert len(chunks) > 4
+    source = McapFrames()
+    for _ in range(2):  # the second pass is served from memory
+        for f in frames:
+            pixels, sidecar = source.frame(segment, f.log_time)
+            assert pixels.tobytes() == f.pixels.tobytes() and pixels.flags.writeable
+            assert sidecar == f.sidecar
+    assert source.chunk_reads == len(chunks)
+
+
+def test_the_chunks_kept_stay_within_their_budget(segment):
+    frames = list(iter_segment_frames(segment))
+    index = SegmentIndex.load(segment)
+    budget = int(2.5 * max(index.lengths))  # the records of about two chunks
+    source = McapFrames(max_chunk_bytes=budget)
+    for f in frames + frames[::-1]:
+        assert source.frame(segment, f.log_time)[0].tobytes() == f.pixels.tobytes()
+        assert source.kept_bytes <= budget
+    assert source.chunk_reads > len({c for f in frames for c in index.chunks_at(f.log_time)})
+
+
+def test_a_replaced_segment_is_read_anew(tmp_path, segment):
+    source = McapFrames()
+    first = next(iter_segment_frames(segment))
+    assert source.frame(segment, first.log_time)[0].tobytes() == first.pixels.tobytes()
+    other = small_chunk_session(tmp_path / "other", Compression.ZSTD, seed=9, frames=20)
+    shutil.copyfile(other, segment)
+    st = os.stat(segment)
+    os.utime(segment, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    now = next(iter_segment_frames(segment))
+    assert source.frame(segment, now.log_time)[0].tobytes() == now.pixels.tobytes()
+    assert source.frame(segment, first.log_time) == (None, None)  # that time is not in the new file
+
+
+def test_a_damaged_chunk_is_refused_naming_the_segment(segment):
+    first = next(iter_segment_frames(segment))
+    index = SegmentIndex.load(segment)
+    (chunk,) = index.chunks_at(first.log_time)
+    raw = bytearray(segment.read_bytes())
+    raw[int(index.offsets[chunk] + index.lengths[chunk]) - 100] ^= 0xFF  # inside its compressed records
+    segment.write_bytes(bytes(raw))
+    with pytest.raises(McapFileError, match=segment.name):
+        McapFrames().frame(segment, first.log_time)
