@@ -30,6 +30,7 @@ def _percentile(values: list[float], q: float) -> float:
 
 
 ROUNDS = 5  # alternating pairs of rounds, ours then nginx's
+UNARCHIVED = "bench-mcap"  # the session left as recorded
 
 
 def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[dict[str, Any]]:
@@ -44,6 +45,9 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
     try:
         Recorder(SimSource(frames=frames, paced=False, seed=5), base, session_id="bench", recover_leftovers=False).run()
         archive_session(base / "sessions" / "bench", ["png16", "tiff-lzw", "hdf5"])  # the default formats
+        # and one left as recorded: frames straight from its MCAP segment, as right after recording
+        Recorder(SimSource(frames=frames, paced=False, seed=6), base, session_id=UNARCHIVED,
+                 recover_leftovers=False).run()
         engine = make_engine(f"sqlite:///{base / 'index.sqlite'}")
         from api.db import migrate
 
@@ -71,6 +75,7 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
             docroot = _static_copies(url, base, frames)
             nginx = _start_nginx(docroot, base)
             ratios: dict[str, Any] = {}
+            anchor_raw_p50: list[float] = []
             try:
                 for fmt in ("raw", "png16"):
                     # alternating rounds, the median p50 of each: the machine is shared and noisy
@@ -90,6 +95,14 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
                         rows.append(_frames_over_http(nginx.url, fmt, frames, requests, clients, static=True))
                         ratios[f"{fmt}_p50_vs_nginx"] = round(statistics.median(
                             a / b for a, b in zip(ours_p50, anchor_p50, strict=True)), 2)
+                    if fmt == "raw":
+                        anchor_raw_p50 = anchor_p50
+                # a session not archived yet: frames in order (a player, a scrubber), then at random
+                for in_order in (True, False):
+                    rows.append(_frames_over_http(url, "raw", frames, requests // 2, 1, session=UNARCHIVED,
+                                                  in_order=in_order))
+                    ratios[f"unarchived_raw_{'in_order' if in_order else 'random'}_p50_vs_nginx"] = round(
+                        rows[-1]["p50_ms"] / statistics.median(anchor_raw_p50), 2) if anchor_raw_p50 else None
                 rows.append(_disk_frames(base, frames, requests))
                 export_rows = _export(url, base, nginx)
                 rows += export_rows
@@ -133,11 +146,11 @@ def _start_nginx(docroot: Path, base: Path) -> Any:
 
 
 def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: int,
-                      static: bool = False) -> dict[str, Any]:
+                      static: bool = False, session: str = "bench", in_order: bool = False) -> dict[str, Any]:
     lat: list[float] = []
     lock = threading.Lock()
     rng = random.Random(1)
-    todo = [rng.randrange(frames) for _ in range(requests)]
+    todo = [i % frames for i in range(requests)] if in_order else [rng.randrange(frames) for _ in range(requests)]
     errors = [0]
 
     def worker(items: list[int]) -> None:
@@ -145,7 +158,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
             for n in items:
                 t = time.perf_counter()
                 r = c.get(f"/{fmt}/{n}.{'png' if fmt == 'png16' else 'raw'}") if static else \
-                    c.get(f"/api/v1/sessions/bench/frames/{n}", params={"format": fmt})
+                    c.get(f"/api/v1/sessions/{session}/frames/{n}", params={"format": fmt})
                 dt = time.perf_counter() - t
                 with lock:
                     lat.append(dt)
@@ -158,7 +171,10 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
     for th in threads:
         th.join()
     wall = time.perf_counter() - t
-    return {"what": f"{'nginx: the same ' + fmt + ' file' if static else 'frame format=' + fmt + ' over HTTP'}",
+    what = f"nginx: the same {fmt} file" if static else f"frame format={fmt} over HTTP"
+    if session == UNARCHIVED:
+        what = f"not archived: format={fmt}, {'in order' if in_order else 'at random'}"
+    return {"what": what,
             "clients": clients, "requests": requests,
             "fps": round(requests / wall, 1), "p50_ms": round(_percentile(lat, 50) * 1000, 2),
             "p99_ms": round(_percentile(lat, 99) * 1000, 2), "errors": errors[0]}

@@ -1,5 +1,6 @@
 """``thermcap bench api`` in its short form: the server, nginx serving the same bytes, and the
-ratios between them from one run. Every frame is answered; the ratios are there and positive."""
+ratios between them from one run, and frames of a session not archived yet. Every frame is
+answered; the ratios are there and positive."""
 
 from __future__ import annotations
 
@@ -18,6 +19,10 @@ def test_bench_api_against_nginx_short():
     rows = json.loads(r.stdout)
     assert all(row.get("errors", 0) == 0 for row in rows)
     ratios = rows[-1]["ratios"]
-    for key in ("raw_p50_vs_nginx", "png16_p50_vs_nginx", "export_vs_nginx", "export_vs_cat"):
+    for key in ("raw_p50_vs_nginx", "png16_p50_vs_nginx", "export_vs_nginx", "export_vs_cat",
+                "unarchived_raw_in_order_p50_vs_nginx", "unarchived_raw_random_p50_vs_nginx"):
         assert ratios[key] and ratios[key] > 0, key
+    # the session left as recorded is served from its MCAP segment, every request answered
+    unarchived = [row for row in rows if row["what"].startswith("not archived")]
+    assert [row["requests"] for row in unarchived] == [10, 10]
     assert any(row["what"].startswith("nginx: the same png16") for row in rows)
