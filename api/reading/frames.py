@@ -25,7 +25,7 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.records import Attachment
 from mcap.stream_reader import StreamReader
-from sqlalchemy import select
+from sqlalchemy import bindparam, select
 from sqlalchemy.engine import Engine
 
 from api import db
@@ -39,6 +39,10 @@ from archive.formats.base import locate
 from archive.manifest import frame_sha256, sidecar_sha256
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
+
+#: Built once, as ``api.routes.common``'s session lookup: every frame request runs it
+_FRAME_ROW = select(db.frames).where(db.frames.c.session_id == bindparam("session_id"),
+                                     db.frames.c.idx == bindparam("idx"))
 
 log = logging.getLogger("thermcap.api")
 
@@ -144,8 +148,7 @@ class FrameReader:
 
     def _frame_row(self, session_id: str, idx: int) -> dict[str, Any]:
         with self.engine.connect() as conn:
-            row = conn.execute(select(db.frames).where(db.frames.c.session_id == session_id,
-                                                       db.frames.c.idx == idx)).mappings().first()
+            row = conn.execute(_FRAME_ROW, {"session_id": session_id, "idx": idx}).mappings().first()
         if row is None:
             raise FrameNotFound(f"session {session_id} has no frame {idx}")
         return dict(row)

@@ -7,7 +7,7 @@ import json
 from typing import Any
 
 from fastapi import HTTPException, Request
-from sqlalchemy import select
+from sqlalchemy import bindparam, select
 
 from api import db
 from api.security import check_session_id
@@ -17,10 +17,15 @@ __all__ = ["FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso",
            "session_row"]
 
 
+#: Built once: building ``select(...).where(...)`` costs more than running it (SQLAlchemy coerces
+#: every operand), and every frame request looks its session up.
+_SESSION_ROW = select(db.sessions).where(db.sessions.c.id == bindparam("session_id"))
+
+
 def session_row(request: Request, session_id: str) -> dict[str, Any]:
     check_session_id(session_id)
     with request.app.state.engine.connect() as conn:
-        row = conn.execute(select(db.sessions).where(db.sessions.c.id == session_id)).mappings().first()
+        row = conn.execute(_SESSION_ROW, {"session_id": session_id}).mappings().first()
     if row is None:
         raise HTTPException(404, f"no session {session_id!r}")
     return dict(row)
