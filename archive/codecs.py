@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import struct
 import threading
-import zlib
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar, cast
 
@@ -20,6 +19,7 @@ import imagecodecs
 import numpy as np
 
 from archive.exceptions import UnknownCodecError
+from recorder.exports.png import encode_png
 from recorder.registry import Registry
 
 __all__ = [
@@ -80,9 +80,10 @@ class FrameCodec(ABC):
 class Png16(FrameCodec):
     """16-bit grayscale PNG. thermcap writes it itself: every row with PNG's "Up" filter (the
     row above subtracted, vectorised in numpy) and one zlib stream from libdeflate at ``level``
-    (4 by default). That is a standard PNG (libpng, Pillow and browsers read it; decoding here
-    uses libpng) at libpng-level-1 speed with a 6% better ratio than libpng level 1; libpng's
-    own level 6 gains little more and is 7x slower. ``writer="libpng"`` uses libpng instead."""
+    (4 by default), written by ``recorder.exports.png``. That is a standard PNG (libpng, Pillow
+    and browsers read it; decoding here uses libpng) at libpng-level-1 speed with a 6% better
+    ratio than libpng level 1; libpng's own level 6 gains little more and is 7x slower.
+    ``writer="libpng"`` uses libpng instead."""
 
     codec_id = "png16"
     extension = ".png"
@@ -98,15 +99,7 @@ class Png16(FrameCodec):
         frame = self._check(frame)
         if self.writer == "libpng":
             return cast(bytes, imagecodecs.png_encode(frame, level=self.level))
-        h, w = frame.shape
-        be = frame.astype(">u2").view(np.uint8).reshape(h, 2 * w)
-        rows = np.empty((h, 2 * w + 1), np.uint8)
-        rows[:, 0] = 2  # filter type Up
-        rows[0, 1:] = be[0]
-        np.subtract(be[1:], be[:-1], out=rows[1:, 1:])  # modulo 256, as PNG defines it
-        idat = cast(bytes, imagecodecs.deflate_encode(cast(Any, rows), level=self.level, raw=False))
-        return (b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", struct.pack(">IIBBBBB", w, h, 16, 0, 0, 0, 0))
-                + _png_chunk(b"IDAT", idat) + _png_chunk(b"IEND", b""))
+        return encode_png(frame, self.level)
 
     def decode(self, buf: bytes) -> np.ndarray:
         return self._as_frame(imagecodecs.png_decode(buf))
@@ -178,10 +171,6 @@ def _prefix_sum_rows(filtered: np.ndarray, block: int = 16) -> np.ndarray:
         else:
             np.add(px[i - 1], filtered[i], out=px[i])
     return px
-
-
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
 class JpegXl(FrameCodec):

@@ -2,19 +2,18 @@
 people), and the range in PNG text chunks (for programs).
 
 The labels use a built-in 5x7 pixel font, so drawing needs no font files or imaging library
-and looks the same on every machine. ``png_with_text`` adds ``tEXt`` chunks after IHDR, where
+and looks the same on every machine. ``recorder.exports.png`` writes the ``tEXt`` chunks after IHDR, where
 any PNG reader (libpng, Pillow, browsers) ignores or exposes them.
 """
 
 from __future__ import annotations
 
 import struct
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RANGE_MODES", "TemperatureRange", "add_colorbar", "png_text", "png_with_text"]
+__all__ = ["RANGE_MODES", "TemperatureRange", "add_colorbar", "png_text"]
 
 #: how the range of a picture is chosen: each frame's own percentiles, one range for the whole
 #: session, or the user's fixed --min/--max
@@ -105,19 +104,6 @@ def add_colorbar(rgb: np.ndarray, rng: TemperatureRange, lut: np.ndarray) -> np.
         region = panel[scale:scale + unit.shape[0], pad:pad + unit.shape[1]]
         region[unit[:region.shape[0], :region.shape[1]]] = white
     return np.concatenate([rgb, panel], axis=1)
-
-
-def _chunk(kind: bytes, data: bytes) -> bytes:
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
-
-
-def png_with_text(png: bytes, text: dict[str, str]) -> bytes:
-    """The PNG with a ``tEXt`` chunk per item, right after IHDR."""
-    if png[:8] != b"\x89PNG\r\n\x1a\n":
-        raise ValueError("not a PNG")
-    ihdr_end = 8 + 8 + struct.unpack(">I", png[8:12])[0] + 4
-    extra = b"".join(_chunk(b"tEXt", k.encode("latin-1") + b"\x00" + v.encode("latin-1")) for k, v in text.items())
-    return png[:ihdr_end] + extra + png[ihdr_end:]
 
 
 def png_text(png: bytes) -> dict[str, str]:
