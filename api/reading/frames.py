@@ -46,6 +46,7 @@ _FRAME_ROW = select(db.frames).where(db.frames.c.session_id == bindparam("sessio
 
 log = logging.getLogger("thermcap.api")
 
+
 class BlobFile(io.RawIOBase):
     """A stored blob as a seekable file (ranged reads), so mcap's seeking reader can fetch one
     attachment from ``extras.mcap`` on S3 without downloading the whole file."""

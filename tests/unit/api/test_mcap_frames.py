@@ -69,3 +69,31 @@ def test_a_damaged_chunk_is_refused_naming_the_segment(segment):
     segment.write_bytes(bytes(raw))
     with pytest.raises(McapFileError, match=segment.name):
         McapFrames().frame(segment, first.log_time)
+
+
+def test_a_segment_without_chunks_is_read_through(tmp_path, segment):
+    """An MCAP written without chunks (so its summary indexes none) is scanned instead."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    flat = tmp_path / "flat.mcap"
+    with open(segment, "rb") as src, open(flat, "wb") as out:
+        writer = Writer(out, use_chunking=False)
+        writer.start()
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(src).iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(channel.topic, channel.message_encoding,
+                                                               schemas.get(channel.schema_id, 0))
+            writer.add_message(channels[channel.id], message.log_time, message.data, message.publish_time)
+        writer.finish()
+    assert SegmentIndex.load(flat) is None
+    frames = list(iter_segment_frames(segment))
+    source = McapFrames()
+    for f in frames[::7]:
+        pixels, sidecar = source.frame(flat, f.log_time)
+        assert pixels.tobytes() == f.pixels.tobytes() and sidecar == f.sidecar
+    assert source.chunk_reads == 0
