@@ -21,7 +21,7 @@ from mcap.reader import SeekingReader, make_reader
 
 from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
-from recorder.storage.chunks import ChunkRecords, SegmentIndex, messages_at, read_chunk
+from recorder.storage.chunks import ChunkRecords, SegmentIndex, StaleIndexError, messages_at, read_chunk
 
 __all__ = ["McapFrames"]
 
@@ -36,7 +36,7 @@ class McapFrames:
     def __init__(self, max_chunk_bytes: int = 64 << 20, max_segments: int = 256) -> None:
         self.max_chunk_bytes = max_chunk_bytes
         self.max_segments = max_segments
-        self._indexes: OrderedDict[Path, SegmentIndex | None] = OrderedDict()
+        self._indexes: OrderedDict[Path, SegmentIndex] = OrderedDict()
         self._chunks: OrderedDict[tuple[Path, int, int, int], ChunkRecords] = OrderedDict()
         self._chunk_bytes = 0
         self._lock = threading.Lock()
@@ -48,6 +48,13 @@ class McapFrames:
         index = self._index(segment)
         if index is None:
             return _scan(segment, log_time)
+        try:
+            return self._frame(index, log_time)
+        except StaleIndexError:  # replaced since it was indexed: index it again, once
+            index = self._index(segment)
+            return _scan(segment, log_time) if index is None else self._frame(index, log_time)
+
+    def _frame(self, index: SegmentIndex, log_time: int) -> tuple[np.ndarray | None, bytes | None]:
         image, meta = index.topics.get(TOPIC_IMAGE), index.topics.get(TOPIC_METADATA)
         wanted = {c for c in (image, meta) if c is not None}
         pixels = sidecar = None
@@ -57,21 +64,27 @@ class McapFrames:
                     pixels = decode_image(data)[1].copy()
                 elif channel == meta and sidecar is None:
                     sidecar = json_payload(index.encodings[channel], bytes(data))
+        if pixels is None and not index.is_current():  # "not there" only from the file as it is
+            raise StaleIndexError(f"{index.path} changed since it was indexed")
         return pixels, sidecar
 
     def _index(self, segment: Path) -> SegmentIndex | None:
+        """The segment's index, kept while its file stays the one indexed (None: it has no chunks)."""
         with self._lock:
-            if segment in self._indexes:
-                index = self._indexes[segment]
-                if index is not None and index.is_current():
+            kept = self._indexes.get(segment)
+        if kept is not None and kept.is_current():
+            with self._lock:
+                if segment in self._indexes:
                     self._indexes.move_to_end(segment)
-                    return index
-                del self._indexes[segment]  # replaced on disk, or had no index: look again
+            return kept
         index = SegmentIndex.load(segment)
         with self._lock:
-            self._indexes[segment] = index
-            while len(self._indexes) > self.max_segments:
-                self._indexes.popitem(last=False)
+            if index is None:
+                self._indexes.pop(segment, None)
+            else:
+                self._indexes[segment] = index
+                while len(self._indexes) > self.max_segments:
+                    self._indexes.popitem(last=False)
         return index
 
     def _chunk(self, index: SegmentIndex, chunk: int) -> ChunkRecords:

@@ -10,7 +10,9 @@ time. A caller may keep decompressed chunks too (``read_chunk``'s result): frame
 other share one.
 
 A chunk whose CRC-32 or framing does not hold raises ``McapFileError`` naming the file and the
-chunk's offset: nothing from it is returned.
+chunk's offset: nothing from it is returned. A file that is no longer the one indexed (replaced
+on disk between the index and the read) raises ``StaleIndexError`` instead, which is no damage:
+the caller indexes the file again.
 """
 
 from __future__ import annotations
@@ -27,13 +29,17 @@ from mcap.reader import make_reader
 
 from recorder.exceptions import McapFileError
 
-__all__ = ["ChunkRecords", "SegmentIndex", "messages_at", "read_chunk"]
+__all__ = ["ChunkRecords", "SegmentIndex", "StaleIndexError", "messages_at", "read_chunk"]
 
 _CHUNK = 0x06
 _MESSAGE = 0x05
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK_FIXED = struct.Struct("<QQQI")  # message start, message end, uncompressed size, uncompressed CRC
 _MESSAGE_FIXED = struct.Struct("<HIQQ")  # channel, sequence, log time, publish time
+
+
+class StaleIndexError(McapFileError):
+    """The file at the index's path is not the one it indexed."""
 
 
 @dataclass(frozen=True)
@@ -52,8 +58,9 @@ class SegmentIndex:
 
     @classmethod
     def load(cls, path: str | Path) -> SegmentIndex | None:
-        """The index of a segment with a summary that lists its chunks; None for one without
-        (cut short, or written without a summary), which a caller reads by scanning instead."""
+        """The index of a segment whose summary lists its chunks; None where it lists none (an
+        MCAP written without chunks or without a summary), which a caller reads through instead.
+        A file whose summary cannot be read (cut short) raises ``McapFileError``."""
         path = Path(path)
         with open(path, "rb") as f:
             st = os.fstat(f.fileno())
@@ -75,9 +82,11 @@ class SegmentIndex:
     def is_current(self) -> bool:
         """False once the file on disk is not the one indexed (replaced, rewritten or gone)."""
         try:
-            st = os.stat(self.path)
+            return self.describes(os.stat(self.path))
         except OSError:
             return False
+
+    def describes(self, st: os.stat_result) -> bool:
         return (st.st_size, st.st_mtime_ns) == (self.size, self.mtime_ns)
 
     def chunks_at(self, log_time: int) -> list[int]:
@@ -91,6 +100,7 @@ class ChunkRecords:
     """One chunk's records, decompressed and CRC-checked: what a cache keeps."""
 
     data: bytes
+    where: str  # "<file>: chunk at byte <offset>", for errors
 
     @property
     def nbytes(self) -> int:
@@ -103,6 +113,8 @@ def read_chunk(index: SegmentIndex, chunk: int) -> ChunkRecords:
     offset, length = int(index.offsets[chunk]), int(index.lengths[chunk])
     where = f"{index.path}: chunk at byte {offset}"
     with open(index.path, "rb") as f:
+        if not index.describes(os.fstat(f.fileno())):
+            raise StaleIndexError(f"{index.path} changed since it was indexed")
         raw = os.pread(f.fileno(), length, offset)
     if len(raw) != length:
         raise McapFileError(f"{where}: {len(raw)} of its {length} bytes are on disk")
@@ -139,7 +151,7 @@ def read_chunk(index: SegmentIndex, chunk: int) -> ChunkRecords:
         raise McapFileError(f"{where}: decompressed to {len(data)} bytes, the chunk says {size}")
     if crc and imagecodecs.deflate_crc32(data) != crc:
         raise McapFileError(f"{where}: CRC-32 of its records differs from the one recorded")
-    return ChunkRecords(data)
+    return ChunkRecords(data, where)
 
 
 def messages_at(records: ChunkRecords, log_time: int, channels: set[int]) -> Iterator[tuple[int, memoryview]]:
@@ -152,7 +164,7 @@ def messages_at(records: ChunkRecords, log_time: int, channels: set[int]) -> Ite
         opcode, length = _RECORD_HEAD.unpack_from(data, pos)
         body = pos + 9
         if body + length > end:
-            raise McapFileError(f"a record at byte {pos} of a chunk runs past its end")
+            raise McapFileError(f"{records.where}: a record at byte {pos} of its records runs past their end")
         if opcode == _MESSAGE and length >= _MESSAGE_FIXED.size:
             channel, _, t, _ = _MESSAGE_FIXED.unpack_from(data, body)
             if t == log_time and channel in channels:

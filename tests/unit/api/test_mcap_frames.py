@@ -97,3 +97,21 @@ def test_a_segment_without_chunks_is_read_through(tmp_path, segment):
         pixels, sidecar = source.frame(flat, f.log_time)
         assert pixels.tobytes() == f.pixels.tobytes() and sidecar == f.sidecar
     assert source.chunk_reads == 0
+
+
+def test_a_segment_replaced_between_the_check_and_the_read_is_indexed_again(tmp_path, segment, monkeypatch):
+    """The race: the kept index still looked current when the request checked it, and the file
+    was replaced before its chunk was read. The frame comes from the new file; no damage."""
+    source = McapFrames()
+    first = next(iter_segment_frames(segment))
+    source.frame(segment, first.log_time)
+    other = small_chunk_session(tmp_path / "other", Compression.ZSTD, seed=9, frames=20)
+    shutil.copyfile(other, segment)
+    st = os.stat(segment)
+    os.utime(segment, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    checks = iter([True])  # the first check, made before the file changed, passes
+    real = SegmentIndex.is_current
+    monkeypatch.setattr(SegmentIndex, "is_current", lambda self: next(checks, None) or real(self))
+    now = next(iter_segment_frames(segment))
+    pixels, sidecar = source.frame(segment, now.log_time)
+    assert pixels.tobytes() == now.pixels.tobytes() and sidecar == now.sidecar

@@ -64,3 +64,16 @@ def test_a_replaced_file_is_not_the_one_indexed(tmp_path):
     assert not index.is_current()
     seg.unlink()
     assert not index.is_current()
+
+
+def test_a_chunk_read_through_a_stale_index_is_refused_as_stale_not_as_damage(tmp_path):
+    from recorder.storage.chunks import StaleIndexError
+
+    seg = small_chunk_session(tmp_path / "a", Compression.ZSTD)
+    other = small_chunk_session(tmp_path / "b", Compression.ZSTD, seed=4, frames=30)
+    index = SegmentIndex.load(seg)
+    assert read_chunk(index, 0).where == f"{seg}: chunk at byte {int(index.offsets[0])}"
+    shutil.copyfile(other, seg)
+    os.utime(seg, ns=(index.mtime_ns + 10**9, index.mtime_ns + 10**9))
+    with pytest.raises(StaleIndexError, match=seg.name):
+        read_chunk(index, 0)
