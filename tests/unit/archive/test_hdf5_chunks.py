@@ -32,3 +32,28 @@ def test_our_szip_chunks_are_the_bytes_hdf5s_filter_writes(tmp_path, shape, cont
         # (filter mask, bytes): 1 and the raw frame where SZIP would not make it smaller
         assert f["ours"].id.read_direct_chunk((0, 0, 0)) == f["theirs"].id.read_direct_chunk((0, 0, 0))
         assert np.array_equal(f["ours"][0], frame)
+
+
+@pytest.mark.parametrize("frames_per_call", [1, 3, 7, 40])
+def test_reading_in_blocks_gives_every_frame_sidecar_and_time_in_order(tmp_path, monkeypatch, frames_per_call):
+    """``Hdf5.read`` takes several frames a call; a count that is no multiple of the block, and
+    a block larger than the file, still give each frame once, with its own sidecar and time."""
+    from archive.formats import ArchiveContext, get_format
+    from archive.formats import hdf5 as hdf5_format
+    from recorder.storage.reader import SessionFrame
+
+    shape, n = (64, 96), 20
+    monkeypatch.setattr(hdf5_format, "READ_BYTES", frames_per_call * shape[0] * shape[1] * 2)
+    rng = np.random.default_rng(5)
+    frames = [SessionFrame(i, "seg-0.mcap", 1_700_000_000_000_000_000 + i * 16_666_667,
+                           rng.integers(0, 1 << 14, shape).astype(np.uint16), f'{{"i":{i},"t":"é"}}'.encode())
+              for i in range(n)]
+    fmt = get_format("hdf5")
+    ctx = ArchiveContext(session_id="blocks", total_frames=n, frames_per_segment={"seg-0.mcap": n})
+    records = fmt.write(iter(frames), tmp_path, ctx)
+    back = list(fmt.read(tmp_path, [r.path for r in records]))
+    assert len(back) == n
+    for want, got in zip(frames, back, strict=True):
+        assert np.array_equal(got.pixels, want.pixels)
+        assert got.sidecar == want.sidecar
+        assert got.log_time == want.log_time
