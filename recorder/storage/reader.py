@@ -19,6 +19,7 @@ from mcap.reader import make_reader
 from recorder.exceptions import McapFileError
 from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import camera_topics, decode_image, is_image_topic
+from recorder.storage.chunks import SegmentIndex, iter_messages
 from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
 __all__ = [
@@ -93,42 +94,61 @@ def iter_segment_frames(path: Path, *, first_index: int = 0, camera: str | None 
     topics = camera_topics(camera)
     wanted = (topics.image, topics.metadata)
     try:
-        with open(path, "rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
-            index = first_index
-            for schema, channel, msg in reader.iter_messages(topics=None if others is not None else list(wanted)):
-                if others is not None:
-                    if channel.topic != topics.image:
-                        others(schema, channel, msg)
-                    if channel.topic not in wanted:
-                        continue
-                img, meta = pending.get(msg.log_time, (None, None))
-                if channel.topic == topics.image:
-                    img = decode_image(msg.data)[1]
-                else:
-                    meta = json_payload(channel.message_encoding, msg.data)
-                if img is not None and meta is not None:
-                    pending.pop(msg.log_time, None)
-                    yield SessionFrame(index, path.name, msg.log_time, img, meta)
-                    index += 1
-                else:
-                    pending[msg.log_time] = (img, meta)
-                # An image whose sidecar never comes (should not happen) is still a frame.
-                for t in [t for t in pending if t < msg.log_time and pending[t][0] is not None]:
-                    orphan = pending.pop(t)[0]
-                    assert orphan is not None
-                    yield SessionFrame(index, path.name, t, orphan, b"")
-                    index += 1
-            for t in sorted(pending):
-                orphan = pending[t][0]
-                if orphan is not None:
-                    yield SessionFrame(index, path.name, t, orphan, b"")
-                    index += 1
+        pending: dict[int, tuple[np.ndarray | None, bytes | None]] = {}
+        index = first_index
+        for schema, channel, msg in _segment_messages(path, None if others is not None else wanted):
+            if others is not None:
+                if channel.topic != topics.image:
+                    others(schema, channel, msg)
+                if channel.topic not in wanted:
+                    continue
+            img, meta = pending.get(msg.log_time, (None, None))
+            if channel.topic == topics.image:
+                img = decode_image(msg.data)[1]
+            else:
+                meta = json_payload(channel.message_encoding, msg.data)
+            if img is not None and meta is not None:
+                pending.pop(msg.log_time, None)
+                yield SessionFrame(index, path.name, msg.log_time, img, meta)
+                index += 1
+            else:
+                pending[msg.log_time] = (img, meta)
+            # An image whose sidecar never comes (should not happen) is still a frame.
+            for t in [t for t in pending if t < msg.log_time and pending[t][0] is not None]:
+                orphan = pending.pop(t)[0]
+                assert orphan is not None
+                yield SessionFrame(index, path.name, t, orphan, b"")
+                index += 1
+        for t in sorted(pending):
+            orphan = pending[t][0]
+            if orphan is not None:
+                yield SessionFrame(index, path.name, t, orphan, b"")
+                index += 1
     except McapFileError:
         raise
     except Exception as exc:
         raise McapFileError(f"{path}: cannot read frames ({type(exc).__name__}: {exc})") from exc
+
+
+def _segment_messages(path: Path, topics: tuple[str, ...] | None) -> Iterator[tuple[Any, Any, Any]]:
+    """(schema, channel, message) of every message of ``topics`` (all where None), in log-time
+    order: from the segment's chunk index, one chunk at a time (``chunks.iter_messages``), where
+    its chunks follow each other in time as the recorder writes them; through mcap's reader for
+    any other file (no summary, overlapping chunks), which gives the same messages in the same
+    order. A message's data may be a view into its chunk rather than bytes."""
+    try:
+        index = SegmentIndex.load(path)
+    except McapFileError:
+        index = None  # mcap's reader says what is wrong, or reads what it can
+    if index is None or not index.chunks_in_time_order:
+        with open(path, "rb") as f:
+            yield from make_reader(f, validate_crcs=True).iter_messages(topics=None if topics is None else list(topics))
+        return
+    summary_channels, schemas = index.channels, index.schemas
+    ids = None if topics is None else {cid for cid, ch in summary_channels.items() if ch.topic in topics}
+    for msg in iter_messages(index, ids):
+        channel = summary_channels[msg.channel_id]  # KeyError, as in mcap's reader: a message of no channel
+        yield schemas.get(channel.schema_id) if channel.schema_id else None, channel, msg
 
 
 def iter_session_frames(session_dir: str | Path, camera: str | None = None) -> Iterator[SessionFrame]:

@@ -77,3 +77,71 @@ def test_a_chunk_read_through_a_stale_index_is_refused_as_stale_not_as_damage(tm
     os.utime(seg, ns=(index.mtime_ns + 10**9, index.mtime_ns + 10**9))
     with pytest.raises(StaleIndexError, match=seg.name):
         read_chunk(index, 0)
+
+
+def _mcap_order(seg: Path, topics: list[str] | None = None) -> list[tuple[int, int, int, int, bytes]]:
+    with open(seg, "rb") as f:
+        return [(m.channel_id, m.sequence, m.log_time, m.publish_time, bytes(m.data))
+                for _, _, m in make_reader(f, validate_crcs=True).iter_messages(topics=topics)]
+
+
+def _ours(messages) -> list[tuple[int, int, int, int, bytes]]:
+    return [(m.channel_id, m.sequence, m.log_time, m.publish_time, bytes(m.data)) for m in messages]
+
+
+@pytest.mark.parametrize("compression", list(Compression))
+def test_iter_messages_is_mcaps_log_time_order_message_for_message(tmp_path, compression):
+    from recorder.storage.chunks import iter_messages
+
+    seg = small_chunk_session(tmp_path, compression)
+    index = SegmentIndex.load(seg)
+    assert index is not None and len(index.offsets) > 4 and index.chunks_in_time_order
+    assert _ours(iter_messages(index)) == _mcap_order(seg)
+    wanted = {index.topics["/thermal/image"], index.topics["/thermal/metadata"]}
+    assert _ours(iter_messages(index, wanted)) == _mcap_order(seg, ["/thermal/image", "/thermal/metadata"])
+
+
+def _hand_written(path: Path, chunks: list[list[tuple[int, int]]]) -> Path:
+    """An MCAP whose chunks hold the given (channel number, log time) messages in that order."""
+    from mcap.writer import CompressionType, Writer
+
+    with open(path, "wb") as f:
+        w = Writer(f, compression=CompressionType.ZSTD, chunk_size=1 << 30)
+        w.start()
+        schema = w.register_schema("s", "jsonschema", b"{}")
+        ids = [w.register_channel(f"/t{k}", "json", schema) for k in range(2)]
+        seq = 0
+        for chunk in chunks:
+            for ch, t in chunk:
+                w.add_message(ids[ch], t, f'{{"seq":{seq}}}'.encode(), t + 1, seq)
+                seq += 1
+            w.flush()  # closes the chunk here
+        w.finish()
+    return path
+
+
+def test_messages_out_of_order_inside_chunks_come_out_as_mcap_orders_them(tmp_path):
+    from recorder.storage.chunks import iter_messages
+    from recorder.storage.reader import _segment_messages
+
+    seg = _hand_written(tmp_path / "unsorted.mcap",
+                        [[(0, 5), (1, 3), (0, 3), (1, 4), (0, 5)], [(0, 9), (1, 7), (1, 9)]])
+    index = SegmentIndex.load(seg)
+    assert index is not None and len(index.offsets) == 2 and index.chunks_in_time_order
+    assert _ours(iter_messages(index)) == _mcap_order(seg)
+    assert [(c.topic, *_ours([m])) for _, c, m in _segment_messages(seg, None)] == \
+        [(index.channels[m[0]].topic, m) for m in _mcap_order(seg)]
+    assert [m[2] for m in _mcap_order(seg)] == [3, 3, 4, 5, 5, 7, 9, 9]
+
+
+def test_overlapping_chunks_are_read_through_mcaps_reader_in_its_order(tmp_path):
+    from recorder.storage.chunks import iter_messages
+    from recorder.storage.reader import _segment_messages
+
+    seg = _hand_written(tmp_path / "overlap.mcap", [[(0, 1), (1, 8)], [(0, 4), (1, 6)], [(0, 2)]])
+    index = SegmentIndex.load(seg)
+    assert index is not None and not index.chunks_in_time_order
+    with pytest.raises(ValueError, match="overlap"):
+        next(iter_messages(index))
+    assert [_ours([m])[0] for _, _, m in _segment_messages(seg, None)] == _mcap_order(seg)
+    assert [m[2] for m in _mcap_order(seg)] == [1, 2, 4, 6, 8]
