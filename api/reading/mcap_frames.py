@@ -87,6 +87,19 @@ class McapFrames:
                     self._indexes.popitem(last=False)
         return index
 
+    def is_kept(self, segment: Path, log_time: int) -> bool:
+        """True where reading the frame takes no disk read and no decompression: its segment's
+        index is kept and current and every chunk that spans ``log_time`` is kept. A caller on
+        an event loop reads such a frame in place and hands any other to a thread."""
+        with self._lock:
+            index = self._indexes.get(segment)
+        if index is None or not index.is_current():
+            return False
+        chunks = index.chunks_at(log_time)
+        with self._lock:
+            return bool(chunks) and all((index.path, index.size, index.mtime_ns, int(index.offsets[c])) in self._chunks
+                                        for c in chunks)
+
     def _chunk(self, index: SegmentIndex, chunk: int) -> ChunkRecords:
         key = (index.path, index.size, index.mtime_ns, int(index.offsets[chunk]))
         with self._lock:

@@ -171,3 +171,54 @@ def test_a_rewritten_copy_of_the_same_size_is_read_afresh():
     first = cache.get("k.zip", len(a), reader(a), "sha-a")
     second = cache.get("k.zip", len(b), reader(b), "sha-b")
     assert first is not second and cache.get("k.zip", len(a), reader(a), "sha-a") is first
+
+
+def test_raw_counts_of_a_session_not_archived_come_from_its_segment_as_the_route_gives_them(client, root):
+    """No png16 copy: the counts come from the MCAP segment through the application's own chunk
+    cache. The first frame of a chunk is read on a thread, its neighbours in place; either way
+    the answer is the route's, byte for byte, ETag, 304 and HEAD included. A PNG of such a
+    session (made on request) stays with the route."""
+    sid = "s-mcap-only"
+    fast = client.app.state.fast_frames
+    frames = [f.pixels.copy() for f in iter_session_frames(root / "sessions" / sid)]
+    served, from_mcap = fast.served, fast.raw_from["mcap"]
+    for n in (0, 1, 2, len(frames) - 1):
+        a = client.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "raw"})
+        b = client.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "raw", "palette": "gray"})
+        assert a.status_code == b.status_code == 200
+        assert a.content == b.content and a.headers["etag"] == b.headers["etag"]
+        for h in ("content-type", "cache-control", "x-width", "x-height", "x-dtype", "content-length"):
+            assert a.headers.get(h) == b.headers.get(h), h
+        assert np.array_equal(np.frombuffer(a.content, "<u2").reshape(frames[n].shape), frames[n])
+        again = client.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "raw"},
+                           headers={"If-None-Match": a.headers["etag"]})
+        assert again.status_code == 304 and again.content == b""
+        head = client.head(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "raw"})
+        assert head.status_code == 200 and head.content == b"" and head.headers["etag"] == a.headers["etag"]
+    assert fast.served == served + 12 and fast.raw_from["mcap"] == from_mcap + 12
+    png = client.get(f"/api/v1/sessions/{sid}/frames/3")
+    assert png.status_code == 200 and fast.served == served + 12
+    assert np.array_equal(imagecodecs.png_decode(png.content), frames[3])
+
+
+def test_a_damaged_segment_chunk_goes_to_the_full_application(tmp_path):
+    """A chunk that fails its CRC is never served from here: the route answers, as it always did
+    (and counts the damage)."""
+    from recorder.storage.chunks import SegmentIndex
+    from tests.support.api_data import make_root
+
+    root = make_root(tmp_path)
+    sid = "s-mcap-only"
+    seg = sorted((root / "sessions" / sid).glob("*.mcap"))[0]
+    index = SegmentIndex.load(seg)
+    assert index is not None
+    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
+        fast = c.app.state.fast_frames
+        data = bytearray(seg.read_bytes())  # damaged after it was indexed, before any frame was read
+        data[int(index.offsets[0]) + int(index.lengths[0]) // 2] ^= 0xFF  # inside the first chunk's records
+        seg.write_bytes(bytes(data))
+        r = c.get(f"/api/v1/sessions/{sid}/frames/0", params={"format": "raw"})
+        route = c.get(f"/api/v1/sessions/{sid}/frames/0", params={"format": "raw", "palette": "gray"})
+        assert fast.served == 0  # not from here
+        assert r.status_code == route.status_code != 200 and r.json() == route.json()
+        assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
