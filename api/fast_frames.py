@@ -187,7 +187,7 @@ class FrameFastPath:
             if fmt != "raw":  # a PNG made on request costs more than the layers skipped
                 return None
             where, mcap = self._segment_of(sid, s, n), self._mcap
-            if where is None or mcap is None:
+            if where is None or mcap is None or not where[0].is_file():  # e.g. deleted once archived
                 return None
             return self._from_segment(sid, n) if mcap.is_kept(*where) else _LATER
         data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])

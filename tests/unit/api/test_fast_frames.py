@@ -222,3 +222,21 @@ def test_a_damaged_segment_chunk_goes_to_the_full_application(tmp_path):
         assert fast.served == 0  # not from here
         assert r.status_code == route.status_code != 200 and r.json() == route.json()
         assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
+
+
+def test_a_session_whose_segments_were_deleted_once_archived_is_served_by_the_route(tmp_path):
+    """No png16 copy and no segment left (archived as hdf5, source deleted): the index still
+    names each frame's segment, but the counts come from the route's other copies."""
+    from archive.archiver import archive_session
+    from recorder.capture.recorder import Recorder
+    from recorder.capture.sources.sim import SimSource
+
+    Recorder(SimSource(width=96, height=64, frames=8, paced=False, seed=9), tmp_path, session_id="gone",
+             analysis=False).run()
+    frames = [f.pixels.copy() for f in iter_session_frames(tmp_path / "sessions" / "gone")]
+    archive_session(tmp_path / "sessions" / "gone", ["hdf5"], delete_source=True)
+    assert not list((tmp_path / "sessions" / "gone").glob("*.mcap"))
+    with TestClient(create_app(Settings(root=tmp_path, tokens={}, rescan_interval_s=0))) as c:
+        r = c.get("/api/v1/sessions/gone/frames/5", params={"format": "raw"})
+        assert r.status_code == 200 and c.app.state.fast_frames.served == 0
+        assert np.array_equal(np.frombuffer(r.content, "<u2").reshape(frames[5].shape), frames[5])
