@@ -174,22 +174,35 @@ def read_chunk(index: SegmentIndex, chunk: int) -> ChunkRecords:
     return ChunkRecords(data, where)
 
 
-def messages_at(records: ChunkRecords, log_time: int, channels: set[int]) -> Iterator[tuple[int, memoryview]]:
-    """(channel id, message data) of every message of ``channels`` logged at ``log_time``, in the
-    chunk's order. Only each record's header is read on the way."""
+def _message_records(records: ChunkRecords) -> Iterator[tuple[int, int, int, int, int, int]]:
+    """(log time, channel, sequence, publish time, data start, data end) of every message record
+    of the chunk, in its order, reading only record headers. A record that runs past the end, a
+    message record too short for its header or bytes after the last record raise
+    ``McapFileError`` naming the chunk."""
     data = records.data
-    view = memoryview(data)
     pos, end = 0, len(data)
     while pos + 9 <= end:
         opcode, length = _RECORD_HEAD.unpack_from(data, pos)
         body = pos + 9
         if body + length > end:
             raise McapFileError(f"{records.where}: a record at byte {pos} of its records runs past their end")
-        if opcode == _MESSAGE and length >= _MESSAGE_FIXED.size:
-            channel, _, t, _ = _MESSAGE_FIXED.unpack_from(data, body)
-            if t == log_time and channel in channels:
-                yield channel, view[body + _MESSAGE_FIXED.size:body + length]
+        if opcode == _MESSAGE:
+            if length < _MESSAGE_FIXED.size:
+                raise McapFileError(f"{records.where}: a message record at byte {pos} is too short")
+            channel, sequence, t, published = _MESSAGE_FIXED.unpack_from(data, body)
+            yield t, channel, sequence, published, body + _MESSAGE_FIXED.size, body + length
         pos = body + length
+    if pos != end:
+        raise McapFileError(f"{records.where}: {end - pos} bytes after its last record")
+
+
+def messages_at(records: ChunkRecords, log_time: int, channels: set[int]) -> Iterator[tuple[int, memoryview]]:
+    """(channel id, message data) of every message of ``channels`` logged at ``log_time``, in the
+    chunk's order."""
+    view = memoryview(records.data)
+    for t, channel, _, _, start, stop in _message_records(records):
+        if t == log_time and channel in channels:
+            yield channel, view[start:stop]
 
 
 class RawMessage(NamedTuple):
@@ -217,24 +230,8 @@ def iter_messages(index: SegmentIndex, channels: Container[int] | None = None) -
         raise ValueError(f"{index.path}: chunks overlap in time; read it with mcap's reader")
     for chunk in range(len(index.offsets)):
         records = read_chunk(index, chunk)
-        data = records.data
-        view = memoryview(data)
-        found: list[tuple[int, int, int, int, int, int]] = []
-        pos, end = 0, len(data)
-        while pos + 9 <= end:
-            opcode, length = _RECORD_HEAD.unpack_from(data, pos)
-            body = pos + 9
-            if body + length > end:
-                raise McapFileError(f"{records.where}: a record at byte {pos} of its records runs past their end")
-            if opcode == _MESSAGE:
-                if length < _MESSAGE_FIXED.size:
-                    raise McapFileError(f"{records.where}: a message record at byte {pos} is too short")
-                channel, sequence, t, published = _MESSAGE_FIXED.unpack_from(data, body)
-                if channels is None or channel in channels:
-                    found.append((t, channel, sequence, published, body + _MESSAGE_FIXED.size, body + length))
-            pos = body + length
-        if pos != end:
-            raise McapFileError(f"{records.where}: {end - pos} bytes after its last record")
+        view = memoryview(records.data)
+        found = [m for m in _message_records(records) if channels is None or m[1] in channels]
         if any(found[k][0] > found[k + 1][0] for k in range(len(found) - 1)):
             found.sort(key=itemgetter(0))  # stable: equal times keep their place in the chunk
         for t, channel, sequence, published, start, stop in found:

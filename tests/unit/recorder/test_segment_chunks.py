@@ -14,6 +14,7 @@ from mcap.reader import make_reader
 
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
+from recorder.exceptions import McapFileError
 from recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
 from recorder.storage.segments import SegmentPolicy
 from recorder.storage.writer import Compression
@@ -145,3 +146,22 @@ def test_overlapping_chunks_are_read_through_mcaps_reader_in_its_order(tmp_path)
         next(iter_messages(index))
     assert [_ours([m])[0] for _, _, m in _segment_messages(seg, None)] == _mcap_order(seg)
     assert [m[2] for m in _mcap_order(seg)] == [1, 2, 4, 6, 8]
+
+
+@pytest.mark.parametrize("tail, says", [
+    (b"\x05" + (3).to_bytes(8, "little") + b"abc", "too short"),  # a message record shorter than its header
+    (b"\x05\x00\x00", "bytes after its last record"),  # a cut record header
+    (b"\x05" + (99).to_bytes(8, "little") + b"x" * 10, "runs past their end"),
+])
+def test_records_that_do_not_frame_are_refused_naming_the_chunk(tail, says):
+    """A chunk's CRC-32 only proves its bytes are the ones written; records that do not add up
+    (a writer's bug) are refused by both readers, naming where, never read as messages."""
+    import struct
+
+    from recorder.storage.chunks import ChunkRecords
+
+    good = b"\x05" + struct.pack("<Q", 22 + 4) + struct.pack("<HIQQ", 1, 0, 7, 7) + b"data"
+    records = ChunkRecords(good + tail, "seg.mcap: chunk at byte 123")
+    assert [bytes(d) for _, d in messages_at(ChunkRecords(good, "x"), 7, {1})] == [b"data"]
+    with pytest.raises(McapFileError, match=f"seg.mcap: chunk at byte 123: .*{says}"):
+        list(messages_at(records, 7, {1}))
