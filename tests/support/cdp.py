@@ -4,6 +4,7 @@ promise rejection the page raised."""
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import shutil
@@ -40,7 +41,9 @@ class Browser:
                 raise RuntimeError("Chromium did not open its DevTools port")
             time.sleep(0.1)
         port, path = port_file.read_text().splitlines()[:2]
-        self._ws = connect(f"ws://127.0.0.1:{port}{path}", max_size=None, open_timeout=30)
+        # entered as the context manager websockets asks for (17 deprecates using it bare)
+        self._stack = contextlib.ExitStack()
+        self._ws = self._stack.enter_context(connect(f"ws://127.0.0.1:{port}{path}", max_size=None, open_timeout=30))
         self._ids = itertools.count(1)
         self.exceptions: list[str] = []
         self.console_errors: list[str] = []
@@ -130,7 +133,7 @@ class Browser:
         import signal
 
         try:
-            self._ws.close()
+            self._stack.close()
         finally:
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(self.proc.pid, signal.SIGKILL)

@@ -9,6 +9,7 @@ FileDescriptorSet), as Foxglove itself does, so a test passes only if any client
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import struct
 import time
@@ -37,12 +38,15 @@ class FoxgloveClient:
     server_info: dict[str, Any] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self._ws = connect(self.url, subprotocols=SUBPROTOCOLS, max_size=None, open_timeout=10)
+        # entered as the context manager websockets asks for (17 deprecates using it bare)
+        self._stack = contextlib.ExitStack()
+        self._ws = self._stack.enter_context(connect(self.url, subprotocols=SUBPROTOCOLS, max_size=None,
+                                                     open_timeout=10))
         self._subs: dict[int, str] = {}
         self._classes: dict[str, Any] = {}
 
     def close(self) -> None:
-        self._ws.close()
+        self._stack.close()
 
     def _handle_text(self, text: str) -> None:
         msg = json.loads(text)
