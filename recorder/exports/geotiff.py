@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import json
+import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -117,6 +118,7 @@ def _write_cog(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str,
         import rasterio
         from rasterio.control import GroundControlPoint
         from rasterio.crs import CRS
+        from rasterio.errors import NotGeoreferencedWarning
     except ImportError:
         raise ThermcapError("a Cloud-Optimized GeoTIFF needs rasterio (pip install 'thermcap[geo]')") from None
     h, w = data.shape
@@ -129,12 +131,16 @@ def _write_cog(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str,
                                    y=float(position["latitude"]), z=float(position.get("absolute_altitude_m") or 0))]
     if isinstance(target, io.BytesIO):
         raise ThermcapError("a Cloud-Optimized GeoTIFF is written to a file, not to memory")
-    with rasterio.Env(), rasterio.open(str(target), "w", **profile) as dst:
-        dst.write(data, 1)
-        dst.update_tags(**{k: v if isinstance(v, str) else json.dumps(v) for k, v in metadata.items()
-                           if v is not None})
-        if description:
-            dst.update_tags(TIFFTAG_IMAGEDESCRIPTION=description)
-        dst.units = (units,)
-        if gcps:
-            dst.gcps = (gcps, CRS.from_epsg(4326))
+    with warnings.catch_warnings():
+        # rasterio warns at the open that the new file has no grid: a frame without a position
+        # never gets one (it is on no map), one with a position gets its ground control point below
+        warnings.simplefilter("ignore", NotGeoreferencedWarning)
+        with rasterio.Env(), rasterio.open(str(target), "w", **profile) as dst:
+            dst.write(data, 1)
+            dst.update_tags(**{k: v if isinstance(v, str) else json.dumps(v) for k, v in metadata.items()
+                               if v is not None})
+            if description:
+                dst.update_tags(TIFFTAG_IMAGEDESCRIPTION=description)
+            dst.units = (units,)
+            if gcps:
+                dst.gcps = (gcps, CRS.from_epsg(4326))
