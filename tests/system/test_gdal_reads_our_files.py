@@ -42,6 +42,7 @@ def duo(tmp_path_factory):
 
 
 @pytest.mark.parametrize("kind", ["celsius-tiff", "celsius-cog"])
+@pytest.mark.filterwarnings("error::rasterio.errors.NotGeoreferencedWarning")  # no noise for the user
 def test_temperature_geotiff_in_gdal(duo, tmp_path, kind):
     export_session(duo, kind, tmp_path)
     (path,) = tmp_path.glob("*.tiff")
