@@ -13,6 +13,7 @@ import pytest
 
 pytest.importorskip("rasterio", reason="rasterio is in the geo extra (pip install 'thermcap[geo]')")
 import rasterio
+from affine import Affine
 from pyproj import Transformer
 
 from recorder.capture.recorder import Recorder
@@ -155,7 +156,8 @@ def test_over_a_dem_hot_spots_land_on_the_targets_and_a_flat_plane_misses_them(t
     heights = np.tile(base + slope * np.clip(east - e0, 0, None), (n, 1)).astype(np.float32)
     path = tmp_path / "hill.tif"
     with rasterio.open(path, "w", driver="GTiff", width=n, height=n, count=1, dtype="float32", crs=f"EPSG:{EPSG}",
-                       transform=rasterio.transform.from_origin(e0 - half, n0 + half, cell, cell)) as dst:
+                       # from_origin's own arithmetic warns in this rasterio (matmul by `*`)
+                       transform=Affine(cell, 0.0, e0 - half, 0.0, -cell, n0 + half)) as dst:
         dst.write(heights, 1)
     dem = Dem.from_file(path)
     altitude = base + 40.0
