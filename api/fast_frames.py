@@ -249,7 +249,8 @@ class FrameFastPath:
         if want is not None and digest != want:
             return None
         h, w = pixels.shape
-        self.raw_from["mcap"] += 1
+        with self._lock:  # this may run on a thread of the segment pool
+            self.raw_from["mcap"] += 1
         return body, b'"' + digest.hex()[:40].encode() + b'"', [
             (b"content-type", b"application/octet-stream"), (b"x-width", str(w).encode()),
             (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
