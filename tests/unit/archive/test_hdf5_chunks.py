@@ -57,3 +57,37 @@ def test_reading_in_blocks_gives_every_frame_sidecar_and_time_in_order(tmp_path,
         assert np.array_equal(got.pixels, want.pixels)
         assert got.sidecar == want.sidecar
         assert got.log_time == want.log_time
+
+
+def test_a_damaged_chunk_is_found_by_verification_and_a_reader_may_stop_early(tmp_path, monkeypatch):
+    """Reading ahead on a thread changes nothing of what verification sees: a changed byte in
+    one frame's chunk is that frame's problem, the frames around it are fine, and a caller
+    that stops after one frame leaves no thread reading the closed file."""
+    import hashlib
+
+    from archive.archiver import verify_format_dir
+    from archive.formats import ArchiveContext, get_format
+    from archive.formats import hdf5 as hdf5_format
+    from recorder.storage.reader import SessionFrame
+
+    shape, n = (64, 96), 20
+    monkeypatch.setattr(hdf5_format, "READ_BYTES", 3 * shape[0] * shape[1] * 2)
+    rng = np.random.default_rng(6)
+    frames = [SessionFrame(i, "seg-0.mcap", 1_700_000_000_000_000_000 + i, rng.integers(0, 1 << 14, shape)
+                           .astype(np.uint16), b"{}") for i in range(n)]
+    fmt = get_format("hdf5")
+    records = fmt.write(iter(frames), tmp_path, ArchiveContext(session_id="d", total_frames=n,
+                                                               frames_per_segment={"seg-0.mcap": n}))
+    path = tmp_path / records[0].path
+    with h5py.File(path) as f:
+        info = f["frames"].id.get_chunk_info(11)
+    data = bytearray(path.read_bytes())
+    data[info.byte_offset + info.size // 2] ^= 0x40
+    path.write_bytes(bytes(data))
+    want = [hashlib.sha256(f.pixels.tobytes()).hexdigest() for f in frames]
+    problems, _ = verify_format_dir(fmt, tmp_path, [{"path": records[0].path, "frames": n}], want, where="hdf5",
+                                    times=[f.log_time for f in frames])
+    assert problems and all("frame 11 " in p or "cannot decode after 11" in p for p in problems), problems
+    reader = fmt.read(tmp_path, [records[0].path])
+    assert np.array_equal(next(reader).pixels, frames[0].pixels)
+    reader.close()  # the read-ahead is waited for before the file closes
