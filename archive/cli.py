@@ -260,18 +260,22 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
                    "beside the formats' own encode time (the floor) and each format alone.")
 @click.option("--formats", default=None, metavar="ID,ID",
               help="--session: the formats to archive (default: the archiver's defaults).")
+@click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
+              help="--session: time the whole archive this many times and report the median run (each run listed).")
 @json_option
-def bench_archive(n_frames: int, session_s: float | None, formats: str | None, as_json: bool) -> None:
+def bench_archive(n_frames: int, session_s: float | None, formats: str | None, repeat: int, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
     from archive.bench import bench_archive as run
     from archive.bench import bench_session, print_table
 
     if session_s:
-        res = bench_session(session_s, tuple(formats.split(",")) if formats else None)
+        res = bench_session(session_s, tuple(formats.split(",")) if formats else None, repeat=repeat)
         click.echo(json.dumps(res, indent=2) if as_json else
                    f"{res['seconds_of_recording']} s of 640x512@60 ({res['frames']} frames), formats "
                    f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "
-                   f"{res['x_real_time']}x real time, {res['cpu_ms_per_frame']} CPU ms per frame (at best "
+                   f"{res['x_real_time']}x real time"
+                   + (f" (the median of {repeat} runs: {res['x_real_time_runs']})" if repeat > 1 else "")
+                   + f", {res['cpu_ms_per_frame']} CPU ms per frame (at best "
                    f"{res['cpu_bound_x_real_time']}x on {res['cores']} cores); the formats' own encoders alone: "
                    f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}; "
                    f"writing and reading back alone, {res['formats_cpu_ms_per_frame']} CPU ms per frame "
