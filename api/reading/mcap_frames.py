@@ -63,7 +63,7 @@ class McapFrames:
                 if channel == image and pixels is None:
                     pixels = decode_image(data)[1].copy()
                 elif channel == meta and sidecar is None:
-                    sidecar = json_payload(index.encodings[channel], bytes(data))
+                    sidecar = json_payload(index.channels[channel].message_encoding, bytes(data))
         if pixels is None and not index.is_current():  # "not there" only from the file as it is
             raise StaleIndexError(f"{index.path} changed since it was indexed")
         return pixels, sidecar
@@ -97,11 +97,10 @@ class McapFrames:
             return False
         chunks = index.chunks_at(log_time)
         with self._lock:
-            return bool(chunks) and all((index.path, index.size, index.mtime_ns, int(index.offsets[c])) in self._chunks
-                                        for c in chunks)
+            return bool(chunks) and all(_key(index, c) in self._chunks for c in chunks)
 
     def _chunk(self, index: SegmentIndex, chunk: int) -> ChunkRecords:
-        key = (index.path, index.size, index.mtime_ns, int(index.offsets[chunk]))
+        key = _key(index, chunk)
         with self._lock:
             kept = self._chunks.get(key)
             if kept is not None:
@@ -122,6 +121,11 @@ class McapFrames:
     def kept_bytes(self) -> int:
         with self._lock:
             return self._chunk_bytes
+
+
+def _key(index: SegmentIndex, chunk: int) -> tuple[Path, int, int, int]:
+    """A kept chunk's key: its file as indexed (path, size, mtime) and its offset."""
+    return index.path, index.size, index.mtime_ns, int(index.offsets[chunk])
 
 
 def _scan(segment: Path, log_time: int) -> tuple[np.ndarray | None, bytes | None]:

@@ -21,6 +21,7 @@ import os
 import struct
 from collections.abc import Container, Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from operator import itemgetter
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -59,8 +60,6 @@ class SegmentIndex:
     path: Path
     size: int
     mtime_ns: int
-    topics: dict[str, int]  # topic -> channel id
-    encodings: dict[int, str]  # channel id -> message encoding
     starts: np.ndarray  # int64 [chunks]: each chunk's first log time, in file order
     ends: np.ndarray  # int64 [chunks]: each chunk's last log time
     offsets: np.ndarray  # int64 [chunks]: where each chunk record starts
@@ -84,13 +83,16 @@ class SegmentIndex:
             return None
         chunks = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
         return cls(path, st.st_size, st.st_mtime_ns,
-                   {ch.topic: ch.id for ch in summary.channels.values()},
-                   {ch.id: ch.message_encoding for ch in summary.channels.values()},
                    np.array([c.message_start_time for c in chunks], np.int64),
                    np.array([c.message_end_time for c in chunks], np.int64),
                    np.array([c.chunk_start_offset for c in chunks], np.int64),
                    np.array([c.chunk_length for c in chunks], np.int64),
                    dict(summary.channels), dict(summary.schemas))
+
+    @cached_property
+    def topics(self) -> dict[str, int]:
+        """topic -> channel id."""
+        return {ch.topic: ch.id for ch in self.channels.values()}
 
     def is_current(self) -> bool:
         """False once the file on disk is not the one indexed (replaced, rewritten or gone)."""

@@ -85,4 +85,4 @@ def test_a_byte_changed_inside_a_chunk_is_refused_by_the_chunk_reader(tmp_path, 
     assert index is not None
     chunk = next(c for c in range(len(index.offsets)) if index.offsets[c] < at < index.offsets[c] + index.lengths[c])
     with pytest.raises(McapFileError, match=f"{seg.name}: chunk at byte {index.offsets[chunk]}"):
-        list(messages_at(read_chunk(index, chunk), first.log_time, set(index.encodings)))
+        list(messages_at(read_chunk(index, chunk), first.log_time, set(index.channels)))

@@ -43,7 +43,7 @@ def test_the_messages_at_every_time_are_the_ones_mcap_reads(tmp_path, compressio
     seg = small_chunk_session(tmp_path, compression)
     index = SegmentIndex.load(seg)
     assert index is not None and len(index.offsets) > 4, "the test wants many chunks"
-    channels = set(index.encodings)
+    channels = set(index.channels)
     expected = _by_time(seg)
     assert len(expected) >= 40
     for t, messages in expected.items():
