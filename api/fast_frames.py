@@ -35,6 +35,7 @@ path only skips layers.
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import json
 import os
@@ -70,7 +71,13 @@ _PATH = re.compile(r"/api/v1/sessions/([A-Za-z0-9][A-Za-z0-9_.-]{0,127})/frames/
 CHECK_S = 2.0  # how stale a session's cached locations may be before its index row is looked at again
 _CACHE_CONTROL = b"public, max-age=31536000, immutable"
 _PNG16 = get_codec("png16")
-_LATER = object()  # ``_answer``: the frame's chunk must be read first, off the event loop
+
+
+def _raw_headers(pixels: np.ndarray) -> list[tuple[bytes, bytes]]:
+    """The route's headers for a frame's raw counts."""
+    h, w = pixels.shape
+    return [(b"content-type", b"application/octet-stream"), (b"x-width", str(w).encode()),
+            (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
 
 
 class _Route:
@@ -87,9 +94,9 @@ class _Session:
     sha256: list[bytes | None]  # the frame's pixel hash (raw LE bytes)
     checked: float
     tiff: list[dict[str, Any]]  # tiff-lzw files ({path: key, frames}), in session order
-    summary: str | None = None  # the index's entry for archive/summary.npz (JSON), if the archive has one
-    times: np.ndarray | None = None  # int64 [frames]: each frame's log time (0: not in the index)
-    segments: list[str | None] | None = None  # each frame's MCAP segment, where the index names one
+    summary: str | None  # the index's entry for archive/summary.npz (JSON), if the archive has one
+    times: np.ndarray  # int64 [frames]: each frame's log time (0: not in the index)
+    segments: list[str | None]  # each frame's MCAP segment, where the index names one
 
 
 @dataclass
@@ -140,8 +147,8 @@ class FrameFastPath:
         # GIL-free work, and a thread hand-off cost raw 1 ms at p50 and 11% of its throughput
         # with four clients (bench api)
         answer = self._answer(sid, n, fmt)
-        if answer is _LATER:
-            answer = await asyncio.get_running_loop().run_in_executor(self._segment_pool, self._from_segment, sid, n)
+        if callable(answer):  # the frame's chunk must be read and decompressed first: off the event loop
+            answer = await asyncio.get_running_loop().run_in_executor(self._segment_pool, answer)
         if answer is None:
             await self.app(scope, receive, send)
             return
@@ -178,7 +185,8 @@ class FrameFastPath:
         return m.group(1), int(m.group(2)), fmt, headers.get(b"if-none-match")
 
     def _answer(self, sid: str, n: int, fmt: str) -> Any:
-        """(body, ETag, headers), None for the full application, or ``_LATER``."""
+        """(body, ETag, headers); None for the full application; or, for a frame whose chunk is
+        not kept, the call that answers it, to be run on a thread."""
         s = self._session(sid)
         if s is None or not 0 <= n < s.frames:
             return None
@@ -186,10 +194,14 @@ class FrameFastPath:
         if blob is None:
             if fmt != "raw":  # a PNG made on request costs more than the layers skipped
                 return None
-            where, mcap = self._segment_of(sid, s, n), self._mcap
-            if where is None or mcap is None or not where[0].is_file():  # e.g. deleted once archived
+            mcap, segment = self._mcap, s.segments[n]
+            if mcap is None or not segment:
                 return None
-            return self._from_segment(sid, n) if mcap.is_kept(*where) else _LATER
+            path, log_time = self.root / "sessions" / sid / segment, int(s.times[n])
+            if not path.is_file():  # e.g. deleted once archived
+                return None
+            read = functools.partial(self._from_segment, mcap, path, log_time, s.sha256[n])
+            return read() if mcap.is_kept(path, log_time) else read
         data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
         if data is None or imagecodecs.deflate_crc32(data) != blob["crc32"]:
             return None  # missing or damaged: the full path reports it and serves another copy
@@ -216,44 +228,27 @@ class FrameFastPath:
                 break
         else:
             return None  # no copy here proves itself: the full path reports and tries the others
-        body = pixels.tobytes()
-        h, w = pixels.shape
-        return body, b'"' + want.hex()[:40].encode() + b'"', [
-            (b"content-type", b"application/octet-stream"), (b"x-width", str(w).encode()),
-            (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
+        return pixels.tobytes(), b'"' + want.hex()[:40].encode() + b'"', _raw_headers(pixels)
 
-    def _segment_of(self, sid: str, s: _Session, n: int) -> tuple[Path, int] | None:
-        """(segment path, log time) of frame ``n`` where the index names its segment."""
-        if self._mcap is None or s.segments is None or s.times is None or not s.segments[n]:
-            return None
-        return self.root / "sessions" / sid / str(s.segments[n]), int(s.times[n])
-
-    def _from_segment(self, sid: str, n: int) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
-        """Frame ``n``'s raw counts from its MCAP segment, as the route answers them (its ETag is
-        the body's sha256, which is the frame's own hash). Damage, a segment gone, a frame not
-        there or counts that differ from the index's hash: None, and the full application says
-        what happened or serves another copy."""
-        s, mcap = self._session(sid), self._mcap
-        where = None if s is None or not 0 <= n < s.frames else self._segment_of(sid, s, n)
-        if s is None or where is None or mcap is None:
-            return None
+    def _from_segment(self, mcap: McapFrames, path: Path, log_time: int,
+                      want: bytes | None) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
+        """A frame's raw counts from its MCAP segment, as the route answers them (its ETag is the
+        body's sha256, which is the frame's own hash). Damage, a segment gone, a frame not there
+        or counts that differ from the index's hash (``want``): None, and the full application
+        says what happened or serves another copy."""
         try:
-            pixels, _ = mcap.frame(*where)
+            pixels, _ = mcap.frame(path, log_time)
         except (McapFileError, OSError):
             return None
         if pixels is None:
             return None
         body = np.ascontiguousarray(pixels, dtype="<u2").tobytes()
         digest = hashlib.sha256(body).digest()
-        want = s.sha256[n]
         if want is not None and digest != want:
             return None
-        h, w = pixels.shape
         with self._lock:  # this may run on a thread of the segment pool
             self.raw_from["mcap"] += 1
-        return body, b'"' + digest.hex()[:40].encode() + b'"', [
-            (b"content-type", b"application/octet-stream"), (b"x-width", str(w).encode()),
-            (b"x-height", str(h).encode()), (b"x-dtype", b"uint16le")]
+        return body, b'"' + digest.hex()[:40].encode() + b'"', _raw_headers(pixels)
 
     def _summary(self, sid: str, s: _Session, n: int) -> FrameSummary | None:
         """The archive's frame summary where it covers frame ``n``: its band CRC-32s were taken
