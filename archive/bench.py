@@ -208,8 +208,8 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     of the same work could do; and the CPU of each format writing and then reading back a sample
     of the frames, alone, which bounds any archiver that verifies with the formats' readers.
 
-    ``repeat``: the whole archive is timed that many times (``--force`` after the first) and the
-    median run is reported, each run beside it. On a shared machine one run moves by 15% from
+    ``repeat``: the whole archive is timed that many times, each a fresh archive of the session,
+    and the median run is reported, each run beside it. On a shared machine one run moves by 15% from
     the next; the median of a few is what a before/after should compare."""
     from archive.archiver import DEFAULT_FORMATS, archive_session
     from archive.manifest import archive_dir
