@@ -5,6 +5,13 @@ Naming: ``NNNN.mcap.active`` while a segment is open, renamed to ``NNNN.mcap`` o
 ``.active`` file is always something ``thermcap recover`` should look at. The folder itself is
 fsynced after each rename, so the new name survives a power cut too.
 
+A closed segment's fsync, rename and folder fsync happen on a thread of their own, one segment
+after another, while the writer thread goes on into the next segment: on a busy disk an fsync
+can take seconds, and frames queued behind it would be in memory only, which ``kill -9`` takes.
+A file that has been written survives ``kill -9`` in the page cache, fsynced or not. So a crash
+may leave several ``.active`` files (finished ones not yet renamed, and the open one);
+``recover`` names the finished ones and rewrites the open one.
+
 Every segment stands alone: it carries the schemas, the session metadata record (sensor,
 radiometric model, software version, host) and the bad-pixel map attachment, so one segment
 copied off a vehicle opens in Foxglove with everything needed to read its temperatures.
@@ -17,8 +24,9 @@ import os
 import socket
 import threading
 import time
+from collections import deque
 from collections.abc import Callable, Iterator, Sequence
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -46,6 +54,9 @@ __all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression"
 
 SEGMENT_STATS_METADATA = "thermcap.segment"
 SESSION_METADATA = "thermcap.session"
+# Closed segments waiting for their fsync and rename, at most; one more makes the writer wait.
+# Each holds only a file descriptor, so this bounds descriptors, not memory.
+MAX_SETTLING = 8
 
 
 def segment_name(index: int) -> str:
@@ -173,6 +184,8 @@ class SessionWriter:
         self._syncer = _Syncer(self.policy.fsync_interval_s) if self.policy.fsync_interval_s > 0 else None
         if self._syncer:
             self._syncer.start()
+        self._settler: ThreadPoolExecutor | None = ThreadPoolExecutor(1, thread_name_prefix="segment-settle")
+        self._settling: deque[Future[None]] = deque()
         self._next_index = self._first_free_index()
 
     def _first_free_index(self) -> int:
@@ -242,27 +255,57 @@ class SessionWriter:
                 self._syncer.fd = writer.fileno()
 
     def close_segment(self) -> None:
-        """finish(), fsync, rename .active -> .mcap, fsync the folder."""
+        """End the open segment: its last chunks, summary and closing magic are written here,
+        then its fsync, the rename .active -> .mcap and the folder's fsync are left to the
+        settling thread, in order. A settling error is raised by a later call (write, poll,
+        close), naming the segment."""
         writer, info = self._writer, self.segments[-1] if self.segments else None
         if writer is None or info is None:
             return
+        path = self._path(info, True)
+        fd: int | None = None
         try:
             writer.add_metadata(SEGMENT_STATS_METADATA, {k: json.dumps(v) for k, v in info.to_dict().items()})
             if self._syncer:
                 with self._syncer.lock:
                     self._syncer.fd = None
-            writer.finish(fsync=True)
+            fd = os.dup(writer.fileno())
+            writer.finish()
             info.bytes = writer.position
-            os.replace(self._path(info, True), self._path(info, False))
-            fsync_dir(self.dir)
         except OSError as exc:
-            raise RecordingError(f"cannot close segment {self._path(info, True)}: {exc.strerror or exc}") from exc
+            if fd is not None:
+                os.close(fd)
+            raise RecordingError(f"cannot close segment {path}: {exc.strerror or exc}") from exc
         finally:
             self._writer = None
+        assert self._settler is not None, "close_segment after shutdown"
+        self._settling.append(self._settler.submit(self._settle, fd, path, self._path(info, False)))
+        self._reap(keep=MAX_SETTLING)
+
+    def _settle(self, fd: int, active: Path, final: Path) -> None:
+        """On the settling thread: the finished file to disk, then its final name."""
+        try:
+            try:
+                os.fsync(fd)
+            finally:
+                os.close(fd)
+            os.replace(active, final)
+            fsync_dir(self.dir)
+        except OSError as exc:
+            raise RecordingError(f"cannot close segment {active}: {exc.strerror or exc}") from exc
         with suppress(OSError):  # the folder stays a rosbag2 bag of its finished segments (derived data)
             write_bag_metadata(self.dir)
         if self.on_segment_closed is not None:
             self.on_segment_closed()
+
+    def _reap(self, keep: int) -> None:
+        """Raise the first settling error; wait while more than ``keep`` segments settle."""
+        while self._settling and (len(self._settling) > keep or self._settling[0].done()):
+            self._settling.popleft().result()
+
+    def settle(self) -> None:
+        """Wait until every closed segment has its final name (raises its error if one failed)."""
+        self._reap(keep=0)
 
     def _maybe_rotate(self, log_time: int, incoming: int) -> None:
         info = self.current
@@ -337,6 +380,7 @@ class SessionWriter:
                                  f"{exc.strerror or exc}") from exc
 
     def poll(self) -> None:
+        self._reap(keep=MAX_SETTLING)
         if self._writer is not None:
             with self._writing():
                 self._writer.poll()
@@ -345,14 +389,17 @@ class SessionWriter:
             raise RecordingError(f"fsync of {self.dir} failed: {err.strerror or err}")
 
     def close(self) -> None:
-        """Close the open segment cleanly and stop the helper threads."""
+        """Close the open segment cleanly, wait until every segment has its final name, and stop
+        the helper threads."""
         try:
             self.close_segment()
+            self.settle()
         finally:
             self.shutdown()
 
     def abandon(self) -> None:
-        """After a write error: keep the open segment as .active for ``recover``; touch nothing else."""
+        """After a write error: keep the open segment as .active for ``recover``; touch nothing
+        else. Segments already finished still settle (or stay .active if they cannot)."""
         if self._writer is not None:
             with suppress(OSError):
                 self._writer.close()
@@ -360,6 +407,10 @@ class SessionWriter:
         self.shutdown()
 
     def shutdown(self) -> None:
+        if self._settler:
+            self._settler.shutdown(wait=True)
+            self._settler = None
+            self._settling.clear()
         if self._syncer:
             self._syncer.stop()
             self._syncer = None

@@ -1,0 +1,134 @@
+"""A segment's close must not hold the writer thread on fsync.
+
+In CI a close waited 1.5 s on fsync while the suite's earlier tests flushed gigabytes; the frames
+captured meanwhile were queued in memory only, and ``kill -9`` took them (1.5 s lost against a
+1 s bound). What makes a frame survive ``kill -9`` is that it was written (the page cache keeps
+it), not that it was fsynced, so the writer thread must go on writing while a closed segment's
+fsync and rename finish elsewhere.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from recorder.exceptions import RecordingError
+from recorder.icd.topics import TOPIC_IMAGE, decode_image, image_message_parts
+from recorder.storage.recover import recover_path
+from recorder.storage.segments import SegmentPolicy, SessionWriter
+
+STEP_NS = 50_000_000  # 20 fps: a 0.1 s segment holds two frames
+
+
+def _writer(session: Path) -> SessionWriter:
+    session.mkdir()
+    return SessionWriter(session, session_meta={"session_id": "s"}, extra_topics={},
+                         policy=SegmentPolicy(max_duration_s=0.1, fsync_interval_s=0, workers=0))
+
+
+def _frame(i: int) -> np.ndarray:
+    return np.full((8, 8), i, dtype=np.uint16)
+
+
+def _write(sw: SessionWriter, frames: range) -> None:
+    for i in frames:
+        sw.write_frame(i * STEP_NS, image_message_parts(_frame(i), i * STEP_NS), b"{}")
+
+
+def _images(session: Path, pattern: str, skip_last: bool = False) -> list[tuple[int, int]]:
+    out = []
+    segments = sorted(session.glob(pattern))
+    for seg in segments[:-1] if skip_last else segments:
+        with open(seg, "rb") as f:
+            for _, _, msg in make_reader(f).iter_messages(topics=[TOPIC_IMAGE]):
+                out.append((msg.log_time, int(decode_image(msg.data)[1][0, 0])))
+    return out
+
+
+@pytest.fixture
+def held_fsync(monkeypatch):
+    """fsync blocks until the test lets it go: a disk busy with someone else's writes."""
+    gate = threading.Event()
+    real = os.fsync
+
+    def fsync(fd: int) -> None:
+        gate.wait(30)
+        real(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    yield gate
+    gate.set()
+
+
+def test_a_stalled_fsync_never_holds_the_writer_thread(tmp_path, held_fsync):
+    session = tmp_path / "s"
+    sw = _writer(session)
+    done = threading.Event()
+    t = threading.Thread(target=lambda: (_write(sw, range(12)), done.set()), daemon=True)
+    t.start()
+    try:
+        assert done.wait(10), "the writer thread waited on a closed segment's fsync"
+        # Every closed segment is finished in its file (the open one is the last), as kill -9
+        # would leave it: complete, only not yet fsynced and renamed.
+        written = _images(session, "*.mcap.active", skip_last=True)
+        assert [v for _, v in written] == list(range(10))
+        assert not list(session.glob("*.mcap")), "renamed before its fsync"
+    finally:
+        held_fsync.set()
+        t.join(10)
+    sw.close()
+    assert not list(session.glob("*.active"))
+    assert _images(session, "*.mcap") == [(i * STEP_NS, i) for i in range(12)]
+    assert len(list(session.glob("*.mcap"))) == 6
+
+
+def test_kill_during_a_stalled_close_loses_no_written_frame(tmp_path, held_fsync):
+    """Several segments wait to be settled (``.active`` though finished), and one is open:
+    ``recover`` names the finished ones and keeps every chunk of the open one."""
+    session = tmp_path / "s"
+    sw = _writer(session)
+    t = threading.Thread(target=_write, args=(sw, range(9)), daemon=True)
+    t.start()
+    t.join(10)
+    assert not t.is_alive()
+    sw._writer.flush()  # the open segment's last chunk written, as max_chunk_age_s would have done
+    actives = sorted(p.name for p in session.glob("*.mcap.active"))
+    assert len(actives) >= 2
+    # kill -9: the process is gone, its files stay as they are on disk. Copy them away before
+    # the held threads are let go.
+    crashed = tmp_path / "crashed"
+    crashed.mkdir()
+    for p in session.iterdir():
+        if p.name.endswith(".active"):
+            (crashed / p.name).write_bytes(p.read_bytes())
+    held_fsync.set()
+    sw.abandon()
+    results = recover_path(crashed)
+    assert sorted(Path(r.source).name for r in results) == actives
+    assert not list(crashed.glob("*.active"))
+    assert _images(crashed, "*.mcap") == [(i * STEP_NS, i) for i in range(9)]
+
+
+def test_a_failed_close_is_reported_naming_the_segment(tmp_path, monkeypatch):
+    """The closing thread's error reaches the writer's caller (on the next write, poll or
+    close) naming the segment, and the segment stays ``.active`` for ``recover``."""
+    real = os.replace
+
+    def replace(src, dst):
+        if str(src).endswith("0000.mcap.active"):
+            raise OSError(5, "Input/output error")
+        return real(src, dst)
+
+    monkeypatch.setattr(os, "replace", replace)
+    session = tmp_path / "s"
+    sw = _writer(session)
+    with pytest.raises(RecordingError, match=r"0000\.mcap\.active.*Input/output error"):
+        _write(sw, range(40))
+        sw.close()
+    sw.abandon()
+    assert (session / "0000.mcap.active").exists()
