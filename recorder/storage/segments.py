@@ -137,12 +137,22 @@ class _Syncer(threading.Thread):
 
     def run(self) -> None:
         while not self._halt.wait(self.interval_s):
+            # The lock only hands over the descriptor (a duplicate, so the segment may close
+            # meanwhile): held through an fsync that takes seconds, it would stop the writer
+            # thread at its next segment, with frames queued in memory only.
             with self.lock:
-                if self.fd is not None:
-                    try:
-                        os.fsync(self.fd)
-                    except OSError as exc:  # reported by the writer, which owns the stop decision
-                        self.error = exc
+                try:
+                    fd = os.dup(self.fd) if self.fd is not None else None
+                except OSError as exc:
+                    self.error, fd = exc, None
+            if fd is None:
+                continue
+            try:
+                os.fsync(fd)
+            except OSError as exc:  # reported by the writer, which owns the stop decision
+                self.error = exc
+            finally:
+                os.close(fd)
 
     def stop(self) -> None:
         self._halt.set()
@@ -338,37 +348,40 @@ class SessionWriter:
                 writer.add_attachment(name, media_type, data, log_time=log_time, create_time=log_time)
         topics = self.cameras[camera]
         doc = sidecar_doc if sidecar_doc is not None else (json.loads(sidecar_json) if sidecar_json else {})
-        self._add(topics.image, log_time, image_parts, token=token, sequence=sequence)
-        self._add(topics.metadata, log_time, SIDECAR.encode(doc, sidecar_json), sequence=sequence)
-        self._add(topics.annotations, log_time, annotations_message(log_time, doc.get("targets") or []),
-                  sequence=sequence)
-        for topic, payload, extra_doc in extra:
-            self._add(topic, log_time, _as_message(topic, payload, extra_doc))
+        batch = [(topics.image, image_parts, sequence),
+                 (topics.metadata, SIDECAR.encode(doc, sidecar_json), sequence),
+                 (topics.annotations, annotations_message(log_time, doc.get("targets") or []), sequence)]
+        batch += [(topic, _as_message(topic, payload, extra_doc), 0) for topic, payload, extra_doc in extra]
+        self._add(log_time, batch, token)
         self.segments[-1].frames += 1
 
     def write_message(self, topic: str, log_time: int, payload: bytes) -> None:
         """A JSON document on ``topic``, as its ROS 2 message (the JSON kept inside it)."""
         if self._writer is None:
             self._maybe_rotate(log_time, len(payload))
-        self._add(topic, log_time, _as_message(topic, payload))
+        self._add(log_time, [(topic, _as_message(topic, payload), 0)])
 
-    def _add(self, topic: str, log_time: int, data: Any, token: Any = None, sequence: int = 0) -> None:
-        assert self._writer is not None
+    def _add(self, log_time: int, batch: list[tuple[str, Any, int]], token: Any = None) -> None:
+        """Messages of one log time, each ``(topic, data, sequence)``, into the open segment."""
+        writer = self._writer
+        assert writer is not None
         info = self.segments[-1]
-        channel = self._channels.get(topic)
-        if channel is None:  # a source's message on a topic it did not declare: kept, as a JSON document
-            with self._writing():
-                m = message_for_topic(topic)
-                channel = self._channels[topic] = self._writer.register_channel(topic, "cdr",
-                                                                                self._schema(m.name, m.text))
+        channels = self._channels
         with self._writing():
-            self._writer.add_message(channel, log_time, data, sequence=sequence, token=token)
-        n = sum(memoryview(p).nbytes for p in data) if isinstance(data, list) else len(data)
-        info.messages += 1
-        info.topic_bytes[topic] = info.topic_bytes.get(topic, 0) + n
-        info.topic_messages[topic] = info.topic_messages.get(topic, 0) + 1
-        info.start_ns = log_time if info.start_ns is None else min(info.start_ns, log_time)
-        info.end_ns = log_time if info.end_ns is None else max(info.end_ns, log_time)
+            for topic, _, _ in batch:
+                if topic not in channels:  # a source's message on a topic it did not declare: kept, as JSON
+                    m = message_for_topic(topic)
+                    channels[topic] = writer.register_channel(topic, "cdr", self._schema(m.name, m.text))
+            lengths = writer.add_messages(log_time, [(channels[t], data, seq) for t, data, seq in batch], token=token)
+        topic_bytes, topic_messages = info.topic_bytes, info.topic_messages
+        for (topic, _, _), n in zip(batch, lengths, strict=True):
+            topic_bytes[topic] = topic_bytes.get(topic, 0) + n
+            topic_messages[topic] = topic_messages.get(topic, 0) + 1
+        info.messages += len(lengths)
+        if info.start_ns is None or log_time < info.start_ns:
+            info.start_ns = log_time
+        if info.end_ns is None or log_time > info.end_ns:
+            info.end_ns = log_time
 
     @contextmanager
     def _writing(self) -> Iterator[None]:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -25,10 +26,10 @@ from recorder.storage.segments import SegmentPolicy, SessionWriter
 STEP_NS = 50_000_000  # 20 fps: a 0.1 s segment holds two frames
 
 
-def _writer(session: Path) -> SessionWriter:
+def _writer(session: Path, fsync_interval_s: float = 0) -> SessionWriter:
     session.mkdir()
     return SessionWriter(session, session_meta={"session_id": "s"}, extra_topics={},
-                         policy=SegmentPolicy(max_duration_s=0.1, fsync_interval_s=0, workers=0))
+                         policy=SegmentPolicy(max_duration_s=0.1, fsync_interval_s=fsync_interval_s, workers=0))
 
 
 def _frame(i: int) -> np.ndarray:
@@ -65,11 +66,17 @@ def held_fsync(monkeypatch):
     gate.set()
 
 
-def test_a_stalled_fsync_never_holds_the_writer_thread(tmp_path, held_fsync):
+@pytest.mark.parametrize("periodic_fsync", [False, True], ids=["close-only", "with-periodic-fsync"])
+def test_a_stalled_fsync_never_holds_the_writer_thread(tmp_path, held_fsync, periodic_fsync):
+    """With the periodic fsync of the open segment on too: its thread, stuck in fsync, must not
+    hold the writer either when a segment closes or opens."""
     session = tmp_path / "s"
-    sw = _writer(session)
+    sw = _writer(session, fsync_interval_s=0.01 if periodic_fsync else 0)
+    if periodic_fsync:
+        _write(sw, range(1))
+        time.sleep(0.1)  # the syncer is now inside a held fsync of segment 0
     done = threading.Event()
-    t = threading.Thread(target=lambda: (_write(sw, range(12)), done.set()), daemon=True)
+    t = threading.Thread(target=lambda: (_write(sw, range(1 if periodic_fsync else 0, 12)), done.set()), daemon=True)
     t.start()
     try:
         assert done.wait(10), "the writer thread waited on a closed segment's fsync"
