@@ -165,3 +165,39 @@ def test_records_that_do_not_frame_are_refused_naming_the_chunk(tail, says):
     assert [bytes(d) for _, d in messages_at(ChunkRecords(good, "x"), 7, {1})] == [b"data"]
     with pytest.raises(McapFileError, match=f"seg.mcap: chunk at byte 123: .*{says}"):
         list(messages_at(records, 7, {1}))
+
+
+def _two_channel_writer(path: Path):
+    from recorder.storage.writer import ChunkedWriter
+
+    w = ChunkedWriter(path, compression=Compression.NONE, chunk_size=1 << 20, workers=0)
+    w.start()
+    sid = w.register_schema("s", "jsonschema", b"{}")
+    return w, w.register_channel("/a", "json", sid), w.register_channel("/b", "json", sid)
+
+
+def test_a_batch_of_messages_is_byte_for_byte_the_messages_one_by_one(tmp_path):
+    """add_messages (a frame's messages at once) writes exactly what add_message does for each,
+    out-of-order times included, and returns each payload's length."""
+    one, a1, b1 = _two_channel_writer(tmp_path / "one.mcap")
+    batch, a2, b2 = _two_channel_writer(tmp_path / "batch.mcap")
+    for t in (30, 10, 20, 20):
+        msgs = [(a1, b"image", t), (b1, [b"pa", memoryview(b"rts")], 0), (a1, bytearray(b"x" * t), 7)]
+        for cid, data, seq in msgs:
+            one.add_message(cid, t, data, sequence=seq)
+        assert batch.add_messages(t, [(cid, data, seq) for cid, data, seq in msgs]) == [5, 5, t]
+    one.finish()
+    batch.finish()
+    assert (tmp_path / "one.mcap").read_bytes() == (tmp_path / "batch.mcap").read_bytes()
+
+
+def test_a_batch_with_an_unknown_channel_is_refused_whole(tmp_path):
+    w, a, _b = _two_channel_writer(tmp_path / "w.mcap")
+    w.add_message(a, 1, b"kept")
+    with pytest.raises(ValueError, match="unknown channel id 99"):
+        w.add_messages(2, [(a, b"not kept", 0), (99, b"?", 0)])
+    w.finish()
+    with open(tmp_path / "w.mcap", "rb") as f:
+        reader = make_reader(f)
+        assert [(m.log_time, m.data) for _, _, m in reader.iter_messages()] == [(1, b"kept")]
+        assert reader.get_summary().statistics.message_count == 1
