@@ -139,3 +139,32 @@ def test_a_failed_close_is_reported_naming_the_segment(tmp_path, monkeypatch):
         sw.close()
     sw.abandon()
     assert (session / "0000.mcap.active").exists()
+
+
+def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, held_fsync):
+    """The recorder end to end: a paced 60 fps camera (which cannot wait), half-second
+    segments, a 30-frame queue, and a disk whose fsync stalls for 2 s. The old writer stopped
+    at the first segment boundary and the queue overflowed (frames dropped, counted); now every
+    frame is written, and every segment has its final name once the disk answers."""
+    from recorder.capture.recorder import Recorder
+    from recorder.capture.sources.sim import SimSource
+
+    session = tmp_path / "sessions" / "s"
+
+    def stall_from_the_first_segment() -> None:  # start-up (imports, rendering) takes no part
+        deadline = time.monotonic() + 60
+        while not list(session.glob("*.active")) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        time.sleep(2.0)
+        held_fsync.set()
+
+    threading.Thread(target=stall_from_the_first_segment, daemon=True).start()
+    rec = Recorder(SimSource(width=64, height=48, fps=60, frames=150, paced=True), tmp_path, session_id="s",
+                   analysis=False, recover_leftovers=False, queue_frames=30,
+                   policy=SegmentPolicy(max_duration_s=0.5, workers=0))
+    res = rec.run()
+    assert res.error is None
+    assert not any(res.dropped.values()), res.dropped
+    assert res.frames_written == 150
+    assert not list(session.glob("*.active"))
+    assert len(_images(session, "*.mcap")) == 150
