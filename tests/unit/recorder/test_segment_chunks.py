@@ -182,10 +182,10 @@ def test_a_batch_of_messages_is_byte_for_byte_the_messages_one_by_one(tmp_path):
     one, a1, b1 = _two_channel_writer(tmp_path / "one.mcap")
     batch, a2, b2 = _two_channel_writer(tmp_path / "batch.mcap")
     for t in (30, 10, 20, 20):
-        msgs = [(a1, b"image", t), (b1, [b"pa", memoryview(b"rts")], 0), (a1, bytearray(b"x" * t), 7)]
-        for cid, data, seq in msgs:
+        for cid, data, seq in [(a1, b"image", t), (b1, [b"pa", memoryview(b"rts")], 0), (a1, bytearray(b"x" * t), 7)]:
             one.add_message(cid, t, data, sequence=seq)
-        assert batch.add_messages(t, [(cid, data, seq) for cid, data, seq in msgs]) == [5, 5, t]
+        msgs = [(a2, b"image", t), (b2, [b"pa", memoryview(b"rts")], 0), (a2, bytearray(b"x" * t), 7)]
+        assert batch.add_messages(t, msgs) == [5, 5, t]
     one.finish()
     batch.finish()
     assert (tmp_path / "one.mcap").read_bytes() == (tmp_path / "batch.mcap").read_bytes()
