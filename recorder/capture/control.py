@@ -60,6 +60,11 @@ def metrics_text(rec: Recorder) -> str:
     metric("thermcap_recorder_write_latency_p99_seconds", "gauge", "p99 capture-to-disk latency",
            (lat.get("p99") or 0) / 1000)
     metric("thermcap_recorder_segments", "gauge", "Segments started in this session", st["segments"])
+    settling = st["segments_settling"]
+    metric("thermcap_recorder_segments_settling", "gauge", "Closed segments waiting for fsync and their final name",
+           len(settling))
+    metric("thermcap_recorder_settle_wait_seconds", "gauge", "How long the oldest of them has waited",
+           settling[0]["waiting_s"] if settling else 0)
     metric("thermcap_recorder_paused", "gauge", "1 while paused", int(st["paused"]))
     metric("thermcap_recorder_healthy", "gauge", "1 when healthy (see /healthz)", int(st["healthy"]))
     metric("thermcap_recorder_seconds_since_last_frame", "gauge", "Seconds since the source gave a frame",

@@ -60,6 +60,9 @@ if TYPE_CHECKING:
 __all__ = ["CameraFeed", "Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
 _STOP = object()
+#: A closed segment waiting longer than this for fsync makes the recorder unhealthy: frames still
+#: go on into the next segments, but the disk is not keeping its promises.
+SETTLE_STALL_S = 30.0
 
 
 def sessions_dir(root: str | os.PathLike) -> Path:
@@ -325,6 +328,7 @@ class Recorder:
             "last_event": self._recorder_events[-1] if self._recorder_events else None,
             "seconds_since_last_frame": round(time.monotonic() - max(f.last_wall for f in self.feeds), 3),
             "cameras": {f.label: f.summary(c.dropped) for f in self.feeds},
+            "segments_settling": self._settling(),
         }
         if self._evictor is not None:
             st = self._evictor.state
@@ -339,7 +343,8 @@ class Recorder:
 
     def health(self, max_dropped: int = 0) -> tuple[bool, list[str]]:
         """Unhealthy when a camera stops giving frames (and we are not paused), when drops exceed
-        ``max_dropped``, when a camera or the writer failed, or when the ring cannot free space."""
+        ``max_dropped``, when a camera or the writer failed, when a closed segment has waited
+        more than ``SETTLE_STALL_S`` for fsync, or when the ring cannot free space."""
         reasons = []
         for f in self.feeds:
             who = f"camera {f.name}: " if self.multi else ""
@@ -353,11 +358,20 @@ class Recorder:
             reasons.append(f"{dropped} frames dropped")
         if self._writer_error:
             reasons.append(self._writer_error)
+        settling = self._settling()
+        if settling and settling[0]["waiting_s"] > SETTLE_STALL_S:
+            reasons.append(f"disk: segment {settling[0]['name']} has waited {settling[0]['waiting_s']:.0f} s for "
+                           f"fsync ({len(settling)} closed segments waiting; frames are still written)")
         if self._evictor is not None and self._evictor.state.blocked:
             reasons.append(f"ring cannot free space: {self._evictor.state.blocked_reason}"
                            + ("; waiting for disk (the source is not read meanwhile, nothing is lost)"
                               if self._waiting_for_disk else ""))
         return not reasons, reasons
+
+    def _settling(self) -> list[dict[str, Any]]:
+        """Closed segments still waiting for fsync and their final name, oldest first."""
+        session = self._session
+        return [{"name": n, "waiting_s": round(s, 3)} for n, s in session.settling()] if session else []
 
     def stop(self) -> None:
         """Ask for a clean stop (Ctrl-C): capture ends, queued frames are written, segments close."""

@@ -30,7 +30,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -159,6 +159,12 @@ class _Syncer(threading.Thread):
         self.join()
 
 
+class _Settling(NamedTuple):
+    name: str
+    since: float  # time.monotonic() when the segment was closed
+    future: Future[None]
+
+
 def _as_message(topic: str, payload: bytes, doc: dict[str, Any] | None = None) -> bytes:
     """``payload`` (JSON) as its topic's ROS 2 message; ``doc`` is the same document when the
     caller has it, so it is not parsed back."""
@@ -195,7 +201,7 @@ class SessionWriter:
         if self._syncer:
             self._syncer.start()
         self._settler: ThreadPoolExecutor | None = ThreadPoolExecutor(1, thread_name_prefix="segment-settle")
-        self._settling: deque[Future[None]] = deque()
+        self._settling: deque[_Settling] = deque()
         self._next_index = self._first_free_index()
 
     def _first_free_index(self) -> int:
@@ -289,7 +295,8 @@ class SessionWriter:
         finally:
             self._writer = None
         assert self._settler is not None, "close_segment after shutdown"
-        self._settling.append(self._settler.submit(self._settle, fd, path, self._path(info, False)))
+        self._settling.append(_Settling(info.name, time.monotonic(),
+                                        self._settler.submit(self._settle, fd, path, self._path(info, False))))
         self._reap(keep=MAX_SETTLING)
 
     def _settle(self, fd: int, active: Path, final: Path) -> None:
@@ -310,8 +317,14 @@ class SessionWriter:
 
     def _reap(self, keep: int) -> None:
         """Raise the first settling error; wait while more than ``keep`` segments settle."""
-        while self._settling and (len(self._settling) > keep or self._settling[0].done()):
-            self._settling.popleft().result()
+        while self._settling and (len(self._settling) > keep or self._settling[0].future.done()):
+            self._settling.popleft().future.result()
+
+    def settling(self) -> list[tuple[str, float]]:
+        """Closed segments still waiting for their fsync and rename, oldest first, each with the
+        seconds it has waited: a disk that stalls shows here before anything is lost."""
+        now = time.monotonic()
+        return [(s.name, now - s.since) for s in list(self._settling) if not s.future.done()]
 
     def settle(self) -> None:
         """Wait until every closed segment has its final name (raises its error if one failed)."""

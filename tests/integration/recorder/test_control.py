@@ -54,6 +54,7 @@ def test_splits_pause_and_marks_while_recording(tmp_path):
             metrics = c.get("/metrics", headers=auth).text
             assert "thermcap_recorder_frames_written_total{camera=" in metrics
             assert "thermcap_recorder_disk_free_bytes" in metrics
+            assert "thermcap_recorder_segments_settling " in metrics  # a gauge, also when nothing waits
         ctl = run_cli("ctl", "status", "--root", str(tmp_path), env={"THERMCAP_CONTROL_TOKEN": TOKEN})
         assert ctl.returncode == 0, ctl.stderr
         assert "c: recording, healthy" in ctl.stdout

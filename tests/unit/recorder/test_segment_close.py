@@ -141,13 +141,17 @@ def test_a_failed_close_is_reported_naming_the_segment(tmp_path, monkeypatch):
     assert (session / "0000.mcap.active").exists()
 
 
-def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, held_fsync):
+def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, held_fsync, monkeypatch):
     """The recorder end to end: a paced 60 fps camera (which cannot wait), half-second
     segments, a 30-frame queue, and a disk whose fsync stalls for 2 s. The old writer stopped
     at the first segment boundary and the queue overflowed (frames dropped, counted); now every
-    frame is written, and every segment has its final name once the disk answers."""
+    frame is written, and every segment has its final name once the disk answers. Meanwhile
+    the status shows the segments waiting, and health names the stall."""
+    import recorder.capture.recorder as recorder_module
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources.sim import SimSource
+
+    monkeypatch.setattr(recorder_module, "SETTLE_STALL_S", 0.5)
 
     session = tmp_path / "sessions" / "s"
 
@@ -162,9 +166,22 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, held_fsync):
     rec = Recorder(SimSource(width=64, height=48, fps=60, frames=150, paced=True), tmp_path, session_id="s",
                    analysis=False, recover_leftovers=False, queue_frames=30,
                    policy=SegmentPolicy(max_duration_s=0.5, workers=0))
+    seen: list[tuple[list, list[str]]] = []
+
+    def watch() -> None:
+        while not held_fsync.is_set():
+            if rec._session is not None:
+                seen.append((rec.status()["segments_settling"], rec.health()[1]))
+            time.sleep(0.05)
+
+    threading.Thread(target=watch, daemon=True).start()
     res = rec.run()
     assert res.error is None
     assert not any(res.dropped.values()), res.dropped
+    waiting = [s for s, _ in seen if s]
+    assert waiting and waiting[-1][0]["name"] == "0000.mcap" and waiting[-1][0]["waiting_s"] > 0.5
+    assert any(any(p.startswith("disk: segment 0000.mcap has waited") for p in problems) for _, problems in seen)
+    assert rec.status()["segments_settling"] == [] and rec.health()[0]
     assert res.frames_written == 150
     assert not list(session.glob("*.active"))
     assert len(_images(session, "*.mcap")) == 150
