@@ -55,8 +55,9 @@ __all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression"
 SEGMENT_STATS_METADATA = "thermcap.segment"
 SESSION_METADATA = "thermcap.session"
 # Closed segments waiting for their fsync and rename, at most; one more makes the writer wait.
-# Each holds only a file descriptor, so this bounds descriptors, not memory.
-MAX_SETTLING = 8
+# Each holds only a file descriptor, so this bounds descriptors (and the .active files a crash
+# leaves), not memory: 32 rides out a 30 s stall (when /healthz says so) with 1 s segments.
+MAX_SETTLING = 32
 
 
 def segment_name(index: int) -> str:
