@@ -77,6 +77,7 @@ def test_kill_9_at_random_moments(tmp_path):
             assert np.array_equal(px, exp.pixels)  # bit-exact, in order, no gaps
         lost_s = (killed_at - got[-1][0]) / 1e9
         report.append({"kill": k, "frames_kept": len(got), "closed_segments": len(closed_before),
+                       "active_files": len(actives),
                        "seconds_lost": round(lost_s, 3), "frames_lost": round(lost_s * FPS)})
         assert lost_s < 1.0, report[-1]
     out = Path(os.environ.get("THERMCAP_RELIABILITY_OUT", tmp_path)) / "kill_recorder.json"
