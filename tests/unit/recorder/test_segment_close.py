@@ -141,47 +141,55 @@ def test_a_failed_close_is_reported_naming_the_segment(tmp_path, monkeypatch):
     assert (session / "0000.mcap.active").exists()
 
 
-def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, held_fsync, monkeypatch):
+def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
     """The recorder end to end: a paced 60 fps camera (which cannot wait), half-second
-    segments, a 30-frame queue, and a disk whose fsync stalls for 2 s. The old writer stopped
-    at the first segment boundary and the queue overflowed (frames dropped, counted); now every
-    frame is written, and every segment has its final name once the disk answers. Meanwhile
-    the status shows the segments waiting, and health names the stall."""
+    segments, a 30-frame queue, and a disk whose fsync of segments stalls for 2 s from the
+    first one asked. The old writer stopped at the first segment boundary and the queue
+    overflowed (frames dropped, counted); now every frame is written, and every segment has its
+    final name once the disk answers. Meanwhile the status shows the segments waiting, and
+    health names the stall."""
     import recorder.capture.recorder as recorder_module
     from recorder.capture.recorder import Recorder
     from recorder.capture.sources.sim import SimSource
 
     monkeypatch.setattr(recorder_module, "SETTLE_STALL_S", 0.5)
+    gate, real = threading.Event(), os.fsync
+    stall = threading.Lock()
 
-    session = tmp_path / "sessions" / "s"
+    def fsync(fd: int) -> None:  # only segments stall: session.json and folders go through
+        if os.readlink(f"/proc/self/fd/{fd}").endswith(".mcap.active"):
+            with stall:
+                if not getattr(fsync, "armed", False):
+                    fsync.armed = True  # type: ignore[attr-defined]
+                    threading.Timer(2.0, gate.set).start()
+            gate.wait(30)
+        real(fd)
 
-    def stall_from_the_first_segment() -> None:  # start-up (imports, rendering) takes no part
-        deadline = time.monotonic() + 60
-        while not list(session.glob("*.active")) and time.monotonic() < deadline:
-            time.sleep(0.01)
-        time.sleep(2.0)
-        held_fsync.set()
-
-    threading.Thread(target=stall_from_the_first_segment, daemon=True).start()
+    monkeypatch.setattr(os, "fsync", fsync)
     rec = Recorder(SimSource(width=64, height=48, fps=60, frames=150, paced=True), tmp_path, session_id="s",
                    analysis=False, recover_leftovers=False, queue_frames=30,
                    policy=SegmentPolicy(max_duration_s=0.5, workers=0))
     seen: list[tuple[list, list[str]]] = []
 
     def watch() -> None:
-        while not held_fsync.is_set():
+        while not gate.is_set():
             if rec._session is not None:
                 seen.append((rec.status()["segments_settling"], rec.health()[1]))
             time.sleep(0.05)
 
     threading.Thread(target=watch, daemon=True).start()
-    res = rec.run()
+    try:
+        res = rec.run()
+    finally:
+        gate.set()
+    assert getattr(fsync, "armed", False), "no segment was ever fsynced"
     assert res.error is None
     assert not any(res.dropped.values()), res.dropped
+    assert res.frames_written == 150
     waiting = [s for s, _ in seen if s]
     assert waiting and waiting[-1][0]["name"] == "0000.mcap" and waiting[-1][0]["waiting_s"] > 0.5
     assert any(any(p.startswith("disk: segment 0000.mcap has waited") for p in problems) for _, problems in seen)
     assert rec.status()["segments_settling"] == [] and rec.health()[0]
-    assert res.frames_written == 150
+    session = tmp_path / "sessions" / "s"
     assert not list(session.glob("*.active"))
     assert len(_images(session, "*.mcap")) == 150
