@@ -26,6 +26,7 @@ import tifffile
 from recorder.exceptions import ThermcapError
 from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
 from recorder.exports.geotiff import geotransform_tags, utm_tags, write_cog, write_temperature_tiff
+from recorder.exports.percentiles import percentiles
 from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.icd.rosmsg import json_payload
@@ -167,7 +168,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             (out / f"{name}.json").write_bytes(f.sidecar or b"{}")
         written.append(path.name)
         if temps is not None and summary:
-            pct = np.percentile(temps, PERCENTILES)
+            pct = percentiles(temps, PERCENTILES)
             stats.append({"frame_index": f.index, "time": desc.get("time") or iso_utc(f.log_time), "file": path.name,
                           "surface_temperature_mean": round(float(temps.mean()), 4),
                           "surface_temperature_min": round(float(temps.min()), 4),

@@ -10,6 +10,7 @@ import numpy as np
 import tifffile
 
 from recorder.exports.colorbar import TemperatureRange, add_colorbar
+from recorder.exports.percentiles import percentiles
 from recorder.exports.png import encode_png
 from recorder.radiometry import RadiometricModel, model_from_dict
 
@@ -57,7 +58,7 @@ def celsius(frame: np.ndarray, model: RadiometricModel) -> np.ndarray:
 
 def frame_range(values: np.ndarray, mode: str = "frame", units: str = "°C") -> TemperatureRange:
     """The 0.5..99.5 percentiles: a few hot or dead pixels do not wash out the picture."""
-    lo, hi = (float(v) for v in np.percentile(values, (0.5, 99.5)))
+    lo, hi = percentiles(values, (0.5, 99.5))
     return TemperatureRange(lo, hi if hi > lo else lo + 1e-3, mode, units)
 
 

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 from recorder.exceptions import ThermcapError
+from recorder.exports.percentiles import percentiles
 from recorder.reports.quality import QualityReport
 
 __all__ = ["write_inspection_report", "write_quality_report"]
@@ -135,7 +136,6 @@ def write_inspection_report(rep: Any, out_dir: Path) -> dict[str, Path]:
     import json
 
     import matplotlib
-    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -172,7 +172,7 @@ def write_inspection_report(rep: Any, out_dir: Path) -> dict[str, Path]:
         for i, f in enumerate(rep.findings):
             fig, ax = plt.subplots(figsize=(8.27, 6.5))
             temps = rep.images[f.frame]
-            lo, hi = (float(v) for v in np.percentile(temps, [0.5, 99.5]))  # a dead or hot pixel sets no scale
+            lo, hi = percentiles(temps, (0.5, 99.5))  # a dead or hot pixel sets no scale
             im = ax.imshow(temps, cmap="inferno", vmin=lo, vmax=max(hi, f.max_c))
             x0, y0, x1, y1 = f.box
             ax.add_patch(Rectangle((x0 - 0.5, y0 - 0.5), x1 - x0 + 1, y1 - y0 + 1, fill=False, ec="#00e5ff", lw=1.5))
