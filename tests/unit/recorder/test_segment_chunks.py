@@ -201,3 +201,22 @@ def test_a_batch_with_an_unknown_channel_is_refused_whole(tmp_path):
         reader = make_reader(f)
         assert [(m.log_time, m.data) for _, _, m in reader.iter_messages()] == [(1, b"kept")]
         assert reader.get_summary().statistics.message_count == 1
+
+
+def test_a_frames_messages_share_one_chunk(tmp_path):
+    """The chunk closes after a batch, never between a frame's image and its sidecar: one
+    decompression serves both."""
+    from recorder.storage.writer import ChunkedWriter
+
+    w = ChunkedWriter(tmp_path / "w.mcap", compression=Compression.NONE, chunk_size=64, workers=0)
+    w.start()
+    sid = w.register_schema("s", "jsonschema", b"{}")
+    image, sidecar = w.register_channel("/image", "json", sid), w.register_channel("/meta", "json", sid)
+    for t in range(5):
+        w.add_messages(t, [(image, b"i" * 100, t), (sidecar, b"s" * 10, t)])
+    w.finish()
+    index = SegmentIndex.load(tmp_path / "w.mcap")
+    assert index is not None and len(index.offsets) == 5
+    with open(tmp_path / "w.mcap", "rb") as f:
+        chunks = make_reader(f).get_summary().chunk_indexes
+    assert [sorted(c.message_index_offsets) for c in chunks] == [[image, sidecar]] * 5
