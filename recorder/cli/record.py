@@ -269,27 +269,35 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
     elif as_json or action != "status":
         click.echo(text)
     else:
-        st = json.loads(text)
-        click.echo(f"{st['session_id']}: {'paused' if st['paused'] else 'recording'}, "
-                   f"{'healthy' if st['healthy'] else 'UNHEALTHY: ' + '; '.join(st['problems'])}")
-        click.echo(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
-                   f"{sum(st['dropped'].values()) if st['dropped'] else 0} dropped, {st['frames_paused']} paused; "
-                   f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
-        if len(st.get("cameras") or {}) > 1:
-            for name, c in st["cameras"].items():
-                click.echo(f"  camera {name}: {c['frames_written']} written, {c['frames_dropped']} dropped"
-                           + (f"; {c['error']}" if c["error"] else ""))
-        if st.get("live"):
-            lv = st["live"]
-            click.echo(f"live view: {lv['url']}, {lv['viewers']} viewers, {lv['published']} frames sent, "
-                       f"{lv['dropped']} dropped by the view")
-        if st.get("ring"):
-            r = st["ring"]
-            click.echo(f"ring: {r['evicted_segments']} segments ({r['evicted_bytes']:,} bytes) evicted, "
-                       f"{r['protected_windows']} windows protected" + (f"; BLOCKED: {r['blocked_reason']}"
-                                                                        if r["blocked"] else ""))
+        click.echo(status_text(json.loads(text)))
     if code >= 400:
         sys.exit(1)
+
+
+def status_text(st: dict[str, Any]) -> str:
+    """``ctl status`` for a person: the recorder's state, its counts, and whatever needs a look."""
+    out = [f"{st['session_id']}: {'paused' if st['paused'] else 'recording'}, "
+           f"{'healthy' if st['healthy'] else 'UNHEALTHY: ' + '; '.join(st['problems'])}"]
+    out.append(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
+               f"{sum(st['dropped'].values()) if st['dropped'] else 0} dropped, {st['frames_paused']} paused; "
+               f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
+    if settling := st.get("segments_settling"):
+        out.append(f"disk: {len(settling)} closed segments waiting for fsync, the oldest "
+                   f"{settling[0]['name']} for {settling[0]['waiting_s']:.1f} s")
+    if len(st.get("cameras") or {}) > 1:
+        for name, c in st["cameras"].items():
+            out.append(f"  camera {name}: {c['frames_written']} written, {c['frames_dropped']} dropped"
+                       + (f"; {c['error']}" if c["error"] else ""))
+    if st.get("live"):
+        lv = st["live"]
+        out.append(f"live view: {lv['url']}, {lv['viewers']} viewers, {lv['published']} frames sent, "
+                   f"{lv['dropped']} dropped by the view")
+    if st.get("ring"):
+        r = st["ring"]
+        out.append(f"ring: {r['evicted_segments']} segments ({r['evicted_bytes']:,} bytes) evicted, "
+                   f"{r['protected_windows']} windows protected" + (f"; BLOCKED: {r['blocked_reason']}"
+                                                                    if r["blocked"] else ""))
+    return "\n".join(out)
 
 
 def _progress_line():

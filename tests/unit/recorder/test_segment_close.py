@@ -193,3 +193,17 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
     session = tmp_path / "sessions" / "s"
     assert not list(session.glob("*.active"))
     assert len(_images(session, "*.mcap")) == 150
+
+
+def test_ctl_status_names_the_segments_waiting_for_the_disk():
+    from recorder.cli.record import status_text
+
+    st = {"session_id": "s", "paused": False, "healthy": False,
+          "problems": ["disk: segment 0003.mcap has waited 42 s for fsync (2 closed segments waiting; ...)"],
+          "frames_captured": 10, "frames_written": 10, "dropped": {}, "frames_paused": 0, "queue_depth": 0,
+          "queue_capacity": 120, "segment": "0005.mcap", "cameras": {"": {}},
+          "segments_settling": [{"name": "0003.mcap", "waiting_s": 42.04}, {"name": "0004.mcap", "waiting_s": 41.0}]}
+    text = status_text(st)
+    assert "UNHEALTHY: disk: segment 0003.mcap has waited 42 s" in text
+    assert "disk: 2 closed segments waiting for fsync, the oldest 0003.mcap for 42.0 s" in text
+    assert "waiting for fsync" not in status_text({**st, "segments_settling": [], "healthy": True, "problems": []})
