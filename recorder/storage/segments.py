@@ -298,6 +298,12 @@ class SessionWriter:
         assert self._settler is not None, "close_segment after shutdown"
         self._settling.append(_Settling(info.name, time.monotonic(),
                                         self._settler.submit(self._settle, fd, path, self._path(info, False))))
+        if self.on_segment_closed is not None:
+            # Here, on the writer thread, before the next segment opens: a ring's eviction
+            # keeps the disk within its budget plus the one open segment only if the writer
+            # does not run ahead of it. (The segment just closed is not a candidate until it
+            # settles; it is the newest anyway.)
+            self.on_segment_closed()
         self._reap(keep=MAX_SETTLING)
 
     def _settle(self, fd: int, active: Path, final: Path) -> None:
@@ -313,8 +319,6 @@ class SessionWriter:
             raise RecordingError(f"cannot close segment {active}: {exc.strerror or exc}") from exc
         with suppress(OSError):  # the folder stays a rosbag2 bag of its finished segments (derived data)
             write_bag_metadata(self.dir)
-        if self.on_segment_closed is not None:
-            self.on_segment_closed()
 
     def _reap(self, keep: int) -> None:
         """Raise the first settling error; wait while more than ``keep`` segments settle."""
