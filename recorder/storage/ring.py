@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from recorder.icd.names import iso_utc
-from recorder.storage.layout import EVICTION_LOG, SessionLayout
+from recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, SessionLayout
 from recorder.storage.reader import segment_span
 from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import fsync_dir, write_json_atomic
@@ -272,10 +272,22 @@ class Evictor(threading.Thread):
                 return done
         if self.policy.require_receipt:
             reason += "; the rest is protected or not yet confirmed by the cloud (thermcap sync)"
+        if settling := self._settling():
+            reason += f"; {settling} closed segments still wait for fsync and cannot go until they settle"
         if not self.state.blocked:
             self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
         self.state.blocked, self.state.blocked_reason = True, reason
         return done
+
+    def _settling(self) -> int:
+        """Closed segments of ring sessions not yet renamed (a stalled fsync): each session's
+        ``.active`` files but the one it is writing. Not candidates, so they can hold the root
+        over its budget, and the reason must say so."""
+        n = 0
+        for d in self._ring_sessions():
+            with contextlib.suppress(OSError):
+                n += max(0, sum(1 for _ in d.glob(f"*.mcap{ACTIVE_SUFFIX}")) - 1)
+        return n
 
     def _confirmed(self) -> dict[str, int]:
         """Segments the cloud confirmed byte for byte: key -> size, from sync's journal."""
