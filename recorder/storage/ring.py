@@ -26,6 +26,7 @@ from typing import Any
 
 from recorder.icd.names import iso_utc
 from recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, SessionLayout
+from recorder.storage.lock import holder
 from recorder.storage.reader import segment_span
 from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import fsync_dir, write_json_atomic
@@ -280,11 +281,14 @@ class Evictor(threading.Thread):
         return done
 
     def _settling(self) -> int:
-        """Closed segments of ring sessions not yet renamed (a stalled fsync): each session's
-        ``.active`` files but the one it is writing. Not candidates, so they can hold the root
-        over its budget, and the reason must say so."""
+        """Closed segments of ring sessions being recorded, not yet renamed (a stalled fsync):
+        each such session's ``.active`` files but the one it is writing. Not candidates, so they
+        can hold the root over its budget, and the reason must say so. A session nobody holds
+        has leftovers for ``recover``, not segments settling."""
         n = 0
         for d in self._ring_sessions():
+            if holder(d) is None:
+                continue
             with contextlib.suppress(OSError):
                 n += max(0, sum(1 for _ in d.glob(f"*.mcap{ACTIVE_SUFFIX}")) - 1)
         return n

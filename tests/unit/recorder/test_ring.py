@@ -116,21 +116,30 @@ def _wait(pred, timeout: float) -> bool:
 
 def test_segments_waiting_for_fsync_are_named_when_the_ring_cannot_free_space(tmp_path):
     """A stalled disk leaves closed segments ``.active`` (not candidates) beside the open one:
-    the ring's reason says so instead of blaming protection alone."""
+    the ring's reason says so instead of blaming protection alone. A session nobody records
+    has leftovers for ``recover``, which are not counted."""
     import json
 
+    from recorder.storage.lock import lock_session
     from recorder.storage.ring import Evictor
 
+    for name in ("r", "crashed"):
+        session = tmp_path / "sessions" / name
+        session.mkdir(parents=True)
+        (session / "session.json").write_text(json.dumps({"ring": {"max_disk": 1}}))
+        for i in range(3):
+            (session / f"{i:04d}.mcap.active").write_bytes(b"\0" * 4096)
     session = tmp_path / "sessions" / "r"
-    session.mkdir(parents=True)
-    (session / "session.json").write_text(json.dumps({"ring": {"max_disk": 1}}))
-    for i in range(3):
-        (session / f"{i:04d}.mcap.active").write_bytes(b"\0" * 4096)
-    evictor = Evictor(tmp_path, RingPolicy(max_disk=1), {})
-    assert evictor.evict_once() == []
-    assert evictor.state.blocked
-    assert "2 closed segments still wait for fsync" in (evictor.state.blocked_reason or "")
-    (session / "0000.mcap.active").unlink()
-    (session / "0001.mcap.active").unlink()
-    evictor.evict_once()
-    assert "fsync" not in (evictor.state.blocked_reason or "")
+    lock = lock_session(session, "recorder")
+    assert lock is not None
+    try:
+        evictor = Evictor(tmp_path, RingPolicy(max_disk=1), {})
+        assert evictor.evict_once() == []
+        assert evictor.state.blocked
+        assert "2 closed segments still wait for fsync" in (evictor.state.blocked_reason or "")
+        (session / "0000.mcap.active").unlink()
+        (session / "0001.mcap.active").unlink()
+        evictor.evict_once()
+        assert "fsync" not in (evictor.state.blocked_reason or "")
+    finally:
+        lock.release()
