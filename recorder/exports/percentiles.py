@@ -4,7 +4,7 @@ Why: a colour preview's scale is its frame's 0.5..99.5 percentiles, and ``np.per
 640x512 float32 image takes 6-8 ms, half of the preview, because it partitions every value.
 Here the values are ranked by the top 16 bits of an order-preserving integer key (one
 ``bincount``), and only the values in the one or two bins that hold the wanted ranks are
-partitioned. The ranks, and so the result, are exactly ``np.percentile``'s ("linear" method).
+sorted. The ranks, and so the result, are exactly ``np.percentile``'s ("linear" method).
 """
 
 from __future__ import annotations
