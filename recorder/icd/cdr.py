@@ -16,7 +16,7 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
-__all__ = ["compile_encoder", "pad", "write_string"]
+__all__ = ["compile_encoder", "pad", "phase_layouts", "write_string"]
 
 #: ros2msg primitive -> (struct code, size); bool and byte are written as uint8, as ROS 2 does
 _PRIMITIVES: dict[str, tuple[str, int]] = {
@@ -48,6 +48,22 @@ def write_string(out: bytearray, value: Any) -> None:
     out += _U32.pack(len(data) + 1)
     out += data
     out += b"\0"
+
+
+def phase_layouts(codes: list[str]) -> list[struct.Struct]:
+    """A run of fixed-size fields (struct codes, one field each) as one struct per offset the run
+    can start at, modulo 8: CDR pads each field to its own size counted from the stream's start,
+    so the padding inside the run depends on where it starts. ``layouts[(len(out) - 4) % 8]``."""
+    layouts = []
+    for phase in range(8):
+        fmt, at = "<", phase
+        for code in codes:
+            size = struct.calcsize(code)
+            gap = -at % size
+            fmt += "x" * gap + code
+            at += gap + size
+        layouts.append(struct.Struct(fmt))
+    return layouts
 
 
 def _coerce(kind: str) -> Callable[[Any], Any]:
@@ -131,15 +147,7 @@ def _run_writer(leaves: list[tuple[tuple[str, ...], str]]) -> Writer:
     between two strings): a single struct pack instead of a call per field. CDR pads each
     field to its own size counted from the stream's start, so the padding depends on where the
     run starts modulo 8; the eight possible layouts are compiled ahead."""
-    layouts = []
-    for phase in range(8):
-        fmt, at = "<", phase
-        for _, kind in leaves:
-            code, size = _PRIMITIVES[kind]
-            gap = -at % size
-            fmt += "x" * gap + code
-            at += gap + size
-        layouts.append(struct.Struct(fmt))
+    layouts = phase_layouts([_PRIMITIVES[kind][0] for _, kind in leaves])
     coerces = [_coerce(kind) for _, kind in leaves]
     exact = not any(kind == "bool" for _, kind in leaves)  # a bool is 0/1 whatever truthy value it had
     tops = [path[0] for path, _ in leaves]
