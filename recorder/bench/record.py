@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -41,23 +40,25 @@ def _baseline(frames: list[CapturedFrame], n: int, path: Path, level: int) -> fl
 
 
 def _against_sdk(width: int, height: int, n: int, base: Path, level: int,
-                 rounds: int) -> tuple[WriterRun, float, list[float]]:
+                 rounds: int) -> tuple[WriterRun, WriterRun, list[float], list[float]]:
     """The recorder and the SDK ``rounds`` times each in alternating order (R S S R R S ...), every
     run in a process of its own (``writer_run``) with its files removed after it: whichever runs
     second meets a different page cache, and in one process a recorder run after an SDK run
-    cost up to a third more. Returns the SDK's median run, the recorder's median CPU s a frame,
-    and each round's ratio."""
-    ours: list[float] = []
+    cost up to a third more. Each process primes the page cache for its output first
+    (``page_cache``). Returns each writer's median run (by CPU), each round's ratio, and what
+    priming cost each run, untimed."""
+    ours: list[WriterRun] = []
     theirs: list[WriterRun] = []
     order = "".join("RS" if i % 2 == 0 else "SR" for i in range(rounds))
     for k, who in enumerate(order):
         run = run_isolated("recorder" if who == "R" else "sdk", width, height, n, level, base / f"run-{k}")
-        if who == "R":
-            ours.append(run.cpu_s_per_frame)
-        else:
-            theirs.append(run)
-    sdk = sorted(theirs, key=lambda r: r.cpu_s_per_frame)[len(theirs) // 2]
-    return sdk, statistics.median(ours), [round(a / b.cpu_s_per_frame, 3) for a, b in zip(ours, theirs, strict=True)]
+        (ours if who == "R" else theirs).append(run)
+
+    def median(runs: list[WriterRun]) -> WriterRun:
+        return sorted(runs, key=lambda r: r.cpu_s_per_frame)[len(runs) // 2]
+
+    pairs = [round(a.cpu_s_per_frame / b.cpu_s_per_frame, 3) for a, b in zip(ours, theirs, strict=True)]
+    return median(ours), median(theirs), pairs, [round(r.primed_cpu_s, 2) for r in ours + theirs]
 
 
 def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: str | None = None,
@@ -91,9 +92,10 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             record_once(sim, rendered, min(n_frames, 120), comp, level, analysis, fps, warm)
             shutil.rmtree(warm, ignore_errors=True)
             res, dt, cpu_per_frame = record_once(sim, rendered, n_frames, comp, level, analysis, fps, root)
-            sdk = None
+            sdk = ours = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
-                sdk, cpu_per_frame, pairs = _against_sdk(width, height, n_frames, base, level, sdk_rounds)
+                ours, sdk, pairs, primed = _against_sdk(width, height, n_frames, base, level, sdk_rounds)
+                cpu_per_frame = ours.cpu_s_per_frame
             rec_fps = n_frames / dt
             size = sum(s["bytes"] for s in res.segments)
             frame_mb = width * height * 2 / 1e6
@@ -110,7 +112,11 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
                     "sdk_fps": round(n_frames / sdk.wall_s, 1),
                     "sdk_ratio": round(n_frames * width * height * 2 / sdk.bytes, 3),
                     "cpu_vs_sdk": round(cpu_per_frame / sdk.cpu_s_per_frame, 3), "sdk_rounds": sdk_rounds,
-                    "cpu_vs_sdk_each_round": pairs} if sdk else {}),
+                    "cpu_vs_sdk_each_round": pairs,
+                    # the kernel's part of each median run, and the untimed priming of each run
+                    "sys_ms_per_frame": round(ours.sys_s_per_frame * 1e3, 3) if ours else None,
+                    "sdk_sys_ms_per_frame": round(sdk.sys_s_per_frame * 1e3, 3),
+                    "primed_cpu_s_each_run": primed} if sdk else {}),
             })
             shutil.rmtree(root, ignore_errors=True)
     finally:

@@ -23,6 +23,10 @@ def test_bench_record_short_with_the_sdk_anchor():
     # both writers run five times in alternating order (R S S R R S S R R S); the row has each round's ratio
     assert auto["sdk_rounds"] == 5 and len(auto["cpu_vs_sdk_each_round"]) == 5
     assert min(auto["cpu_vs_sdk_each_round"]) <= auto["cpu_vs_sdk"] + 0.01
+    # every run primed the page cache for its output before it was timed, and says what it cost
+    assert len(auto["primed_cpu_s_each_run"]) == 10 and all(v >= 0 for v in auto["primed_cpu_s_each_run"])
+    assert 0 <= auto["sys_ms_per_frame"] <= auto["cpu_ms_per_frame"]
+    assert 0 <= auto["sdk_sys_ms_per_frame"] <= auto["sdk_cpu_ms_per_frame"]
 
 
 def test_each_writer_runs_in_a_process_of_its_own_and_a_failure_says_why(tmp_path):
@@ -32,7 +36,9 @@ def test_each_writer_runs_in_a_process_of_its_own_and_a_failure_says_why(tmp_pat
 
     run = run_isolated("recorder", 96, 64, 30, 1, tmp_path)
     assert run.cpu_s_per_frame > 0 and run.bytes > 0
+    assert run.primed_cpu_s > 0 and 0 <= run.sys_s_per_frame <= run.cpu_s_per_frame
     assert not any(tmp_path.rglob("*.mcap")), "the run's files are removed"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".prime")] == [], "and the priming file"
     with pytest.raises(ValueError, match="writer must be"):
         run_isolated("ffmpeg", 96, 64, 30, 1, tmp_path)
     blocked = tmp_path / "a-file"
