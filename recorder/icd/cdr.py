@@ -42,12 +42,15 @@ def pad(out: bytearray, size: int) -> None:
         out += b"\0" * gap
 
 
+#: a string's length, after the padding that 4-aligns it, by the offset modulo 4
+_LENGTH_AT = [struct.Struct("<" + "x" * (-phase % 4) + "I") for phase in range(4)]
+
+
 def write_string(out: bytearray, value: Any) -> None:
-    data = ("" if value is None else str(value)).encode("utf-8")
-    pad(out, 4)
-    out += _U32.pack(len(data) + 1)
+    data = (value if value.__class__ is str else "" if value is None else str(value)).encode("utf-8")
+    out += _LENGTH_AT[(len(out) - 4) % 4].pack(len(data) + 1)  # the header's four bytes do not count
     out += data
-    out += b"\0"
+    out.append(0)
 
 
 def phase_layouts(codes: list[str]) -> list[struct.Struct]:
