@@ -276,7 +276,7 @@ class Evictor(threading.Thread):
         if settling := self._settling():
             reason += f"; {settling} closed segments still wait for fsync and cannot go until they settle"
         if not self.state.blocked:
-            self.log(f"ring: cannot free space, every finished segment is protected ({reason})")
+            self.log(f"ring: cannot free space, no finished segment can go ({reason})")
         self.state.blocked, self.state.blocked_reason = True, reason
         return done
 
