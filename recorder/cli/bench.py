@@ -17,8 +17,11 @@ from recorder.cli.root import bench
 @click.option("--soak", type=float, default=None, help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
 @click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None,
               help="Where to write (default: a temp folder).")
+@click.option("--rounds", type=click.IntRange(1, 21), default=5, show_default=True,
+              help="Runs of each writer against foxglove-sdk, alternated (more for a tighter verdict).")
 @json_option
-def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, as_json: bool) -> None:
+def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, rounds: int,
+                 as_json: bool) -> None:
     """Recorder throughput vs plain zstd-to-file, or a paced soak."""
     from recorder.bench.record import bench_record as run_bench
     from recorder.bench.record import print_table, run_soak
@@ -33,7 +36,7 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
         dims = [(int(w), int(h)) for w, h in (s.lower().split("x") for s in sizes.split(","))]
     except ValueError:
         fail(f"--sizes must look like 640x512,1280x1024, got {sizes!r}")
-    rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json)
+    rows = run_bench(dims, n_frames, workdir=workdir, progress=not as_json, sdk_rounds=rounds)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
 
 

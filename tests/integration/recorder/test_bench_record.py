@@ -23,10 +23,21 @@ def test_bench_record_short_with_the_sdk_anchor():
     # both writers run five times in alternating order (R S S R R S S R R S); the row has each round's ratio
     assert auto["sdk_rounds"] == 5 and len(auto["cpu_vs_sdk_each_round"]) == 5
     assert min(auto["cpu_vs_sdk_each_round"]) <= auto["cpu_vs_sdk"] + 0.01
+    assert auto["cpu_vs_sdk_rounds_median"] == sorted(auto["cpu_vs_sdk_each_round"])[2]
     # every run primed the page cache for its output before it was timed, and says what it cost
     assert len(auto["primed_cpu_s_each_run"]) == 10 and all(v >= 0 for v in auto["primed_cpu_s_each_run"])
     assert 0 <= auto["sys_ms_per_frame"] <= auto["cpu_ms_per_frame"]
     assert 0 <= auto["sdk_sys_ms_per_frame"] <= auto["sdk_cpu_ms_per_frame"]
+
+
+def test_bench_record_takes_more_rounds():
+    r = run_cli("bench", "record", "--sizes", "96x64", "--frames", "60", "--rounds", "3", "--json", timeout=300)
+    assert r.returncode == 0, r.stderr
+    auto = next(row for row in json.loads(r.stdout) if row["mode"] == "auto")
+    assert auto["sdk_rounds"] == 3 and len(auto["cpu_vs_sdk_each_round"]) == 3
+    assert len(auto["primed_cpu_s_each_run"]) == 6
+    bad = run_cli("bench", "record", "--rounds", "0", timeout=60)
+    assert bad.returncode == 2 and "--rounds" in bad.stderr
 
 
 def test_each_writer_runs_in_a_process_of_its_own_and_a_failure_says_why(tmp_path):
