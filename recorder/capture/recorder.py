@@ -328,7 +328,7 @@ class Recorder:
             "last_event": self._recorder_events[-1] if self._recorder_events else None,
             "seconds_since_last_frame": round(time.monotonic() - max(f.last_wall for f in self.feeds), 3),
             "cameras": {f.label: f.summary(c.dropped) for f in self.feeds},
-            "segments_settling": self._settling(),
+            "segments_settling": (settling := self._settling()),
         }
         if self._evictor is not None:
             st = self._evictor.state
@@ -337,11 +337,11 @@ class Recorder:
                            "protected_windows": len(self._book.windows) if self._book else 0}
         if self.live is not None:
             out["live"] = {"url": self.live.url, **self.live.snapshot()}
-        healthy, reasons = self.health()
+        healthy, reasons = self.health(settling=settling)  # the same snapshot the status shows
         out["healthy"], out["problems"] = healthy, reasons
         return out
 
-    def health(self, max_dropped: int = 0) -> tuple[bool, list[str]]:
+    def health(self, max_dropped: int = 0, *, settling: list[dict[str, Any]] | None = None) -> tuple[bool, list[str]]:
         """Unhealthy when a camera stops giving frames (and we are not paused), when drops exceed
         ``max_dropped``, when a camera or the writer failed, when a closed segment has waited
         more than ``SETTLE_STALL_S`` for fsync, or when the ring cannot free space."""
@@ -358,7 +358,7 @@ class Recorder:
             reasons.append(f"{dropped} frames dropped")
         if self._writer_error:
             reasons.append(self._writer_error)
-        settling = self._settling()
+        settling = self._settling() if settling is None else settling
         if settling and settling[0]["waiting_s"] > SETTLE_STALL_S:
             reasons.append(f"disk: segment {settling[0]['name']} has waited {settling[0]['waiting_s']:.0f} s for "
                            f"fsync ({len(settling)} closed segments waiting; frames are still written)")
