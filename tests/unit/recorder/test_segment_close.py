@@ -170,11 +170,15 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
                    analysis=False, recover_leftovers=False, queue_frames=30,
                    policy=SegmentPolicy(max_duration_s=0.5, workers=0))
     seen: list[tuple[list, list[str]]] = []
+    agree: list[bool] = []
 
     def watch() -> None:
         while not gate.is_set():
             if rec._session is not None:
                 seen.append((rec.status()["segments_settling"], rec.health()[1]))
+                st = rec.status()  # its problems judge the very list it shows
+                stalled = bool(st["segments_settling"]) and st["segments_settling"][0]["waiting_s"] > 0.5
+                agree.append(stalled == any(p.startswith("disk: ") for p in st["problems"]))
             time.sleep(0.05)
 
     threading.Thread(target=watch, daemon=True).start()
@@ -189,6 +193,7 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
     waiting = [s for s, _ in seen if s]
     assert waiting and waiting[-1][0]["name"] == "0000.mcap" and waiting[-1][0]["waiting_s"] > 0.5
     assert any(any(p.startswith("disk: segment 0000.mcap has waited") for p in problems) for _, problems in seen)
+    assert agree and all(agree)
     assert rec.status()["segments_settling"] == [] and rec.health()[0]
     session = tmp_path / "sessions" / "s"
     assert not list(session.glob("*.active"))
