@@ -153,12 +153,12 @@ class _Validator:
         self._rs = jsonschema_rs.validator_for(schema)
         self._py: Any = None  # fastjsonschema's, compiled when first needed
 
-    def __call__(self, value: Any, prefix: str = "") -> None:
+    def __call__(self, value: Any) -> None:
         try:
             self._rs.validate(value)
             return
         except jsonschema_rs.ValidationError as exc:
-            raise _error(exc, value, prefix) from exc
+            raise _error(exc, value) from exc
         except ValueError:  # a value jsonschema-rs does not take ("Unsupported type: 'float64'")
             pass
         if self._py is None:
@@ -166,31 +166,29 @@ class _Validator:
         try:
             self._py(value)
         except fastjsonschema.JsonSchemaValueException as exc:
-            field = (exc.name or "data").removeprefix("data").lstrip(".")
-            raise SidecarError(_join(prefix, field), exc.message.replace(exc.name or "data", "value")) from exc
+            field = (exc.name or "data").removeprefix("data").lstrip(".") or "<root>"
+            raise SidecarError(field, exc.message.replace(exc.name or "data", "value")) from exc
 
 
-def _join(prefix: str, field: str) -> str:
-    return ".".join(p for p in (prefix, field) if p) or "<root>"
-
-
-def _error(exc: Any, value: Any, prefix: str) -> SidecarError:
+def _error(exc: Any, value: Any) -> SidecarError:
+    """jsonschema-rs's error as fastjsonschema's path of the field (``targets[1].confidence``),
+    so messages and logs read as they always did; a missing field is named itself."""
     path = list(exc.instance_path)
     missing = getattr(exc.kind, "property", None)  # only a "required" error names a property
     if isinstance(missing, str):
         path.append(missing)
-    field = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".")
+    field = "".join(f"[{p}]" if isinstance(p, int) else f".{p}" for p in path).lstrip(".") or "<root>"
     if isinstance(missing, str):
-        return SidecarError(_join(prefix, field), "is required")
+        return SidecarError(field, "is required")
     node = value
     with suppress(LookupError, TypeError):
         for p in path:
             node = node[p]
     if isinstance(node, float) and not math.isfinite(node):  # jsonschema-rs takes NaN and inf for null
         if '"number"' in exc.message:
-            return SidecarError(_join(prefix, field), "must be a finite number")
-        return SidecarError(_join(prefix, field), exc.message.replace("null", repr(node), 1))
-    return SidecarError(_join(prefix, field), exc.message)
+            return SidecarError(field, "must be a finite number")
+        return SidecarError(field, exc.message.replace("null", repr(node), 1))
+    return SidecarError(field, exc.message)
 
 
 _validate = _Validator(SIDECAR_SCHEMA)
