@@ -749,7 +749,7 @@ class Recorder:
         if feed.triggers is not None:
             for reason in feed.triggers.check(blocks):
                 self._protect(ts, "trigger", reason, camera=feed.name)
-        extra = [(feed.topics.extra(topic), json.dumps(msg, separators=(",", ":")).encode(), msg)
+        extra = [(feed.topics.extra(topic), _compact_json(msg).encode(), msg)
                  for topic, msg in frame.messages]
         attachments = frame.attachments if not self.multi else \
             [(f"{feed.name}/{name}", media, data) for name, media, data in frame.attachments]
@@ -845,6 +845,10 @@ class Recorder:
                             "post_s": self.ring.post_s}
         return meta
 
+
+#: a source's own messages of a frame as compact JSON, with an encoder made once (``json.dumps``
+#: with options makes one a call); a circular message fails on recursion instead of a marker check
+_compact_json = json.JSONEncoder(separators=(",", ":"), check_circular=False).encode
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
                 "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}

@@ -193,6 +193,22 @@ def _error(exc: Any, value: Any) -> SidecarError:
 
 _validate = _Validator(SIDECAR_SCHEMA)
 
+#: Compact JSON without NaN, made once (``json.dumps`` with options builds an encoder a call),
+#: and without circular-reference bookkeeping (3 of the 14 us a frame's blocks took): a circular
+#: document ends in RecursionError instead, which ``_serialise`` reports.
+_json = json.JSONEncoder(separators=(",", ":"), allow_nan=False, check_circular=False).encode
+
+
+def _serialise(doc: dict[str, Any]) -> str:
+    """JSON has no NaN or Infinity (Python would write them anyway and break every other reader),
+    so a non-finite number is a SidecarError, naming its field; so is a document that contains itself."""
+    try:
+        return _json(doc)
+    except ValueError as exc:
+        raise SidecarError(_find_non_finite(doc, "") or "<root>", "must be a finite number") from exc
+    except RecursionError as exc:
+        raise SidecarError("<root>", "contains itself (or is nested too deeply to write)") from exc
+
 
 def validate_sidecar(sidecar: dict[str, Any]) -> dict[str, Any]:
     """Raise SidecarError naming the offending field (e.g. ``sensor.resolution.width``)."""
@@ -231,24 +247,14 @@ class SidecarEncoder:
     def encode(self, blocks: dict[str, Any]) -> bytes:
         """``blocks`` holds the per-frame keys; returns the complete validated sidecar as JSON bytes."""
         self._blocks(blocks)
-        try:
-            tail = json.dumps({k: blocks[k] for k in self._PER_FRAME}, separators=(",", ":"), allow_nan=False)
-        except ValueError as exc:
-            raise SidecarError(_find_non_finite(blocks, "") or "<root>", "must be a finite number") from exc
+        tail = _serialise({k: blocks[k] for k in self._PER_FRAME})
         return (self._head + "," + tail[1:]).encode()
 
 
 def dumps_sidecar(sidecar: dict[str, Any]) -> bytes:
-    """Validate and serialise; compact separators keep 60 sidecars a second small.
-
-    JSON has no NaN or Infinity (Python would write them anyway and break every other reader),
-    so a non-finite number is a SidecarError too.
-    """
+    """Validate and serialise; compact separators keep 60 sidecars a second small."""
     validate_sidecar(sidecar)
-    try:
-        return json.dumps(sidecar, separators=(",", ":"), allow_nan=False).encode()
-    except ValueError as exc:
-        raise SidecarError(_find_non_finite(sidecar, "") or "<root>", "must be a finite number") from exc
+    return _serialise(sidecar).encode()
 
 
 def _find_non_finite(value: Any, path: str) -> str | None:

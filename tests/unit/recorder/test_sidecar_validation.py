@@ -129,3 +129,11 @@ def test_numpy_values_are_checked_as_before() -> None:
     with pytest.raises(SidecarError) as err:
         enc.encode(blocks)
     assert err.value.field.startswith("targets[0].bbox")
+
+
+def test_a_document_that_contains_itself_is_a_sidecar_error() -> None:
+    enc = SidecarEncoder(ICD_EXAMPLE["sensor"], ICD_EXAMPLE["radiometric"])
+    blocks = copy.deepcopy({k: ICD_EXAMPLE[k] for k in _BLOCKS})
+    blocks["capture"]["again"] = blocks["capture"]  # extra fields are allowed, so the schema passes it
+    with pytest.raises(SidecarError, match="contains itself"):
+        enc.encode(blocks)
