@@ -46,8 +46,8 @@ def _against_sdk(width: int, height: int, n: int, base: Path, level: int,
     run in a process of its own (``writer_run``) with its files removed after it: whichever runs
     second meets a different page cache, and in one process a recorder run after an SDK run
     cost up to a third more. Each process primes the page cache for its output first
-    (``page_cache``). Returns each writer's median run (by CPU), each round's ratio, and what
-    priming cost each run, untimed."""
+    (``page_cache``). Returns each writer's median run by CPU (of an even number, the upper of
+    the two middle runs), each round's ratio, and what priming cost each run, untimed."""
     ours: list[WriterRun] = []
     theirs: list[WriterRun] = []
     order = "".join("RS" if i % 2 == 0 else "SR" for i in range(rounds))
