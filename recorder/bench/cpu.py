@@ -8,14 +8,20 @@ import resource
 import threading
 from pathlib import Path
 
-__all__ = ["ThreadCpu", "process_cpu_s"]
+__all__ = ["ThreadCpu", "process_cpu_s", "process_cpu_split"]
 
 _TICK = os.sysconf("SC_CLK_TCK") if hasattr(os, "sysconf") else 100
 
 
 def process_cpu_s() -> float:
+    return process_cpu_split()[0]
+
+
+def process_cpu_split() -> tuple[float, float]:
+    """(user + kernel, kernel) CPU seconds, from one reading: differences of two readings keep
+    the kernel's part within the whole (``os.times`` counts in 10 ms ticks, too coarse for that)."""
     ru = resource.getrusage(resource.RUSAGE_SELF)
-    return ru.ru_utime + ru.ru_stime
+    return ru.ru_utime + ru.ru_stime, ru.ru_stime
 
 
 def _thread_cpu_s(tid: int) -> float | None:

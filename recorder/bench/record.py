@@ -92,7 +92,7 @@ def bench_record(sizes: list[tuple[int, int]], n_frames: int = 600, *, workdir: 
             warm = base / f"warm-{width}-{name}"
             record_once(sim, rendered, min(n_frames, 120), comp, level, analysis, fps, warm)
             shutil.rmtree(warm, ignore_errors=True)
-            res, dt, cpu_per_frame = record_once(sim, rendered, n_frames, comp, level, analysis, fps, root)
+            res, dt, cpu_per_frame, _ = record_once(sim, rendered, n_frames, comp, level, analysis, fps, root)
             sdk = ours = None
             if comp is Compression.ZSTD and not analysis:  # the anchor: foxglove-sdk's writer, same frames
                 ours, sdk, pairs, primed = _against_sdk(width, height, n_frames, base, level, sdk_rounds)

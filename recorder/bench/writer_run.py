@@ -27,7 +27,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from recorder.bench.cpu import process_cpu_s
+from recorder.bench.cpu import process_cpu_split
 from recorder.bench.page_cache import prime
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.base import CapturedFrame, FrameSource
@@ -61,12 +61,12 @@ class MemorySource(FrameSource):
                                 capture_mono_ns=time.monotonic_ns(), sidecar=f.sidecar, messages=f.messages)
 
 
-def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tuple[float, float, int]:
+def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tuple[float, float, float, int]:
     """The same frames through foxglove-sdk's MCAP writer (Rust): each image as a RawImage
     (mono16), each sidecar and each of the frame's other messages (the source's, e.g. the
     simulator's ground truth) as JSON, zstd at the same level. The JSON is serialised inside the
     timed loop, as a user of the SDK would have to: the recorder is timed serialising its own.
-    (CPU s per frame, wall s, bytes.)"""
+    (CPU s per frame, its kernel part, wall s, bytes.)"""
     import foxglove
     from foxglove.channels import RawImageChannel
     from foxglove.mcap import MCAPCompression, MCAPWriteOptions
@@ -74,7 +74,7 @@ def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tup
 
     ctx = foxglove.Context()
     opts = MCAPWriteOptions(compression=MCAPCompression.Zstd, compression_level=level, chunk_size=4 << 20)
-    cpu, t = process_cpu_s(), time.perf_counter()
+    cpu, t = process_cpu_split(), time.perf_counter()
     writer = foxglove.open_mcap(str(path), allow_overwrite=True, context=ctx, writer_options=opts)
     images = RawImageChannel("/thermal/image", context=ctx)
     meta = foxglove.Channel("/thermal/metadata", message_encoding="json", context=ctx)
@@ -95,16 +95,17 @@ def sdk_once(frames: list[CapturedFrame], n: int, path: Path, level: int) -> tup
     writer.close()
     with open(path, "rb") as fh:
         os.fsync(fh.fileno())
-    return (process_cpu_s() - cpu) / n, time.perf_counter() - t, path.stat().st_size
+    done = process_cpu_split()
+    return (done[0] - cpu[0]) / n, (done[1] - cpu[1]) / n, time.perf_counter() - t, path.stat().st_size
 
 
 def record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, comp: Compression, level: int,
-                 analysis: bool, fps: float, where: Path) -> tuple[Any, float, float]:
-    """One recording of the frames into ``where``: (result, wall s, CPU s a frame)."""
+                 analysis: bool, fps: float, where: Path) -> tuple[Any, float, float, float]:
+    """One recording of the frames into ``where``: (result, wall s, CPU s a frame, its kernel part)."""
     rec = Recorder(MemorySource(sim, rendered, n_frames), where, queue_frames=max(120, n_frames),
                    policy=SegmentPolicy(compression=comp, compression_level=level),
                    recover_leftovers=False, analysis=analysis, analysis_max_fps=fps)
-    cpu = process_cpu_s()
+    cpu = process_cpu_split()
     t = time.perf_counter()
     res = rec.run()
     dt = time.perf_counter() - t
@@ -112,7 +113,8 @@ def record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, co
     # recorder takes them, so most frames are (rightly) marked skipped: that is no failure
     if res.error is not None or res.dropped or res.frames_written != n_frames:
         raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
-    return res, dt, (process_cpu_s() - cpu) / n_frames
+    done = process_cpu_split()
+    return res, dt, (done[0] - cpu[0]) / n_frames, (done[1] - cpu[1]) / n_frames
 
 
 @dataclass(frozen=True)
@@ -150,22 +152,19 @@ def _main(argv: list[str]) -> int:
     for warm, count in ((True, warm_n), (False, n)):
         if not warm:  # the run's output size, from the warm-up's: see page_cache
             primed = prime(base, int(warm_bytes * count / warm_n * 1.1))
-        sys0 = os.times().system
         if writer == "sdk":
             path = base / "sdk.mcap"
-            cpu, wall, size_b = sdk_once(rendered, count, path, lvl)
-            sys_s = os.times().system - sys0  # the run's, not its file's removal
+            cpu, sys_s, wall, size_b = sdk_once(rendered, count, path, lvl)
             path.unlink(missing_ok=True)
         else:
             root = base / "recorder"
-            res, wall, cpu = record_once(sim, rendered, count, comp, lvl, False, 60.0, root)
-            sys_s = os.times().system - sys0
+            res, wall, cpu, sys_s = record_once(sim, rendered, count, comp, lvl, False, 60.0, root)
             size_b = sum(s["bytes"] for s in res.segments)
             shutil.rmtree(root, ignore_errors=True)
         if warm:
             warm_bytes = size_b
         else:
-            print(json.dumps({"cpu_s_per_frame": cpu, "sys_s_per_frame": sys_s / count, "wall_s": wall,
+            print(json.dumps({"cpu_s_per_frame": cpu, "sys_s_per_frame": sys_s, "wall_s": wall,
                               "bytes": size_b, "primed_cpu_s": primed}))
     return 0
 
