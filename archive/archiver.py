@@ -21,8 +21,9 @@ from pathlib import Path
 from typing import Any
 
 from archive.codecs import library_versions
+from archive.evidence import copy_problems, extras_problems, local_cover
 from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.extras import EXTRAS_NAME, ExtrasWriter
+from archive.extras import ExtrasWriter
 from archive.fanout import fan_out
 from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from archive.frame_summary import SUMMARY_NAME, SummaryBuilder
@@ -38,7 +39,7 @@ from archive.manifest import (
 )
 from archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest
 from archive.source_pass import SourcePass
-from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
+from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
 from recorder.storage.ring import load_windows
@@ -201,6 +202,19 @@ def take_name(session_dir: Path, fid: str, partial: Path, manifest: Manifest, en
     return []
 
 
+def _mark_damaged(session_dir: Path, manifest: Manifest, found: dict[str, list[str]]) -> None:
+    """A copy recorded as verified whose files no longer hash as the manifest says is marked
+    damaged (as scrub would), so no reader, gc or later step counts it before it is rebuilt."""
+    changed = False
+    for fid, problems in found.items():
+        entry = manifest["formats"][fid]
+        if not entry.get("damaged"):
+            entry["damaged"] = {"at": iso_now(), "problems": problems[:20]}
+            changed = True
+    if changed:
+        save_manifest(session_dir, manifest)
+
+
 def fresh_partial(session_dir: Path, fid: str) -> Path:
     partial = archive_dir(session_dir) / (fid + PARTIAL_SUFFIX)
     if partial.exists():  # left by a crashed run; never taken for an archive
@@ -281,12 +295,18 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
 
     segments = session_segments(session_dir)
     source_gone = bool(manifest.get("source", {}).get("deleted"))
-    todo = [f for f in formats if force or not manifest["formats"].get(f, {}).get("verified")
-            or not (adir / f).is_dir()]
+    layout = SessionLayout.of(session_dir)
+    # a format counts as done only if its files hash as the manifest says now (not on its flag)
+    found = {f: copy_problems(layout, f, manifest["formats"].get(f)) for f in formats}
+    todo = [f for f in formats if force or found[f]]
+    _mark_damaged(session_dir, manifest, {f: p for f, p in found.items()
+                                           if p and manifest["formats"].get(f, {}).get("verified")})
     if todo and (source_gone or not segments):
-        raise ArchiveError(f"{session_dir}: the MCAP source is gone; cannot write {', '.join(todo)}")
+        why = "; ".join(p for f in todo for p in found[f][:2]) or "asked to rewrite"
+        raise ArchiveError(f"{session_dir}: the MCAP source is gone; cannot write {', '.join(todo)} ({why}); "
+                           f"`thermcap scrub --repair` rebuilds a damaged copy from another verified one")
     need_extras = bool(segments) and not source_gone and (
-        force or bool(todo) or not manifest.get("extras", {}).get("verified") or not (adir / EXTRAS_NAME).is_file())
+        force or bool(todo) or bool(extras_problems(layout, manifest.get("extras"))))
     per_segment = count_frames(session_dir) if todo or need_extras else {}
     total = sum(per_segment.values())
     known = manifest["frames"].get("sha256")
@@ -363,11 +383,10 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
                                "band_rows": source.summary.band_rows, "frames": source.summary.n}
         save_manifest(session_dir, manifest)
     if delete_source:
-        not_ok = [f for f in formats if not manifest["formats"].get(f, {}).get("verified")]
-        if not manifest.get("extras", {}).get("verified"):
-            not_ok.append(EXTRAS_MCAP)
-        if not_ok:
-            raise ArchiveError(f"refusing to delete the source: {', '.join(not_ok)} not verified")
+        # the last copy goes only on evidence checked now: every file hashed against the manifest
+        cover = local_cover(layout, manifest, formats)
+        if not cover.ok:
+            raise ArchiveError(f"refusing to delete the source: {'; '.join(cover.problems[:5])}")
         windows = load_windows(session_dir)
         if windows:  # an event window is kept as recorded, beside its verified archive
             manifest["source"]["kept_because"] = f"{len(windows)} event windows are protected (protected.json)"

@@ -23,7 +23,8 @@ from typing import Any
 
 from api.storage import BlobStore
 from archive.archiver import DEFAULT_FORMATS
-from archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
+from archive.evidence import local_cover
+from archive.manifest import archived_files, iso_now, load_manifest, save_manifest
 from archive.manifest_types import Manifest
 from recorder.exceptions import ThermcapError
 from recorder.storage.layout import SessionLayout
@@ -64,28 +65,6 @@ class GcResult:
                 "bytes_freed": sum(d.frees for d in self.deleted), "bytes_remaining": self.bytes_remaining,
                 "decisions": [d.to_dict() for d in self.decisions],
                 "kept_unverified": [d.session for d in self.decisions if d.action == "keep"]}
-
-
-def _local_cover(layout: SessionLayout, m: Manifest) -> tuple[list[str], str | None]:
-    """(what the source's deletion relies on, or why it cannot go): every requested format and
-    extras verified, and their files on disk hash as the manifest says."""
-    requested = m.get("requested_formats") or list(DEFAULT_FORMATS)
-    relies = []
-    for fid in requested:
-        entry = m.get("formats", {}).get(fid) or {}
-        if not entry.get("verified") or entry.get("damaged"):
-            return [], f"requested format {fid} is not verified"
-        for rec in entry.get("files", []):
-            path = layout.format_dir(fid) / rec["path"]
-            if not path.is_file() or file_sha256(path) != rec.get("sha256"):
-                return [], f"{fid}/{rec['path']} is missing or differs from the manifest"
-        n_files = len(entry.get("files", []))
-        relies.append(f"{fid}: {n_files} files verified {entry.get('verified_at')}, hashes rechecked")
-    extras = m.get("extras") or {}
-    if not extras.get("verified") or not layout.extras.is_file() or file_sha256(layout.extras) != extras.get("sha256"):
-        return [], "extras.mcap (attachments, other topics) is not verified"
-    relies.append("extras.mcap verified, hash rechecked")
-    return relies, None
 
 
 def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str | None]:
@@ -162,11 +141,11 @@ def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_
         if not segments:
             decision.why_kept = "only the archive is left (the last copy); upload it to free more"
             return decision
-        relies, why = _local_cover(layout, m)
-        if why is not None:
-            decision.why_kept = why
+        cover = local_cover(layout, m, m.get("requested_formats") or list(DEFAULT_FORMATS))
+        if not cover.ok:
+            decision.why_kept = "; ".join(cover.problems[:3])
             return decision
-        decision.action, decision.relies_on = "delete-source", relies
+        decision.action, decision.relies_on = "delete-source", cover.relies_on
         decision.frees = sum(p.stat().st_size for p in segments)
         if not dry_run:
             for seg in segments:
