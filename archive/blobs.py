@@ -15,7 +15,7 @@ from obstore.store import LocalStore, S3Store
 
 from recorder.storage.layout import SessionLayout
 
-__all__ = ["BlobStore", "open_store", "upload_archive"]
+__all__ = ["BlobStore", "open_store", "stored_sha256", "upload_archive"]
 
 
 class BlobStore:
@@ -82,6 +82,19 @@ class BlobStore:
         return obstore.sign(self.store, "GET", self._key(key), timedelta(seconds=expires_s))
 
 
+def stored_sha256(store: BlobStore, key: str) -> str | None:
+    """sha256 of an object as the store gives it back now; None when it is not there."""
+    import hashlib
+
+    h = hashlib.sha256()
+    try:
+        for piece in store.iter_bytes(key):
+            h.update(piece)
+    except FileNotFoundError:
+        return None
+    return h.hexdigest()
+
+
 def open_store(root: Path, *, bucket: str | None = None, endpoint: str | None = None, region: str = "us-east-1",
                prefix: str = "") -> BlobStore:
     """The local root, or an S3-compatible bucket (credentials from AWS_ACCESS_KEY_ID /
@@ -112,24 +125,37 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 
     from archive.manifest import archived_files, iso_now, load_manifest, save_manifest
     from recorder.exceptions import ThermcapError
+    from recorder.storage.digest import file_sha256
 
     manifest = load_manifest(session_dir)
     keys = []
+    etags: dict[str, str] = {}
     for rec in archived_files(manifest):
         path = SessionLayout.of(session_dir).archive / rec.rel
         key = path.resolve().relative_to(root.resolve()).as_posix()
+        # what gc later lets the bucket stand for must be the verified bytes: the local file is
+        # hashed before it goes, and the object read back and hashed after
+        if not path.is_file() or file_sha256(path) != rec.sha256:
+            raise ThermcapError(f"{path}: missing or differs from the manifest; not uploading a damaged copy "
+                                f"(`thermcap scrub --repair` rebuilds it)")
         head = store.head(key)
         if head is None:
             try:
                 with open(path, "rb") as f:
                     obstore.put(store.store, store._key(key), f, mode="create")
             except AlreadyExistsError:
-                head = store.head(key)
-        if head is not None and head["size"] != rec.bytes:
-            raise ThermcapError(f"{key} already exists in the store with different content ({head['size']} bytes, "
-                                f"expected {rec.bytes}); refusing to overwrite")
+                pass
+            head = store.head(key)
+        if head is None or head["size"] != rec.bytes:
+            raise ThermcapError(f"{key} already exists in the store with different content "
+                                f"({head['size'] if head else 'no'} bytes, expected {rec.bytes}); refusing to overwrite")
+        if stored_sha256(store, key) != rec.sha256:
+            raise ThermcapError(f"{key}: the store holds other bytes than the verified archive file; "
+                                f"refusing to overwrite (delete the object, then upload again)")
         keys.append(key)
-    manifest["upload"] = {"complete": True, "keys": keys, "at": iso_now(), "store": store.kind}
+        if head.get("e_tag"):
+            etags[key] = str(head["e_tag"])
+    manifest["upload"] = {"complete": True, "keys": keys, "etags": etags, "at": iso_now(), "store": store.kind}
     save_manifest(session_dir, manifest)
     manifest_path = SessionLayout.of(session_dir).manifest
     store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)

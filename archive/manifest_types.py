@@ -83,6 +83,7 @@ class SummaryEntry(TypedDict, total=False):
 class UploadBlock(TypedDict, total=False):
     complete: bool
     keys: list[str]
+    etags: dict[str, str]  # each object's ETag when it was read back and hashed at upload
     at: str
     store: str
     damaged: dict[str, str]

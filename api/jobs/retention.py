@@ -68,18 +68,31 @@ class GcResult:
 
 
 def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str | None]:
+    """(what deleting the local folder relies on, or why it cannot go). The upload hashed each
+    object as the store gave it back and kept its ETag; now every object must still be there at
+    its size and with that ETag (the same object, not rewritten since), and scrub must not have
+    found any of them damaged. A manifest's word alone, with no store to ask, is not enough."""
     up = m.get("upload") or {}
     if not up.get("complete"):
         return [], "not uploaded to the object store"
     if store is None:
-        return [f"upload recorded complete {up.get('at')} ({len(up.get('keys', []))} objects)"], None
+        return [], "an upload is recorded, but no store is configured to recheck it (THERMCAP_S3_BUCKET)"
+    if up.get("damaged"):
+        return [], f"scrub found {len(up['damaged'])} damaged objects in the store"
     sizes = {f.rel: f.bytes for f in archived_files(m)}
-    for key in up.get("keys", []):
+    etags = up.get("etags") or {}
+    keys = up.get("keys", [])
+    for key in keys:
         rel = key.split("/archive/", 1)[-1]
         head = store.head(key)
         if head is None or (rel in sizes and head["size"] != sizes[rel]):
             return [], f"object {key} is missing from the store or has another size"
-    return [f"{len(up.get('keys', []))} objects in the {store.kind} store, sizes rechecked"], None
+        if key in etags and str(head.get("e_tag")) != etags[key]:
+            return [], f"object {key} was rewritten since it was uploaded and hashed (ETag differs)"
+    missing = [rel for rel in sizes if not any(k.endswith("/archive/" + rel) for k in keys)]
+    if missing:
+        return [], f"{len(missing)} archived files were never uploaded ({missing[0]}, ...)"
+    return [f"{len(keys)} objects in the {store.kind} store, sizes and ETags rechecked"], None
 
 
 def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,

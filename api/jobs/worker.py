@@ -55,7 +55,8 @@ def needs_work(d: Path, formats: list[str], store: BlobStore | None) -> bool:
         m = load_manifest(d, required=False)
     except ThermcapError:
         return True
-    if m is None or any(not m["formats"].get(f, {}).get("verified") for f in formats):
+    if m is None or any(not m["formats"].get(f, {}).get("verified") or m["formats"][f].get("damaged")
+                        for f in formats):
         return True
     return store is not None and not m.get("upload", {}).get("complete")
 
