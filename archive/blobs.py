@@ -148,7 +148,8 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
             head = store.head(key)
         if head is None or head["size"] != rec.bytes:
             raise ThermcapError(f"{key} already exists in the store with different content "
-                                f"({head['size'] if head else 'no'} bytes, expected {rec.bytes}); refusing to overwrite")
+                                f"({head['size'] if head else 'no'} bytes, expected {rec.bytes}); "
+                                f"refusing to overwrite")
         if stored_sha256(store, key) != rec.sha256:
             raise ThermcapError(f"{key}: the store holds other bytes than the verified archive file; "
                                 f"refusing to overwrite (delete the object, then upload again)")
