@@ -90,4 +90,6 @@ class SourcePass:
 
     def _refuse(self, problems: list[str]) -> None:
         raise SourceDamagedError(f"{self.session_dir}: the MCAP source disagrees with itself; nothing was archived "
-                                 f"(run `thermcap info` on the segments, and `thermcap recover` on a copy)", problems)
+                                 f"(`thermcap info` names the segments; `thermcap recover SEGMENT` repairs one in "
+                                 f"place, keeping every intact chunk, and `--keep-original` keeps the damaged file "
+                                 f"beside it)", problems)

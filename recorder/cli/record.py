@@ -413,10 +413,15 @@ def split_cameras_cmd(session: str, root: str, delete_source: bool, as_json: boo
 
 @cli.command()
 @click.argument("path", type=click.Path())
-@click.option("--keep-original", is_flag=True, help="Keep the .active file after recovery.")
+@click.option("--keep-original", is_flag=True,
+              help="Keep the original beside the result (NNNN.mcap.active, or NNNN.mcap.orig for a closed segment).")
 @json_option
 def recover(path: str, keep_original: bool, as_json: bool) -> None:
-    """Turn interrupted segments (*.mcap.active) into valid, indexed MCAP files."""
+    """Turn interrupted segments (*.mcap.active) into valid, indexed MCAP files, and repair closed
+    segments cut short in place (the same name, so the session still counts them).
+
+    PATH is a segment, a session folder or a data root. session.json is updated to what the
+    segments now hold, with what each repair kept and discarded."""
     from recorder.storage.recover import recover_path
 
     try:

@@ -28,6 +28,7 @@ from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, 
 from mcap.stream_reader import breakup_chunk
 
 from recorder.exceptions import McapFileError
+from recorder.icd.topics import is_image_topic
 from recorder.storage.layout import SESSION_JSON, SessionLayout
 from recorder.storage.lock import holder, lock_session
 from recorder.storage.reader import count_frames
@@ -35,7 +36,11 @@ from recorder.storage.rosbag2 import write_bag_metadata
 from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
 from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
-__all__ = ["RecoveryResult", "recover_leftovers", "recover_path", "recover_segment", "scan_records"]
+ORIGINAL_SUFFIX = ".orig"  # a repaired file's original, kept until the result reads back
+UNREADABLE_SUFFIX = ".unreadable"  # an empty segment moved aside: it held no frame
+
+__all__ = ["ORIGINAL_SUFFIX", "UNREADABLE_SUFFIX", "RecoveryResult", "recover_leftovers", "recover_path",
+           "recover_segment", "scan_records"]
 
 _READERS = {
     Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
@@ -107,30 +112,43 @@ def _is_complete(path: Path) -> bool:
 
 def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None = None,
                     keep_original: bool = False) -> RecoveryResult:
-    """Recover one ``.active`` (or otherwise truncated) MCAP file; returns what was kept."""
+    """Recover one ``.active`` (or otherwise truncated) MCAP file; returns what was kept.
+
+    An ``.active`` file becomes the finished segment of its name. A closed file (a segment cut
+    short, or any MCAP) is repaired in place: the result replaces it atomically, under the same
+    name, so every command goes on counting it as the segment it was; the original is kept
+    beside it (``.orig``) until the result has read back. An empty file holds nothing to keep:
+    it is moved aside (``.unreadable``), never deleted, so it no longer blocks the session."""
     src = Path(path)
     if not src.is_file():
         raise McapFileError(f"{src}: no such file")
-    if output is None:
-        name = src.name[: -len(ACTIVE_SUFFIX)] if src.name.endswith(ACTIVE_SUFFIX) else src.stem + ".recovered.mcap"
-        output = src.with_name(name)
-    dst = Path(output)
-    if dst.exists():
+    active = src.name.endswith(ACTIVE_SUFFIX)
+    in_place = output is None and not active
+    dst = Path(output) if output is not None else src.with_name(src.name[: -len(ACTIVE_SUFFIX)]) if active else src
+    if not in_place and dst.exists():
         raise McapFileError(f"{dst} already exists; refusing to overwrite a finished segment")
     before = src.stat()
     size = before.st_size
     result = RecoveryResult(source=str(src), output=str(dst))
+    if size == 0:
+        aside = (dst if active else src).with_name((dst if active else src).name + UNREADABLE_SUFFIX)
+        _rename_no_clobber(src, aside)
+        fsync_dir(src.parent)
+        result.output = str(aside)
+        result.stopped_because = f"held no bytes (no frame to keep); moved aside as {aside.name}"
+        return result
+    orig = src.with_name(src.name + ORIGINAL_SUFFIX)
     if _is_complete(src):
-        # finish() completed but the rename did not: the file is whole, just name it.
-        if keep_original:
+        # finish() completed but the rename did not, or the file was whole all along: name it
+        if in_place:
+            if orig.exists() and not keep_original:
+                orig.unlink()  # a repair that ended before it removed the original: the result read back
+        elif keep_original:
             _copy(src, dst)
         else:
             _rename_no_clobber(src, dst)
         fsync_dir(dst.parent)
-        with open(dst, "rb") as f:
-            summary = make_reader(f).get_summary()
-        stats = summary.statistics if summary else None
-        result.messages = stats.message_count if stats else 0
+        result.messages, result.frames, result.topics = _summary_counts(dst)
         result.bytes_kept = size
         result.stopped_because = "file was complete"
         return result
@@ -207,8 +225,8 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
                             if isinstance(r, Message):
                                 add(r)
                         result.chunks += 1
-                except McapFileError:
-                    raise
+                except (McapFileError, OSError):
+                    raise  # our own output could not be written (a full disk): not damage in the source
                 except Exception as exc:
                     if opcode == Opcode.CHUNK:
                         # The record's framing held, only its content is damaged (checksum, codec):
@@ -225,24 +243,28 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
         if not started:
             raise McapFileError(f"{src}: no MCAP header survived; nothing to recover")
         writer.finish(fsync=True)
-    except BaseException:
+    except BaseException as exc:
         writer.close()
-        if tmp.exists():
-            tmp.unlink()
+        with contextlib.suppress(OSError):
+            tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            raise McapFileError(f"{src}: the recovered copy could not be written ({exc.filename or tmp}: "
+                                f"{exc.strerror or exc}); {src.name} is left as it was") from None
         raise
     result.bytes_kept = last_good
     result.bytes_discarded = size - last_good
-    result.frames = result.topics.get("/thermal/image", 0)
-    # Check the result with the official reader before it takes the final name.
-    with open(tmp, "rb") as f:
-        summary = make_reader(f).get_summary()
-    count = summary.statistics.message_count if summary and summary.statistics else 0
-    if count != result.messages:
+    result.frames = sum(n for t, n in result.topics.items() if is_image_topic(t))
+    # Check the result with the official reader (every chunk's CRC) before it takes the final name.
+    if not _is_complete(tmp) or _summary_counts(tmp)[0] != result.messages:
         tmp.unlink()
-        raise McapFileError(f"{src}: recovered file holds {count} messages, expected {result.messages}")
+        raise McapFileError(f"{src}: the recovered copy did not read back with {result.messages} messages; "
+                            f"{src.name} is left as it was")
     if _changed(src, before):
         tmp.unlink()
         raise McapFileError(f"{src}: changed while it was being recovered (is a recorder writing it?); left as it was")
+    if in_place:
+        _replace_keeping_original(tmp, src, orig, result.messages, keep_original)
+        return result
     try:
         _rename_no_clobber(tmp, dst)
     except McapFileError:
@@ -253,6 +275,38 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
         src.unlink()
         fsync_dir(src.parent)
     return result
+
+
+def _replace_keeping_original(new: Path, path: Path, orig: Path, messages: int, keep_original: bool) -> None:
+    """``new`` takes ``path``'s name in one rename; the original stays as ``orig`` (a second
+    link, no copy) until the result under the final name reads back with its messages."""
+    if orig.exists():
+        orig.unlink()  # only ever a second link to ``path`` or an older original already replaced
+    os.link(path, orig)
+    fsync_dir(path.parent)
+    os.replace(new, path)
+    fsync_dir(path.parent)
+    if _summary_counts(path)[0] != messages:
+        os.replace(orig, path)  # put the original back: the result is not what was checked
+        fsync_dir(path.parent)
+        raise McapFileError(f"{path}: the repaired file did not read back; the original was put back")
+    if not keep_original:
+        orig.unlink()
+        fsync_dir(path.parent)
+
+
+def _summary_counts(path: Path) -> tuple[int, int, dict[str, int]]:
+    """(messages, frames, messages per topic) from a finished file's summary."""
+    with open(path, "rb") as f:
+        summary = make_reader(f).get_summary()
+    if summary is None or summary.statistics is None:
+        return 0, 0, {}
+    per = summary.statistics.channel_message_counts
+    topics: dict[str, int] = {}
+    for cid, ch in summary.channels.items():
+        topics[ch.topic] = topics.get(ch.topic, 0) + per.get(cid, 0)
+    frames = sum(n for t, n in topics.items() if is_image_topic(t))
+    return summary.statistics.message_count, frames, topics
 
 
 def _changed(path: Path, before: os.stat_result) -> bool:
@@ -295,6 +349,9 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
         by_session = {}
         for active in sorted(p.rglob(f"*.mcap{ACTIVE_SUFFIX}")):
             by_session.setdefault(active.parent, []).append(active)
+        for seg in sorted(p.rglob("[0-9][0-9][0-9][0-9].mcap")):
+            if _looks_cut(seg):  # a closed segment the archiver refuses: repaired in place
+                by_session.setdefault(seg.parent, []).append(seg)
         for meta in sorted(p.rglob(SESSION_JSON)):
             if _left_recording(meta.parent):
                 by_session.setdefault(meta.parent, [])
@@ -309,9 +366,11 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
                                        stopped_because=f"skipped: {who} holds the session") for a in actives]
             continue
         try:
+            done = []
             for active in actives:
-                results.append(recover_segment(active, keep_original=keep_original))
-            _mark_session(session)
+                done.append(recover_segment(active, keep_original=keep_original))
+            results += done
+            _mark_session(session, done)
             with contextlib.suppress(OSError):  # derived data: a failure must not undo the work above
                 write_bag_metadata(session)
         finally:
@@ -330,20 +389,47 @@ def _left_recording(session_dir: Path) -> bool:
         return False
 
 
-def _mark_session(session_dir: Path) -> None:
+def _looks_cut(seg: Path) -> bool:
+    """A closed segment with no closing magic or no readable summary (cut short, or empty).
+    Cheap: the tail and the summary, not every chunk."""
+    try:
+        if seg.stat().st_size < 16:
+            return True
+        with open(seg, "rb") as f:
+            f.seek(-8, os.SEEK_END)
+            if f.read(8) != MCAP_MAGIC:
+                return True
+            f.seek(0)
+            summary = make_reader(f).get_summary()
+        return summary is None or summary.statistics is None
+    except OSError:
+        return False  # unreadable here: named by the command that reads it, never moved
+    except Exception:
+        return True
+
+
+def _mark_session(session_dir: Path, results: list[RecoveryResult] | None = None) -> None:
     meta_path = SessionLayout.of(session_dir).session_json
     try:
         meta = json.loads(meta_path.read_text())
     except (OSError, ValueError):
         return
-    if meta.get("status") in _UNFINISHED:
-        # The recorder died before its summary: the counts come from what the segments now hold,
-        # so session.json, `info` and the catalog agree.
+    repaired = [r for r in results or [] if r.stopped_because != "file was complete" and not r.skipped]
+    if meta.get("status") in _UNFINISHED or repaired:
+        # The recorder died before its summary, or a segment lost its cut tail: the counts come
+        # from what the segments now hold, so session.json, `info` and the catalog agree.
+        if meta.get("status") not in _UNFINISHED and "frames_written_before_recovery" not in meta:
+            meta["frames_written_before_recovery"] = meta.get("frames_written")
         meta["status"] = "recovered"
         # a finished segment with no readable summary: `info` names it; no count is made up
         with contextlib.suppress(McapFileError):
             meta["frames_written"] = sum(count_frames(session_dir).values())
         meta["recovered_ns"] = time.time_ns()
+        notes = meta.setdefault("recovered_segments", {})
+        for r in repaired:
+            notes[Path(r.source).name.removesuffix(ACTIVE_SUFFIX)] = {
+                "frames": r.frames, "messages": r.messages, "bytes_discarded": r.bytes_discarded,
+                "damaged_chunks": r.damaged_chunks, "output": Path(r.output).name, "why": r.stopped_because}
         write_json_atomic(meta_path, meta)
 
 
