@@ -20,7 +20,7 @@ from api.indexing import index_root
 from api.jobs.runner import JobRunner
 from api.reading.frames import FrameReader
 from api.reading.regions import RegionReader
-from api.security import AuthGate
+from api.security import AuthGate, BodyLimit
 from api.settings import Settings
 from api.storage import make_store
 from api.verified_files import FileVerifier
@@ -125,6 +125,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     app.add_middleware(FrameFastPath, engine=app.state.engine, root=settings.root, store_kind=app.state.store.kind,
                        tokens=settings.tokens, locations=app.state.frames.locations, state=app.state)
     app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
+    app.add_middleware(BodyLimit)  # outermost: no body is read past the limit, token or not
 
     @app.exception_handler(HTTPException)
     async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:

@@ -24,13 +24,16 @@ from fastapi import HTTPException, Request
 
 __all__ = [
     "FILE_NAME_RE",
+    "MAX_BODY_BYTES",
     "PUBLIC_PATHS",
     "SESSION_ID_RE",
     "TOKEN_COOKIE",
     "AuthGate",
+    "BodyLimit",
     "check_file_name",
     "check_session_id",
     "given_token",
+    "has_token",
     "require",
     "scopes_for_token",
 ]
@@ -67,6 +70,11 @@ def given_token(authorization: str, cookie_header: str) -> str | None:
     return None
 
 
+def has_token(request: Request) -> bool:
+    """Whether the request may see what only token holders see (always, with no tokens set)."""
+    return not request.app.state.settings.tokens or _scopes_for(request) is not None
+
+
 def _scopes_for(request: Request) -> frozenset[str] | None:
     tokens: dict[str, frozenset[str]] = request.app.state.settings.tokens
     given = given_token(request.headers.get("authorization", ""), request.headers.get("cookie", ""))
@@ -94,6 +102,64 @@ class AuthGate:
             return
         body = json.dumps({"error": "a valid bearer token is required", "status": 401}).encode()
         await _send(send, 401, body, [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")])
+
+
+#: Request bodies are small (a login form, a radiometry change, a job): nothing larger is read.
+MAX_BODY_BYTES = 1 << 20
+
+
+class BodyLimit:
+    """Pure ASGI: a request body over ``max_bytes`` is refused with 413 before it is read (by its
+    Content-Length) or as soon as it passes the limit (a chunked one), so no route ever holds an
+    unbounded body in memory, authenticated or not."""
+
+    def __init__(self, app: Any, *, max_bytes: int = MAX_BODY_BYTES) -> None:
+        self.app, self.max_bytes = app, max_bytes
+
+    async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+        length = next((v for k, v in scope.get("headers", []) if k.lower() == b"content-length"), None)
+        if length is not None:
+            text = length.decode("latin-1").strip()
+            if not text.isdigit():
+                await _send_error(send, 400, f"Content-Length {text[:40]!r} is not a byte count")
+                return
+            if int(text) > self.max_bytes:
+                await _send_error(send, 413, f"the request body is {int(text):,} bytes; at most {self.max_bytes:,}")
+                return
+        seen = 0
+        started = False
+
+        async def counted() -> dict:
+            nonlocal seen
+            message = await receive()
+            if message["type"] == "http.request":
+                seen += len(message.get("body", b""))
+                if seen > self.max_bytes:
+                    raise _TooLarge
+            return message
+
+        async def tracked(message: dict) -> None:
+            nonlocal started
+            started = started or message["type"] == "http.response.start"
+            await send(message)
+
+        try:
+            await self.app(scope, counted, tracked)
+        except _TooLarge:
+            if not started:
+                await _send_error(send, 413, f"the request body is over {self.max_bytes:,} bytes")
+
+
+class _TooLarge(Exception):
+    pass
+
+
+async def _send_error(send: Any, status: int, message: str) -> None:
+    body = json.dumps({"error": message, "status": status}).encode()
+    await _send(send, status, body, [(b"content-type", b"application/json")])
 
 
 async def _send(send: Any, status: int, body: bytes, headers: list[tuple[bytes, bytes]]) -> None:

@@ -63,8 +63,15 @@ class Settings:
         self.root = Path(self.root)
         if not self.tokens:
             text = os.environ.get("THERMCAP_TOKENS", "")
+            if text.strip() and not _parse_tokens(text):
+                raise ValueError("THERMCAP_TOKENS is set but holds no token (only comments or separators); "
+                                 "refusing to serve without authentication")
             path = os.environ.get("THERMCAP_TOKENS_FILE")
             if path:
+                from_file = _parse_tokens(Path(path).read_text())
+                if not from_file:  # fail closed: a file meant to guard the service never opens it
+                    raise ValueError(f"THERMCAP_TOKENS_FILE {path}: holds no token (empty, or only comments); "
+                                     f"refusing to serve without authentication")
                 text += "\n" + Path(path).read_text()
             self.tokens = _parse_tokens(text)
 

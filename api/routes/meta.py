@@ -8,7 +8,7 @@ from sqlalchemy import func, select
 
 from api import db
 from api.indexing import IndexReport, index_root
-from api.security import require
+from api.security import has_token, require
 from recorder.storage.layout import SessionLayout
 from recorder.storage.reader import list_sessions
 
@@ -17,10 +17,12 @@ router = APIRouter()
 
 @router.get("/healthz", tags=["meta"])
 def healthz(request: Request) -> dict:
-    """Alive; ``degraded`` (still 200: the service serves other copies) once it met a damaged copy,
-    with what and where, so a probe or a person sees the disk needs `thermcap scrub --repair`."""
+    """Alive; ``degraded`` (still 200: the service serves other copies) once it met a damaged copy.
+    What and where (session and file names) only with a token: a probe needs the state, not the
+    data root's names."""
     damage = request.app.state.frames.damage.summary()
-    return {"status": "degraded" if damage["damaged_copies_seen"] else "ok", **damage}
+    status = "degraded" if damage["damaged_copies_seen"] else "ok"
+    return {"status": status, **damage} if has_token(request) else {"status": status}
 
 
 @router.get("/readyz", tags=["meta"])

@@ -108,7 +108,8 @@ def test_tokens_cors_and_damage_go_to_the_full_application(tmp_path):
         assert np.array_equal(imagecodecs.png_decode(png.content), np.frombuffer(raw.content, "<u2").reshape(
             int(raw.headers["x-height"]), int(raw.headers["x-width"])))
         assert hashlib.sha256(ok.content).hexdigest() == want
-        assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
+        assert c.get("/healthz").json() == {"status": "degraded"}  # what and where only with a token
+        assert c.get("/healthz", headers={"Authorization": "Bearer " + "r" * 32}).json()["damaged_copies_seen"] >= 1
 
 
 def test_raw_from_thermcaps_own_png_then_the_strips_then_libpng(tmp_path, monkeypatch):
