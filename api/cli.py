@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import PORT, Number, fail, json_option, root_option
 from recorder.exceptions import ThermcapError
 
 __all__ = ["index", "jobs", "on_archived", "serve", "upload"]
@@ -21,8 +21,8 @@ __all__ = ["index", "jobs", "on_archived", "serve", "upload"]
 @root_option
 @click.option("-h", "--host", default="127.0.0.1", show_default=True,
               help="Interface to bind; 0.0.0.0 exposes the service to the network (set tokens first).")
-@click.option("-p", "--port", type=int, default=8000, show_default=True, help="0 picks a free port.")
-@click.option("--workers", type=int, default=1, show_default=True)
+@click.option("-p", "--port", type=PORT, default=8000, show_default=True, help="0 picks a free port.")
+@click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=1, show_default=True)
 @click.option("--get", "get_path", default=None,
               help="Answer one GET request in-process, print it, exit (1 unless 200).")
 @click.option("--access-log/--no-access-log", default=True, show_default=True,

@@ -25,7 +25,7 @@ from recorder.storage.segments import write_json_atomic
 if TYPE_CHECKING:
     from recorder.capture.recorder import Recorder
 
-__all__ = ["ControlServer", "find_control", "metrics_text"]
+__all__ = ["MAX_BODY_BYTES", "ControlServer", "find_control", "is_loopback", "metrics_text"]
 
 RUN_DIR = "run"
 
@@ -89,9 +89,66 @@ def metrics_text(rec: Recorder) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: A control request's body is a note: nothing larger, or nested deeper, is read.
+MAX_BODY_BYTES = 16 << 10
+MAX_JSON_DEPTH = 8
+
+
+def is_loopback(host: str) -> bool:
+    """127.0.0.0/8, ::1 or localhost: where a token may be sent without leaving the machine."""
+    import ipaddress
+
+    name = host.strip("[]").lower()
+    if name == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(name).is_loopback
+    except ValueError:
+        return False
+
+
+def _depth(text: str) -> int:
+    """How deep brackets nest in a JSON text (checked before parsing: json.loads recurses)."""
+    depth = most = 0
+    in_string = escaped = False
+    for ch in text:
+        if in_string:
+            escaped = not escaped and ch == "\\"
+            if ch == '"' and not escaped:
+                in_string = False
+            continue
+        if ch == '"':
+            in_string = True
+        elif ch in "[{":
+            depth += 1
+            most = max(most, depth)
+        elif ch in "]}":
+            depth -= 1
+    return most
+
+
+class _QuietServer(ThreadingHTTPServer):
+    daemon_threads = True
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        """A client that hangs up mid-answer is its own business: no traceback in the recorder's log."""
+        import sys
+
+        exc = sys.exc_info()[1]
+        if isinstance(exc, ConnectionError | TimeoutError):
+            return
+        super().handle_error(request, client_address)
+
+
 class ControlServer:
+    """``insecure=True`` alone lets it run without a token: any local user (or a web page, through
+    a POST no browser preflights) could otherwise pause a recording."""
+
     def __init__(self, rec: Recorder, *, host: str = "127.0.0.1", port: int = 0, token: str | None = None,
-                 max_dropped: int = 0) -> None:
+                 max_dropped: int = 0, insecure: bool = False) -> None:
+        if not token and not insecure:
+            raise ValueError("the control endpoint needs a token: set THERMCAP_CONTROL_TOKEN (or --control-token), "
+                             "or pass --control-insecure to run it open to every local user")
         self.rec, self.token, self.max_dropped = rec, token or None, max_dropped
         server = self
 
@@ -101,13 +158,36 @@ class ControlServer:
 
             def _send(self, code: int, body: Any, ctype: str = "application/json") -> None:
                 data = body.encode() if isinstance(body, str) else json.dumps(body, indent=1).encode()
-                self.send_response(code)
-                self.send_header("Content-Type", ctype)
-                self.send_header("Content-Length", str(len(data)))
-                self.end_headers()
-                self.wfile.write(data)
+                try:
+                    self.send_response(code)
+                    self.send_header("Content-Type", ctype)
+                    self.send_header("Content-Length", str(len(data)))
+                    self.end_headers()
+                    self.wfile.write(data)
+                except (ConnectionError, TimeoutError):
+                    self.close_connection = True  # the client hung up: nothing to tell it
+
+            def _same_origin(self) -> bool:
+                """Only requests addressed to this endpoint by its own name: a page elsewhere (its
+                Origin) or a DNS name rebound to 127.0.0.1 (its Host) is refused before anything."""
+                host = (self.headers.get("Host") or "").strip()
+                try:
+                    parsed = urlsplit("//" + host)
+                    name, port = parsed.hostname, parsed.port
+                except ValueError:
+                    name = port = None
+                if not name or port != server.port or not (is_loopback(name) or name == server.host.strip("[]")):
+                    self._send(403, {"error": f"Host {host or '(none)'!r} is not this control endpoint"})
+                    return False
+                origin = self.headers.get("Origin")
+                if origin is not None and origin.rstrip("/") not in server.origins:
+                    self._send(403, {"error": f"requests from {origin!r} are not accepted"})
+                    return False
+                return True
 
             def _allowed(self) -> bool:
+                if not self._same_origin():
+                    return False
                 if server.token is None:
                     return True
                 got = self.headers.get("Authorization", "")
@@ -119,6 +199,8 @@ class ControlServer:
             def do_GET(self) -> None:
                 path = urlsplit(self.path).path
                 if path == "/healthz":
+                    if not self._same_origin():
+                        return
                     healthy, reasons = server.rec.health(server.max_dropped)
                     self._send(200 if healthy else 503, {"healthy": healthy, "problems": reasons})
                     return
@@ -136,11 +218,23 @@ class ControlServer:
                     return
                 url = urlsplit(self.path)
                 note = (parse_qs(url.query).get("note") or [""])[0]
-                n = int(self.headers.get("Content-Length") or 0)
+                length = (self.headers.get("Content-Length") or "0").strip()
+                if not length.isdigit():
+                    self._send(400, {"error": f"Content-Length {length[:40]!r} is not a byte count"})
+                    self.close_connection = True
+                    return
+                n = int(length)
+                if n > MAX_BODY_BYTES:
+                    self._send(413, {"error": f"the body is {n:,} bytes; at most {MAX_BODY_BYTES:,}"})
+                    self.close_connection = True
+                    return
                 if n:
+                    text = self.rfile.read(n).decode("utf-8", errors="replace")
                     try:
-                        note = str(json.loads(self.rfile.read(min(n, 65536))).get("note", note))
-                    except (ValueError, AttributeError):
+                        if _depth(text) > MAX_JSON_DEPTH:
+                            raise ValueError("nested too deep")
+                        note = str(json.loads(text).get("note", note))
+                    except (ValueError, AttributeError, RecursionError):
                         self._send(400, {"error": "the body must be a JSON object like {\"note\": \"...\"}"})
                         return
                 rec = server.rec
@@ -157,9 +251,10 @@ class ControlServer:
                 else:
                     self._send(404, {"error": f"no such route {url.path}"})
 
-        self.httpd = ThreadingHTTPServer((host, port), Handler)
-        self.httpd.daemon_threads = True
-        self.url = f"http://{host}:{self.httpd.server_address[1]}"
+        self.httpd = _QuietServer((host, port), Handler)
+        self.host, self.port = host, self.httpd.server_address[1]
+        self.url = f"http://{host}:{self.port}"
+        self.origins = {f"http://{h}:{self.port}" for h in ("127.0.0.1", "localhost", "[::1]", host)}
         self._thread = threading.Thread(target=self.httpd.serve_forever, name="thermcap-control", daemon=True)
         self.address_file = Path(rec.root) / RUN_DIR / f"{rec.session_id}.control.json"
 

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import PORT, Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 
@@ -19,15 +19,20 @@ if TYPE_CHECKING:
 
 
 # -- record ---------------------------------------------------------------------------------
+MAX_FRAME_PIXELS = 8192 * 8192
+EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the same as a failure (1)
+
 @cli.command()
 @click.option("--source", "sources", multiple=True, default=["sim"], show_default=True, metavar="[NAME=]SOURCE",
               help="sim, raw:PATH, or raw:- for stdin; repeat with names for several cameras in one session "
                    "(left=sim --source right=raw:/dev/stdin,width=320,height=256,fps=30).")
-@click.option("--duration", type=float, default=None,
+@click.option("--duration", type=Number(minimum=0, above=True, unit="s"), default=None,
               help="Seconds to record (default: until the input ends or Ctrl-C).")
-@click.option("--fps", type=float, default=60.0, show_default=True)
-@click.option("--width", type=int, default=640, show_default=True)
-@click.option("--height", type=int, default=512, show_default=True)
+@click.option("--fps", type=Number(minimum=0, above=True, maximum=10_000, unit="fps"), default=60.0, show_default=True)
+@click.option("--width", type=Number(minimum=1, maximum=16384, integer=True, unit="pixels"), default=640,
+              show_default=True)
+@click.option("--height", type=Number(minimum=1, maximum=16384, integer=True, unit="pixels"), default=512,
+              show_default=True)
 @click.option("--sensor", "sensor_id", default=None, help="Sensor id used in names (default SIM640 / GRAY16).")
 @root_option
 @click.option("--session", "session_id", default=None, help="Session id (default: <UTC time>_<sensor>_<random>).")
@@ -38,16 +43,18 @@ if TYPE_CHECKING:
                    "arrives (a pipe from a live camera tool).")
 @click.option("--seed", type=int, default=0, show_default=True, help="Simulator seed.")
 @click.option("--crossover", is_flag=True, help="Simulator: include a dawn/dusk thermal crossover.")
-@click.option("--cue-period", type=float, default=20.0, show_default=True,
+@click.option("--cue-period", type=Number(minimum=0, unit="s"), default=20.0, show_default=True,
               help="Simulator: seconds between radar cues (0: none).")
-@click.option("--segment-duration", type=float, default=60.0, show_default=True,
+@click.option("--segment-duration", type=Number(minimum=0, unit="s"), default=60.0, show_default=True,
               help="Rotate segments after this many seconds.")
-@click.option("--segment-size", type=float, default=4096.0, show_default=True,
+@click.option("--segment-size", type=Number(minimum=0, unit="MiB"), default=4096.0, show_default=True,
               help="Rotate segments after this many MiB.")
 @click.option("--compression", type=click.Choice(["auto", "zstd", "lz4", "none"]), default="auto", show_default=True,
               help="Chunk compression; auto: zstd-1 up to 25 Mpixel/s, lz4 above (e.g. 1280x1024@60).")
-@click.option("--level", type=int, default=None, help="Compression level (default: zstd 1, lz4 0).")
-@click.option("--queue", "queue_frames", type=int, default=120, show_default=True,
+@click.option("--level", type=Number(minimum=0, maximum=22, integer=True), default=None,
+              help="Compression level (default: zstd 1, lz4 0).")
+@click.option("--queue", "queue_frames", type=Number(minimum=1, maximum=100_000, integer=True, unit="frames"),
+              default=120, show_default=True,
               help="Capture queue capacity in frames.")
 @click.option("--analysis/--no-analysis", default=True, show_default=True,
               help="Run the hot-spot detector beside recording (fills sidecar targets and contrast grade).")
@@ -60,24 +67,28 @@ if TYPE_CHECKING:
 @click.option("--evict-only-synced", is_flag=True,
               help="With --ring: delete only segments the cloud confirmed (thermcap sync receipts), whatever the "
                    "pressure.")
-@click.option("--pre", "pre_s", type=float, default=30.0, show_default=True,
+@click.option("--pre", "pre_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
               help="Seconds kept before a trigger or mark.")
-@click.option("--post", "post_s", type=float, default=30.0, show_default=True,
+@click.option("--post", "post_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
               help="Seconds kept after a trigger or mark.")
-@click.option("--trigger-hot", type=float, default=None, metavar="DEGC",
+@click.option("--trigger-hot", type=Number(minimum=-273.15, maximum=5000, unit="°C"), default=None, metavar="DEGC",
               help="Trigger when a target at or above this temperature appears.")
 @click.option("--trigger-target-count", is_flag=True, help="Trigger when the number of targets changes.")
 @click.option("--control", "control", is_flag=True,
               help="Serve the control endpoint (thermcap ctl; /status, /metrics, /healthz) on 127.0.0.1.")
-@click.option("--control-port", type=int, default=0, show_default=True, help="Its port (0: any free port).")
+@click.option("--control-port", type=PORT, default=0, show_default=True, help="Its port (0: any free port).")
 @click.option("--control-token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
               help="Bearer token every control route but /healthz requires (set it in the environment).")
+@click.option("--control-insecure", is_flag=True,
+              help="Run the control endpoint without a token (any local user could pause the recording).")
 @click.option("--live", is_flag=True, help="Serve a live view for Foxglove (Open connection: ws://HOST:PORT).")
 @click.option("--live-host", default="127.0.0.1", show_default=True,
-              help="Address of the live view (0.0.0.0 to let the vehicle network see it).")
-@click.option("--live-port", type=int, default=8765, show_default=True)
-@click.option("--live-fps", type=float, default=10.0, show_default=True, help="Most frames/s per camera it sends.")
-@click.option("--live-width", type=int, default=0, show_default=True,
+              help="Address of the live view: a loopback one, since it has no token (reach it from the vehicle "
+                   "network through an SSH tunnel).")
+@click.option("--live-port", type=PORT, default=8765, show_default=True)
+@click.option("--live-fps", type=Number(minimum=0, above=True, maximum=1000, unit="fps"), default=10.0,
+              show_default=True, help="Most frames/s per camera it sends.")
+@click.option("--live-width", type=Number(minimum=0, maximum=16384, integer=True), default=0, show_default=True,
               help="Subsample the live picture to at most this width (0: full resolution).")
 @click.option("--debug-writer-delay", type=float, default=0.0, hidden=True)
 @json_option
@@ -88,8 +99,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
            analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, evict_only_synced: bool,
            pre_s: float, post_s: float,
            trigger_hot: float | None, trigger_target_count: bool, control: bool, control_port: int,
-           control_token: str | None, live: bool, live_host: str, live_port: int, live_fps: float,
-           live_width: int, debug_writer_delay: float, as_json: bool) -> None:
+           control_token: str | None, control_insecure: bool, live: bool, live_host: str, live_port: int,
+           live_fps: float, live_width: int, debug_writer_delay: float, as_json: bool) -> None:
     """Record a session: frames + ICD sidecars into rotating, crash-safe MCAP segments.
 
     With --ring it records until stopped within a disk budget; triggers (--trigger-*, the contrast
@@ -100,12 +111,18 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
     from recorder.capture.sources import make_source
     from recorder.capture.sources.spec import parse_source_spec
     from recorder.capture.triggers import TriggerPolicy
+    from recorder.storage.layout import check_session_name
     from recorder.storage.ring import RingPolicy
     from recorder.storage.segments import SegmentPolicy, auto_compression
-    from recorder.storage.writer import Compression
+    from recorder.storage.writer import Compression, check_level
 
     live_branch = None
     try:
+        if session_id is not None:
+            check_session_name(session_id)
+        if width * height > MAX_FRAME_PIXELS:
+            raise click.BadParameter(f"--width {width} --height {height}: a frame of {width * height:,} pixels; "
+                                     f"at most {MAX_FRAME_PIXELS:,} (8192x8192)")
         specs = [parse_source_spec(s) for s in sources]
         if len(specs) > 1:
             specs = [sp if sp.name else dataclasses.replace(sp, name=f"cam{i}") for i, sp in enumerate(specs)]
@@ -134,6 +151,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             comp, default_level = auto_compression(int(pixel_rate), 1, 1.0)
         else:
             comp, default_level = Compression(compression), (1 if compression == "zstd" else 0)
+        if level is not None:
+            check_level(comp, level)
         policy = SegmentPolicy(max_duration_s=segment_duration or None,
                                max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
                                compression=comp, compression_level=default_level if level is None else level)
@@ -143,7 +162,17 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
         if ring and ring_policy is not None and ring_policy.max_disk is None and ring_policy.min_free is None \
                 and ring_policy.min_free_percent is None:
             raise click.BadParameter("--ring needs --max-disk and/or --min-free")
+        if control and not control_token and not control_insecure:
+            raise click.BadParameter("--control needs a token: set THERMCAP_CONTROL_TOKEN (or --control-token), "
+                                     "or pass --control-insecure to run it open to every local user")
         if live:
+            from recorder.capture.control import is_loopback
+
+            if not is_loopback(live_host):
+                raise click.BadParameter(
+                    f"--live-host {live_host}: the live view has no token of its own, so it is served on this "
+                    f"machine only (127.0.0.1); reach it from elsewhere through an SSH tunnel "
+                    f"(ssh -L {live_port}:127.0.0.1:{live_port} ...) or a proxy that checks a token")
             from recorder.live.branch import LiveBranch
             from recorder.live.publisher import LiveOptions
 
@@ -175,7 +204,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
     server = None
     if control:
         try:
-            server = ControlServer(rec, port=control_port, token=control_token)
+            server = ControlServer(rec, port=control_port, token=control_token, insecure=control_insecure)
         except OSError as exc:
             fail(f"control endpoint on 127.0.0.1:{control_port}: {exc.strerror or exc}")
     from recorder.cli.progress import verbosity
@@ -225,6 +254,10 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
                        f"{lv['dropped']} dropped by the view (never by the recording)")
     if result.error:
         fail(result.error)
+    if result.frames_dropped:  # exit 0 means nothing recorded was lost
+        fail(f"{result.frames_dropped} of {result.frames_captured} frames were dropped "
+             f"({'; '.join(result.problems[:2])}); the session keeps the {result.frames_written} written",
+             code=EXIT_DROPPED)
 
 
 # -- ctl ------------------------------------------------------------------------------------
@@ -243,14 +276,20 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
     """Control a running recorder: status, split (a new segment, no frame lost), pause/resume (a
     recorded gap), mark/snapshot (an event whose window is kept), metrics, health."""
     import urllib.error
+    import urllib.parse
     import urllib.request
 
-    from recorder.capture.control import find_control
+    from recorder.capture.control import find_control, is_loopback
 
     try:
         base = url or find_control(root, session_id)["url"]
     except ThermcapError as exc:
         fail(str(exc))
+    host = urllib.parse.urlsplit(base).hostname or ""
+    if token and url is None and not is_loopback(host):
+        # the address came from a file anyone who can write ROOT/run/ may have written
+        fail(f"{base}: the recorder's address file names a host off this machine; the token is sent only to "
+             f"127.0.0.1 (name the endpoint with --url to send it there)")
     route = {"health": "/healthz"}.get(action, f"/{action}")
     method = "POST" if action in ("split", "pause", "resume", "mark", "snapshot") else "GET"
     body = json.dumps({"note": note}).encode() if method == "POST" else None
@@ -264,6 +303,12 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
         code, text = exc.code, exc.read().decode()
     except OSError as exc:
         fail(f"{base}: {exc}")
+    if code >= 400 and action != "health":
+        try:
+            said = json.loads(text).get("error") or text
+        except (ValueError, AttributeError):
+            said = text
+        fail(f"{base}{route}: {code}: {said}")
     if action == "metrics":
         click.echo(text, nl=False)
     elif as_json or action != "status":
@@ -279,7 +324,8 @@ def status_text(st: dict[str, Any]) -> str:
     out = [f"{st['session_id']}: {'paused' if st['paused'] else 'recording'}, "
            f"{'healthy' if st['healthy'] else 'UNHEALTHY: ' + '; '.join(st['problems'])}"]
     out.append(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
-               f"{sum(st['dropped'].values()) if st['dropped'] else 0} dropped, {st['frames_paused']} paused; "
+               f"{sum(c['frames_dropped'] for c in st['cameras'].values())} frames dropped, "
+               f"{st['frames_paused']} paused; "
                f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
     if settling := st.get("segments_settling"):
         out.append(f"disk: {len(settling)} closed segments waiting for fsync, the oldest "

@@ -8,6 +8,7 @@ layout is changed (and documented, in docs/architecture.md) in one place.
 from __future__ import annotations
 
 import os
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,7 +24,9 @@ __all__ = [
     "PARTIAL_SUFFIX",
     "PROTECTED_JSON",
     "SESSION_JSON",
+    "SESSION_NAME_RE",
     "SessionLayout",
+    "check_session_name",
 ]
 
 ACTIVE_SUFFIX = ".active"  # a segment being written, or left by a crash for `recover`
@@ -37,6 +40,17 @@ EXTRAS_MCAP = "extras.mcap"
 LOCK_FILE = ".lock"
 PROTECTED_JSON = "protected.json"  # event windows eviction, gc and the archiver keep
 EVICTION_LOG = "eviction.log"  # ROOT/eviction.log: one JSON line per deleted segment, with why
+
+#: A session id is one folder name under ROOT/sessions: no separator, no "..", nothing hidden.
+SESSION_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
+
+
+def check_session_name(name: str) -> str:
+    """A session id from a flag or a request, refused unless it names one folder inside the root."""
+    if not SESSION_NAME_RE.match(name) or ".." in name:
+        raise ValueError(f"session id {name!r}: use 1-128 letters, digits, '_', '-' or '.', starting with a letter "
+                         f"or digit, without '..' (it names one folder under ROOT/sessions)")
+    return name
 
 
 @dataclass(frozen=True)

@@ -34,16 +34,21 @@ from recorder.storage.segments import fsync_dir, write_json_atomic
 __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
 
 
+#: The smallest --max-disk a ring takes.
+MIN_RING_BYTES = 16 << 20
+
+
 def parse_size(text: str) -> int:
     """``500M``, ``2G``, ``1.5T``, ``123456`` (bytes): the sizes a user types."""
     t = str(text).strip().upper().removesuffix("B").removesuffix("I")
     units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
     try:
-        if t and t[-1] in units:
-            return int(float(t[:-1]) * units[t[-1]])
-        return int(t)
-    except ValueError:
+        value = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(int(t))
+    except (ValueError, OverflowError):
         raise ValueError(f"{text!r} is not a size (for example 500M, 20G, 123456)") from None
+    if not 0 <= value < 1 << 62:  # nan fails this too
+        raise ValueError(f"{text!r} is not a size (for example 500M, 20G, 123456)")
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -63,11 +68,19 @@ class RingPolicy:
         free = None
         if min_free:
             if min_free.strip().endswith("%"):
-                pct = float(min_free.strip()[:-1])
+                try:
+                    pct = float(min_free.strip()[:-1])
+                except ValueError:
+                    raise ValueError(f"--min-free {min_free!r} is not a share like 10%") from None
+                if not 0 < pct < 100:
+                    raise ValueError(f"--min-free {min_free}: a share of the disk is between 0% and 100%")
             else:
                 free = parse_size(min_free)
-        return cls(parse_size(max_disk) if max_disk else None, free, pct, pre_s, post_s,
-                   require_receipt=require_receipt)
+        disk = parse_size(max_disk) if max_disk else None
+        if disk is not None and disk < MIN_RING_BYTES:
+            raise ValueError(f"--max-disk {max_disk}: a ring needs room for the segment being written and the ones "
+                             f"kept before it; at least {MIN_RING_BYTES >> 20}M")
+        return cls(disk, free, pct, pre_s, post_s, require_receipt=require_receipt)
 
 
 @dataclass(frozen=True)

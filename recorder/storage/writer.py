@@ -51,7 +51,7 @@ from mcap.records import (
 
 from recorder import __version__
 
-__all__ = ["LIBRARY", "MCAP_MAGIC", "ChunkedWriter", "Compression"]
+__all__ = ["LEVELS", "LIBRARY", "MCAP_MAGIC", "ChunkedWriter", "Compression", "check_level"]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 LIBRARY = f"thermcap/{__version__}"
@@ -67,6 +67,20 @@ class Compression(StrEnum):
     @property
     def mcap_name(self) -> str:
         return "" if self is Compression.NONE else self.value
+
+
+#: The levels each codec takes (zstd's negative "fast" levels are not offered).
+LEVELS = {Compression.ZSTD: range(1, 23), Compression.LZ4: range(0, 17)}
+
+
+def check_level(compression: Compression, level: int) -> int:
+    """A compression level refused before the first frame (it had failed after 7)."""
+    allowed = LEVELS.get(compression)
+    if allowed is None:
+        raise ValueError(f"--level {level}: no level applies to --compression {compression.value}")
+    if level not in allowed:
+        raise ValueError(f"--level {level}: {compression.value} takes levels {allowed.start}-{allowed.stop - 1}")
+    return level
 
 
 _tls = threading.local()

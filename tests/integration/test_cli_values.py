@@ -1,0 +1,64 @@
+"""Issue 36: every CLI value is validated at parse time, in the option's own terms. These were
+tracebacks (``--fps inf``, ``--width 100000``, ``--control-port 99999``), were taken without a
+word (``--duration -1``, ``--min-free 150%``, ``--ring --max-disk 1K``, ``serve --port 99999``),
+failed after seven frames (``--level 99``), or wrote outside the data root (``--session ../../x``)."""
+
+from __future__ import annotations
+
+import pytest
+
+from tests.conftest import run_cli
+
+BAD_RECORD = [
+    (["--fps", "inf"], "--fps"),
+    (["--fps", "nan"], "--fps"),
+    (["--fps", "0"], "--fps"),
+    (["--width", "100000", "--height", "100000"], "--width"),
+    (["--width", "8193", "--height", "8193"], "--width"),
+    (["--duration", "-1"], "--duration"),
+    (["--segment-duration", "-1"], "--segment-duration"),
+    (["--pre", "-5"], "--pre"),
+    (["--queue", "-1"], "--queue"),
+    (["--queue", "0"], "--queue"),
+    (["--ring", "--min-free", "150%"], "--min-free"),
+    (["--ring", "--max-disk", "1K"], "--max-disk"),
+    (["--ring", "--max-disk", "nanG"], "nanG"),
+    (["--level", "99"], "--level"),
+    (["--compression", "lz4", "--level", "20"], "--level"),
+    (["--session", "../../x"], "session id"),
+    (["--session", ".hidden"], "session id"),
+    (["--control-port", "99999"], "--control-port"),
+    (["--live", "--live-host", "0.0.0.0"], "--live-host"),
+    (["--control"], "token"),
+]
+
+
+@pytest.mark.parametrize(("args", "named"), BAD_RECORD, ids=[" ".join(a) for a, _ in BAD_RECORD])
+def test_record_refuses_an_absurd_value_before_recording(tmp_path, args, named):
+    r = run_cli("record", "--root", str(tmp_path), "--duration", "0.2", *args,
+                env={"THERMCAP_CONTROL_TOKEN": ""})
+    assert r.returncode != 0, r.stdout
+    assert named in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
+    assert not (tmp_path / "sessions").exists() or not any((tmp_path / "sessions").iterdir())
+    assert not (tmp_path.parent / "x").exists()
+
+
+@pytest.mark.parametrize("port", ["99999", "-1", "http"])
+def test_serve_refuses_a_port_that_cannot_be(tmp_path, port):
+    r = run_cli("serve", "--root", str(tmp_path), "--port", port)
+    assert r.returncode == 2 and "--port" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_record_exits_nonzero_when_frames_were_dropped(tmp_path):
+    """A writer slower than the paced source: frames are dropped, and the exit says so."""
+    r = run_cli("record", "--root", str(tmp_path), "--duration", "1", "--width", "64", "--height", "48",
+                "--queue", "1", "--no-analysis", "--debug-writer-delay", "0.05", "--json")
+    assert r.returncode == 3, (r.returncode, r.stderr)
+    assert "frames were dropped" in r.stderr
+
+
+def test_control_insecure_is_an_explicit_choice(tmp_path):
+    r = run_cli("record", "--root", str(tmp_path), "--duration", "0.3", "--width", "64", "--height", "48",
+                "--control", "--control-insecure", "--no-analysis", env={"THERMCAP_CONTROL_TOKEN": ""})
+    assert r.returncode == 0, r.stderr
