@@ -77,6 +77,8 @@ def metrics_text(rec: Recorder) -> str:
     metric("thermcap_recorder_evicted_segments_total", "counter", "Segments deleted by the ring",
            ring.get("evicted_segments", 0))
     metric("thermcap_recorder_ring_blocked", "gauge", "1 when the ring cannot free space", int(ring.get("blocked", 0)))
+    metric("thermcap_recorder_windows_expired_total", "counter", "Event windows the ring let go to keep recording",
+           ring.get("windows_expired", 0))
     metric("thermcap_recorder_events_total", "counter", "Marks, triggers, pauses and splits", st["events"])
     last = st.get("last_event") or {}
     metric("thermcap_recorder_last_event_timestamp_seconds", "gauge", "Time of the last event",

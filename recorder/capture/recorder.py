@@ -63,6 +63,8 @@ _STOP = object()
 #: A closed segment waiting longer than this for fsync makes the recorder unhealthy: frames still
 #: go on into the next segments, but the disk is not keeping its promises.
 SETTLE_STALL_S = 30.0
+#: After an event window expires (the ring needed its share), health says so for this long.
+EXPIRY_ALERT_S = 60.0
 
 
 def sessions_dir(root: str | os.PathLike) -> Path:
@@ -334,6 +336,7 @@ class Recorder:
             st = self._evictor.state
             out["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
                            "blocked": st.blocked, "blocked_reason": st.blocked_reason,
+                           "windows_expired": st.windows_expired, "last_expired": st.last_expired,
                            "protected_windows": len(self._book.windows) if self._book else 0}
         if self.live is not None:
             out["live"] = {"url": self.live.url, **self.live.snapshot()}
@@ -362,6 +365,10 @@ class Recorder:
         if settling and settling[0]["waiting_s"] > SETTLE_STALL_S:
             reasons.append(f"disk: segment {settling[0]['name']} has waited {settling[0]['waiting_s']:.0f} s for "
                            f"fsync ({len(settling)} closed segments waiting; frames are still written)")
+        expired_at = self._evictor.state.last_expired_mono if self._evictor is not None else None
+        if expired_at is not None and time.monotonic() - expired_at < EXPIRY_ALERT_S:
+            assert self._evictor is not None
+            reasons.append(f"ring: an event window expired to keep recording ({self._evictor.state.last_expired})")
         if self._evictor is not None and self._evictor.state.blocked:
             reasons.append(f"ring cannot free space: {self._evictor.state.blocked_reason}"
                            + ("; waiting for disk (the source is not read meanwhile, nothing is lost)"
@@ -791,7 +798,7 @@ class Recorder:
             st = self._evictor.state
             stats["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
                              "blocked": st.blocked, "blocked_reason": st.blocked_reason,
-                             "frames_dropped_for_disk": c.disk_dropped}
+                             "windows_expired": st.windows_expired, "frames_dropped_for_disk": c.disk_dropped}
         if self.live is not None:
             stats["live"] = self.live.snapshot()
         self._interval_latency = LatencyHistogram()
@@ -842,7 +849,8 @@ class Recorder:
         if self.ring is not None:
             meta["ring"] = {"max_disk": self.ring.max_disk, "min_free": self.ring.min_free,
                             "min_free_percent": self.ring.min_free_percent, "pre_s": self.ring.pre_s,
-                            "post_s": self.ring.post_s}
+                            "post_s": self.ring.post_s, "max_protected": self.ring.protected_budget,
+                            "keep_events": self.ring.keep_events}
         return meta
 
 

@@ -20,6 +20,7 @@ if TYPE_CHECKING:
 
 # -- record ---------------------------------------------------------------------------------
 MAX_FRAME_PIXELS = 8192 * 8192
+RING_FRAMES_AT_LEAST = 16  # the smallest --max-disk, in raw frames
 EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the same as a failure (1)
 
 @cli.command()
@@ -67,6 +68,12 @@ EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the sam
 @click.option("--evict-only-synced", is_flag=True,
               help="With --ring: delete only segments the cloud confirmed (thermcap sync receipts), whatever the "
                    "pressure.")
+@click.option("--max-protected", default=None, metavar="SIZE",
+              help="With --ring: the most event windows may hold (default: half of --max-disk); past it the oldest "
+                   "window goes first, logged and shown on health.")
+@click.option("--keep-events", is_flag=True,
+              help="With --ring: never let an event window go; when only protected segments are left, new frames "
+                   "are dropped (or a file or pipe waits) instead.")
 @click.option("--pre", "pre_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
               help="Seconds kept before a trigger or mark.")
 @click.option("--post", "post_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
@@ -97,6 +104,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
            cue_period: float,
            segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, evict_only_synced: bool,
+           max_protected: str | None, keep_events: bool,
            pre_s: float, post_s: float,
            trigger_hot: float | None, trigger_target_count: bool, control: bool, control_port: int,
            control_token: str | None, control_insecure: bool, live: bool, live_host: str, live_port: int,
@@ -156,9 +164,14 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
         policy = SegmentPolicy(max_duration_s=segment_duration or None,
                                max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
                                compression=comp, compression_level=default_level if level is None else level)
-        if (max_disk or min_free) and not ring:
-            raise click.BadParameter("--max-disk and --min-free need --ring")
-        ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s, evict_only_synced) if ring else None
+        if (max_disk or min_free or max_protected or keep_events) and not ring:
+            raise click.BadParameter("--max-disk, --min-free, --max-protected and --keep-events need --ring")
+        ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s, evict_only_synced, max_protected,
+                                       keep_events) if ring else None
+        if ring_policy is not None and ring_policy.max_disk is not None \
+                and ring_policy.max_disk < RING_FRAMES_AT_LEAST * width * height * 2:
+            raise click.BadParameter(f"--max-disk {max_disk}: smaller than {RING_FRAMES_AT_LEAST} raw "
+                                     f"{width}x{height} frames; a ring must hold its segments")
         if ring and ring_policy is not None and ring_policy.max_disk is None and ring_policy.min_free is None \
                 and ring_policy.min_free_percent is None:
             raise click.BadParameter("--ring needs --max-disk and/or --min-free")

@@ -35,7 +35,7 @@ __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "dis
 
 
 #: The smallest --max-disk a ring takes.
-MIN_RING_BYTES = 16 << 20
+MIN_RING_BYTES = 1 << 20
 
 
 def parse_size(text: str) -> int:
@@ -60,10 +60,20 @@ class RingPolicy:
     post_s: float = 30.0  # kept after it
     interval_s: float = 1.0  # how often the evictor looks, besides after every segment
     require_receipt: bool = False  # evict only segments the cloud confirmed (``thermcap sync``'s receipts)
+    max_protected: int | None = None  # bytes event windows may hold (default: half of max_disk)
+    keep_events: bool = False  # the operator prefers old events to new frames: windows never expire
+
+    @property
+    def protected_budget(self) -> int | None:
+        """The share of the budget event windows may hold before the oldest one goes."""
+        if self.max_protected is not None:
+            return self.max_protected
+        return self.max_disk // 2 if self.max_disk is not None else None
 
     @classmethod
     def parse(cls, max_disk: str | None, min_free: str | None, pre_s: float, post_s: float,
-              require_receipt: bool = False) -> RingPolicy:
+              require_receipt: bool = False, max_protected: str | None = None,
+              keep_events: bool = False) -> RingPolicy:
         pct = None
         free = None
         if min_free:
@@ -80,7 +90,14 @@ class RingPolicy:
         if disk is not None and disk < MIN_RING_BYTES:
             raise ValueError(f"--max-disk {max_disk}: a ring needs room for the segment being written and the ones "
                              f"kept before it; at least {MIN_RING_BYTES >> 20}M")
-        return cls(disk, free, pct, pre_s, post_s, require_receipt=require_receipt)
+        protected = parse_size(max_protected) if max_protected else None
+        if protected is not None and disk is not None and protected > disk:
+            raise ValueError(f"--max-protected {max_protected} is more than --max-disk {max_disk}")
+        if protected is not None and keep_events:
+            raise ValueError("--max-protected and --keep-events contradict each other: the one caps event windows, "
+                             "the other keeps them all")
+        return cls(disk, free, pct, pre_s, post_s, require_receipt=require_receipt, max_protected=protected,
+                   keep_events=keep_events)
 
 
 @dataclass(frozen=True)
@@ -111,6 +128,18 @@ class ProtectionBook:
 
     def protects(self, start_ns: int, end_ns: int) -> bool:
         return any(w.overlaps(start_ns, end_ns) for w in self.windows)
+
+    def expire(self, window: Window, why: str) -> None:
+        """The window stops protecting its segments; protected.json keeps it under ``expired``
+        with why, so nobody reads its loss as silence."""
+        with self.lock:
+            self.windows.remove(window)
+            try:
+                expired = json.loads(self.path.read_text()).get("expired", [])
+            except (OSError, ValueError, AttributeError):
+                expired = []
+            expired.append({**asdict(window), "expired_at": iso_utc(time.time_ns()), "why": why})
+            write_json_atomic(self.path, {"windows": [asdict(w) for w in self.windows], "expired": expired})
 
 
 def load_windows(session_dir: Path) -> list[Window]:
@@ -162,6 +191,9 @@ class EvictorState:
     blocked: bool = False
     blocked_reason: str | None = None
     last: list[Eviction] = field(default_factory=list)
+    windows_expired: int = 0  # event windows that went because the ring needed their share
+    last_expired: str | None = None  # what the last expiry said
+    last_expired_mono: float | None = None  # when (time.monotonic), for health's alert window
 
 
 class Evictor(threading.Thread):
@@ -260,38 +292,91 @@ class Evictor(threading.Thread):
                     write_bag_metadata(d)
 
     def _evict_pass(self, touched: set[Path]) -> list[Eviction]:
+        """Under pressure: event windows over their share (``protected_budget``) lose the oldest
+        first; then the oldest unprotected segments go; when nothing unprotected is left, the
+        oldest window goes too, unless ``keep_events`` (then the ring blocks, as the operator
+        chose). Every expiry is logged, counted and shown on health."""
         done: list[Eviction] = []
         used = disk_usage(self.root) if self.policy.max_disk is not None else None
         if (reason := self.pressure(used)) is None:
             self.state.blocked, self.state.blocked_reason = False, None
             return done
         confirmed = self._confirmed() if self.policy.require_receipt else None
-        for c in self._candidates():
-            key = c.path.relative_to(self.root).as_posix()
-            if confirmed is not None and confirmed.get(key) != c.path.stat().st_size:
-                continue  # not yet safe in the cloud: kept, whatever the pressure
-            book = self._book(c.session_dir)
-            with book.lock:  # a window added now is seen before the file goes
-                if book.protects(c.start_ns, c.end_ns):
-                    continue
-                st = c.path.stat()
-                c.path.unlink()
-            self._record_eviction(c, st.st_size, reason)
-            touched.add(c.session_dir)
-            done.append(self.state.last[-1])
-            if used is not None:
-                used -= st.st_blocks * 512  # as disk_usage counts it
-            if (reason := self.pressure(used)) is None:
-                self.state.blocked, self.state.blocked_reason = False, None
-                return done
+        while True:
+            candidates = self._candidates()
+            if not self.policy.keep_events:
+                self._expire_over_share(candidates)
+            for c in candidates:
+                key = c.path.relative_to(self.root).as_posix()
+                if confirmed is not None and confirmed.get(key) != c.path.stat().st_size:
+                    continue  # not yet safe in the cloud: kept, whatever the pressure
+                book = self._book(c.session_dir)
+                with book.lock:  # a window added now is seen before the file goes
+                    if book.protects(c.start_ns, c.end_ns):
+                        continue
+                    st = c.path.stat()
+                    c.path.unlink()
+                self._record_eviction(c, st.st_size, reason)
+                touched.add(c.session_dir)
+                done.append(self.state.last[-1])
+                if used is not None:
+                    used -= st.st_blocks * 512  # as disk_usage counts it
+                if (reason := self.pressure(used)) is None:
+                    self.state.blocked, self.state.blocked_reason = False, None
+                    return done
+            if self.policy.keep_events or not self._expire_oldest(
+                    candidates, f"nothing else can go ({reason}); new frames come before old events"):
+                break
         if self.policy.require_receipt:
             reason += "; the rest is protected or not yet confirmed by the cloud (thermcap sync)"
+        if self.policy.keep_events:
+            reason += "; --keep-events keeps every event window"
         if settling := self._settling():
             reason += f"; {settling} closed segments still wait for fsync and cannot go until they settle"
         if not self.state.blocked:
             self.log(f"ring: cannot free space, no finished segment can go ({reason})")
         self.state.blocked, self.state.blocked_reason = True, reason
         return done
+
+    def _protected_bytes(self, candidates: list[_Candidate]) -> int:
+        total = 0
+        for c in candidates:
+            if self._book(c.session_dir).protects(c.start_ns, c.end_ns):
+                with contextlib.suppress(OSError):
+                    total += c.path.stat().st_blocks * 512
+        return total
+
+    def _expire_over_share(self, candidates: list[_Candidate]) -> None:
+        budget = self.policy.protected_budget
+        if budget is None:
+            return
+        while (held := self._protected_bytes(candidates)) > budget:
+            if not self._expire_oldest(candidates, f"event windows hold {held:,} bytes, over --max-protected "
+                                                   f"{budget:,}"):
+                return
+
+    def _expire_oldest(self, candidates: list[_Candidate], why: str) -> bool:
+        """The oldest window that protects a finished segment stops protecting; False if none does."""
+        found: list[tuple[Window, Path]] = []
+        for d in {c.session_dir for c in candidates}:
+            book = self._book(d)
+            for w in book.windows:
+                if any(c.session_dir == d and w.overlaps(c.start_ns, c.end_ns) for c in candidates):
+                    found.append((w, d))
+        if not found:
+            return False
+        window, d = min(found, key=lambda f: (f[0].start_ns, str(f[1])))
+        self._book(d).expire(window, why)
+        entry = {"at": iso_utc(time.time_ns()), "session": d.name, "expired_window": asdict(window),
+                 "reason": why}
+        with open(self.root / EVICTION_LOG, "a") as f:
+            f.write(json.dumps(entry) + "\n")
+        self.state.windows_expired += 1
+        self.state.last_expired_mono = time.monotonic()
+        self.state.last_expired = (f"{d.name}: the {window.reason} window {iso_utc(window.start_ns)}.."
+                                   f"{iso_utc(window.end_ns)} ({window.note or 'no note'}) expired: {why}")
+        self.log(f"ring: WARNING: {self.state.last_expired}")
+        return True
 
     def _settling(self) -> int:
         """Closed segments of ring sessions being recorded, not yet renamed (a stalled fsync):

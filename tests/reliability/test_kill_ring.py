@@ -43,12 +43,14 @@ def test_kill_9_during_eviction_loses_nothing_protected(tmp_path):
         root = tmp_path / f"k{k}"
         seg_bytes = int(W * H * 2 * FPS * SEG_S)
         # two windows of 1 s hold 8-10 segments; the rest of the budget keeps more than --pre of
-        # rolling history (a budget smaller than the windows plus --pre cannot keep a new pre-window)
+        # rolling history (a budget smaller than the windows plus --pre cannot keep a new pre-window);
+        # their share is raised from half the budget so that neither window expires
         budget = 16 * seg_bytes
         proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "60", "--width", str(W),
                                  "--height", str(H), "--segment-duration", str(SEG_S), "--seed", str(k),
                                  "--root", str(root), "--session", "s", "--no-analysis", "--ring",
-                                 "--max-disk", str(budget), "--pre", str(PRE), "--post", str(POST),
+                                 "--max-disk", str(budget), "--max-protected", str(12 * seg_bytes),
+                                 "--pre", str(PRE), "--post", str(POST),
                                  "--compression", "none", "--cue-period", "0"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         session = root / "sessions" / "s"

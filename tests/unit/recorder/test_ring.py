@@ -55,7 +55,8 @@ def test_triggers_fire_on_edges_only():
 
 
 def test_everything_protected_blocks_and_counts_the_drops(tmp_path):
-    ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02)  # one mark protects all time
+    # one mark protects all time, and the operator keeps events over new frames
+    ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02, keep_events=True)
     live = SimSource(width=W, height=H, fps=600.0, frames=600, paced=True, seed=11, start_time_ns=T0,
                      cue_period_s=0)  # a live camera, which cannot wait: its frames are dropped and counted
     rec = Recorder(live, tmp_path, session_id="full", policy=SegmentPolicy(max_duration_s=0.1), analysis=False,
@@ -84,7 +85,7 @@ def test_a_source_that_can_wait_waits_for_disk_instead_of_dropping(tmp_path):
 
     px = np.random.default_rng(2).integers(0, 1 << 14, size=(300, 48, 64), dtype=np.uint16)
     src = RawSource("pipe", width=64, height=48, fps=60, stream=io.BytesIO(px.astype("<u2").tobytes()))
-    ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02)
+    ring = RingPolicy(max_disk=1, pre_s=1e6, post_s=1e6, interval_s=0.02, keep_events=True)
     rec = Recorder(src, tmp_path, session_id="w", policy=SegmentPolicy(max_duration_s=0.1), analysis=False,
                    ring=ring)
     rec.mark("keep everything")
@@ -143,3 +144,74 @@ def test_segments_waiting_for_fsync_are_named_when_the_ring_cannot_free_space(tm
         assert "fsync" not in (evictor.state.blocked_reason or "")
     finally:
         lock.release()
+
+
+def _run_bounded(rec: Recorder, timeout: float = 120):
+    """Run a recording on a thread; a ring that stops recording for good shows as a hang here."""
+    out = {}
+    t = threading.Thread(target=lambda: out.setdefault("res", rec.run()), daemon=True)
+    t.start()
+    t.join(timeout)
+    if t.is_alive():
+        rec.stop()
+        t.join(30)
+        pytest.fail(f"the recording never finished: {rec.status().get('ring')}")
+    return out["res"]
+
+
+def test_the_ring_keeps_recording_when_a_window_outgrows_its_share(tmp_path):
+    """Issue 36: a budget near one protected window's size (one mark, a long pre/post) left every
+    segment protected and the recorder dropped (or, from a file, waited) for the rest of the run.
+    Windows now hold at most --max-protected (default half of --max-disk); past it the oldest goes,
+    logged, in protected.json's "expired", and on health."""
+    import json
+
+    from recorder.storage.ring import read_eviction_log
+
+    ring = RingPolicy(max_disk=300_000, pre_s=1e8, post_s=1e8, interval_s=0.02)  # the mark covers the run
+    rec = Recorder(_sim(1200), tmp_path, session_id="r", policy=SegmentPolicy(max_duration_s=0.5),
+                   analysis=False, ring=ring)
+    rec.mark("one long event")
+    res = _run_bounded(rec)
+    assert res.frames_written == res.frames_captured == 1200 and res.frames_dropped == 0
+    assert res.evicted_segments > 0
+    log = read_eviction_log(tmp_path)
+    expired = [e for e in log if "expired_window" in e]
+    assert expired and ("over --max-protected" in expired[0]["reason"] or "nothing else can go" in expired[0]["reason"])
+    doc = json.loads((tmp_path / "sessions" / "r" / "protected.json").read_text())
+    assert doc["windows"] == [] and doc["expired"][0]["note"] == "one long event"
+    kept = [f.index for f in iter_session_frames(tmp_path / "sessions" / "r")]
+    assert kept == sorted(kept) and len(kept) > 0
+
+
+def test_the_oldest_window_goes_first_and_health_says_so(tmp_path):
+    """Two events: when their share is exceeded the older one expires, the newer one is kept."""
+    from recorder.storage.ring import Evictor, ProtectionBook, Window
+
+    rec = Recorder(_sim(600), tmp_path, session_id="e", policy=SegmentPolicy(max_duration_s=0.5), analysis=False)
+    rec.run()
+    session = tmp_path / "sessions" / "e"
+    (session / "session.json").write_text(
+        (session / "session.json").read_text().replace('"status"', '"ring": {"max_disk": 1}, "status"', 1))
+    book = ProtectionBook(session)
+    book.add(Window(T0, T0 + 2_000_000_000, "manual", "old"))
+    book.add(Window(T0 + 8_000_000_000, T0 + 10_000_000_000, "manual", "new"))
+    seg_bytes = sum(p.stat().st_blocks * 512 for p in session.glob("*.mcap"))
+    ev = Evictor(tmp_path, RingPolicy(max_disk=seg_bytes // 2, max_protected=seg_bytes // 3), {session: book})
+    ev.evict_once()
+    assert [w.note for w in book.windows] == ["new"]
+    assert ev.state.windows_expired == 1 and "old" in (ev.state.last_expired or "")
+
+
+def test_keep_events_keeps_every_window(tmp_path):
+    from recorder.storage.ring import Evictor, ProtectionBook, Window
+
+    rec = Recorder(_sim(300), tmp_path, session_id="k", policy=SegmentPolicy(max_duration_s=0.5), analysis=False)
+    rec.run()
+    session = tmp_path / "sessions" / "k"
+    book = ProtectionBook(session)
+    book.add(Window(0, 2**62, "manual", "all"))
+    ev = Evictor(tmp_path, RingPolicy(max_disk=1, keep_events=True), {session: book})
+    ev.evict_once()
+    assert [w.note for w in book.windows] == ["all"] and ev.state.blocked
+    assert "--keep-events" in (ev.state.blocked_reason or "")
