@@ -51,13 +51,32 @@ def check_segment(path: Path) -> dict[str, Any]:
     return {**out, "ok": True, "frames": n, "frames_sha256": frames.hexdigest()}
 
 
+def _still_holds(store: BlobStore, rkey: str, head: dict[str, Any]) -> bool:
+    """Whether an existing receipt still speaks for the object as it is now: it said the bytes
+    were good, and the object has the size and ETag it had then. A receipt for damaged bytes is
+    never final: the vehicle sends the segment again, and the new bytes are checked anew."""
+    try:
+        receipt = json.loads(b"".join(store.iter_bytes(rkey)))
+    except FileNotFoundError:
+        return False
+    except ValueError:
+        return False  # an unreadable receipt is written again
+    if not receipt.get("ok") or receipt.get("bytes") != head.get("size"):
+        return False
+    etag = receipt.get("etag")
+    return not etag or etag == str(head.get("e_tag") or "")
+
+
 def confirm_synced(store: BlobStore, prefix: str = "sessions/") -> ConfirmReport:
     report = ConfirmReport()
     for key in sorted(k for k, _ in store.list(prefix)):
         if not key.endswith(".mcap") or "/archive/" in key or key.startswith(RECEIPTS_PREFIX + "/"):
             continue
         rkey = receipt_key(key)
-        if store.head(rkey) is not None:
+        head = store.head(key)
+        if head is None:
+            continue  # removed while we listed
+        if _still_holds(store, rkey, head):
             report.already += 1
             continue
         with tempfile.TemporaryDirectory() as tmp:
@@ -65,7 +84,8 @@ def confirm_synced(store: BlobStore, prefix: str = "sessions/") -> ConfirmReport
             with open(local, "wb") as f:
                 for block in store.iter_bytes(key):
                     f.write(block)
-            receipt = {"key": key, **check_segment(local), "checked_at": iso_now(), "by": "thermcap sync-confirm"}
+            receipt = {"key": key, **check_segment(local), "etag": str(head.get("e_tag") or ""),
+                       "checked_at": iso_now(), "by": "thermcap sync-confirm"}
         store.put_bytes(rkey, json.dumps(receipt, indent=1).encode())
         if receipt["ok"]:
             report.receipted.append(key)

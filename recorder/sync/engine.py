@@ -152,7 +152,7 @@ class Syncer:
             return True
         if st is None or (st.size, st.mtime_ns) != (item.size, item.mtime_ns):
             sha = file_sha256(item.path)
-            st = ObjectState(item.key, item.size, sha, item.mtime_ns)
+            st = ObjectState(item.key, item.size, sha, item.mtime_ns, stale_receipt=st.stale_receipt if st else None)
             if self.target.complete_copy(item.key, item.size, sha):  # sent before the journal knew (a lost journal)
                 st.state = "uploaded"
                 self.journal.put(st)
@@ -247,7 +247,10 @@ class Syncer:
                 st.state = "confirmed"
                 n += 1
             elif r.get("sha256") and r.get("sha256") != st.sha256:
+                if r["sha256"] == st.stale_receipt:
+                    continue  # about the bytes this copy replaced: wait for the cloud to check the new ones
                 st.state, st.error = "pending", f"the cloud's copy differs (receipt: {r.get('problem') or r['sha256']})"
+                st.stale_receipt = r["sha256"]
                 st.mtime_ns = -1  # sent again on the next pass
         self.journal.save()
         return n
@@ -286,6 +289,10 @@ class Syncer:
                 continue
             if path.stat().st_size != st.size or file_sha256(path) != st.sha256:
                 continue
+            if not self._receipt_still_good(st.key, st.sha256, st.size):
+                st.state, st.error = "pending", "the cloud's receipt no longer names these bytes; sent again"
+                st.mtime_ns = -1
+                continue
             windows = load_windows(path.parent)
             if windows:
                 start, end, _ = segment_span(path)
@@ -293,7 +300,18 @@ class Syncer:
                     continue
             path.unlink()
             freed.append(st.key)
+        self.journal.save()
         return freed
+
+    def _receipt_still_good(self, key: str, sha256: str, size: int) -> bool:
+        """The receipt read again at the moment of deleting: the last local copy goes only on
+        what the cloud says now (a scrub there may have found the copy damaged since)."""
+        try:
+            r = self.target.get_json(receipt_key(key))
+        except Exception as exc:  # the link is down: nothing is freed on old evidence
+            log.warning("sync: %s kept, its receipt cannot be read now (%s)", key, exc)
+            return False
+        return bool(r and r.get("ok") and r.get("sha256") == sha256 and r.get("bytes") == size)
 
 
 class _LinkDown(Exception):

@@ -44,6 +44,9 @@ class ObjectState:
     parts: list[PartState] = field(default_factory=list)
     attempts: int = 0  # parts sent, counting the ones that had to be sent again
     error: str | None = None
+    # the sha256 a receipt named for bytes the cloud held before this copy was sent again: that
+    # receipt is about the replaced bytes, so it neither confirms nor re-sends this copy
+    stale_receipt: str | None = None
 
     @property
     def bytes_done(self) -> int:

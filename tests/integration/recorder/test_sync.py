@@ -122,6 +122,29 @@ def test_only_a_receipt_for_the_same_bytes_confirms_and_frees(vehicle, tmp_path)
     st = syncer.status()
     assert key in st.pending  # sent again on the next pass
     assert not syncer.run_once().failed and copy.read_bytes() == segs[0].read_bytes()
+    # issue 36: the receipt for the damaged copy is not final; the good bytes are checked anew,
+    # confirmed, and only then freed
+    again = confirm_synced(open_store(dest))
+    assert key in again.receipted
+    assert syncer.check_receipts() == 1
+    assert syncer.delete_confirmed() == [key] and not segs[0].exists()
+
+
+def test_a_receipt_withdrawn_since_confirmation_frees_nothing(vehicle, tmp_path):
+    """delete_confirmed reads each receipt again at the moment it deletes."""
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    syncer = Syncer(root, DirTarget(dest), part_size=5 * MiB)
+    assert not syncer.run_once().failed
+    confirm_synced(open_store(dest))
+    segs = sorted((root / "sessions" / "drive").glob("*.mcap"))
+    assert syncer.check_receipts() == len(segs)
+    key = segs[0].relative_to(root).as_posix()
+    rpath = dest / receipt_key(key)
+    receipt = json.loads(rpath.read_text())
+    rpath.write_text(json.dumps({**receipt, "ok": False, "problem": "scrub: sha256 differs"}))
+    freed = syncer.delete_confirmed()
+    assert key not in freed and segs[0].exists()
+    assert key in syncer.status().pending
 
 
 def test_protected_windows_are_never_freed(vehicle, tmp_path):
