@@ -46,7 +46,8 @@ class _Rescanner(threading.Thread):
     def run(self) -> None:
         while not self.halt.wait(self.interval_s):
             try:
-                index_root(self.app.state.engine, self.app.state.settings.root, store=self.app.state.store)
+                self.app.state.index_damage = index_root(self.app.state.engine, self.app.state.settings.root,
+                                                         store=self.app.state.store).damaged
             except Exception as exc:  # never take the service down over a scan
                 log.warning("background index failed: %s", exc)
 
@@ -85,7 +86,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     async def lifespan(app: FastAPI):
         rescan = None
         if index_on_start:
-            index_root(app.state.engine, settings.root, store=app.state.store)
+            app.state.index_damage = index_root(app.state.engine, settings.root, store=app.state.store).damaged
         if settings.rescan_interval_s > 0:
             rescan = _Rescanner(app, settings.rescan_interval_s)
             rescan.start()
@@ -98,6 +99,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                   description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.")
     app.state.settings = settings
     app.state.engine = make_engine(settings.db_url)
+    app.state.index_damage = {}  # session folder -> the parts the last scan could not serve, and why
     migrate(app.state.engine)
     app.state.store = make_store(settings)
     app.state.frames = FrameReader(app.state.engine, app.state.store, settings.root)

@@ -24,10 +24,12 @@ from sqlalchemy import delete, insert, select
 from sqlalchemy.engine import Engine
 
 from api import db
+from recorder.exceptions import McapFileError
 from recorder.icd.quality import graded_contrast
 from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_METADATA
 from recorder.storage.layout import SessionLayout
+from recorder.storage.lock import holder
 from recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
 __all__ = ["ZIPPED_FORMATS", "IndexReport", "fingerprint", "index_root", "index_session"]
@@ -42,6 +44,7 @@ class IndexReport:
     removed: list[str] = field(default_factory=list)
     failed: dict[str, str] = field(default_factory=dict)  # folder -> the error, so one bad session is visible
     skipped: dict[str, str] = field(default_factory=dict)  # folder -> why it is not served as it is
+    damaged: dict[str, list[str]] = field(default_factory=dict)  # folder -> the parts not served, and why
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -91,14 +94,42 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]])
     return sidecars
 
 
-def _sidecars_from_mcap(files: list[Path]) -> tuple[list[dict], list[str]]:
+def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None) -> tuple[list[dict], list[str]]:
+    """Every readable sidecar of ``files``, chunk by chunk: a damaged chunk or a segment with no
+    readable summary hides only itself (named in ``problems``), never the rest of the session."""
     from mcap.reader import make_reader
+
+    from recorder.storage.chunks import SegmentIndex, message_records, read_chunk
 
     out, segs = [], []
     for seg in files:
-        with open(seg, "rb") as f:
-            for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA]):
-                out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
+        try:
+            index = SegmentIndex.load(seg)
+        except McapFileError as exc:
+            if problems is None:
+                raise
+            problems.append(f"{seg.name}: {exc} (`thermcap recover {seg}` keeps every intact chunk)")
+            continue
+        if index is None or not index.chunks_in_time_order or TOPIC_METADATA not in index.topics:
+            with open(seg, "rb") as f:  # written without a chunk index: read through
+                for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA]):
+                    out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
+                    segs.append(seg.name)
+            continue
+        cid = index.topics[TOPIC_METADATA]
+        channel = index.channels[cid]
+        for chunk in range(len(index.offsets)):
+            try:
+                records = read_chunk(index, chunk)
+            except McapFileError as exc:
+                if problems is None:
+                    raise
+                problems.append(f"{seg.name}: {exc}; its frames are not served until `thermcap recover {seg}`")
+                continue
+            view = memoryview(records.data)
+            for _t, _channel, _seq, _pub, start, stop in sorted(
+                    (m for m in message_records(records) if m[1] == cid), key=lambda m: m[0]):
+                out.append(json.loads(json_payload(channel.message_encoding, bytes(view[start:stop]))))
                 segs.append(seg.name)
     return out, segs
 
@@ -131,8 +162,11 @@ def _ts(sidecar: dict[str, Any]) -> int | None:
     return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
 
 
-def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> bool:
-    """Index one session; returns False when it was already indexed as it is."""
+def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
+                  problems: list[str] | None = None) -> bool:
+    """Index one session; returns False when it was already indexed as it is. What could not be
+    read (a damaged chunk, a segment cut short) is added to ``problems``: the rest is indexed."""
+    problems = [] if problems is None else problems
     session_dir = Path(session_dir)
     meta = read_session_meta(session_dir)
     sid = meta.get("session_id") or session_dir.name
@@ -152,7 +186,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
         times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
     elif session_segments(session_dir):
-        sidecars, segs = _sidecars_from_mcap(session_segments(session_dir))
+        sidecars, segs = _sidecars_from_mcap(session_segments(session_dir), problems)
         times = [_ts(s) for s in sidecars]
     else:
         # Source deleted and no zipped archive (hdf5, tiff-lzw ...): the sidecars live in extras.mcap
@@ -206,7 +240,8 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False) -> 
         "has_targets": any(r["target_count"] for r in frame_rows),
         "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),
         "coverage": json.dumps(_coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
-        "fingerprint": fp, "indexed_at": time.time_ns(),
+        # a session read with problems is read again at every scan, so they are reported every time
+        "fingerprint": f"damaged:{fp}" if problems else fp, "indexed_at": time.time_ns(),
         "summary": json.dumps((manifest or {})["summary"]) if (manifest or {}).get("summary") else None,
     }
     seg_rows = [{"session_id": sid, "name": s.name, "frames": sum(1 for x in segs if x == s.name),
@@ -244,18 +279,28 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     present = set()
     for d in list_sessions(root):
         layout = SessionLayout.of(d)
-        if layout.active_segments() or (not layout.session_json.exists() and not layout.archive.exists()):
+        if not layout.session_json.exists() and not layout.archive.exists():
             continue
+        if layout.active_segments():
+            if holder(d) is not None:
+                continue  # being recorded: served once its recorder has finished it
+            # a recorder died: its closed segments are served, the unfinished one waits for recover
+            report.damaged[d.name] = [f"{len(layout.active_segments())} unfinished segments (*.active) are not "
+                                      f"served until `thermcap recover {d}`"]
         meta = read_session_meta(d)
         if isinstance(meta.get("cameras"), dict):  # read as one camera it would show no frame at all
             report.skipped[d.name] = (f"a session of several cameras ({', '.join(sorted(meta['cameras']))}): "
                                       f"served through its per-camera sessions (thermcap split-cameras)")
             continue
         present.add(meta.get("session_id") or d.name)
+        problems: list[str] = []
         try:
-            (report.indexed if index_session(engine, d, force=force) else report.unchanged).append(d.name)
+            (report.indexed if index_session(engine, d, force=force, problems=problems) else report.unchanged
+             ).append(d.name)
         except Exception as exc:  # one broken session must not stop the others
             report.failed[d.name] = f"{type(exc).__name__}: {exc}"
+        if problems:
+            report.damaged.setdefault(d.name, []).extend(problems)
     with engine.begin() as conn:
         known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
         gone = sorted(known - present)

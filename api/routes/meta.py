@@ -21,8 +21,9 @@ def healthz(request: Request) -> dict:
     What and where (session and file names) only with a token: a probe needs the state, not the
     data root's names."""
     damage = request.app.state.frames.damage.summary()
-    status = "degraded" if damage["damaged_copies_seen"] else "ok"
-    return {"status": status, **damage} if has_token(request) else {"status": status}
+    unserved = request.app.state.index_damage
+    status = "degraded" if damage["damaged_copies_seen"] or unserved else "ok"
+    return {"status": status, **damage, "not_served": unserved} if has_token(request) else {"status": status}
 
 
 @router.get("/readyz", tags=["meta"])
@@ -56,5 +57,7 @@ def audit(request: Request, prices: str | None = None) -> dict:
 
 @router.post("/api/v1/index", tags=["meta"], dependencies=[Depends(require("write"))])
 def reindex(request: Request, force: bool = False) -> IndexReport:
-    return index_root(request.app.state.engine, request.app.state.settings.root, force=force,
-                      store=request.app.state.store)
+    report = index_root(request.app.state.engine, request.app.state.settings.root, force=force,
+                        store=request.app.state.store)
+    request.app.state.index_damage = report.damaged
+    return report

@@ -86,7 +86,9 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
                        f"sent {report.sent_bytes:,} B in {report.parts_sent} parts ({report.parts_resent} sent again), "
                        f"{report.objects_done} objects done, {report.confirmed} newly confirmed"
                        + (f", {len(freed)} segments freed" if freed else "")
-                       + (f"; stopped early: {report.failed[-1]}" if report.stopped_early else ""))
+                       + (f"; stopped early: {report.failed[-1]}" if report.stopped_early else "")
+                       + (f"; {len(report.diverged)} confirmed segments changed here since and were not sent "
+                          f"again: {', '.join(report.diverged[:3])}" if report.diverged else ""))
             if not watch or stop.wait(interval):
                 break
     except ThermcapError as exc:

@@ -38,6 +38,7 @@ __all__ = [
     "SegmentIndex",
     "StaleIndexError",
     "iter_messages",
+    "message_records",
     "messages_at",
     "read_chunk",
 ]
@@ -196,6 +197,12 @@ def _message_records(records: ChunkRecords) -> Iterator[tuple[int, int, int, int
         pos = body + length
     if pos != end:
         raise McapFileError(f"{records.where}: {end - pos} bytes after its last record")
+
+
+def message_records(records: ChunkRecords) -> Iterator[tuple[int, int, int, int, int, int]]:
+    """(log time, channel, sequence, publish time, data start, data stop) of each message record
+    of a chunk, in the chunk's order: for readers that take one topic out of a chunk."""
+    return _message_records(records)
 
 
 def messages_at(records: ChunkRecords, log_time: int, channels: set[int]) -> Iterator[tuple[int, memoryview]]:

@@ -47,6 +47,9 @@ class SyncReport:
     confirmed: int = 0
     failed: list[str] = field(default_factory=list)
     stopped_early: bool = False
+    # segments whose local bytes changed after the cloud confirmed them: the confirmed copy is
+    # the good one (a closed segment never changes), so it is never overwritten from here
+    diverged: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -150,6 +153,16 @@ class Syncer:
             report.sent_bytes += len(data)
             self.journal.put(ObjectState(item.key, len(data), sha, item.mtime_ns, state="uploaded"))
             return True
+        if st is not None and st.state == "confirmed" and (st.size, st.mtime_ns) != (item.size, item.mtime_ns):
+            sha = file_sha256(item.path)
+            if sha == st.sha256:  # touched, not changed
+                st.mtime_ns = item.mtime_ns
+                self.journal.save()
+                return False
+            log.warning("sync: %s changed on the vehicle after the cloud confirmed it; the confirmed copy is "
+                        "kept and not overwritten (the local file may be damaged: `thermcap info` it)", item.key)
+            report.diverged.append(item.key)
+            return False
         if st is None or (st.size, st.mtime_ns) != (item.size, item.mtime_ns):
             sha = file_sha256(item.path)
             st = ObjectState(item.key, item.size, sha, item.mtime_ns, stale_receipt=st.stale_receipt if st else None)
@@ -288,7 +301,7 @@ class Syncer:
             if st.state != "confirmed" or not st.key.endswith(".mcap") or not path.is_file():
                 continue
             if path.stat().st_size != st.size or file_sha256(path) != st.sha256:
-                continue
+                continue  # changed since: not the bytes the cloud confirmed, and not freed on their word
             if not self._receipt_still_good(st.key, st.sha256, st.size):
                 st.state, st.error = "pending", "the cloud's receipt no longer names these bytes; sent again"
                 st.mtime_ns = -1

@@ -214,3 +214,21 @@ def test_a_ring_that_needs_receipts_evicts_only_what_the_cloud_confirmed(vehicle
     assert [e.segment for e in gone] == [segs[0].name]
     assert all(s.exists() for s in segs[1:])
     assert ev.state.blocked and "not yet confirmed by the cloud" in ev.state.blocked_reason
+
+
+def test_a_segment_damaged_here_after_confirmation_never_overwrites_the_cloud(vehicle, tmp_path):
+    """Found by the random journeys: a confirmed segment truncated on the vehicle was sent again
+    and replaced the cloud's good copy; the only good bytes were lost."""
+    root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
+    syncer = Syncer(root, DirTarget(dest), part_size=5 * MiB)
+    assert not syncer.run_once().failed
+    confirm_synced(open_store(dest))
+    syncer.check_receipts()
+    seg = sorted((root / "sessions" / "drive").glob("*.mcap"))[0]
+    key = seg.relative_to(root).as_posix()
+    good = (dest / key).read_bytes()
+    seg.write_bytes(seg.read_bytes()[: seg.stat().st_size // 2])
+    report = syncer.run_once()
+    assert report.diverged == [key]
+    assert (dest / key).read_bytes() == good
+    assert key not in syncer.delete_confirmed() and seg.exists()
