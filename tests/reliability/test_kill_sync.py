@@ -10,7 +10,6 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import pytest
 
@@ -19,6 +18,7 @@ from archive.receipts import confirm_synced
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
 from recorder.storage.segments import SegmentPolicy
+from tests.conftest import wait_for
 
 pytestmark = pytest.mark.slow
 pytest.importorskip("boto3", reason="boto3 is in the sync extra")
@@ -50,10 +50,14 @@ def test_kill_sync_mid_upload_resends_at_most_the_part_in_flight(seaweedfs, tmp_
                    for o in objs)
 
     for _ in range(3):
+        before = journaled()
         p = subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        time.sleep(1.5)
+        # killed once this run has journaled a part more: mid-upload however loaded the machine is
+        # (a fixed sleep had landed the kills before any upload began)
+        ok = wait_for(lambda b=before, p=p: journaled() > b or p.poll() is not None, 120, step=0.005)
         p.send_signal(signal.SIGKILL)
         p.wait()
+        assert ok and p.returncode == -signal.SIGKILL, "sync ended before it could be killed mid-upload"
     held = journaled()
     assert 0 < held < total_parts, f"the kills missed the upload ({held} of {total_parts} parts journaled)"
     r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=120)
