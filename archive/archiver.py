@@ -292,6 +292,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     adir = archive_dir(session_dir)
     adir.mkdir(exist_ok=True)
     fmts = {fid: get_format(fid) for fid in formats}  # unknown ids fail before any work
+    for left in adir.glob(f"*{PARTIAL_SUFFIX}"):  # a killed run's; never an archive, and we hold the lock
+        shutil.rmtree(left) if left.is_dir() else left.unlink()
 
     segments = session_segments(session_dir)
     source_gone = bool(manifest.get("source", {}).get("deleted"))
@@ -355,17 +357,17 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         damaged = next((o for o in outcomes if isinstance(o, SourceDamagedError)), None)
         if damaged is not None:
             raise damaged
-    except BaseException:
+        for fid, outcome in zip(todo, outcomes, strict=True):
+            if isinstance(outcome, ArchiveError | OSError):
+                failures.append(f"{fid}: {outcome}")
+            elif isinstance(outcome, BaseException):
+                raise outcome
+            elif outcome:
+                failures.append(f"{fid}: " + "; ".join(outcome[:5]))
+    except BaseException:  # nothing half-made is left behind: no extras.mcap.partial
         if source.extras is not None:
             source.extras.abort()
         raise
-    for fid, outcome in zip(todo, outcomes, strict=True):
-        if isinstance(outcome, ArchiveError | OSError):
-            failures.append(f"{fid}: {outcome}")
-        elif isinstance(outcome, BaseException):
-            raise outcome
-        elif outcome:
-            failures.append(f"{fid}: " + "; ".join(outcome[:5]))
 
     if source.extras is not None:
         if on_progress:

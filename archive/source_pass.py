@@ -72,6 +72,12 @@ class SourcePass:
                     got.sidecar_sha256.append(sidecar_sha256(f.sidecar))
                     got.timestamps_ns.append(f.log_time)
                     got.segments.append(f.segment)
+                if got.width and f.pixels.shape != (got.height, got.width):
+                    raise SourceDamagedError(
+                        f"{self.session_dir}: frame {f.index} ({f.segment}) is {f.pixels.shape[1]}x"
+                        f"{f.pixels.shape[0]}, the session's first frame {got.width}x{got.height}; a session's "
+                        f"frames are of one size (one sensor), so nothing was archived",
+                        [f"{f.segment}: frame {f.index} is {f.pixels.shape[1]}x{f.pixels.shape[0]}"])
                 if self.summary is not None:
                     self.summary.add(f.pixels)
                 read[f.segment] = read.get(f.segment, 0) + 1
