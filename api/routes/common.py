@@ -4,22 +4,26 @@ from __future__ import annotations
 
 import base64
 import json
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import HTTPException, Request
+from fastapi import HTTPException, Query, Request
 from sqlalchemy import bindparam, select
 
 from api import db
 from api.security import check_session_id
 from recorder.icd.names import iso_utc, parse_rfc3339
 
-__all__ = ["FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size", "parse_time",
-           "session_row"]
+__all__ = ["CelsiusQuery", "FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size",
+           "parse_time", "session_row"]
 
 
 #: Built once: building ``select(...).where(...)`` costs more than running it (SQLAlchemy coerces
 #: every operand), and every frame request looks its session up.
 _SESSION_ROW = select(db.sessions).where(db.sessions.c.id == bindparam("session_id"))
+
+#: A temperature from a query string: finite and physical, or a 422 naming it (NaN had reached
+#: numpy and come back as a 500, or as a bare NaN in the JSON).
+CelsiusQuery = Annotated[float | None, Query(ge=-273.15, le=5000, allow_inf_nan=False)]
 
 
 def session_row(request: Request, session_id: str) -> dict[str, Any]:

@@ -9,7 +9,7 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from api.routes.common import frame_model, session_row
+from api.routes.common import CelsiusQuery, frame_model, session_row
 from api.security import require
 from archive.codecs import get_codec
 from recorder.exports.colorbar import TemperatureRange
@@ -55,8 +55,8 @@ _FRAME_RESPONSES: dict[int | str, dict[str, Any]] = {
 def get_frame(request: Request, session_id: str, n: int,
               format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",
-              min: float | None = Query(None, ge=-273.15, le=5000),
-              max: float | None = Query(None, ge=-273.15, le=5000),
+              min: CelsiusQuery = None,
+              max: CelsiusQuery = None,
               range: Literal["frame", "session", "fixed"] | None = Query(
                   None, description="preview scale: the frame's own (default), one for the whole session, or "
                                     "fixed by min and max (the default when both are given)"),

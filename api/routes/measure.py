@@ -15,7 +15,7 @@ from sqlalchemy import select
 
 from api import db
 from api.reading.regions import RegionReader
-from api.routes.common import FrameModel, frame_model, session_row
+from api.routes.common import CelsiusQuery, FrameModel, frame_model, session_row
 from api.security import require
 from recorder.exports.render import celsius
 from recorder.radiometry import describe_model
@@ -80,7 +80,7 @@ def get_profile(request: Request, session_id: str, n: int,
 
 @router.get("/frames/{n}/histogram")
 def get_histogram(request: Request, session_id: str, n: int, bins: int = Query(64, ge=1, le=4096),
-                  min: float | None = None, max: float | None = None, tool: str | None = None) -> dict:
+                  min: CelsiusQuery = None, max: CelsiusQuery = None, tool: str | None = None) -> dict:
     _, temps = _frame_temps(request, session_id, n)
     try:
         return {"frame": n, **histogram(temps, bins, min, max, parse_tool(tool) if tool else None)}
@@ -89,7 +89,7 @@ def get_histogram(request: Request, session_id: str, n: int, bins: int = Query(6
 
 
 @router.get("/frames/{n}/isotherm", responses={200: {"content": {"image/png": {}, "application/json": {}}}})
-def get_isotherm(request: Request, session_id: str, n: int, above: float | None = None, below: float | None = None,
+def get_isotherm(request: Request, session_id: str, n: int, above: CelsiusQuery = None, below: CelsiusQuery = None,
                  format: Literal["json", "png"] = "json") -> Response:
     _, temps = _frame_temps(request, session_id, n)
     try:

@@ -176,7 +176,8 @@ def list_frames(request: Request, session_id: str, start: str | None = None, end
 
 @router.get("/frames")
 def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, le=1),
-                  min_target_c: float | None = Query(None, description="frames whose hottest target is at least this"),
+                  min_target_c: float | None = Query(None, description="frames whose hottest target is at least this",
+                                                     ge=-273.15, le=5000, allow_inf_nan=False),
                   sensor: str | None = None, limit: int = 100, cursor: str | None = None) -> dict:
     """Frames across every session: ``max_grade=0.3&min_target_c=40`` finds frames in thermal
     crossover with a target above 40 °C. Hottest first; page with ``next_cursor``. Answered from

@@ -61,6 +61,8 @@ def parse_tool(text: str) -> Tool:
         nums = [float(v) for v in rest.split(",")] if rest else []
     except ValueError:
         raise ToolError(f"tool {text!r}: coordinates must be numbers") from None
+    if not all(math.isfinite(v) and abs(v) < 1e9 for v in nums):
+        raise ToolError(f"tool {text!r}: coordinates must be finite pixel positions")
     if kind == "spot" and len(nums) == 2:
         return Spot(int(nums[0]), int(nums[1]))
     if kind == "box" and len(nums) == 4:
