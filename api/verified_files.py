@@ -1,21 +1,48 @@
 """Whole archive files are checked against the manifest's sha256 before they are served.
 
 A download's ETag is the manifest's hash, a promise about the bytes; a file damaged on disk
-since it was archived must not be sent under it. Hashing a file costs one read of it, so the
-result is kept per (size, mtime, inode): a file is hashed again only when it changes. Objects in
-an S3-compatible store were written create-only and are checked by the store's own checksums
-and by ``thermcap scrub``; here their size is compared.
+since it was archived must not be sent under it. Before a download starts, its size is compared
+and (on local disk) its hash, kept per (size, mtime, inode) so an unchanged file is not read
+twice. That key cannot see a file that rots in place (one byte changed, same size, inode and
+mtime), nor an object in a bucket changed behind the store's back, so every whole-file download
+is also hashed as it is sent (``verified_stream``), its last piece held back until the hash
+matches: a damaged file never arrives whole under the manifest's ETag, and it is reported.
 """
 
 from __future__ import annotations
 
+import hashlib
 import threading
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 from api.storage import BlobStore
 from archive.manifest import file_sha256
 
-__all__ = ["FileVerifier"]
+__all__ = ["DamagedWhileServing", "FileVerifier", "verified_stream"]
+
+
+class DamagedWhileServing(Exception):
+    """Raised inside a response body: the server closes the connection before the last bytes."""
+
+
+async def verified_stream(pieces: AsyncIterator[bytes], sha256: str,
+                          on_damage: Callable[[str], None]) -> AsyncIterator[bytes]:
+    """``pieces`` passed on, hashed as they go; the last one is sent only if the whole hashes
+    to ``sha256``, otherwise ``on_damage`` is told and the body ends short (the client sees an
+    incomplete transfer, never a complete file with the wrong bytes)."""
+    h = hashlib.sha256()
+    held: bytes | None = None
+    async for piece in pieces:
+        if held is not None:
+            yield held
+        h.update(piece)
+        held = piece
+    if h.hexdigest() != sha256:
+        on_damage("sha256 differs from the manifest (found while sending it)")
+        raise DamagedWhileServing("the file's bytes differ from the manifest's sha256")
+    if held is not None:
+        yield held
 
 
 class FileVerifier:
@@ -23,6 +50,11 @@ class FileVerifier:
         self.store, self.root, self.keep = store, Path(root), keep
         self._known: dict[str, tuple[tuple[int, int, int], str]] = {}
         self._lock = threading.Lock()
+
+    def forget(self, key: str) -> None:
+        """Hash the file again next time (it was found damaged while it was served)."""
+        with self._lock:
+            self._known.pop(key, None)
 
     def problem(self, key: str, sha256: str, size: int) -> str | None:
         """Why the stored file is not the archived one, or None when it is."""

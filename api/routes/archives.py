@@ -13,6 +13,7 @@ from api import db
 from api.reading.frames import Damage
 from api.routes.common import session_row
 from api.security import check_file_name, require
+from api.verified_files import verified_stream
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
@@ -99,5 +100,12 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
         headers["Content-Range"] = f"bytes {start}-{end - 1}/{size}"
     if request.method == "HEAD" or end == start:
         return Response(status_code=status, headers=headers)
-    return StreamingResponse(store.stream_range(key, start, end), status_code=status, headers=headers,
-                             media_type="application/octet-stream")
+    body = store.stream_range(key, start, end)
+    if (start, end) == (0, size):  # a whole file: hashed as it goes, the last piece sent only if it matches
+
+        def damaged(why: str) -> None:
+            request.app.state.files.forget(key)
+            request.app.state.frames.damage.report(Damage(session_id, -1, f"{fmt}:{name}", why))
+
+        body = verified_stream(body, entry["sha256"], damaged)
+    return StreamingResponse(body, status_code=status, headers=headers, media_type="application/octet-stream")
