@@ -257,8 +257,12 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
 
 def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,
                     delete_source: bool = False, workers: int = 2, force: bool = False,
-                    on_progress: Callable[[str, int, int], None] | None = None) -> Manifest:
-    """Archive one session; returns the manifest. Raises VerificationError if any format fails."""
+                    on_progress: Callable[[str, int, int], None] | None = None,
+                    before_delete: Callable[[Path], None] | None = None) -> Manifest:
+    """Archive one session; returns the manifest. Raises VerificationError if any format fails.
+
+    ``before_delete(session_dir)`` runs once the copies are re-checked and before the source goes
+    (the API indexes the archive there, so no reader is left pointing at deleted segments)."""
     session_dir = Path(session_dir)
     if not session_dir.is_dir():
         raise ArchiveError(f"{session_dir}: no such session folder")
@@ -268,7 +272,8 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
     if lock is None:
         raise ArchiveError(f"{session_dir}: {holder(session_dir) or 'another process'} holds this session")
     try:
-        return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress)
+        return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress,
+                               before_delete)
     except OSError as exc:  # a read-only or full disk: name the file; the source is untouched
         raise ArchiveError(f"{exc.filename or session_dir}: {exc.strerror or exc}; nothing was deleted") from None
     finally:
@@ -276,7 +281,8 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
 
 
 def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int, force: bool,
-                    on_progress: Callable[[str, int, int], None] | None) -> Manifest:
+                    on_progress: Callable[[str, int, int], None] | None,
+                    before_delete: Callable[[Path], None] | None = None) -> Manifest:
     meta = read_session_meta(session_dir)
     if isinstance(meta.get("cameras"), dict):  # read as one camera it would archive no frame at all
         split = meta.get("split_into")
@@ -394,6 +400,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             manifest["source"]["kept_because"] = f"{len(windows)} event windows are protected (protected.json)"
             save_manifest(session_dir, manifest)
             return manifest
+        if before_delete is not None:
+            before_delete(session_dir)
         for seg in segments:
             seg.unlink()
         fsync_dir(session_dir)

@@ -69,8 +69,9 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
                 bar.update(task, description=f"{name}: {what}", completed=done, total=total)
 
             try:
+                # the index learns of the archive before the source goes: no frame 503s in between
                 m = archive_session(d, fmts, delete_source=delete_source, force=force, workers=workers,
-                                    on_progress=on_progress)
+                                    on_progress=on_progress, before_delete=lambda sd: _run_hooks(sd, root))
                 results.append({"session": str(d), "ok": True, "formats": {
                     k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
                                           "decode_fps")} for k, v in m["formats"].items() if k in fmts},

@@ -105,3 +105,27 @@ def test_manifest_edited_to_verified_is_not_evidence(session):
     archive_session(session, ["png16"], delete_source=True)
     assert all(c.ok for c in verify_session(session).values())
     assert json.loads((session / "archive" / "manifest.json").read_text())["source"]["deleted"]
+
+
+def test_frames_stay_served_while_the_source_is_deleted(session):
+    """Issue 36: ``archive --delete-source`` left a window of 503s: the index still pointed at the
+    segments it deleted until the hook re-indexed after. The index now learns of the archive
+    before the source goes (without the hook this test sees 503), so a server that never
+    re-indexes meanwhile still serves every frame."""
+    from fastapi.testclient import TestClient
+
+    from api.app import create_app
+    from api.indexing import index_session
+    from api.settings import Settings
+
+    root = session.parent.parent / "root"
+    (root / "sessions").mkdir(parents=True)
+    moved = root / "sessions" / "s"
+    session.rename(moved)
+    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
+        n = c.get("/api/v1/sessions/s").json()["frames"]
+        engine = c.app.state.engine
+        archive_session(moved, ["hdf5"], delete_source=True, before_delete=lambda d: index_session(engine, d))
+        assert not session_segments(moved)
+        for i in range(n):
+            assert c.get(f"/api/v1/sessions/s/frames/{i}", params={"format": "raw"}).status_code == 200, i
