@@ -17,7 +17,7 @@ from recorder.exceptions import McapFileError
 from recorder.icd.names import iso_utc
 from recorder.icd.rosmsg import json_payload
 from recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
-from recorder.storage.layout import SessionLayout
+from recorder.storage.layout import EVICTION_LOG, SessionLayout
 from recorder.storage.lock import session_status
 from recorder.storage.reader import archived_frame_count
 from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
@@ -234,9 +234,25 @@ def session_info(path: str | Path) -> SessionInfo:
         pauses=meta.get("pauses") or [],
         frames_paused=meta.get("frames_paused") or 0,
         ring=meta.get("ring"),
-        evicted_segments=meta.get("evicted_segments") or 0,
+        evicted_segments=_evicted(Path(path), meta),
         cameras=_cameras(meta, topics, span),
     )
+
+
+def _evicted(session_dir: Path, meta: dict[str, Any]) -> int:
+    """Segments the ring deleted from this session: ROOT/eviction.log is the record (written as
+    each one goes, so it survives a crash that session.json's end-of-run count does not)."""
+    log = session_dir.resolve().parents[1] / EVICTION_LOG if len(session_dir.resolve().parents) > 1 else None
+    n = 0
+    if log is not None and log.is_file():
+        with open(log) as f:
+            for line in f:
+                try:
+                    entry = json.loads(line)
+                except ValueError:
+                    continue
+                n += entry.get("session") == session_dir.name and "segment" in entry
+    return max(n, int(meta.get("evicted_segments") or 0))
 
 
 def _cameras(meta: dict[str, Any], topics: dict[str, TopicUsage], span: float) -> dict[str, CameraUsage]:

@@ -215,3 +215,23 @@ def test_keep_events_keeps_every_window(tmp_path):
     ev.evict_once()
     assert [w.note for w in book.windows] == ["all"] and ev.state.blocked
     assert "--keep-events" in (ev.state.blocked_reason or "")
+
+
+def test_info_counts_evictions_after_a_crash(tmp_path):
+    """Issue 36: after a crash ``info`` showed 0 evictions while eviction.log listed 6: the count
+    came only from session.json's end-of-run summary."""
+    import json
+
+    from recorder.storage.info import session_info
+
+    ring = RingPolicy(max_disk=300_000, pre_s=0, post_s=0, interval_s=0.02)
+    Recorder(_sim(600), tmp_path, session_id="c", policy=SegmentPolicy(max_duration_s=0.5), analysis=False,
+             ring=ring).run()
+    session = tmp_path / "sessions" / "c"
+    meta = json.loads((session / "session.json").read_text())
+    logged = sum(1 for line in (tmp_path / "eviction.log").read_text().splitlines() if '"segment"' in line)
+    assert logged > 0
+    meta.pop("evicted_segments", None)  # what a recorder killed before its summary leaves
+    meta["status"] = "recording"
+    (session / "session.json").write_text(json.dumps(meta))
+    assert session_info(session).evicted_segments == logged
