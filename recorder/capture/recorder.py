@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import queue
 import secrets
@@ -856,7 +857,31 @@ class Recorder:
 
 #: a source's own messages of a frame as compact JSON, with an encoder made once (``json.dumps``
 #: with options makes one a call); a circular message fails on recursion instead of a marker check
-_compact_json = json.JSONEncoder(separators=(",", ":"), check_circular=False).encode
+_strict_json = json.JSONEncoder(separators=(",", ":"), check_circular=False, allow_nan=False).encode
+
+
+def _compact_json(msg: Any) -> str:
+    """Standard JSON, always: a non-finite number (a NaN in a radar cue) is written as null, and
+    what it was is kept beside it in ``_non_finite`` (path -> "NaN", "Infinity", "-Infinity"),
+    so strict readers take the message and nothing about the value is lost."""
+    try:
+        return _strict_json(msg)
+    except ValueError:
+        found: dict[str, str] = {}
+        clean = _finite(msg, "", found)
+        return _strict_json({**clean, "_non_finite": found} if isinstance(clean, dict)
+                            else {"value": clean, "_non_finite": found})
+
+
+def _finite(value: Any, path: str, found: dict[str, str]) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        found[path or "."] = "NaN" if math.isnan(value) else ("Infinity" if value > 0 else "-Infinity")
+        return None
+    if isinstance(value, dict):
+        return {k: _finite(v, f"{path}.{k}" if path else str(k), found) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_finite(v, f"{path}[{i}]", found) for i, v in enumerate(value)]
+    return value
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
                 "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}
