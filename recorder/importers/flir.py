@@ -224,10 +224,45 @@ def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
     return [frame]
 
 
-def iter_fff_records(path: str, data: bytes | mmap.mmap) -> Iterator[bytes]:
+def _short_trailer(path: str, image: bytes, order: str, dir_off: int, count: int) -> tuple[bytes, str] | None:
+    """An image whose directory promises more bytes than the file holds: the image as it can be
+    read (records past the end dropped, the raw record cut to what is there), and a note saying
+    so; None when what is missing is the camera's calibration or the directory itself. Whether
+    the raw image is complete is for its decoder to say: ``frame_from_fff`` refuses a cut one."""
+    have = len(image)
+    if dir_off + 32 * count > have:
+        return None
+    buf = bytearray(image)
+    dropped, cut = [], 0
+    for i in range(count):
+        at = dir_off + 32 * i
+        rtype, _sub, _ver, _id, off, length = struct.unpack(order + "HHIIII", buf[at:at + 20])
+        if not rtype or off + length <= have:
+            continue
+        if rtype == RAW and off + 0x20 < have:
+            cut = off + length - have
+            buf[at + 16:at + 20] = struct.pack(order + "I", have - off)
+        elif rtype in (CAMERA_INFO, RAW):
+            return None
+        else:
+            dropped.append(f"0x{rtype:02X}")
+            buf[at:at + 2] = struct.pack(order + "H", 0)
+    missing = max(cut, 0)
+    note = (f"the image's directory promises {missing or 'some'} bytes more than the file holds; the image was "
+            f"complete and kept" + (f"; records {', '.join(dropped)} past the end were left out" if dropped else ""))
+    return bytes(buf), note
+
+
+def iter_fff_records(path: str, data: bytes | mmap.mmap,
+                     notes: dict[int, tuple[str, int, int, int]] | None = None) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
-    image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file)."""
+    image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file).
+
+    The last image may end a few bytes short of what its directory promises (a trailer cut, or
+    padding a writer never wrote) while its image stream is whole: it is kept, and ``notes``
+    says so by image index (with where it starts, the bytes there and the bytes promised); only
+    an image whose pixels are cut is truncated."""
     pos, n = 0, len(data)
     index = 0
     done = 0  # bytes of an mmap already handed back to the kernel
@@ -247,7 +282,12 @@ def iter_fff_records(path: str, data: bytes | mmap.mmap) -> Iterator[bytes]:
             if rtype:
                 end = max(end, off + length)
         if pos + end > n:
-            raise TruncatedImageError(path, index, pos, n - pos, end)
+            kept = _short_trailer(path, bytes(data[pos:n]), order, dir_off, count) if notes is not None else None
+            if kept is None:
+                raise TruncatedImageError(path, index, pos, n - pos, end)
+            notes[index] = (kept[1], pos, n - pos, end)
+            yield kept[0]
+            return
         yield bytes(data[pos:pos + end])
         index += 1
         pos += end
@@ -264,20 +304,29 @@ def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:
 def iter_fff_file(path: str, data: bytes | mmap.mmap) -> Iterator[ImportedFrame]:
     """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be an mmap): a long SEQ never
     sits decoded in memory. A file with a second image is a SEQ (CSQ when JPEG-LS coded)."""
-    records = iter_fff_records(path, data)
+    notes: dict[int, tuple[str, int, int, int]] = {}
+    records = iter_fff_records(path, data, notes)
     first = next(records, None)
     if first is None:
         raise ImportFileError(f"{path}: no FFF image in the file")
     second = next(records, None)
     multi = second is not None
 
-    def named(frame: ImportedFrame) -> ImportedFrame:
+    def named(rec: bytes, i: int) -> ImportedFrame:
+        try:
+            frame = frame_from_fff(path, rec, "flir-fff", i)
+        except ImportFileError as exc:
+            if i in notes:  # the short image's pixels are cut after all: truncated, as any cut image
+                raise TruncatedImageError(path, i, *notes[i][1:]) from exc
+            raise
         if multi:
             frame.format = "flir-seq" if frame.layout != "jpeg-ls" else "flir-csq"
+        if i in notes:
+            frame.vendor_metadata["short_trailer"] = notes[i][0]
         return frame
 
-    yield named(frame_from_fff(path, first, "flir-fff", 0))
+    yield named(first, 0)
     if second is not None:
-        yield named(frame_from_fff(path, second, "flir-fff", 1))
+        yield named(second, 1)
         for i, rec in enumerate(records, start=2):
-            yield named(frame_from_fff(path, rec, "flir-fff", i))
+            yield named(rec, i)
