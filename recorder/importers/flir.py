@@ -283,7 +283,7 @@ def iter_fff_records(path: str, data: bytes | mmap.mmap,
                 end = max(end, off + length)
         if pos + end > n:
             kept = _short_trailer(path, bytes(data[pos:n]), order, dir_off, count) if notes is not None else None
-            if kept is None:
+            if kept is None or notes is None:
                 raise TruncatedImageError(path, index, pos, n - pos, end)
             notes[index] = (kept[1], pos, n - pos, end)
             yield kept[0]
