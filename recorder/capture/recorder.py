@@ -16,6 +16,7 @@ is offered each written frame without waiting; it drops its own frames, never ou
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import math
 import os
@@ -404,9 +405,12 @@ class Recorder:
         meta = self._session_meta(started_ns)
         try:
             write_json_atomic(SessionLayout.of(self.session_dir).session_json, {**meta, "status": "recording"})
+            _take_reserve(SessionLayout.of(self.session_dir).reserve)
         except OSError as exc:
             lock.release()
-            raise RecordingError(f"cannot write {self.session_dir / 'session.json'}: {exc.strerror or exc}") from exc
+            raise RecordingError(f"cannot start recording in {self.session_dir}: {exc.strerror or exc} (a recording "
+                                 f"needs {RESERVE_BYTES >> 20} MiB kept for its summary, and room for its "
+                                 f"segments)") from exc
         extra_topics = {f.topics.extra(t): schema for f in self.feeds for t, schema in f.source.extra_topics.items()}
         bad_pixels: Any = self.source.bad_pixel_map
         if self.multi:
@@ -461,6 +465,12 @@ class Recorder:
                 "every camera failed: " + "; ".join(f"{f.name}: {f.error}" for f in failed)
         error = self._writer_error or source_error
         events = [e for f in self.feeds for e in self._camera_events(f)] + self._recorder_events
+        SessionLayout.of(self.session_dir).reserve.unlink(missing_ok=True)  # room for what follows
+        written = self.counters.frames_written
+        lost_on_disk = 0
+        if self._writer_error:  # count what is durably there, not what was handed to the writer
+            written = self._durable_frames()
+            lost_on_disk = max(0, self.counters.frames_written - written)
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
                               {"session_id": self.session_id, "events": events})
@@ -468,7 +478,7 @@ class Recorder:
             write_layout(self.session_dir, {f.name: f.counts_range.bounds() for f in self.feeds})
         result = RecordingResult(
             session_id=self.session_id, session_dir=self.session_dir,
-            frames_captured=self.counters.frames_captured, frames_written=self.counters.frames_written,
+            frames_captured=self.counters.frames_captured, frames_written=written,
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
             wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
             analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing(),
@@ -477,6 +487,9 @@ class Recorder:
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
             cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
             live=self.live.snapshot() if self.live is not None else None)
+        if lost_on_disk:
+            result.error = (f"{result.error}; {lost_on_disk} frames handed to the writer never reached a closed "
+                            f"chunk and are lost ({written} are on disk)")
         summary = {**meta, "status": "complete" if error is None else "failed", "ended_ns": time.time_ns(),
                    "pauses": self._pauses,
                    **{k: v for k, v in result.to_dict().items() if k not in ("session_dir", "recovered", "ok", "live")}}
@@ -489,6 +502,21 @@ class Recorder:
             result.error = result.error or f"cannot write session summary: {exc.strerror or exc}"
         lock.release()
         return result
+
+    def _durable_frames(self) -> int:
+        """Frames on disk after a write error: closed segments' counts, and the whole chunks of
+        the segment the error cut (what ``recover`` keeps)."""
+        from recorder.exceptions import McapFileError
+        from recorder.storage.reader import count_frames
+        from recorder.storage.recover import durable_frames
+
+        layout = SessionLayout.of(self.session_dir)
+        n = 0
+        with contextlib.suppress(McapFileError, OSError):
+            n += sum(count_frames(self.session_dir).values())
+        for active in layout.active_segments():
+            n += durable_frames(active)
+        return n
 
     def _camera_events(self, feed: CameraFeed) -> list[dict[str, Any]]:
         events = feed.events.finish()
@@ -858,6 +886,30 @@ class Recorder:
 #: a source's own messages of a frame as compact JSON, with an encoder made once (``json.dumps``
 #: with options makes one a call); a circular message fails on recursion instead of a marker check
 _strict_json = json.JSONEncoder(separators=(",", ":"), check_circular=False, allow_nan=False).encode
+
+
+#: Bytes kept free for a recording's last words: session.json, events.json and the layout.
+RESERVE_BYTES = 1 << 20
+
+
+def _take_reserve(path: Path) -> None:
+    """Allocate the reserve (blocks, not a sparse file), so a disk that fills mid-recording still
+    has room for the summary; freed just before it is written."""
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
+    try:
+        try:
+            os.posix_fallocate(fd, 0, RESERVE_BYTES)
+        except OSError as exc:
+            if exc.errno not in (errno.EOPNOTSUPP, errno.EINVAL):
+                raise
+            with os.fdopen(os.dup(fd), "wb") as f:  # a filesystem without fallocate: write it
+                f.write(bytes(RESERVE_BYTES))
+        os.fsync(fd)
+    except OSError:
+        path.unlink(missing_ok=True)
+        raise
+    finally:
+        os.close(fd)
 
 
 def _compact_json(msg: Any) -> str:

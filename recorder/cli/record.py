@@ -337,7 +337,7 @@ def status_text(st: dict[str, Any]) -> str:
     out = [f"{st['session_id']}: {'paused' if st['paused'] else 'recording'}, "
            f"{'healthy' if st['healthy'] else 'UNHEALTHY: ' + '; '.join(st['problems'])}"]
     out.append(f"frames: {st['frames_captured']} captured, {st['frames_written']} written, "
-               f"{sum(c['frames_dropped'] for c in st['cameras'].values())} frames dropped, "
+               f"{sum(c.get('frames_dropped', 0) for c in st['cameras'].values())} frames dropped, "
                f"{st['frames_paused']} paused; "
                f"queue {st['queue_depth']}/{st['queue_capacity']}; segment {st['segment']}")
     if settling := st.get("segments_settling"):

@@ -23,6 +23,7 @@ __all__ = [
     "MANIFEST_JSON",
     "PARTIAL_SUFFIX",
     "PROTECTED_JSON",
+    "RESERVE_FILE",
     "SESSION_JSON",
     "SESSION_NAME_RE",
     "SessionLayout",
@@ -38,6 +39,7 @@ ARCHIVE_DIR = "archive"
 MANIFEST_JSON = "manifest.json"
 EXTRAS_MCAP = "extras.mcap"
 LOCK_FILE = ".lock"
+RESERVE_FILE = ".reserve"
 PROTECTED_JSON = "protected.json"  # event windows eviction, gc and the archiver keep
 EVICTION_LOG = "eviction.log"  # ROOT/eviction.log: one JSON line per deleted segment, with why
 
@@ -78,6 +80,12 @@ class SessionLayout:
     @property
     def protected_json(self) -> Path:
         return self.dir / PROTECTED_JSON
+
+    @property
+    def reserve(self) -> Path:
+        """Disk kept for the end of a recording (session.json, events.json, the layout): taken
+        at the start, freed just before they are written, so a full disk cannot lose them."""
+        return self.dir / RESERVE_FILE
 
     @property
     def lock(self) -> Path:

@@ -39,8 +39,8 @@ from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 ORIGINAL_SUFFIX = ".orig"  # a repaired file's original, kept until the result reads back
 UNREADABLE_SUFFIX = ".unreadable"  # an empty segment moved aside: it held no frame
 
-__all__ = ["ORIGINAL_SUFFIX", "UNREADABLE_SUFFIX", "RecoveryResult", "recover_leftovers", "recover_path",
-           "recover_segment", "scan_records"]
+__all__ = ["ORIGINAL_SUFFIX", "UNREADABLE_SUFFIX", "RecoveryResult", "durable_frames", "recover_leftovers",
+           "recover_path", "recover_segment", "scan_records"]
 
 _READERS = {
     Opcode.HEADER: Header, Opcode.SCHEMA: Schema, Opcode.CHANNEL: Channel,
@@ -309,6 +309,34 @@ def _summary_counts(path: Path) -> tuple[int, int, dict[str, int]]:
     return summary.statistics.message_count, frames, topics
 
 
+def durable_frames(path: Path) -> int:
+    """Frames a cut segment holds in whole, CRC-checked chunks: what ``recover`` would keep, and
+    so what a recording that stopped on a write error may count as written."""
+    images: set[int] = set()
+    n = 0
+    try:
+        with open(path, "rb") as f:
+            for _offset, opcode, body in scan_records(f, os.fstat(f.fileno()).st_size, str(path)):
+                if opcode == Opcode.CHANNEL:
+                    ch = _parse(opcode, body)
+                    if is_image_topic(ch.topic):
+                        images.add(ch.id)
+                elif opcode == Opcode.CHUNK:
+                    try:
+                        inner = breakup_chunk(_parse(opcode, body), validate_crc=True)
+                    except Exception:
+                        continue  # a damaged chunk keeps nothing
+                    for r in inner:
+                        if isinstance(r, Channel) and is_image_topic(r.topic):
+                            images.add(r.id)
+                    n += sum(1 for r in inner if isinstance(r, Message) and r.channel_id in images)
+                elif opcode == Opcode.MESSAGE:
+                    n += Message.read(ReadDataStream(io.BytesIO(body)), len(body)).channel_id in images
+    except (OSError, McapFileError):
+        return n
+    return n
+
+
 def _changed(path: Path, before: os.stat_result) -> bool:
     try:
         now = path.stat()
@@ -366,6 +394,7 @@ def recover_path(path: str | os.PathLike, *, keep_original: bool = False) -> lis
                                        stopped_because=f"skipped: {who} holds the session") for a in actives]
             continue
         try:
+            SessionLayout.of(session).reserve.unlink(missing_ok=True)  # a killed recorder's reserve
             done = []
             for active in actives:
                 done.append(recover_segment(active, keep_original=keep_original))
@@ -447,6 +476,7 @@ def recover_leftovers(root: str | os.PathLike) -> list[Path]:
         if lock is None:
             continue  # a recorder is still writing it
         try:
+            SessionLayout.of(session).reserve.unlink(missing_ok=True)
             for active in actives:
                 try:
                     recover_segment(active)

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from recorder.icd.names import iso_utc
-from recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, SessionLayout
+from recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
 from recorder.storage.lock import holder
 from recorder.storage.reader import segment_span
 from recorder.storage.rosbag2 import write_bag_metadata
@@ -165,9 +165,13 @@ class Eviction:
 
 
 def disk_usage(root: Path) -> int:
+    """Bytes the data root holds, as the ring counts them: a recording's end-of-run reserve is
+    not data (it is freed before the summary is written)."""
     total = 0
     for dirpath, _dirs, names in os.walk(root):
         for n in names:
+            if n == RESERVE_FILE:
+                continue
             try:
                 total += os.lstat(os.path.join(dirpath, n)).st_blocks * 512
             except OSError:

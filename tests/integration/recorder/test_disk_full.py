@@ -1,0 +1,48 @@
+"""Issue 36: a recording that fills the disk. The summary counted frames as written that never
+reached a closed chunk (146 reported, 120 recoverable), zero-byte ``*.tmp`` files stayed behind,
+and the stop lost events.json. Now the count is what is durably on disk, the loss is named, the
+end-of-run files are written from a reserve kept for them, and nothing half-written is left.
+A real full filesystem: a 4 MiB tmpfs (needs root, as CI and this workplace have)."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+
+import pytest
+
+from recorder.capture.recorder import Recorder
+from recorder.capture.sources.sim import SimSource
+from recorder.storage.reader import iter_session_frames
+from recorder.storage.recover import recover_path
+from recorder.storage.segments import SegmentPolicy
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    mnt = tmp_path / "disk"
+    mnt.mkdir()
+    r = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=4m", "tmpfs", str(mnt)], capture_output=True, text=True)
+    if r.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs here ({r.stderr.strip()}); run as root")
+    yield mnt
+    subprocess.run(["umount", "-l", str(mnt)], check=False)
+
+
+def test_a_full_disk_counts_only_what_is_on_disk(small_disk):
+    res = Recorder(SimSource(width=160, height=128, frames=2000, paced=False, seed=3), small_disk, session_id="f",
+                   analysis=False, policy=SegmentPolicy(max_duration_s=0.5)).run()
+    assert res.error and "No space left" in res.error
+    session = small_disk / "sessions" / "f"
+    meta = json.loads((session / "session.json").read_text())
+    assert meta["status"] == "failed" and meta["frames_written"] == res.frames_written
+    assert json.loads((session / "events.json").read_text())["session_id"] == "f"
+    assert not [p.name for p in session.iterdir() if p.name.endswith(".tmp")]
+    assert not (session / ".reserve").exists()
+    recover_path(session)
+    kept = list(iter_session_frames(session))
+    assert len(kept) == res.frames_written, (len(kept), res.frames_written)
+    if res.frames_written < res.frames_captured - res.frames_dropped:
+        assert "never reached a closed chunk" in res.error
+    os.sync()
