@@ -144,9 +144,11 @@ def on_archived(session_dir: Path, root: Path) -> None:
 
 
 @click.command("api")
-@click.option("--frames", type=int, default=300, show_default=True, help="Frames in the benchmark session.")
-@click.option("--requests", "n_requests", type=int, default=400, show_default=True)
-@click.option("--clients", type=int, default=4, show_default=True)
+@click.option("--frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=300, show_default=True,
+              help="Frames in the benchmark session.")
+@click.option("--requests", "n_requests", type=Number(minimum=1, maximum=10_000_000, integer=True), default=400,
+              show_default=True)
+@click.option("--clients", type=Number(minimum=1, maximum=256, integer=True), default=4, show_default=True)
 @json_option
 def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> None:
     """Frames/s and p50/p99 over real HTTP with concurrent clients; export MB/s; beside disk reads."""
@@ -182,7 +184,8 @@ def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, format
 
 @click.command("index")
 @click.option("--sessions", type=int, default=100_000, show_default=True, help="Synthetic sessions in the catalog.")
-@click.option("--frames", type=int, default=10_000_000, show_default=True, help="Synthetic frames across them.")
+@click.option("--frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=10_000_000,
+              show_default=True, help="Synthetic frames across them.")
 @click.option("--db", "db_url", default=None, metavar="postgresql://...",
               help="A PostgreSQL server to measure on (a fresh database is made there and dropped); default SQLite.")
 @json_option

@@ -10,7 +10,7 @@ from typing import Any
 import click
 
 from archive.archiver import DEFAULT_FORMATS
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import Number, fail, json_option, root_option
 from recorder.exceptions import SessionBusyError, ThermcapError
 from recorder.storage.layout import SessionLayout
 
@@ -35,7 +35,8 @@ def _formats(value: str) -> list[str]:
               help="Comma-separated: png16, tiff-lzw, hdf5, jxl, htj2k, jpegls.")
 @click.option("--delete-source", is_flag=True, help="Delete the MCAP segments once every format verified.")
 @click.option("--force", is_flag=True, help="Rewrite formats that are already archived.")
-@click.option("--workers", type=int, default=2, show_default=True, help="Encoder threads.")
+@click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=2, show_default=True,
+              help="Encoder threads.")
 @json_option
 def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
             workers: int, as_json: bool) -> None:
@@ -153,7 +154,8 @@ def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: b
 @root_option
 @click.option("--session", "sessions", multiple=True, help="Only this session (id or path); repeatable.")
 @click.option("--repair", is_flag=True, help="Rebuild each damaged copy from another verified one, then verify it.")
-@click.option("--workers", type=int, default=2, show_default=True, help="Encoder threads for repairs.")
+@click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=2, show_default=True,
+              help="Encoder threads for repairs.")
 @json_option
 def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bool, workers: int,
           as_json: bool) -> None:
@@ -210,11 +212,13 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 @root_option
 @click.option("--prices", type=click.Path(dir_okay=False), default=None,
               help="JSON price table overriding the defaults.")
-@click.option("--project-cameras", type=int, default=None, help="Projection: number of cameras.")
-@click.option("--project-hours", type=float, default=8.0, show_default=True,
+@click.option("--project-cameras", type=Number(minimum=1, maximum=1_000_000, integer=True), default=None,
+              help="Projection: number of cameras.")
+@click.option("--project-hours", type=Number(minimum=0, above=True, maximum=24, unit="h"), default=8.0,
+              show_default=True,
               help="Projection: recorded hours a day per camera.")
-@click.option("--project-days", type=int, default=365, show_default=True)
-@click.option("--project-segment-s", type=float, default=60.0, show_default=True,
+@click.option("--project-days", type=Number(minimum=1, maximum=36500, integer=True), default=365, show_default=True)
+@click.option("--project-segment-s", type=Number(minimum=0, above=True, unit="s"), default=60.0, show_default=True,
               help="Projection: segment length (one object per segment; hdf5: one per camera-day).")
 @click.option("--markdown", is_flag=True, help="Print a Markdown table.")
 @json_option
@@ -255,8 +259,10 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 
 
 @click.command("archive")
-@click.option("--frames", "n_frames", type=int, default=60, show_default=True, help="Simulated frames per run.")
-@click.option("--session", "session_s", type=float, default=None, metavar="SECONDS",
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=60,
+              show_default=True, help="Simulated frames per run.")
+@click.option("--session", "session_s", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=None,
+              metavar="SECONDS",
               help="Instead: archive a whole 640x512@60 session of this length end to end and report x real time, "
                    "beside the formats' own encode time (the floor) and each format alone.")
 @click.option("--formats", default=None, metavar="ID,ID",
@@ -333,7 +339,8 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
 
 
 @click.command("temporal")
-@click.option("--frames", "n_frames", type=int, default=240, show_default=True, help="Frames per sequence.")
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=240,
+              show_default=True, help="Frames per sequence.")
 @json_option
 def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
     """tpred (temporal prediction) against JPEG-XL e2, PNG16 and FFV1 on still, sweeping and cued views."""

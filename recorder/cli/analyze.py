@@ -6,7 +6,7 @@ import json
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 
@@ -14,9 +14,11 @@ from recorder.exceptions import ThermcapError
 @cli.command()
 @click.argument("sessions", nargs=-1, required=True)
 @root_option
-@click.option("--threshold", type=float, default=5.0, show_default=True, help="K above the local background.")
-@click.option("--min-area", type=int, default=4, show_default=True, help="Smallest target, in pixels.")
-@click.option("--min-crossover", type=float, default=1.0, show_default=True,
+@click.option("--threshold", type=Number(minimum=0, above=True, unit="K"), default=5.0, show_default=True,
+              help="K above the local background.")
+@click.option("--min-area", type=Number(minimum=1, integer=True, unit="pixels"), default=4, show_default=True,
+              help="Smallest target, in pixels.")
+@click.option("--min-crossover", type=Number(minimum=0, unit="s"), default=1.0, show_default=True,
               help="Seconds of grade < 0.3 that make a thermal_crossover event.")
 @json_option
 def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: int, min_crossover: float,

@@ -7,14 +7,16 @@ import sys
 
 import click
 
-from recorder.cli.options import fail, json_option
+from recorder.cli.options import Number, fail, json_option
 from recorder.cli.root import bench
 
 
 @bench.command("record")
-@click.option("--frames", "n_frames", type=int, default=600, show_default=True, help="Frames per measurement.")
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=600,
+              show_default=True, help="Frames per measurement.")
 @click.option("--sizes", default="640x512,1280x1024", show_default=True)
-@click.option("--soak", type=float, default=None, help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
+@click.option("--soak", type=Number(minimum=0, above=True, unit="s"), default=None,
+              help="Instead: record paced 60 fps for SECONDS and report drops/p99.")
 @click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None,
               help="Where to write (default: a temp folder).")
 @click.option("--rounds", type=click.IntRange(1, 21), default=5, show_default=True,
@@ -41,10 +43,11 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
 
 
 @bench.command("import")
-@click.option("--frames", "n_frames", type=int, default=300, show_default=True, help="Simulated ICD TIFF files.")
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=300,
+              show_default=True, help="Simulated ICD TIFF files.")
 @click.option("--samples", type=click.Path(file_okay=False, exists=True), default=None,
               help="Also real files here (e.g. ../shared/samples), each copied --copies times, one row per format.")
-@click.option("--copies", type=int, default=8, show_default=True)
+@click.option("--copies", type=Number(minimum=1, maximum=10_000, integer=True), default=8, show_default=True)
 @click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
               help="Also time DJI files with this SDK backend.")
 @json_option
@@ -58,7 +61,8 @@ def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: s
 
 
 @bench.command("analysis")
-@click.option("--frames", "n_frames", type=int, default=12, show_default=True, help="Frames per scene.")
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=12,
+              show_default=True, help="Frames per scene.")
 @click.option("--samples", type=click.Path(file_okay=False), default=None,
               help="Also run on real files here (e.g. ../shared/samples) and count hot spots per image.")
 @click.option("--overlays", type=click.Path(file_okay=False), default=None, help="Write overlay PNGs of those here.")
@@ -83,7 +87,8 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
 
 
 @bench.command("cameras")
-@click.option("--seconds", type=float, default=10.0, show_default=True, help="Seconds per recording.")
+@click.option("--seconds", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=10.0,
+              show_default=True, help="Seconds per recording.")
 @click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None)
 @json_option
 def bench_cameras_cmd(seconds: float, workdir: str | None, as_json: bool) -> None:
@@ -98,10 +103,13 @@ def bench_cameras_cmd(seconds: float, workdir: str | None, as_json: bool) -> Non
 
 
 @bench.command("live")
-@click.option("--seconds", type=float, default=10.0, show_default=True, help="Seconds per recording.")
-@click.option("--viewers", type=int, default=2, show_default=True)
-@click.option("--live-fps", type=float, default=60.0, show_default=True)
-@click.option("--live-width", type=int, default=0, show_default=True, help="0: full resolution.")
+@click.option("--seconds", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=10.0,
+              show_default=True, help="Seconds per recording.")
+@click.option("--viewers", type=Number(minimum=0, maximum=64, integer=True), default=2, show_default=True)
+@click.option("--live-fps", type=Number(minimum=0, above=True, maximum=1000, unit="fps"), default=60.0,
+              show_default=True)
+@click.option("--live-width", type=Number(minimum=0, maximum=16384, integer=True), default=0, show_default=True,
+              help="0: full resolution.")
 @click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None)
 @json_option
 def bench_live_cmd(seconds: float, viewers: int, live_fps: float, live_width: int, workdir: str | None,

@@ -8,7 +8,7 @@ import sys
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 
@@ -80,11 +80,13 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 @click.option("--palette", default="ironbow", type=click.Choice(["ironbow", "gray", "turbo"]), show_default=True)
 @click.option("--range", "range_mode", type=click.Choice(["session", "frame", "fixed"]), default="session",
               show_default=True, help="heatmap-png: one scale for the session, each frame's own, or --min/--max.")
-@click.option("--min", "t_min", type=float, default=None, help="heatmap-png: the scale's low end, °C (--range fixed).")
-@click.option("--max", "t_max", type=float, default=None, help="heatmap-png: the scale's high end, °C.")
+@click.option("--min", "t_min", type=Number(minimum=-273.15, maximum=5000, unit="°C"), default=None,
+              help="heatmap-png: the scale's low end, °C (--range fixed).")
+@click.option("--max", "t_max", type=Number(minimum=-273.15, maximum=5000, unit="°C"), default=None,
+              help="heatmap-png: the scale's high end, °C.")
 @click.option("--crs", type=click.Choice(["utm", "4326"]), default=None,
               help="map-tiff of TERRA-REF images: EPSG:4326 as the pipeline publishes (default) or UTM 12N.")
-@click.option("--ground-elevation", type=float, default=None, metavar="M",
+@click.option("--ground-elevation", type=Number(minimum=-500, maximum=9000, unit="m"), default=None, metavar="M",
               help="Maps: the ground's height above sea level (with the file's absolute altitude) instead of the "
                    "take-off point's.")
 @click.option("--dem", type=click.Path(dir_okay=False, exists=True), default=None, metavar="GEOTIFF",
@@ -92,7 +94,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
                    "lands on the terrain, with the camera's absolute altitude.")
 @click.option("--truth", type=click.Path(dir_okay=False, exists=True), default=None,
               help="hotspots: ground-truth points (GeoJSON or latitude,longitude CSV) to match the detections with.")
-@click.option("--match-radius", type=float, default=3.0, show_default=True, help="hotspots --truth: metres.")
+@click.option("--match-radius", type=Number(minimum=0, above=True, unit="m"), default=3.0, show_default=True,
+              help="hotspots --truth: metres.")
 @click.option("--colorbar/--no-colorbar", default=True, show_default=True,
               help="heatmap-png: draw the scale into each picture (the range is in its PNG text either way).")
 @json_option

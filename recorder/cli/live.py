@@ -8,7 +8,7 @@ import threading
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import PORT, Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 
@@ -17,17 +17,19 @@ from recorder.exceptions import ThermcapError
 @click.argument("session")
 @root_option
 @click.option("--host", default="127.0.0.1", show_default=True, help="Address to serve on.")
-@click.option("--port", type=int, default=8765, show_default=True, help="Port (0: any free port).")
-@click.option("--rate", type=float, default=1.0, show_default=True, help="Playback speed (2: twice as fast).")
+@click.option("--port", type=PORT, default=8765, show_default=True, help="Port (0: any free port).")
+@click.option("--rate", type=Number(minimum=0, above=True, maximum=1000), default=1.0, show_default=True,
+              help="Playback speed (2: twice as fast).")
 @click.option("--loop", is_flag=True, help="Start again at the end, until Ctrl-C.")
-@click.option("--start", "start_s", type=float, default=0.0, show_default=True,
+@click.option("--start", "start_s", type=Number(minimum=0, unit="s"), default=0.0, show_default=True,
               help="Seconds into the session to start from.")
-@click.option("--fps", "max_fps", type=float, default=0.0, show_default=True,
+@click.option("--fps", "max_fps", type=Number(minimum=0, maximum=1000, unit="fps"), default=0.0, show_default=True,
               help="Most frames/s per camera (0: every frame).")
-@click.option("--width", "max_width", type=int, default=0, show_default=True,
+@click.option("--width", "max_width", type=Number(minimum=0, maximum=16384, integer=True), default=0, show_default=True,
               help="Subsample the picture to at most this width (0: full resolution).")
-@click.option("--duration", "duration_s", type=float, default=None, help="Stop after this many seconds.")
-@click.option("--wait-for-viewer", type=float, default=0.0, show_default=True,
+@click.option("--duration", "duration_s", type=Number(minimum=0, above=True, unit="s"), default=None,
+              help="Stop after this many seconds.")
+@click.option("--wait-for-viewer", type=Number(minimum=0, maximum=86400, unit="s"), default=0.0, show_default=True,
               help="Wait up to this many seconds for a viewer to subscribe before the first frame.")
 @json_option
 def play(session: str, root: str, host: str, port: int, rate: float, loop: bool, start_s: float, max_fps: float,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 
@@ -31,7 +31,7 @@ def _reference(value: str, root: str) -> tuple[Path, float | None]:
 @report.command("quality")
 @click.argument("session")
 @root_option
-@click.option("--blackbody", type=float, default=None, metavar="TEMP_C",
+@click.option("--blackbody", type=Number(minimum=-273.15, maximum=5000, unit="°C"), default=None, metavar="TEMP_C",
               help="The session looks at a blackbody at this temperature (else its source's, if it says).")
 @click.option("--reference", "references", multiple=True, metavar="SESSION[=TEMP_C]",
               help="Blackbody sessions at other temperatures, for linearity (repeat).")
@@ -68,7 +68,8 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
 @report.command("inspection")
 @click.argument("session")
 @root_option
-@click.option("--max-findings", type=int, default=12, show_default=True, help="The hottest targets, at most.")
+@click.option("--max-findings", type=Number(minimum=0, maximum=1000, integer=True), default=12, show_default=True,
+              help="The hottest targets, at most.")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder for inspection.pdf and .json (default: SESSION/report).")
 @json_option

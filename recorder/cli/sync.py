@@ -10,7 +10,7 @@ from pathlib import Path
 
 import click
 
-from recorder.cli.options import fail, json_option, root_option
+from recorder.cli.options import Number, fail, json_option, root_option
 from recorder.cli.root import cli
 from recorder.exceptions import ThermcapError
 from recorder.sync.targets import Target
@@ -37,7 +37,8 @@ def _target(bucket: str | None, endpoint: str | None, region: str, prefix: str, 
 @click.option("--session", "sessions", multiple=True, help="Only these sessions (repeat); default: the whole root.")
 @click.option("--max-rate", default=None, metavar="RATE",
               help='Bandwidth cap, e.g. 2MB/s, or by local time: "08:00-18:00=512KB/s,4MB/s".')
-@click.option("--part-size", default=8, show_default=True, type=int, metavar="MiB",
+@click.option("--part-size", default=8, show_default=True,
+              type=Number(minimum=5, maximum=5120, integer=True, unit="MiB"), metavar="MiB",
               help="Multipart part size: at most this much is sent again after a drop.")
 @click.option("--watch", is_flag=True, help="Keep going: ship segments as they close, take receipts as they come.")
 @click.option("--interval", default=10.0, show_default=True, help="--watch: seconds between passes.")

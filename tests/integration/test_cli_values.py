@@ -62,3 +62,18 @@ def test_control_insecure_is_an_explicit_choice(tmp_path):
     r = run_cli("record", "--root", str(tmp_path), "--duration", "0.3", "--width", "64", "--height", "48",
                 "--control", "--control-insecure", "--no-analysis", env={"THERMCAP_CONTROL_TOKEN": ""})
     assert r.returncode == 0, r.stderr
+
+
+OTHER = [
+    (["archive", "x", "--workers", "0"], "--workers"),
+    (["analyze", "x", "--threshold", "nan"], "--threshold"),
+    (["sync", "--part-size", "1"], "--part-size"),
+    (["audit", "--project-days", "0"], "--project-days"),
+    (["report", "quality", "x", "--blackbody", "inf"], "--blackbody"),
+]
+
+
+@pytest.mark.parametrize(("args", "named"), OTHER, ids=[" ".join(a) for a, _ in OTHER])
+def test_other_commands_refuse_absurd_values_at_parse_time(tmp_path, args, named):
+    r = run_cli(*args, "--root", str(tmp_path))
+    assert r.returncode == 2 and named in r.stderr and "Traceback" not in r.stderr, r.stderr
