@@ -18,33 +18,16 @@ from typing import Any
 from recorder.analysis.detector import EventBuilder, HotSpotDetector
 from recorder.exceptions import McapFileError
 from recorder.radiometry import model_from_dict
+from recorder.radiometry.session import read_bad_pixel_map
 from recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON
 from recorder.storage.lock import session_locked
-from recorder.storage.reader import archived_frame_count, frame_files, iter_session_frames, read_session_meta
+from recorder.storage.reader import archived_frame_count, iter_session_frames, read_session_meta
 from recorder.storage.segments import write_json_atomic
 
 __all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
 
 ANALYSIS_FILE = ANALYSIS_JSONL
 EVENTS_FILE = EVENTS_JSON
-
-
-def _bad_pixel_map(session_dir: Path):
-    import numpy as np
-    from mcap.reader import make_reader
-
-    files = frame_files(session_dir)  # the segments, or extras.mcap once they are archived and gone
-    if not files:
-        return None
-    with open(files[0], "rb") as f:
-        for att in make_reader(f, validate_crcs=True).iter_attachments():
-            if att.name == "bad_pixel_map.json":
-                bpm = json.loads(att.data)
-                out = np.zeros((bpm["height"], bpm["width"]), bool)
-                for x, y in bpm["pixels"]:
-                    out[y, x] = True
-                return out
-    return None
 
 
 def analyze_session(session_dir: str | Path, *, threshold_k: float = 5.0, min_area: int = 4,
@@ -69,7 +52,7 @@ def _analyze(session_dir: Path, meta: dict[str, Any], threshold_k: float, min_ar
              on_frame: Callable[[int], None] | None) -> dict[str, Any]:
     model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
     detector = HotSpotDetector(model, threshold_k=threshold_k, min_area=min_area,
-                               bad_pixel_map=_bad_pixel_map(session_dir))
+                               bad_pixel_map=read_bad_pixel_map(session_dir))
     events = EventBuilder(min_crossover_s=min_crossover_s)
     tmp = session_dir / (ANALYSIS_FILE + ".tmp")
     frames = targets = 0

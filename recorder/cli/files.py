@@ -98,11 +98,16 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
               help="hotspots --truth: metres.")
 @click.option("--colorbar/--no-colorbar", default=True, show_default=True,
               help="heatmap-png: draw the scale into each picture (the range is in its PNG text either way).")
+@click.option("--model-version", type=Number(minimum=0, integer=True), default=None,
+              help="Temperatures at this radiometric model version (`thermcap radiometry SESSION` lists them; "
+                   "default: the latest covering each frame; 0: as recorded).")
+@click.option("--bad-pixels", type=click.Choice(["nan", "keep"]), default="nan", show_default=True,
+              help="The session's bad pixels: NaN (no temperature; magenta in pictures) or kept as measured.")
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                range_mode: str, t_min: float | None, t_max: float | None, crs: str | None,
                ground_elevation: float | None, dem: str | None, truth: str | None, match_radius: float, colorbar: bool,
-               as_json: bool) -> None:
+               model_version: int | None, bad_pixels: str, as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from recorder.exports.files import export_session
     from recorder.storage.reader import resolve_session
@@ -114,7 +119,8 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette,
                              range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
                              crs=crs or "4326", ground_elevation_m=ground_elevation, truth=truth,
-                             match_radius_m=match_radius, dem=dem)
+                             match_radius_m=match_radius, dem=dem, model_version=model_version,
+                             bad_pixels=bad_pixels)
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else

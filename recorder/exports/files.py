@@ -31,6 +31,7 @@ from recorder.exports.render import colour_png, frame_range
 from recorder.icd.names import format_name, iso_utc
 from recorder.icd.rosmsg import json_payload
 from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
+from recorder.radiometry.session import SessionTemperatures
 from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
@@ -98,21 +99,30 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                    range_mode: str = "session", t_min: float | None = None, t_max: float | None = None,
                    colorbar: bool = True, crs: str = "4326", ground_elevation_m: float | None = None,
                    truth: str | Path | None = None, match_radius_m: float = 3.0,
-                   dem: str | Path | None = None) -> dict[str, Any]:
+                   dem: str | Path | None = None, model_version: int | None = None,
+                   bad_pixels: str = "nan") -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
-    each PNG's text chunks either way."""
+    each PNG's text chunks either way.
+
+    Temperatures come from ``SessionTemperatures``: the model version covering each frame (the
+    latest re-parameterisation, or ``model_version``), the session's bad pixels NaN (or kept,
+    ``bad_pixels="keep"``); every file says which version and rule it used."""
     if kind not in EXPORT_KINDS:
         raise ThermcapError(f"unknown export {kind!r}; use one of {', '.join(EXPORT_KINDS)}")
     session_dir, out = Path(session_dir), Path(out_dir)
     meta = read_session_meta(session_dir)
     model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
+    try:
+        temps_of = SessionTemperatures.of(session_dir, meta, version=model_version, bad_pixels=bad_pixels)
+    except ValueError as exc:
+        raise ThermcapError(f"{session_dir}: {exc}") from None
     sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
     if kind in _MAP_KINDS:
-        return _export_map(session_dir, kind, out, model, sensor_id, meta, on_frame,
+        return _export_map(session_dir, kind, out, temps_of, sensor_id, meta, on_frame,
                            MapOptions(crs, ground_elevation_m, dem, truth, match_radius_m))
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
@@ -124,22 +134,25 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     has_temps = _has_temps(model)
     session_rng: TemperatureRange | None = None
     if frames is not None and range_mode == "session":  # one colour scale for the whole session
-        parts = [frame_range(np.asarray(model.to_celsius(f.pixels)) if has_temps else f.pixels.astype(np.float32))
-                 for f in frames]
+        parts = [frame_range(temps_of.celsius(f.index, f.pixels).finite() if has_temps
+                             else f.pixels.astype(np.float32)) for f in frames]
         if parts:
             session_rng = TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session",
                                            "°C" if has_temps else "counts")
     written, stats, refused = [], [], []
     for f in frames if frames is not None else iter_session_frames(session_dir):
+        ft = None
         try:
-            temps = np.asarray(model.to_celsius(f.pixels), dtype=np.float32) if kind != "icd" or summary else None
+            ft = temps_of.celsius(f.index, f.pixels) if kind != "icd" or summary else None
         except TemperatureUnavailable as exc:
             if kind != "icd":
                 refused.append(f"frame {f.index}: {exc}")
                 continue
-            temps = None
-        name = format_name(f.log_time, sensor_id, *_name_range(model, vendors.get(f.log_time, {}), temps))
-        desc = {"session_id": meta.get("session_id"), "frame_index": f.index, "radiometric_model": model.to_dict(),
+        temps = ft.celsius if ft is not None else None
+        name = format_name(f.log_time, sensor_id, *_name_range(ft.model if ft else model,
+                                                                vendors.get(f.log_time, {}), temps))
+        desc = {"session_id": meta.get("session_id"), "frame_index": f.index,
+                **(ft.describe() if ft is not None else {"radiometric_model": model.to_dict()}),
                 "position": positions.get(f.log_time)}
         if kind in ("celsius-tiff", "kelvin-tiff", "celsius-cog"):
             assert temps is not None  # a missing temperature was refused above
@@ -151,6 +164,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             write_temperature_tiff(path, data, units=units, description=json.dumps({**desc, "units": units}),
                                    metadata={"session_id": desc["session_id"], "frame_index": f.index,
                                              "time": iso_utc(f.log_time),
+                                             "model_version": desc.get("model_version"),
+                                             "bad_pixels": desc.get("bad_pixels"),
                                              "radiometric_model": desc["radiometric_model"]},
                                    geo_tags=geotiff_tags(pos, data.shape), position=pos, cog=kind == "celsius-cog")
         elif kind == "heatmap-png":
@@ -158,7 +173,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             if range_mode == "fixed" and t_min is not None and t_max is not None:
                 rng = TemperatureRange(t_min, t_max, "fixed")
             else:
-                rng = session_rng or frame_range(src, "frame", "°C" if temps is not None else "counts")
+                rng = session_rng or frame_range(ft.finite() if ft is not None else src, "frame",
+                                                 "°C" if temps is not None else "counts")
             path = out / f"{name}.png"
             path.write_bytes(colour_png(src, rng, palette_name, colorbar=colorbar, level=6))
         else:
@@ -167,12 +183,14 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                              byteorder="<", compression=None, metadata=None, rowsperstrip=f.pixels.shape[0])
             (out / f"{name}.json").write_bytes(f.sidecar or b"{}")
         written.append(path.name)
-        if temps is not None and summary:
-            pct = percentiles(temps, PERCENTILES)
+        if ft is not None and summary:
+            good = ft.finite()  # no statistic takes in a bad pixel
+            pct = percentiles(good, PERCENTILES)
             stats.append({"frame_index": f.index, "time": desc.get("time") or iso_utc(f.log_time), "file": path.name,
-                          "surface_temperature_mean": round(float(temps.mean()), 4),
-                          "surface_temperature_min": round(float(temps.min()), 4),
-                          "surface_temperature_max": round(float(temps.max()), 4),
+                          "model_version": ft.model_version, "bad_pixels_excluded": ft.bad_pixels,
+                          "surface_temperature_mean": round(float(good.mean()), 4),
+                          "surface_temperature_min": round(float(good.min()), 4),
+                          "surface_temperature_max": round(float(good.max()), 4),
                           **{f"surface_temperature_p{p}": round(float(v), 4) for p,
                              v in zip(PERCENTILES, pct, strict=True)},
                           "units": "degC"})
@@ -196,7 +214,8 @@ class MapOptions:
     match_radius_m: float = 3.0
 
 
-def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: str, meta: dict[str, Any],
+def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemperatures, sensor_id: str,
+                meta: dict[str, Any],
                 on_frame: Callable[[int], None] | None, opts: MapOptions) -> dict[str, Any]:
     """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
     frame as a °C GeoTIFF (``recorder.maps``): a drone image in its UTM zone; a TERRA-REF gantry
@@ -257,24 +276,25 @@ def _export_map(session_dir: Path, kind: str, out: Path, model: Any, sensor_id: 
                                f"one scale; export it with --to map-tiff)")
                 continue
             try:
-                tiles.append((f.index, fp, np.asarray(model.to_celsius(f.pixels), dtype=np.float32)))
+                tiles.append((f.index, fp, temps_of.celsius(f.index, f.pixels).celsius))
             except TemperatureUnavailable as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
             frame_times[f.index] = iso_utc(f.log_time)
         else:
             try:
-                temps = np.asarray(model.to_celsius(pixels), dtype=np.float32)
+                ft = temps_of.celsius(f.index, f.pixels)
             except TemperatureUnavailable as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
-            name = format_name(f.log_time, sensor_id, *_name_range(model, vendor, temps))
+            temps = np.rot90(ft.celsius, 3) if gantry is not None else ft.celsius  # as ``pixels`` is laid
+            name = format_name(f.log_time, sensor_id, *_name_range(ft.model, vendor, temps))
             path = out / f"{name}.map.tiff"
             write_temperature_tiff(path, temps, units="degC", geo_tags=tags,
                                    description=json.dumps({"units": "degC", **props}),
                                    metadata={"session_id": meta.get("session_id"), "frame_index": f.index,
                                              "time": iso_utc(f.log_time), "footprint": props,
-                                             "radiometric_model": model.to_dict()})
+                                             **ft.describe()})
             written.append(path.name)
         if on_frame:
             on_frame(len(features) + len(written))

@@ -62,14 +62,25 @@ def frame_range(values: np.ndarray, mode: str = "frame", units: str = "°C") -> 
     return TemperatureRange(lo, hi if hi > lo else lo + 1e-3, mode, units)
 
 
+#: Pixels without a temperature (the session's bad pixels) in a picture: magenta, off every palette.
+NO_TEMPERATURE_RGB = (255, 0, 255)
+
+
 def colour_png(values: np.ndarray, rng: TemperatureRange, palette_name: str = "ironbow", *,
                colorbar: bool = True, level: int = 1, boxes: list[list[int]] | tuple = ()) -> bytes:
     """Values (°C, or counts) as an 8-bit colour PNG on ``rng``, with ``boxes`` (inclusive pixel
     boxes, e.g. detections) outlined in white: a colour bar drawn in, for people; always the
     range in its text chunks, for programs."""
     lut = palette(palette_name)
+    missing = np.isnan(values) if values.dtype.kind == "f" else None
+    if missing is not None and missing.any():
+        values = np.where(missing, rng.lo, values)
+    else:
+        missing = None
     idx = np.clip((values - rng.lo) * (255.0 / max(rng.hi - rng.lo, 1e-6)), 0, 255).astype(np.uint8)
     rgb = np.take(lut, idx, axis=0)  # lut[idx], a third of the time (1.4 against 4.5 ms at 640x512)
+    if missing is not None:
+        rgb[missing] = NO_TEMPERATURE_RGB  # a known bad pixel: no temperature, never a colour of the scale
     h, w = values.shape
     for x0, y0, x1, y1 in boxes:
         x0, y0, x1, y1 = max(0, x0 - 1), max(0, y0 - 1), min(w - 1, x1 + 1), min(h - 1, y1 + 1)

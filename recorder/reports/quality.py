@@ -25,18 +25,17 @@ What a session cannot support is reported as not measurable, with the reason, ne
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from mcap.reader import make_reader
 
 from recorder.exceptions import ThermcapError
 from recorder.radiometry import model_from_dict
-from recorder.storage.reader import frame_files, iter_session_frames, read_session_meta
+from recorder.radiometry.session import read_bad_pixel_map
+from recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["Measurement", "QualityReport", "measure_quality"]
 
@@ -74,23 +73,6 @@ class QualityReport:
                 "flat_source": self.flat_source, "blackbody_c": self.blackbody_c,
                 "measurements": [{**asdict(m), "verdict": m.verdict} for m in self.measurements],
                 "passed": all(m.passed is not False for m in self.measurements)}
-
-
-def _bad_pixel_map(session_dir: Path) -> np.ndarray | None:
-    """The session's bad-pixel map (the bad_pixel_map.json attachment) as a boolean mask."""
-    for path in frame_files(session_dir):
-        try:
-            with open(path, "rb") as f:
-                for att in make_reader(f, validate_crcs=True).iter_attachments():
-                    if att.name.endswith("bad_pixel_map.json"):
-                        bpm = json.loads(att.data)
-                        mask = np.zeros((int(bpm["height"]), int(bpm["width"])), bool)
-                        for x, y in bpm.get("pixels", []):
-                            mask[int(y), int(x)] = True
-                        return mask
-        except (OSError, ValueError, KeyError, IndexError):
-            continue
-    return None
 
 
 class _Accumulator:
@@ -134,7 +116,7 @@ def measure_quality(session_dir: str | Path, *, blackbody_c: float | None = None
     changed: np.ndarray | None = None
     times: list[float] = []
     series_c: list[float] = []
-    bpm = _bad_pixel_map(session_dir)
+    bpm = read_bad_pixel_map(session_dir)
     n = 0
     t0 = None
     prev_index = -2
