@@ -112,7 +112,7 @@ def test_known_bad_pixels_are_nan_and_out_of_every_statistic(sim, tmp_path):
         ERRORS["celsius-tiff linear (ICD formula)"] = max(ERRORS.get("celsius-tiff linear (ICD formula)", 0), err)
         meta = json.loads(tifffile.TiffFile(path).pages[0].description)
         assert meta["bad_pixels"]["listed"] == int(mask.sum()) and meta["bad_pixels"]["rule"] == "nan"
-    rows = list(csv.DictReader(open(tmp_path / "c" / "summary.csv")))
+    rows = list(csv.DictReader((tmp_path / "c" / "summary.csv").read_text().splitlines()))
     for f, row in zip(frames, rows, strict=True):
         good = f.pixels[~mask].astype(np.float64) * 0.036 - 40
         assert abs(float(row["surface_temperature_max"]) - good.max()) < 1e-3
