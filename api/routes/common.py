@@ -52,26 +52,46 @@ class FrameModel:
                     self.overrides[name] = float(request.query_params[name])
                 except ValueError:
                     raise HTTPException(400, f"{name} must be a number") from None
+        from recorder.radiometry.session import SessionTemperatures
+
         session_dir = request.app.state.settings.root / "sessions" / row["id"]
-        self._built: dict[int, tuple[Any, dict[str, Any]]] = {}
         try:
             self.versions = read_versions(session_dir)
         except ValueError as exc:
             raise HTTPException(500, str(exc)) from None
+        self.temps = SessionTemperatures(self.base, self.versions, _bad_pixels(request, row, session_dir),
+                                         overrides=self.overrides or None)
 
     def at(self, frame: int) -> tuple[Any, dict[str, Any]]:
-        """Built once per version (a series asks for every frame of a session)."""
-        from recorder.radiometry.params import model_for_frame
+        """The model and what to say of it; built once per version (a series asks for every frame)."""
+        try:
+            model, version = self.temps.model_for(frame)
+        except ValueError as exc:
+            raise HTTPException(409, str(exc)) from None
+        return model, {"model_version": version, **({"object_parameters": self.overrides} if self.overrides else {})}
 
-        chosen = next((v.version for v in reversed(self.versions) if v.covers(frame)), 0)
-        if chosen not in self._built:
-            try:
-                model, version = model_for_frame(self.base, self.versions, frame, self.overrides)
-            except ValueError as exc:
-                raise HTTPException(409, str(exc)) from None
-            self._built[chosen] = (model, {"model_version": version,
-                                           **({"object_parameters": self.overrides} if self.overrides else {})})
-        return self._built[chosen]
+    def temperatures(self, frame: int, counts: Any) -> Any:
+        """Frame ``frame``'s °C through ``SessionTemperatures``: its model version, bad pixels NaN."""
+        try:
+            return self.temps.celsius(frame, counts)
+        except ValueError as exc:
+            raise HTTPException(409, str(exc)) from None
+
+
+def _bad_pixels(request: Request, row: dict[str, Any], session_dir: Any) -> Any:
+    """The session's bad-pixel map, read once per indexed state of the session (its fingerprint)."""
+    from recorder.radiometry.session import read_bad_pixel_map
+
+    cache = request.app.state.__dict__.setdefault("bad_pixel_maps", {})
+    key = (row["id"], row.get("fingerprint"))
+    if key not in cache:
+        if len(cache) > 256:
+            cache.clear()
+        try:
+            cache[key] = read_bad_pixel_map(session_dir)
+        except Exception:  # the folder is gone (served from a bucket): no map to apply
+            cache[key] = None
+    return cache[key]
 
 
 def frame_model(request: Request, row: dict[str, Any], frame: int) -> tuple[Any, dict[str, Any]]:

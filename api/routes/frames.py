@@ -9,7 +9,7 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from api.routes.common import CelsiusQuery, frame_model, session_row
+from api.routes.common import CelsiusQuery, FrameModel, session_row
 from api.security import require
 from archive.codecs import get_codec
 from recorder.exports.colorbar import TemperatureRange
@@ -84,10 +84,11 @@ def get_frame(request: Request, session_id: str, n: int,
         except ValueError as exc:
             raise HTTPException(409, f"frame {n}: {exc}") from None
         return _send(request, body, "image/jpeg", {**dims, "Content-Disposition": disposition})
-    model, said = frame_model(request, row, n)
+    models = FrameModel(request, row)
+    model, said = models.at(n)
     dims = {**dims, "X-Model-Version": str(said["model_version"])}
     if format == "celsius-tiff":
-        return _send(request, celsius_tiff(frame, model), "image/tiff", dims)
+        return _send(request, celsius_tiff(models.temperatures(n, frame)), "image/tiff", dims)
     if min is not None and max is not None and max <= min:
         raise HTTPException(400, "max must be greater than min")
     mode = range or ("fixed" if min is not None and max is not None else "frame")
@@ -135,9 +136,12 @@ def get_temperature(request: Request, session_id: str, n: int, x: int = Query(..
     h, w = frame.shape
     if x >= w or y >= h:
         raise HTTPException(400, f"pixel ({x}, {y}) is outside the {w}x{h} frame")
-    model, said = frame_model(request, row, n)
-    value = round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
-    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value,
+    models = FrameModel(request, row)
+    model, said = models.at(n)
+    mask = models.temps.bad_pixel_map
+    bad = mask is not None and mask.shape == frame.shape and bool(mask[y, x])
+    value = None if bad else round(float(celsius(frame[y:y + 1, x:x + 1], model)[0, 0]), 4)
+    return {"x": x, "y": y, "counts": int(frame[y, x]), "celsius": value, "bad_pixel": bad,
             "approximate": getattr(model, "approximate", False),
             "model": describe_model(model), **said}
 

@@ -15,9 +15,8 @@ from sqlalchemy import select
 
 from api import db
 from api.reading.regions import RegionReader
-from api.routes.common import CelsiusQuery, FrameModel, frame_model, session_row
+from api.routes.common import CelsiusQuery, FrameModel, session_row
 from api.security import require
-from recorder.exports.render import celsius
 from recorder.radiometry import describe_model
 from recorder.thermography.measure import (
     Line,
@@ -39,8 +38,10 @@ def _frame_temps(request: Request, session_id: str, n: int) -> tuple[dict, np.nd
     row = session_row(request, session_id)
     if n < 0 or n >= row["frames"]:
         raise HTTPException(404, f"session {row['id']} has frames 0..{row['frames'] - 1}, not {n}")
-    model, said = frame_model(request, row, n)
-    return {**said, "model": describe_model(model)}, celsius(request.app.state.frames.pixels(session_id, n), model)
+    models = FrameModel(request, row)
+    model, said = models.at(n)
+    ft = models.temperatures(n, request.app.state.frames.pixels(session_id, n))
+    return {**said, "model": describe_model(model), "bad_pixels": ft.describe()["bad_pixels"]}, ft.celsius
 
 
 def _tools(texts: list[str]) -> list:

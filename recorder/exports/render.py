@@ -13,6 +13,7 @@ from recorder.exports.colorbar import TemperatureRange, add_colorbar
 from recorder.exports.percentiles import percentiles
 from recorder.exports.png import encode_png
 from recorder.radiometry import RadiometricModel, model_from_dict
+from recorder.radiometry.session import FrameTemperatures
 
 __all__ = ["PALETTES", "celsius", "celsius_tiff", "colour_png", "frame_range", "palette", "preview_png",
            "session_model", "tiff16"]
@@ -119,11 +120,13 @@ def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
     return buf.getvalue()
 
 
-def celsius_tiff(frame: np.ndarray, model: RadiometricModel) -> bytes:
-    """A °C GeoTIFF of one frame (see ``recorder.exports.geotiff``)."""
+def celsius_tiff(temps: FrameTemperatures) -> bytes:
+    """A °C GeoTIFF of one frame's ``FrameTemperatures`` (``recorder.radiometry.session``), naming
+    the model version and the bad-pixel rule it used (see ``recorder.exports.geotiff``)."""
     from recorder.exports.geotiff import write_temperature_tiff
 
     buf = io.BytesIO()
-    write_temperature_tiff(buf, celsius(frame, model), units="degC", metadata={"radiometric_model": model.to_dict()},
-                           description=json.dumps({"units": "degC", "radiometric_model": model.to_dict()}))
+    said = temps.describe()
+    write_temperature_tiff(buf, temps.celsius, units="degC", metadata=said,
+                           description=json.dumps({"units": "degC", **said}))
     return buf.getvalue()

@@ -121,7 +121,9 @@ def test_celsius_tiff_and_temperature_use_the_model(client, source):
     t = tifffile.imread(io.BytesIO(client.get("/api/v1/sessions/s-archived/frames/5",
                                               params={"format": "celsius-tiff"}).content))
     assert t.dtype == np.float32
-    assert np.allclose(t, exp * 0.036 - 40, atol=1e-4)
+    bad = np.isnan(t)  # the session's bad pixels have no temperature (issue 37)
+    assert 0 < bad.sum() < 100
+    assert np.allclose(t[~bad], (exp * 0.036 - 40)[~bad], atol=1e-4)
     p = client.get("/api/v1/sessions/s-archived/frames/5/temperature", params={"x": 10, "y": 20}).json()
     assert p["counts"] == int(exp[20, 10])
     assert p["celsius"] == pytest.approx(exp[20, 10] * 0.036 - 40, abs=1e-3)
