@@ -61,6 +61,7 @@ class RecorderCounters:
     frames_written: int = 0
     dropped: dict[str, int] = field(default_factory=dict)
     analysis_skipped: int = 0
+    analysis_unavailable: int = 0  # frames with no temperature to analyse (a DJI layout without DJI's SDK)
     disk_dropped: int = 0  # frames the writer let go because the ring could not free space
     _lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
 

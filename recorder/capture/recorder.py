@@ -50,7 +50,7 @@ from recorder.icd.topics import (
     image_message_parts,
     sum_image_topics,
 )
-from recorder.radiometry import LinearModel, describe_model
+from recorder.radiometry import LinearModel, TemperatureUnavailable, describe_model
 from recorder.storage.layout import SessionLayout
 from recorder.storage.lock import lock_session
 from recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
@@ -93,6 +93,9 @@ class RecordingResult:
     error: str | None = None
     recovered: list[str] = field(default_factory=list)
     analysis_skipped: int = 0
+    # frames the detector cannot analyse because they have no temperature (not a fault: said why)
+    analysis_unavailable: int = 0
+    analysis_unavailable_why: str | None = None
     events: int = 0
     timing: dict[str, Any] = field(default_factory=dict)
     frames_paused: int = 0  # not recorded on purpose (`thermcap ctl pause`); not drops
@@ -113,7 +116,7 @@ class RecordingResult:
         if any(self.dropped.values()):
             out.append(f"dropped messages per topic: {self.dropped}")
         if self.analysis_skipped:
-            out.append(f"{self.analysis_skipped} frames not analysed (the detector fell behind)")
+            out.append(f"{self.analysis_skipped} frames not analysed (the detector fell behind or failed)")
         late = self.timing.get("frames_late") or 0
         if late:
             out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "
@@ -133,7 +136,9 @@ class RecordingResult:
                 "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
                 "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
                 "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
-                "analysis_skipped": self.analysis_skipped, "events": self.events, "timing": self.timing,
+                "analysis_skipped": self.analysis_skipped, "analysis_unavailable": self.analysis_unavailable,
+                "analysis_unavailable_why": self.analysis_unavailable_why, "events": self.events,
+                "timing": self.timing,
                 "frames_paused": self.frames_paused, "evicted_segments": self.evicted_segments,
                 "evicted_bytes": self.evicted_bytes,
                 **({"cameras": self.cameras} if self.cameras else {}),
@@ -242,6 +247,7 @@ class Recorder:
         self._interval_latency = LatencyHistogram()
         self._stop = threading.Event()
         self._writer_error: str | None = None
+        self._unavailable_why: str | None = None
         self._stop_seen = False  # the writer took every capture thread's stop token
         self._signals = 0
         self._session: SessionWriter | None = None
@@ -481,7 +487,8 @@ class Recorder:
             frames_captured=self.counters.frames_captured, frames_written=written,
             dropped=dict(self.counters.dropped), segments=[s.to_dict() for s in self._session.segments],
             wall_s=wall, write_latency_ms=self.latency.summary_ms(), error=error, recovered=recovered,
-            analysis_skipped=self.counters.analysis_skipped, events=len(events), timing=self.timing(),
+            analysis_skipped=self.counters.analysis_skipped, analysis_unavailable=self.counters.analysis_unavailable,
+            analysis_unavailable_why=self._unavailable_why, events=len(events), timing=self.timing(),
             frames_paused=self.frames_paused,
             evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
@@ -645,6 +652,8 @@ class Recorder:
             pixels, fut = item
             try:
                 fut.set_result(feed.detector.detect(pixels))
+            except TemperatureUnavailable as exc:  # nothing to analyse: said as such, not as a failure
+                fut.set_result(_Unanalysable(str(exc)))
             except Exception:  # a detector failure must not stop recording: the frame says skipped
                 fut.set_result(None)
 
@@ -852,6 +861,10 @@ class Recorder:
                 self.counters.analysis_skipped += 1
                 feed.analysis_skipped += 1
                 analysis, targets = _SKIPPED, []
+            elif isinstance(result, _Unanalysable):
+                self.counters.analysis_unavailable += 1
+                self._unavailable_why = result.why
+                analysis, targets = _NO_ANALYSIS, []
             else:
                 analysis, targets = result[1], [d.to_sidecar() for d in result[0]]
         return {
@@ -934,6 +947,13 @@ def _finite(value: Any, path: str, found: dict[str, str]) -> Any:
     if isinstance(value, list | tuple):
         return [_finite(v, f"{path}[{i}]", found) for i, v in enumerate(value)]
     return value
+
+@dataclass(frozen=True)
+class _Unanalysable:
+    """The detector's answer for a frame with no temperature."""
+
+    why: str
+
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
                 "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}

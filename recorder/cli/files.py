@@ -63,7 +63,12 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
             click.echo(f"error: {f['error']}", err=True)
         for f in report.truncated:
             click.echo(f"error: {f['error']}", err=True)
-    if report.failed or report.truncated or any(not r.ok for r in report.sessions):
+    # 0: every file imported (with or without temperatures); 1: a file or a session failed, said why
+    broken = [r for r in report.sessions if r.error or r.frames_dropped]
+    if not as_json:
+        for r in broken:
+            click.echo(f"error: session {r.session_id}: {'; '.join(r.problems) or r.error}", err=True)
+    if report.failed or report.truncated or broken:
         sys.exit(1)
 
 

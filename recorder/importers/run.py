@@ -94,6 +94,9 @@ def _summary(f: ImportedFrame) -> dict[str, Any]:
            "celsius": celsius, "model": describe_model(f.model)}
     if celsius is None:
         out["celsius_unavailable"] = reason
+        out["missing"] = {"temperature": reason}  # imported, counts bit-exact: only the °C is absent
+    elif celsius.get("approximate"):
+        out["missing"] = {"exact_temperature": "the approximate DJI formula (no DJI SDK backend)"}
     return out
 
 
