@@ -44,6 +44,9 @@ def test_recover_any_damaged_segment(segment, tmp_path, data):
         res = recover_segment(src)
     except McapFileError:
         return
+    if res.output.endswith(".unreadable"):  # an empty file is moved aside, never taken for a segment
+        assert cut == 0 and not src.exists()
+        return
     with open(res.output, "rb") as f:
         reader = make_reader(f)
         assert reader.get_summary().statistics.message_count == res.messages
