@@ -220,42 +220,57 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 @click.option("--project-days", type=Number(minimum=1, maximum=36500, integer=True), default=365, show_default=True)
 @click.option("--project-segment-s", type=Number(minimum=0, above=True, unit="s"), default=60.0, show_default=True,
               help="Projection: segment length (one object per segment; hdf5: one per camera-day).")
-@click.option("--markdown", is_flag=True, help="Print a Markdown table.")
+@click.option("--project-retention-days", type=Number(minimum=1, maximum=36500, integer=True), default=None,
+              help="Projection: each day's data is deleted after this many days (default: kept for the whole "
+                   "period).")
+@click.option("--markdown", is_flag=True, help="Print a Markdown table instead of the aligned one.")
 @json_option
 def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_cameras: int | None,
-          project_hours: float, project_days: int, project_segment_s: float, markdown: bool, as_json: bool) -> None:
-    """Storage cost of archived sessions per format and tier, and a fleet projection."""
-    from archive.costs import audit_sessions, load_prices, project, render_markdown
+          project_hours: float, project_days: int, project_segment_s: float, project_retention_days: int | None,
+          markdown: bool, as_json: bool) -> None:
+    """Storage cost of archived sessions per sensor and kind (continuous or stills), per format and
+    tier, with the format to keep for each and why, what was left out, and a fleet projection."""
+    from archive.costs import audit_sessions, load_prices, project, render_markdown, render_plain
     from recorder.storage.reader import list_sessions, resolve_session
 
     try:
         table = load_prices(prices)
-        dirs = [resolve_session(s, root) for s in sessions] or \
-            [d for d in list_sessions(root) if SessionLayout.of(d).manifest.exists()]
+        candidates = [resolve_session(s, root) for s in sessions] or list_sessions(root)
+        dirs = [d for d in candidates if SessionLayout.of(d).manifest.exists()]
+        left = [{"session": d.name, "why": "not archived yet (`thermcap archive " + d.name + "`); its MCAP "
+                 f"source holds {sum(p.stat().st_size for p in SessionLayout.of(d).segments()):,} bytes"}
+                for d in candidates if d not in dirs]
         if not dirs:
-            fail(f"no archived sessions under {root} (run `thermcap archive` first)")
-        report = audit_sessions(dirs, table)
+            fail(f"no archived sessions under {root} (run `thermcap archive` first)"
+                 + (f"; {len(left)} sessions are not archived yet" if left else ""))
+        report = audit_sessions(dirs, table, left)
     except ThermcapError as exc:
         fail(str(exc))
     if project_cameras:
-        bph = {k: v["bytes_per_hour"] for k, v in report["formats"].items() if v["bytes_per_hour"]}
-        # Objects follow the segmenting, not a short sample session's object count.
-        oph = {k: (1 / project_hours if k == "hdf5" else 3600 / project_segment_s) for k in bph}
-        report["projection"] = project(bph, oph, cameras=project_cameras, hours_per_day=project_hours,
-                                       days=project_days, prices=table)
+        report["projection"] = {}
+        for g in report["groups"]:
+            if g["kind"] != "continuous" or not g["hours"]:
+                continue
+            bph = {k: v["bytes"] / g["hours"] for k, v in g["formats"].items() if v["covers_every_session"]}
+            # Objects follow the segmenting, not a short sample session's object count.
+            oph = {k: (1 / project_hours if k == "hdf5" else 3600 / project_segment_s) for k in bph}
+            report["projection"][g["sensor"]] = project(bph, oph, cameras=project_cameras,
+                                                        hours_per_day=project_hours, days=project_days,
+                                                        prices=table, retention_days=project_retention_days)
     if as_json:
         click.echo(json.dumps(report, indent=2))
         return
-    click.echo(render_markdown(report))
-    if "projection" in report:
-        p = report["projection"]
-        click.echo(f"\nProjection: {p['cameras']} camera(s) x {p['hours_per_day']} h/day x {p['days']} days")
-        tiers = " | ".join(f"{table[t]['label']} $ total (storage+PUT)" for t in table)
-        click.echo(f"| format | TiB | objects | {tiers} |")
-        click.echo("|---|---|---|" + "---|" * len(table))
-        for fid, f in sorted(p["formats"].items(), key=lambda kv: kv[1]["bytes"]):
-            click.echo(f"| {fid} | {f['tib']} | {f['objects']:,} | " + " | ".join(
-                f"{f['cost'][t]['storage_total'] + f['cost'][t]['put_total']:,.2f}" for t in table) + " |")
+    click.echo(render_markdown(report) if markdown else render_plain(report))
+    for sensor, p in (report.get("projection") or {}).items():
+        click.echo(f"\nProjection for {sensor}: {p['assumes']}")
+        tier = table["s3-standard"]["label"] if "s3-standard" in table else next(iter(table))
+        key = "s3-standard" if "s3-standard" in table else next(iter(table))
+        click.echo(f"  {'format':9} {'TiB stored at end':>18} {tier + ' $/month at end':>28} "
+                   f"{tier + ' $ paid over the period':>34}")
+        for fid, f in sorted(p["formats"].items(), key=lambda kv: kv[1]["stored_bytes_at_end"]):
+            c = f["cost"][key]
+            click.echo(f"  {fid:9} {f['tib_at_end']:>18,.3f} {c['monthly_at_end']:>28,.2f} "
+                       f"{c['storage_total'] + c['put_total']:>34,.2f}")
 
 
 @click.command("archive")

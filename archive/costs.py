@@ -16,7 +16,8 @@ from typing import Any
 from archive.exceptions import ArchiveError
 from archive.manifest import load_manifest
 
-__all__ = ["DEFAULT_PRICES", "audit_sessions", "load_prices", "project", "render_markdown"]
+__all__ = ["DEFAULT_PRICES", "KINDS", "RECOMMENDATION_RULE", "audit_sessions", "load_prices", "project",
+           "render_markdown", "render_plain", "session_kind", "table_rows"]
 
 GIB = 1024**3
 
@@ -71,100 +72,177 @@ def costs(nbytes: int, objects: int, prices: dict[str, dict[str, Any]]) -> dict[
             for name, t in prices.items()}
 
 
+#: Why a kind of session gets its own figures: an hour of video and a folder of still images are
+#: different things to keep, so the audit never averages one with the other.
+KINDS = {"continuous": "recordings and imported sequences (SEQ, CSQ, raw): frames at a steady rate; "
+                       "figures per recorded hour",
+         "stills": "imported still images (R-JPEG, FLIR JPEG, single FFF or TIFF): one frame per file; "
+                   "figures per image"}
+RECOMMENDATION_RULE = ("per sensor and kind: the verified lossless format with the fewest bytes (per recorded hour "
+                       "for continuous sessions, per image for stills); the MCAP source is shown, never recommended")
+
+
+def session_kind(meta: dict[str, Any], frames: int) -> str:
+    """``stills`` where an importer made one frame of each still file, else ``continuous``."""
+    source = meta.get("source") or {}
+    if isinstance(source, dict) and source.get("source") == "import" and frames <= int(source.get("files") or 0):
+        return "stills"
+    return "continuous"
+
+
 def _session_row(session_dir: Path, prices: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    from recorder.storage.reader import read_session_meta
+
     m = load_manifest(session_dir)
     frames = m["frames"].get("timestamps_ns") or []
     src = m.get("source", {})
-    fps = (m.get("session", {}).get("sensor") or {}).get("frame_rate_hz") or 60.0
+    try:
+        meta = read_session_meta(session_dir)
+    except Exception:  # the archive alone is left: its copy of the session's record
+        meta = m.get("session", {})
+    sensor = meta.get("sensor") or m.get("session", {}).get("sensor") or {}
+    fps = sensor.get("frame_rate_hz") or 60.0
+    kind = session_kind(meta, len(frames))
     hours = ((frames[-1] - frames[0]) / 1e9 + 1 / fps) / 3600 if len(frames) > 1 else len(frames) / fps / 3600
     raw = src.get("raw_bytes", 0)
     formats: dict[str, dict[str, Any]] = {}
     for fid, e in m["formats"].items():
         formats[fid] = {"bytes": e["bytes"], "objects": e["objects"], "compression_ratio": e.get("compression_ratio"),
-                        "bytes_per_hour": round(e["bytes"] / hours) if hours else None, "verified": e["verified"],
-                        "cost": costs(e["bytes"], e["objects"], prices)}
+                        "verified": bool(e["verified"]) and not e.get("damaged")}
     if not src.get("deleted") and src.get("segments"):
         mcap_bytes = sum(s["bytes"] for s in src["segments"])
         formats["mcap"] = {"bytes": mcap_bytes, "objects": len(src["segments"]),
-                           "compression_ratio": round(raw / mcap_bytes, 4) if mcap_bytes else None,
-                           "bytes_per_hour": round(mcap_bytes / hours) if hours else None, "verified": True,
-                           "cost": costs(mcap_bytes, len(src["segments"]), prices)}
-    verified = {k: v for k, v in formats.items() if v["verified"] and k != "mcap"}
-    best = min(verified, key=lambda k: verified[k]["bytes"]) if verified else None
-    return {"session_id": m["session_id"], "sensor": (m.get("session", {}).get("sensor") or {}).get("model"),
-            "frames": len(frames), "hours": round(hours, 6), "raw_bytes": raw, "formats": formats,
-            "recommended_format": best}
+                           "compression_ratio": round(raw / mcap_bytes, 4) if mcap_bytes else None, "verified": True}
+    return {"session_id": m["session_id"], "sensor": sensor.get("model") or "unknown", "kind": kind,
+            "frames": len(frames), "hours": round(hours, 6) if kind == "continuous" else None,
+            "raw_bytes": raw, "formats": formats}
 
 
-def audit_sessions(session_dirs: list[Path], prices: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    rows = [_session_row(d, prices) for d in session_dirs]
-    by_sensor: dict[str, dict[str, Any]] = defaultdict(lambda: {"hours": 0.0, "frames": 0, "formats": defaultdict(
-        lambda: {"bytes": 0, "objects": 0})})
-    by_format: dict[str, dict[str, Any]] = defaultdict(lambda: {"bytes": 0, "objects": 0, "hours": 0.0,
-                                                                "raw_bytes": 0, "all_verified": True})
+def audit_sessions(session_dirs: list[Path], prices: dict[str, dict[str, Any]],
+                   left_out: list[dict[str, str]] | None = None) -> dict[str, Any]:
+    """Figures per (sensor, kind) group, never across groups; ``left_out`` (session, why) is
+    carried into the report, with the sessions that could not be read added to it."""
+    left = list(left_out or [])
+    rows = []
+    for d in session_dirs:
+        try:
+            rows.append(_session_row(d, prices))
+        except (ArchiveError, KeyError, ValueError) as exc:
+            left.append({"session": d.name, "why": f"its manifest cannot be read ({exc})"})
+    groups: dict[tuple[str, str], dict[str, Any]] = {}
     for r in rows:
-        s = by_sensor[r["sensor"] or "unknown"]
-        s["hours"] += r["hours"]
-        s["frames"] += r["frames"]
+        g = groups.setdefault((r["sensor"], r["kind"]), {
+            "sensor": r["sensor"], "kind": r["kind"], "sessions": 0, "frames": 0, "hours": 0.0, "raw_bytes": 0,
+            "formats": defaultdict(lambda: {"bytes": 0, "objects": 0, "sessions": 0, "all_verified": True})})
+        g["sessions"] += 1
+        g["frames"] += r["frames"]
+        g["hours"] += r["hours"] or 0.0
+        g["raw_bytes"] += r["raw_bytes"]
         for fid, f in r["formats"].items():
-            s["formats"][fid]["bytes"] += f["bytes"]
-            s["formats"][fid]["objects"] += f["objects"]
-            agg = by_format[fid]
+            agg = g["formats"][fid]
             agg["bytes"] += f["bytes"]
             agg["objects"] += f["objects"]
-            agg["hours"] += r["hours"]
-            agg["raw_bytes"] += r["raw_bytes"]
-            agg["all_verified"] &= bool(f["verified"])
-    fmt_out = {}
-    for fid, a in by_format.items():
-        fmt_out[fid] = {**a, "compression_ratio": round(a["raw_bytes"] / a["bytes"], 4) if a["bytes"] else None,
-                        "bytes_per_hour": round(a["bytes"] / a["hours"]) if a["hours"] else None,
-                        "cost": costs(a["bytes"], a["objects"], prices)}
-    candidates = {k: v for k, v in fmt_out.items() if v["all_verified"] and k != "mcap"}
-    best = min(candidates, key=lambda k: candidates[k]["bytes"]) if candidates else None
-    cheapest_tier = None
-    if best:
-        tiers = fmt_out[best]["cost"]
-        cheapest_tier = min(tiers, key=lambda t: tiers[t]["storage_per_month"])
-    return {"sessions": rows,
-            "sensors": {k: {**v, "formats": dict(v["formats"])} for k, v in by_sensor.items()},
-            "formats": fmt_out, "recommended_format": best, "cheapest_storage_tier": cheapest_tier,
-            "prices": prices, "units": "bytes; USD; storage per GiB-month; 1 GiB = 2^30 bytes"}
+            agg["sessions"] += 1
+            agg["all_verified"] &= f["verified"]
+    out_groups = []
+    for (_sensor, kind), g in sorted(groups.items()):
+        fmts = {}
+        for fid, a in g["formats"].items():
+            # a format only some of the group's sessions have is not compared with the others
+            complete = a["sessions"] == g["sessions"]
+            if kind == "continuous":
+                per = {"gib_per_recorded_hour": round(a["bytes"] / GIB / g["hours"], 4) if g["hours"] else None}
+            else:
+                per = {"bytes_per_image": round(a["bytes"] / g["frames"]) if g["frames"] else None}
+            ratio = round(g["raw_bytes"] / a["bytes"], 4) if a["bytes"] and complete else None
+            fmts[fid] = {**a, **per, "covers_every_session": complete, "compression_ratio": ratio,
+                         "cost": costs(a["bytes"], a["objects"], prices)}
+        candidates = {k: v for k, v in fmts.items() if v["all_verified"] and v["covers_every_session"] and k != "mcap"}
+        best = min(candidates, key=lambda k: candidates[k]["bytes"]) if candidates else None
+        out_groups.append({**{k: v for k, v in g.items() if k != "formats"},
+                           "hours": round(g["hours"], 6) if kind == "continuous" else None,
+                           "formats": fmts, "recommended_format": best})
+    return {"groups": out_groups, "sessions": rows, "left_out": left, "kinds": KINDS,
+            "recommendation_rule": RECOMMENDATION_RULE, "prices": prices,
+            "units": "bytes; USD; storage per GiB-month; 1 GiB = 2^30 bytes"}
 
 
 def project(bytes_per_hour: dict[str, float], objects_per_hour: dict[str, float], *, cameras: int,
-            hours_per_day: float, days: int = 365, prices: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    """N cameras, H hours a day, for ``days``: volume, the monthly bill at the end, the total paid."""
+            hours_per_day: float, days: int = 365, prices: dict[str, dict[str, Any]],
+            retention_days: int | None = None) -> dict[str, Any]:
+    """N cameras recording H hours a day for ``days``, each day's data kept ``retention_days``
+    (default: all of it, for the whole period). Assumes a steady rate of new data
+    (``cameras * hours_per_day`` recorded hours a day, at the sample's bytes per hour): what is
+    stored grows by the same amount each day until the retention starts deleting, then stays
+    flat. Gives the running monthly bill at the end of the period and the total paid over it."""
     out = {}
+    kept_days = days if retention_days is None else min(days, retention_days)
     months = days / (365 / 12)
     for fid, bph in bytes_per_hour.items():
-        total_bytes = bph * cameras * hours_per_day * days
-        objects = objects_per_hour.get(fid, 0) * cameras * hours_per_day * days
-        gib = total_bytes / GIB
+        per_day = bph * cameras * hours_per_day
+        objects_per_day = objects_per_hour.get(fid, 0) * cameras * hours_per_day
+        stored_end = per_day * kept_days
+        # GiB-days: growing for kept_days (a triangle), then flat at the retained volume
+        gib_days = (per_day * kept_days * kept_days / 2 + per_day * kept_days * (days - kept_days)) / GIB
         tiers = {}
         for name, t in prices.items():
-            # Data grows linearly, so on average half of it is stored over the period.
-            tiers[name] = {"storage_per_month_at_end": round(gib * t["storage"], 2),
-                           "storage_total": round(gib * t["storage"] * months / 2, 2),
-                           "put_total": round(objects / 1000 * t["put"], 2),
-                           "retrieve_all_once": round(gib * t["retrieval"] + _egress(t, gib), 2)}
-        out[fid] = {"bytes": round(total_bytes), "tib": round(total_bytes / 1024**4, 3), "objects": round(objects),
+            tiers[name] = {"monthly_at_end": round(stored_end / GIB * t["storage"], 2),
+                           "storage_total": round(gib_days / (365 / 12) * t["storage"], 2),
+                           "put_total": round(objects_per_day * days / 1000 * t["put"], 2),
+                           "retrieve_all_once": round(stored_end / GIB * t["retrieval"]
+                                                      + _egress(t, stored_end / GIB), 2)}
+        out[fid] = {"recorded_bytes": round(per_day * days), "stored_bytes_at_end": round(stored_end),
+                    "tib_at_end": round(stored_end / 1024**4, 3), "objects": round(objects_per_day * days),
                     "cost": tiers}
-    return {"cameras": cameras, "hours_per_day": hours_per_day, "days": days, "formats": out}
+    return {"cameras": cameras, "hours_per_day": hours_per_day, "days": days, "months": round(months, 3),
+            "retention_days": retention_days,
+            "assumes": (f"{cameras} cameras x {hours_per_day:g} h a day of new recordings every day for {days} days "
+                        f"at the sample's bytes per recorded hour; "
+                        + (f"each day's data deleted after {retention_days} days" if retention_days
+                           else "nothing deleted during the period")),
+            "formats": out}
+
+
+def table_rows(report: dict[str, Any], tier: str = "s3-standard") -> list[tuple[str, ...]]:
+    """The audit as rows (one per group and format), for the plain, Markdown and rich renderings."""
+    label = report["prices"].get(tier, {}).get("label", tier)
+    rows: list[tuple[str, ...]] = [("sensor", "kind", "format", "sessions", "per hour / per image", "ratio",
+                                    f"{label} $/month", "")]
+    for g in report["groups"]:
+        for fid, f in sorted(g["formats"].items(), key=lambda kv: kv[1]["bytes"]):
+            per = f"{f['gib_per_recorded_hour']:.2f} GiB/h" if g["kind"] == "continuous" and \
+                f.get("gib_per_recorded_hour") is not None else \
+                f"{f['bytes_per_image'] / 1e3:,.0f} KB/image" if f.get("bytes_per_image") is not None else "-"
+            note = "recommended" if fid == g["recommended_format"] else \
+                "unverified" if not f["all_verified"] else "" if f["covers_every_session"] else "not every session"
+            rows.append((g["sensor"], g["kind"], fid, str(f["sessions"]), per,
+                         f"{f['compression_ratio']:.2f}" if f["compression_ratio"] else "-",
+                         f"{f['cost'][tier]['storage_per_month']:.4f}" if tier in f["cost"] else "-", note))
+    return rows
+
+
+def render_plain(report: dict[str, Any]) -> str:
+    """An aligned table, the groups' recommendations with their rule, and what was left out."""
+    rows = table_rows(report)
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    lines = ["  ".join(c.ljust(w) if i < 3 or i == 7 else c.rjust(w) for i, (c, w) in enumerate(zip(r, widths,
+                                                                                                 strict=True))).rstrip()
+             for r in rows]
+    lines.insert(1, "  ".join("-" * w for w in widths))
+    lines.append("")
+    lines.append(f"rule: {report['recommendation_rule']}")
+    for left in report["left_out"]:
+        lines.append(f"left out: {left['session']}: {left['why']}")
+    return "\n".join(lines)
 
 
 def render_markdown(report: dict[str, Any]) -> str:
-    tiers = list(report["prices"])
-    head = "| format | bytes | objects | ratio | GiB per recorded hour | " + " | ".join(
-        report["prices"][t]["label"] + " $/month" for t in tiers) + " | PUT $ (S3 Std) | retrieve once $ (S3 Std) |"
-    lines = [f"{len(report['sessions'])} session(s); recommended format: **{report['recommended_format']}**, "
-             f"cheapest storage tier: {report['prices'].get(report['cheapest_storage_tier'] or '', {}).get('label')}",
-             "", head, "|" + "---|" * (len(tiers) + 7)]
-    for fid, f in sorted(report["formats"].items(), key=lambda kv: kv[1]["bytes"]):
-        bph = f["bytes_per_hour"] / GIB if f["bytes_per_hour"] else 0
-        lines.append(f"| {fid}{'' if f['all_verified'] else ' (unverified)'} | {f['bytes']:,} | {f['objects']} | "
-                     f"{f['compression_ratio']} | {bph:.1f} | "
-                     + " | ".join(f"{f['cost'][t]['storage_per_month']:.4f}" for t in tiers)
-                     + f" | {f['cost'].get('s3-standard', {}).get('put_once', 0):.4f} | "
-                     f"{f['cost'].get('s3-standard', {}).get('retrieve_once', 0):.4f} |")
+    rows = table_rows(report)
+    head, body = rows[0], rows[1:]
+    lines = ["| " + " | ".join(h or "note" for h in head) + " |", "|" + "---|" * len(head)]
+    lines += ["| " + " | ".join(c for c in r) + " |" for r in body]
+    lines.append("")
+    lines.append(f"Rule: {report['recommendation_rule']}.")
+    for left in report["left_out"]:
+        lines.append(f"- left out: {left['session']}: {left['why']}")
     return "\n".join(lines)

@@ -51,8 +51,10 @@ def audit(request: Request, prices: str | None = None) -> dict:
 
     if prices is not None:
         raise HTTPException(400, "custom price tables are set on the server (thermcap audit --prices), not per request")
-    dirs = [d for d in list_sessions(request.app.state.settings.root) if SessionLayout.of(d).manifest.exists()]
-    return audit_sessions(dirs, load_prices(None))
+    every = list_sessions(request.app.state.settings.root)
+    dirs = [d for d in every if SessionLayout.of(d).manifest.exists()]
+    left = [{"session": d.name, "why": "not archived yet"} for d in every if d not in dirs]
+    return audit_sessions(dirs, load_prices(None), left)
 
 
 @router.post("/api/v1/index", tags=["meta"], dependencies=[Depends(require("write"))])

@@ -74,22 +74,23 @@ def test_audit_reports_costs_and_recommends_the_smallest_verified(archived, tmp_
     r = run_cli("audit", str(archived), "--json", "--project-cameras", "4", "--project-hours", "6")
     assert r.returncode == 0, r.stderr
     rep = json.loads(r.stdout)
-    fmts = rep["formats"]
+    [group] = rep["groups"]
+    fmts = group["formats"]
     smallest = min((k for k in fmts if k != "mcap"), key=lambda k: fmts[k]["bytes"])
-    assert rep["recommended_format"] == smallest
+    assert group["recommended_format"] == smallest
     std = fmts["png16"]["cost"]["s3-standard"]
     assert std["storage_per_month"] == pytest.approx(fmts["png16"]["bytes"] / 1024**3 * 0.023, rel=1e-3)
     assert std["put_once"] == pytest.approx(4 / 1000 * 0.005)
     assert set(fmts["png16"]["cost"]) == {"s3-standard", "s3-standard-ia", "s3-glacier-ir", "s3-deep-archive", "r2",
                                           "b2"}
-    assert rep["projection"]["cameras"] == 4
+    assert next(iter(rep["projection"].values()))["cameras"] == 4
     prices = tmp_path / "p.json"
     prices.write_text(json.dumps({"s3-standard": {"storage": 1.0}}))
     rep2 = json.loads(run_cli("audit", str(archived), "--json", "--prices", str(prices)).stdout)
-    assert rep2["formats"]["png16"]["cost"]["s3-standard"]["storage_per_month"] == pytest.approx(
+    assert rep2["groups"][0]["formats"]["png16"]["cost"]["s3-standard"]["storage_per_month"] == pytest.approx(
         fmts["png16"]["bytes"] / 1024**3, rel=1e-3)
     md = run_cli("audit", str(archived), "--markdown").stdout
     assert "| png16 |" in md
-    assert "recommended format" in md
+    assert "Rule:" in md
 
 
