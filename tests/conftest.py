@@ -33,13 +33,23 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(parts[0])
 
 
-SAMPLES = Path(__file__).resolve().parents[1].parent / "shared" / "samples"
+#: The real camera files: THERMCAP_SAMPLES, or the shared/samples folder beside the checkout.
+SAMPLES = Path(os.environ.get("THERMCAP_SAMPLES") or Path(__file__).resolve().parents[1].parent / "shared"
+               / "samples").expanduser()
+SAMPLES_HOW = ("set THERMCAP_SAMPLES to a folder holding the real sample files (dji/, flir/, terraref/, each "
+               "with SOURCE.txt naming its public source), or lay shared/samples/ beside the checkout")
+
+
+def skip_without_sample(path: Path) -> None:
+    """Skip, saying how to get the files, when a sample is not here."""
+    if not path.exists():
+        pytest.skip(f"{path} is not here: {SAMPLES_HOW}")
 
 
 @pytest.fixture
 def samples() -> Path:
     if not SAMPLES.is_dir():
-        pytest.skip(f"real sample files not present at {SAMPLES} (the shared/ folder beside the checkout)")
+        pytest.skip(f"real sample files not present at {SAMPLES}: {SAMPLES_HOW}")
     return SAMPLES
 
 

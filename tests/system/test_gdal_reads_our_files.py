@@ -19,7 +19,7 @@ from recorder.exports.files import export_session
 from recorder.importers.run import import_paths
 from recorder.radiometry import model_from_dict
 from recorder.storage.reader import iter_session_frames, read_session_meta
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 if shutil.which("gdalinfo") is None:
     pytest.skip("no gdalinfo here (apt-get install gdal-bin; .ci/run does this)", allow_module_level=True)
@@ -35,7 +35,7 @@ def _info(path) -> dict:
 def duo(tmp_path_factory):
     sample = SAMPLES / "flir" / "frame_000000.fff"
     if not sample.is_file():
-        pytest.skip(f"{sample} is not here")
+        pytest.skip(f"{sample} is not here: {SAMPLES_HOW}")
     root = tmp_path_factory.mktemp("duo")
     import_paths([str(sample)], root, session="duo", analysis=False)
     return root / "sessions" / "duo"

@@ -23,7 +23,7 @@ from recorder.exports.geotiff import utm_tags, write_temperature_tiff
 from recorder.importers.run import import_paths
 from recorder.maps.footprint import footprint
 from recorder.maps.pose import CameraPose
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 pytest.importorskip("pyproj", reason="pyproj is in the geo extra")
 if shutil.which("gdalinfo") is None:
@@ -67,7 +67,7 @@ def _import(tmp_path, data: bytes, name: str):
 def test_the_h20t_sample_is_refused_and_a_nadir_copy_gets_its_footprint(tmp_path):
     sample = SAMPLES / "dji" / "DJI_H20T.jpg"
     if not sample.is_file():
-        pytest.skip(f"{sample} is not here")
+        pytest.skip(f"{sample} is not here: {SAMPLES_HOW}")
     data = sample.read_bytes()
     session = _import(tmp_path, data, "h20t.jpg")
     res = export_session(session, "footprints", tmp_path / "fp")
@@ -91,7 +91,7 @@ def test_the_h20t_sample_is_refused_and_a_nadir_copy_gets_its_footprint(tmp_path
 def test_samples_without_a_position_say_so(tmp_path, name):
     sample = SAMPLES / "dji" / name
     if not sample.is_file():
-        pytest.skip(f"{sample} is not here")
+        pytest.skip(f"{sample} is not here: {SAMPLES_HOW}")
     session = _import(tmp_path, sample.read_bytes(), name.lower())
     res = export_session(session, "footprints", tmp_path / "fp")
     assert res["features"] == 0 and "no position" in res["refused"][0]
@@ -101,7 +101,7 @@ def test_samples_without_a_position_say_so(tmp_path, name):
 def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
     binf = SAMPLES / "terraref" / "c3c21db1-deb5-481a-8180-ad447f356a95_ir.bin"
     if not binf.is_file():
-        pytest.skip(f"{binf} is not here")
+        pytest.skip(f"{binf} is not here: {SAMPLES_HOW}")
     root = tmp_path / "root"
     import_paths([str(binf)], root, session="tr", analysis=False)
     session = root / "sessions" / "tr"

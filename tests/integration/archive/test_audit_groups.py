@@ -13,7 +13,7 @@ from archive.archiver import archive_session
 from recorder.capture.recorder import Recorder
 from recorder.capture.sources.sim import SimSource
 from recorder.importers.run import import_paths
-from tests.conftest import SAMPLES, run_cli
+from tests.conftest import SAMPLES, SAMPLES_HOW, run_cli
 
 GIB = 1024**3
 
@@ -26,7 +26,7 @@ def root(tmp_path_factory):
     archive_session(root / "sessions" / "video", ["png16", "hdf5"])
     for name in ("FLIR_E40.jpg", "FLIR_T640.jpg"):
         if not (SAMPLES / "flir" / name).is_file():
-            pytest.skip(f"{SAMPLES / 'flir' / name} is not here (THERMCAP_SAMPLES, or shared/samples)")
+            pytest.skip(f"{SAMPLES / 'flir' / name} is not here: {SAMPLES_HOW}")
     import_paths([str(SAMPLES / "flir" / "FLIR_E40.jpg")], root, session="stills", analysis=False)
     archive_session(root / "sessions" / "stills", ["png16", "hdf5"])
     Recorder(SimSource(width=64, height=48, frames=10, paced=False, seed=3), root, session_id="pending",

@@ -25,7 +25,7 @@ from recorder.radiometry.base import model_from_dict
 from recorder.radiometry.params import add_version
 from recorder.radiometry.session import read_bad_pixel_map
 from recorder.storage.reader import iter_session_frames, read_session_meta
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 flyr = pytest.importorskip("flyr", reason="flyr is a test dependency (pip install 'thermcap[test]')")
 FLIR = ["FLIR_T640.jpg", "FLIR_E40.jpg"]
@@ -52,7 +52,7 @@ def flir_root(tmp_path_factory):
     root = tmp_path_factory.mktemp("flir")
     for name in FLIR:
         if not (SAMPLES / "flir" / name).is_file():
-            pytest.skip(f"{SAMPLES / 'flir' / name} is not here (THERMCAP_SAMPLES, or shared/samples)")
+            pytest.skip(f"{SAMPLES / 'flir' / name} is not here: {SAMPLES_HOW}")
         import_paths([str(SAMPLES / "flir" / name)], root, session=name.split(".")[0].lower().replace("_", "-"),
                      analysis=False)
     return root

@@ -56,11 +56,11 @@ def test_every_number_is_the_counts_own_and_verify_holds(reported):
 def test_a_real_flir_image_holds_after_a_reparameterisation(tmp_path):
     """FLIR_T640 (Planck): a report names model version 0; after emissivity 0.8 is recorded as
     version 1 it still verifies, and a new report names version 1 and other temperatures."""
-    from tests.conftest import SAMPLES
+    from tests.conftest import SAMPLES, SAMPLES_HOW
 
     sample = SAMPLES / "flir" / "FLIR_T640.jpg"
     if not sample.is_file():
-        pytest.skip(f"{sample} is not here")
+        pytest.skip(f"{sample} is not here: {SAMPLES_HOW}")
     assert _run("import", str(sample), "--root", str(tmp_path), "--session", "t640").exit_code == 0
     r = _run("report", "inspection", "t640", "--root", str(tmp_path), "--out", str(tmp_path / "a"), "--json")
     assert r.exit_code == 0, r.output

@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 
 from recorder.importers.run import import_paths
-from tests.conftest import SAMPLES, ApiServer
+from tests.conftest import SAMPLES, SAMPLES_HOW, ApiServer
 from tests.support.cdp import Browser
 
 
@@ -16,7 +16,7 @@ from tests.support.cdp import Browser
 def dji_server(tmp_path_factory):
     sample = SAMPLES / "dji" / "DJI_H20T.jpg"
     if not sample.is_file():
-        pytest.skip(f"{sample} is not here")
+        pytest.skip(f"{sample} is not here: {SAMPLES_HOW}")
     root = tmp_path_factory.mktemp("djiroot")
     import_paths([str(sample)], root, session="h20t", dji_sdk=None)
     s = ApiServer(root)

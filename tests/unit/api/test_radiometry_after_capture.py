@@ -16,7 +16,7 @@ from api.app import create_app
 from api.settings import Settings
 from recorder.cli import cli
 from recorder.importers.run import import_paths
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 flyr = pytest.importorskip("flyr", reason="flyr is a test dependency (pip install 'thermcap[test]')")
 
@@ -48,7 +48,7 @@ def root(tmp_path_factory):
     root = tmp_path_factory.mktemp("radio")
     for name in SAMPLE_FILES:
         if not (SAMPLES / "flir" / name).is_file():
-            pytest.skip(f"{SAMPLES / 'flir' / name} is not here")
+            pytest.skip(f"{SAMPLES / 'flir' / name} is not here: {SAMPLES_HOW}")
         import_paths([str(SAMPLES / "flir" / name)], root, session=name.split(".")[0].lower().replace("_", "-"),
                      analysis=False)
     dji = SAMPLES / "dji" / "M30T_DJI_0001_R.JPG"

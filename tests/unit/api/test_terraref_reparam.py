@@ -16,12 +16,12 @@ from fastapi.testclient import TestClient
 from api.app import create_app
 from api.settings import Settings
 from recorder.importers.run import import_paths
-from tests.conftest import SAMPLES
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 
 def test_phytooracle_parameters_through_the_api(tmp_path):
     if not (SAMPLES / "terraref").is_dir():
-        pytest.skip(f"real sample files not present at {SAMPLES} (the shared/ folder beside the checkout)")
+        pytest.skip(f"real sample files not present at {SAMPLES}: {SAMPLES_HOW}")
     ref = json.loads((SAMPLES / "terraref" / "reference_temperatures_derived.json").read_text())[
         "phytooracle_flir2tif_s17_variant (T=shutter temp, D=3.778m)"]
     import_paths([str(SAMPLES / "terraref")], tmp_path, session="gantry", analysis=False)

@@ -5,14 +5,12 @@ with the reason instead of decoding to other numbers."""
 from __future__ import annotations
 
 import glob
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from archive import rans, tpred_key
-
-SAMPLES = Path(__file__).resolve().parents[4] / "shared" / "samples"
+from tests.conftest import SAMPLES
 
 
 @pytest.mark.parametrize("values", [
