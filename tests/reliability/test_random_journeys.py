@@ -102,6 +102,7 @@ class Journeys(RuleBasedStateMachine):
         self.truth: dict[tuple[str, int], str] = {}  # (session, time) -> pixel sha256, as first recorded
         self.readable: set[tuple[str, int]] = set()
         self.local: set[tuple[str, int]] = set()  # readable from this root (what its API can serve)
+        self.segment_of: dict[tuple[str, int], str] = {}  # the segment a frame was recorded in
         self.n = 0
         self.last = ""
         STATS["sequences"] += 1
@@ -120,7 +121,11 @@ class Journeys(RuleBasedStateMachine):
         seen: set[tuple[str, int]] = set()
         local: set[tuple[str, int]] = set()
         for s in self.sessions():
-            here = [_segment_frames(seg) for seg in sorted(s.glob("[0-9][0-9][0-9][0-9].mcap"))]
+            here = []
+            for seg in sorted(s.glob("[0-9][0-9][0-9][0-9].mcap")):
+                here.append(_segment_frames(seg))
+                for t in here[-1]:
+                    self.segment_of.setdefault((s.name, t), seg.name)
             here += list(_archived_frames(s).values())
             depot = self.depot / "sessions" / s.name
             there = [_segment_frames(seg) for seg in sorted(depot.glob("[0-9][0-9][0-9][0-9].mcap"))] \
@@ -143,9 +148,18 @@ class Journeys(RuleBasedStateMachine):
     def command_done(self, name: str) -> None:
         """After a command (not a fault): nothing readable before it is unreadable now."""
         now, self.local = self.observe()
-        lost = self.readable - now
+        lost = self.readable - now - self.reported_lost()
         assert not lost, f"{name} made {len(lost)} frames unreadable, e.g. {sorted(lost)[:3]}"
         self.readable = now
+
+    def reported_lost(self) -> set[tuple[str, int]]:
+        """Frames a command reported gone by name: the ring's evictions, segment by segment, in
+        ROOT/eviction.log (the ring deletes by design, and says what)."""
+        log = self.root / "eviction.log"
+        if not log.is_file():
+            return set()
+        gone = {(e["session"], e["segment"]) for e in map(json.loads, log.read_text().splitlines()) if "segment" in e}
+        return {k for k, seg in self.segment_of.items() if (k[0], seg) in gone}
 
     def fault_done(self) -> None:
         self.readable, self.local = self.observe()
