@@ -16,8 +16,9 @@ the depot, or any archive format's files decoded by that format's reader). The i
 - a recording that returned says how many frames it wrote, and exactly those are readable;
 - ``serve`` lists and serves bit-exact every readable frame of every session it indexes.
 
-THERMCAP_JOURNEYS=N runs N random journeys beyond the fixed seeds (default 3; the long form,
-e.g. 200, runs behind that variable). The figures (sequences and steps) are printed at the end.
+The default run is the fixed, derandomized journey set (the same every run, so a failure in CI
+reproduces); THERMCAP_JOURNEYS=N adds N fresh random sets (the long form, e.g. 50). The
+figures (sequences and steps) are printed at the end.
 """
 
 from __future__ import annotations
@@ -62,7 +63,7 @@ def _segment_frames(path: Path) -> dict[int, str]:
     return out
 
 
-def _archived_frames(session: Path) -> dict[str, dict[int, str]]:
+def _archived_frames(session: Path, offered: bool = False) -> dict[str, dict[int, str]]:
     """Per archive format on disk: (time -> pixel sha256) its files decode to, file by file."""
     from archive.formats import get_format
 
@@ -74,6 +75,8 @@ def _archived_frames(session: Path) -> dict[str, dict[int, str]]:
     times = m.get("frames", {}).get("timestamps_ns") or []
     out: dict[str, dict[int, str]] = {}
     for fid, entry in m.get("formats", {}).items():
+        if offered and (not entry.get("verified") or entry.get("damaged")):
+            continue  # a copy the manifest does not offer: it keeps frames, but serve does not use it
         fdir = session / "archive" / fid
         if not fdir.is_dir():
             continue
@@ -126,11 +129,12 @@ class Journeys(RuleBasedStateMachine):
                 here.append(_segment_frames(seg))
                 for t in here[-1]:
                     self.segment_of.setdefault((s.name, t), seg.name)
-            here += list(_archived_frames(s).values())
+            offered = here + list(_archived_frames(s, offered=True).values())  # what serve may use
+            here = here + list(_archived_frames(s).values())
             depot = self.depot / "sessions" / s.name
             there = [_segment_frames(seg) for seg in sorted(depot.glob("[0-9][0-9][0-9][0-9].mcap"))] \
                 if depot.is_dir() else []
-            for copies, into in ((here, local), (there, None)):
+            for copies, into in ((here, None), (offered, local), (there, None)):
                 for copy in copies:
                     for t, sha in copy.items():
                         key = (s.name, t)
@@ -354,7 +358,9 @@ class Journeys(RuleBasedStateMachine):
         assert self.readable <= set(self.truth)
 
 
-RANDOM = int(os.environ.get("THERMCAP_JOURNEYS", "3"))
+#: Fresh random journey sets beyond the fixed (derandomized) ones. The default run keeps to the
+#: fixed sets, so a CI failure is always reproducible; THERMCAP_JOURNEYS=N adds N random sets.
+RANDOM = int(os.environ.get("THERMCAP_JOURNEYS", "0"))
 
 
 @pytest.mark.parametrize("which", ["fixed", *[f"random-{k}" for k in range(RANDOM)]])
