@@ -15,7 +15,6 @@ uploaded again from a verified local copy. Each repaired copy is verified again.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import tempfile
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from archive.archiver import build_format
-from archive.blobs import BlobStore
+from archive.blobs import BlobStore, stored_sha256
 from archive.exceptions import ArchiveError
 from archive.extras import write_extras
 from archive.formats import get_format
@@ -162,15 +161,13 @@ def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, str]:
 
 
 def _check_object(store: BlobStore, key: str, sha256: str) -> str | None:
-    h = hashlib.sha256()
     try:
-        for piece in store.iter_bytes(key):
-            h.update(piece)
-    except FileNotFoundError:
-        return "missing from the store"
+        got = stored_sha256(store, key)
     except Exception as exc:  # a network or store error is reported, not taken for damage-free
         return f"cannot be read ({type(exc).__name__}: {exc})"
-    return None if h.hexdigest() == sha256 else "sha256 differs from the manifest"
+    if got is None:
+        return "missing from the store"
+    return None if got == sha256 else "sha256 differs from the manifest"
 
 
 def _repair(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, store: BlobStore | None,
