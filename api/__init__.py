@@ -13,11 +13,11 @@ __all__ = ["Settings", "create_app"]
 
 def __getattr__(name: str) -> Any:
     if name == "create_app":
-        from api.app import create_app
+        from thermcap.api.app import create_app
 
         return create_app
     if name == "Settings":
-        from api.settings import Settings
+        from thermcap.api.settings import Settings
 
         return Settings
     raise AttributeError(f"module 'api' has no attribute {name!r}")

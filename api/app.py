@@ -13,19 +13,19 @@ from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
-from api.db import make_engine, migrate
-from api.exceptions import FrameNotFound, FrameUnavailable
-from api.fast_frames import FrameFastPath
-from api.indexing import index_root
-from api.jobs.runner import JobRunner
-from api.reading.frames import FrameReader
-from api.reading.regions import RegionReader
-from api.security import AuthGate, BodyLimit
-from api.settings import Settings
-from api.storage import make_store
-from api.verified_files import FileVerifier
-from recorder import __version__
-from recorder.radiometry import TemperatureUnavailable
+from thermcap.api.db import make_engine, migrate
+from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
+from thermcap.api.fast_frames import FrameFastPath
+from thermcap.api.indexing import index_root
+from thermcap.api.jobs.runner import JobRunner
+from thermcap.api.reading.frames import FrameReader
+from thermcap.api.reading.regions import RegionReader
+from thermcap.api.security import AuthGate, BodyLimit
+from thermcap.api.settings import Settings
+from thermcap.api.storage import make_store
+from thermcap.api.verified_files import FileVerifier
+from thermcap.recorder import __version__
+from thermcap.recorder.radiometry import TemperatureUnavailable
 
 __all__ = ["create_app"]
 
@@ -154,7 +154,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                      "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui
+    from thermcap.api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui
 
     for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, ui):
         app.include_router(module.router)

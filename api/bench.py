@@ -34,11 +34,11 @@ UNARCHIVED = "bench-mcap"  # the session left as recorded
 
 
 def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[dict[str, Any]]:
-    from api.db import make_engine
-    from api.indexing import index_root
-    from archive.archiver import archive_session
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
+    from thermcap.api.db import make_engine
+    from thermcap.api.indexing import index_root
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     base = Path(tempfile.mkdtemp(prefix="thermcap-bench-api-"))
     rows = []
@@ -49,7 +49,7 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
         Recorder(SimSource(frames=frames, paced=False, seed=6), base, session_id=UNARCHIVED,
                  recover_leftovers=False).run()
         engine = make_engine(f"sqlite:///{base / 'index.sqlite'}")
-        from api.db import migrate
+        from thermcap.api.db import migrate
 
         migrate(engine)
         index_root(engine, base)
@@ -61,7 +61,7 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
             s.bind(("127.0.0.1", 0))
             port = s.getsockname()[1]
         # no access log, as nginx here (access_log off): the same work on both sides
-        proc = subprocess.Popen([sys.executable, "-m", "recorder", "serve", "--root", str(base), "--port", str(port),
+        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(base), "--port", str(port),
                                  "--no-access-log"],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         url = f"http://127.0.0.1:{port}"
@@ -138,7 +138,7 @@ def _static_copies(url: str, base: Path, frames: int) -> Path:
 
 
 def _start_nginx(docroot: Path, base: Path) -> Any:
-    from api.bench_nginx import Nginx, find_nginx
+    from thermcap.api.bench_nginx import Nginx, find_nginx
 
     if find_nginx() is None:
         return None
@@ -181,7 +181,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 
 
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
-    from api.reading.zip_index import read_zip_file
+    from thermcap.api.reading.zip_index import read_zip_file
 
     zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
     spans = [(z, int(off), int(n)) for z, e in ((z, read_zip_file(z)) for z in zips)

@@ -35,11 +35,11 @@ FLEET_CAMERA_HOURS_A_YEAR = 100 * 8 * 365
 def _index_bytes(tmp: Path) -> dict[str, Any]:
     import sqlite3
 
-    from api.db import make_engine, migrate
-    from api.indexing import index_root
-    from archive.archiver import archive_session
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.indexing import index_root
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     root = tmp / "real"
     n = 600
@@ -91,7 +91,7 @@ def _fresh_postgres(url: str) -> tuple[str, Any]:
 def _fill(engine: Any, sessions: int, frames: int, seed: int = 7) -> float:
     from sqlalchemy import insert
 
-    from api import db
+    from thermcap.api import db
 
     rng = random.Random(seed)
     t0 = 1_800_000_000_000_000_000
@@ -147,9 +147,9 @@ def _p50(fn: Any, n: int = 30) -> float:
 def bench_index(sessions: int = 100_000, frames: int = 10_000_000, db_url: str | None = None) -> dict[str, Any]:
     from fastapi.testclient import TestClient
 
-    from api.app import create_app
-    from api.db import make_engine, migrate
-    from api.settings import Settings
+    from thermcap.api.app import create_app
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.settings import Settings
 
     out: dict[str, Any] = {}
     with tempfile.TemporaryDirectory(prefix="thermcap-bench-index-") as tmp_s:

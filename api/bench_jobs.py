@@ -28,12 +28,12 @@ def _pin_process(core: int) -> int:
 
 def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...] = ("png16", "tiff-lzw", "hdf5"),
                workdir: str | None = None, segment_s: float = 1.0, pin: bool = True) -> dict[str, Any]:
-    from api.db import make_engine, migrate
-    from api.jobs.dask_jobs import DaskJobs, TaskConfig
-    from api.jobs.worker import Worker
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
-    from recorder.storage.segments import SegmentPolicy
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.jobs.dask_jobs import DaskJobs, TaskConfig
+    from thermcap.api.jobs.worker import Worker
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
+    from thermcap.recorder.storage.segments import SegmentPolicy
 
     n = int(seconds * 60)
     out: dict[str, Any] = {"sessions": sessions, "seconds_each": seconds, "frames_each": n, "formats": list(formats),
@@ -43,7 +43,7 @@ def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...
         for k in range(sessions):
             Recorder(SimSource(width=640, height=512, frames=n, paced=False, seed=k), pristine, session_id=f"b{k}",
                      analysis=False, recover_leftovers=False, policy=SegmentPolicy(max_duration_s=segment_s)).run()
-        from recorder.storage.reader import session_segments
+        from thermcap.recorder.storage.reader import session_segments
 
         out["segments_each"] = len(session_segments(pristine / "sessions" / "b0"))
         for workers in (1, 2):

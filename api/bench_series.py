@@ -32,17 +32,17 @@ def bench_series(seconds: float = 60.0, tool: str = "box:300,200,339,239", *, th
                  workdir: str | None = None) -> dict[str, Any]:
     from sqlalchemy import select
 
-    from api import db
-    from api.db import make_engine, migrate
-    from api.indexing import index_session
-    from api.reading.frames import FrameReader
-    from api.reading.regions import RegionReader
-    from archive.archiver import DEFAULT_FORMATS, archive_session
-    from archive.blobs import open_store
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
-    from recorder.exports.render import session_model
-    from recorder.thermography.measure import parse_tool
+    from thermcap.api import db
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.indexing import index_session
+    from thermcap.api.reading.frames import FrameReader
+    from thermcap.api.reading.regions import RegionReader
+    from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session
+    from thermcap.archive.blobs import open_store
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
+    from thermcap.recorder.exports.render import session_model
+    from thermcap.recorder.thermography.measure import parse_tool
 
     n = int(seconds * 60)
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:

@@ -11,15 +11,15 @@ from typing import Any
 
 import click
 
-from recorder.cli.options import PORT, Number, fail, json_option, root_option
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["index", "jobs", "on_archived", "serve", "upload"]
 
 
 @click.command()
 @root_option
-@click.option("-h", "--host", default="127.0.0.1", show_default=True,
+@click.option("-H", "--host", default="127.0.0.1", show_default=True,
               help="Interface to bind; 0.0.0.0 exposes the service to the network (set tokens first).")
 @click.option("-p", "--port", type=PORT, default=8000, show_default=True, help="0 picks a free port.")
 @click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=1, show_default=True)
@@ -31,8 +31,8 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
     """Serve the data root over HTTP (catalog, frames, exports, archives, browser view)."""
     import os
 
-    from api.app import create_app
-    from api.settings import Settings
+    from thermcap.api.app import create_app
+    from thermcap.api.settings import Settings
 
     os.environ["THERMCAP_ROOT"] = root  # the workers build their own app from the environment
     try:
@@ -56,8 +56,8 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
     import uvicorn
 
     if workers > 1:
-        uvicorn.run("api.app:create_app", factory=True, host=host, port=port, workers=workers, log_level="info",
-                    access_log=access_log)
+        uvicorn.run("thermcap.api.app:create_app", factory=True, host=host, port=port, workers=workers,
+                    log_level="info", access_log=access_log)
     else:
         uvicorn.run(create_app(settings), host=host, port=port, log_level="info", access_log=access_log)
 
@@ -71,10 +71,10 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
     """Index (or re-index) the sessions under ROOT for the API; idempotent."""
     from sqlalchemy.exc import SQLAlchemyError
 
-    from api.db import make_engine, migrate
-    from api.indexing import index_root
-    from api.settings import Settings
-    from api.storage import make_store
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.indexing import index_root
+    from thermcap.api.settings import Settings
+    from thermcap.api.storage import make_store
 
     settings = Settings(root=Path(root_arg or root))
     try:
@@ -96,7 +96,7 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
 
 def index_db_problem(settings: Any, exc: Exception) -> str:
     """One line for an index database that cannot be used, naming it (never its password)."""
-    from api.settings import _redact
+    from thermcap.api.settings import _redact
 
     orig = getattr(exc, "orig", None) or exc
     why = str(orig).splitlines()[0] if str(orig) else type(orig).__name__
@@ -114,9 +114,9 @@ def index_db_problem(settings: Any, exc: Exception) -> str:
 @json_option
 def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
     """Copy verified archives to the configured S3 store (THERMCAP_S3_BUCKET, ...)."""
-    from api.settings import Settings
-    from api.storage import make_store, upload_archive
-    from recorder.storage.reader import resolve_session
+    from thermcap.api.settings import Settings
+    from thermcap.api.storage import make_store, upload_archive
+    from thermcap.recorder.storage.reader import resolve_session
 
     settings = Settings(root=Path(root))
     if not settings.s3_bucket:
@@ -134,9 +134,9 @@ def upload(sessions: tuple[str, ...], root: str, as_json: bool) -> None:
 
 def on_archived(session_dir: Path, root: Path) -> None:
     """Hook run by ``thermcap archive`` once a session verified: index it right away."""
-    from api.db import make_engine, migrate
-    from api.indexing import index_session
-    from api.settings import Settings
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.indexing import index_session
+    from thermcap.api.settings import Settings
 
     engine = make_engine(Settings(root=Path(root)).db_url)
     migrate(engine)
@@ -152,7 +152,7 @@ def on_archived(session_dir: Path, root: Path) -> None:
 @json_option
 def bench_api_cmd(frames: int, n_requests: int, clients: int, as_json: bool) -> None:
     """Frames/s and p50/p99 over real HTTP with concurrent clients; export MB/s; beside disk reads."""
-    from api.bench import bench_api, print_table
+    from thermcap.api.bench import bench_api, print_table
 
     rows = bench_api(frames, n_requests, clients)
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
@@ -170,7 +170,7 @@ def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, format
                    as_json: bool) -> None:
     """The same sessions archived as Dask tasks (a task per segment) on one worker and on two: the
     scaling, and a capacity model."""
-    from api.bench_jobs import bench_jobs
+    from thermcap.api.bench_jobs import bench_jobs
 
     res = bench_jobs(sessions, seconds, tuple(f for f in formats.split(",") if f), segment_s=segment_seconds, pin=pin)
     if as_json:
@@ -191,7 +191,7 @@ def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, format
 @json_option
 def bench_index_cmd(sessions: int, frames: int, db_url: str | None, as_json: bool) -> None:
     """Index bytes per camera-hour; a catalog page and a frame search at fleet size, p50."""
-    from api.bench_index import bench_index, print_table
+    from thermcap.api.bench_index import bench_index, print_table
 
     res = bench_index(sessions, frames, db_url)
     click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
@@ -204,7 +204,7 @@ def bench_index_cmd(sessions: int, frames: int, db_url: str | None, as_json: boo
 def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
     """A region's series over an archived session (whole frame from the summary, a box from its
     strips) against decoding every frame, in one run; exits 1 if the ways disagree."""
-    from api.bench_series import bench_series, print_table
+    from thermcap.api.bench_series import bench_series, print_table
 
     res = bench_series(seconds, tool)
     click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
@@ -235,11 +235,11 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
     tasks: one per segment, in parallel, then a finalize per session."""
     import time as _time
 
-    from api.db import make_engine, migrate
-    from api.jobs.dask_jobs import DaskJobs, TaskConfig
-    from api.jobs.worker import Worker
-    from api.settings import Settings
-    from api.storage import make_store
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.jobs.dask_jobs import DaskJobs, TaskConfig
+    from thermcap.api.jobs.worker import Worker
+    from thermcap.api.settings import Settings
+    from thermcap.api.storage import make_store
 
     settings = Settings(root=Path(root))
     engine = make_engine(settings.db_url)
@@ -289,8 +289,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
        include_protected: bool, as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
-    from api.jobs.retention import gc_sessions
-    from api.settings import Settings
+    from thermcap.api.jobs.retention import gc_sessions
+    from thermcap.api.settings import Settings
 
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")
@@ -304,7 +304,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
         except ValueError:
             fail(f"--max-bytes: {max_bytes!r} is not a size like 500G")
     req = bool(settings.s3_bucket) if require_upload is None else require_upload
-    from api.storage import make_store
+    from thermcap.api.storage import make_store
 
     store = make_store(settings) if settings.s3_bucket else None
     try:
@@ -351,14 +351,14 @@ def watch(inbox: str, root: str, once: bool, interval: float, settle: float, arc
     to quarantine/."""
     import time as _time
 
-    from api.jobs.inbox import InboxBusy, process_inbox
+    from thermcap.api.jobs.inbox import InboxBusy, process_inbox
 
     fmts = [f.strip() for f in formats.split(",") if f.strip()] if archive else None
     log = (lambda m: None) if as_json else (lambda m: click.echo(m, err=True))
     bucket_inbox: Callable[[], Any] | None = None
     if inbox.startswith("s3://"):
-        from api.jobs.bucket_inbox import parse_bucket_url, process_bucket_inbox
-        from archive.blobs import open_store
+        from thermcap.api.jobs.bucket_inbox import parse_bucket_url, process_bucket_inbox
+        from thermcap.archive.blobs import open_store
 
         try:
             bucket, prefix = parse_bucket_url(inbox)
@@ -404,9 +404,9 @@ def jobs(root: str, state: str | None, kind: str | None, session_id: str | None,
     workers' archive tasks, with attempts, the worker that ran them and why one failed."""
     from sqlalchemy.exc import SQLAlchemyError
 
-    from api.db import make_engine, migrate
-    from api.jobs.records import list_jobs
-    from api.settings import Settings
+    from thermcap.api.db import make_engine, migrate
+    from thermcap.api.jobs.records import list_jobs
+    from thermcap.api.settings import Settings
 
     settings = Settings(root=Path(root))
     try:

@@ -55,15 +55,15 @@ import tifffile
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
-from api import db
-from api.reading.mcap_frames import McapFrames
-from api.reading.zip_index import ArchiveLocations
-from api.security import given_token, scopes_for_token
-from archive.codecs import decode_up_png, get_codec
-from archive.formats.base import locate
-from archive.formats.tiff_lzw import decode_strip
-from archive.frame_summary import FrameSummary
-from recorder.exceptions import McapFileError
+from thermcap.api import db
+from thermcap.api.reading.mcap_frames import McapFrames
+from thermcap.api.reading.zip_index import ArchiveLocations
+from thermcap.api.security import given_token, scopes_for_token
+from thermcap.archive.codecs import decode_up_png, get_codec
+from thermcap.archive.formats.base import locate
+from thermcap.archive.formats.tiff_lzw import decode_strip
+from thermcap.archive.frame_summary import FrameSummary
+from thermcap.recorder.exceptions import McapFileError
 
 __all__ = ["FrameFastPath"]
 

@@ -23,16 +23,17 @@ from typing import Any
 from sqlalchemy import delete, insert, select
 from sqlalchemy.engine import Engine
 
-from api import db
-from recorder.exceptions import McapFileError
-from recorder.icd.quality import graded_contrast
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import TOPIC_METADATA
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import holder
-from recorder.storage.reader import list_sessions, read_session_meta, session_segments
+from thermcap.api import db
+from thermcap.api.reading.zip_index import ZIPPED_FORMATS, read_zip_file
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.icd.quality import graded_contrast
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import TOPIC_METADATA
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import holder
+from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
-__all__ = ["ZIPPED_FORMATS", "IndexReport", "fingerprint", "index_root", "index_session"]
+__all__ = ["IndexReport", "fingerprint", "index_root", "index_session"]
 
 
 @dataclass
@@ -48,9 +49,6 @@ class IndexReport:
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
-
-ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
-
 
 #: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
 INDEX_RULES_VERSION = 4  # 2: frames with no graded target have no grade; 3: the frame summary; 4: no frame_blobs
@@ -81,7 +79,6 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]])
     """The sidecars of a zipped archive, in session order, from its JSON entries. Where each frame
     sits is not copied into the index: the ZIP's own central directory says it
     (``api.reading.zip_index``)."""
-    from api.reading.zip_index import read_zip_file
 
     sidecars = []
     for rec in files:
@@ -99,7 +96,7 @@ def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None) ->
     readable summary hides only itself (named in ``problems``), never the rest of the session."""
     from mcap.reader import make_reader
 
-    from recorder.storage.chunks import SegmentIndex, message_records, read_chunk
+    from thermcap.recorder.storage.chunks import SegmentIndex, message_records, read_chunk
 
     out, segs = [], []
     for seg in files:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from api.settings import Settings
-from archive.blobs import BlobStore, open_store, upload_archive
+from thermcap.api.settings import Settings
+from thermcap.archive.blobs import BlobStore, open_store, upload_archive
 
 __all__ = ["BlobStore", "make_store", "upload_archive"]
 

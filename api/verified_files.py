@@ -16,8 +16,8 @@ import threading
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
-from api.storage import BlobStore
-from archive.manifest import file_sha256
+from thermcap.api.storage import BlobStore
+from thermcap.archive.manifest import file_sha256
 
 __all__ = ["DamagedWhileServing", "FileVerifier", "verified_stream"]
 

@@ -13,9 +13,11 @@ from typing import Any
 __all__ = ["DEFAULT_FORMATS", "archive_session", "get_codec", "get_format", "load_manifest", "scrub_root",
            "scrub_session", "verify_session"]
 
-_WHERE = {"DEFAULT_FORMATS": "archive.archiver", "archive_session": "archive.archiver", "get_codec": "archive.codecs",
-          "get_format": "archive.formats", "load_manifest": "archive.manifest", "scrub_root": "archive.scrub",
-          "scrub_session": "archive.scrub", "verify_session": "archive.verify"}
+_WHERE = {"DEFAULT_FORMATS": "thermcap.archive.archiver", "archive_session": "thermcap.archive.archiver",
+          "get_codec": "thermcap.archive.codecs",
+          "get_format": "thermcap.archive.formats", "load_manifest": "thermcap.archive.manifest",
+          "scrub_root": "thermcap.archive.scrub",
+          "scrub_session": "thermcap.archive.scrub", "verify_session": "thermcap.archive.verify"}
 
 
 def __getattr__(name: str) -> Any:

@@ -20,14 +20,14 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from archive.codecs import library_versions
-from archive.evidence import copy_problems, extras_problems, local_cover
-from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.extras import ExtrasWriter
-from archive.fanout import fan_out
-from archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
-from archive.frame_summary import SUMMARY_NAME, SummaryBuilder
-from archive.manifest import (
+from thermcap.archive.codecs import library_versions
+from thermcap.archive.evidence import copy_problems, extras_problems, local_cover
+from thermcap.archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
+from thermcap.archive.extras import ExtrasWriter
+from thermcap.archive.fanout import fan_out
+from thermcap.archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
+from thermcap.archive.frame_summary import SUMMARY_NAME, SummaryBuilder
+from thermcap.archive.manifest import (
     archive_dir,
     file_sha256,
     frame_sha256,
@@ -37,14 +37,14 @@ from archive.manifest import (
     save_manifest,
     sidecar_sha256,
 )
-from archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest
-from archive.source_pass import SourcePass
-from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
-from recorder.storage.ring import load_windows
-from recorder.storage.rosbag2 import write_bag_metadata
-from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
+from thermcap.archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest
+from thermcap.archive.source_pass import SourcePass
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
+from thermcap.recorder.storage.ring import load_windows
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "BuiltCopy", "archive_session", "build_format", "format_entry",
            "fresh_partial", "take_name", "verify_format_dir", "write_verified"]

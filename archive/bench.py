@@ -26,8 +26,8 @@ import h5py
 import numpy as np
 import tifffile
 
-from archive.codecs import get_codec
-from recorder.capture.sources.sim import SimSource
+from thermcap.archive.codecs import get_codec
+from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
@@ -96,7 +96,7 @@ def _pillow_png() -> tuple[Callable, Callable] | None:
 def _tiff(predictor: bool, strips: str = "tifffile") -> tuple[Callable, Callable]:
     """A page with LZW; ``strips="archive.lzw"`` encodes them as the tiff-lzw format does, else
     tifffile encodes them with imagecodecs' LZW (its own thread pool)."""
-    from archive.formats.tiff_lzw import write_page
+    from thermcap.archive.formats.tiff_lzw import write_page
 
     def enc(f: np.ndarray) -> bytes:
         buf = io.BytesIO()
@@ -179,8 +179,8 @@ def print_table(rows: list[dict[str, Any]]) -> str:
 def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float]:
     """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` and to read them
     back with its reader, alone, in memory: the part of archiving no scheduling can remove."""
-    from archive.formats import ArchiveContext, get_format
-    from recorder.bench.cpu import process_cpu_s
+    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.recorder.bench.cpu import process_cpu_s
 
     fmt = get_format(fid)
     out = Path(tempfile.mkdtemp(prefix=f"floor-{fid}-", dir=workdir))
@@ -213,12 +213,12 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     the next; the median of a few is what a before/after should compare. Before each run the page
     cache is primed for its output (``recorder.bench.page_cache``): the first run of a process
     had been up to a third slower than the next, faulting in memory the host had taken back."""
-    from archive.archiver import DEFAULT_FORMATS, archive_session
-    from archive.manifest import archive_dir
-    from recorder.bench.cpu import process_cpu_s as cpu_s
-    from recorder.bench.page_cache import prime
-    from recorder.capture.recorder import Recorder
-    from recorder.storage.reader import iter_session_frames
+    from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session
+    from thermcap.archive.manifest import archive_dir
+    from thermcap.recorder.bench.cpu import process_cpu_s as cpu_s
+    from thermcap.recorder.bench.page_cache import prime
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.storage.reader import iter_session_frames
 
     fmts = tuple(formats or DEFAULT_FORMATS)
     n = int(seconds * 60)

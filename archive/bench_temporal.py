@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
-from archive.codecs import get_codec
-from archive.temporal import BITSTREAM_VERSION, TemporalEncoder, decode_records
-from recorder.capture.sources.sim import SimSource
+from thermcap.archive.codecs import get_codec
+from thermcap.archive.temporal import BITSTREAM_VERSION, TemporalEncoder, decode_records
+from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_temporal"]
 
@@ -44,7 +44,7 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
 def _real_frames() -> dict[str, list[np.ndarray]]:
     """The real frames in ``../shared/samples``: single stills (no sample is a sequence yet), so
     tpred codes each as a key frame; its goal there is JPEG-XL e2's ratio."""
-    from archive.bench import real_frames
+    from thermcap.archive.bench import real_frames
 
     return {f"{name} (one frame)": [frame] for name, frame in real_frames().items()}
 

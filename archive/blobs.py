@@ -13,7 +13,7 @@ from typing import Any
 import obstore
 from obstore.store import LocalStore, S3Store
 
-from recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["BlobStore", "open_store", "stored_sha256", "upload_archive"]
 
@@ -123,9 +123,9 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
     """
     from obstore.exceptions import AlreadyExistsError
 
-    from archive.manifest import archived_files, iso_now, load_manifest, save_manifest
-    from recorder.exceptions import ThermcapError
-    from recorder.storage.digest import file_sha256
+    from thermcap.archive.manifest import archived_files, iso_now, load_manifest, save_manifest
+    from thermcap.recorder.exceptions import ThermcapError
+    from thermcap.recorder.storage.digest import file_sha256
 
     manifest = load_manifest(session_dir)
     keys = []

@@ -9,16 +9,16 @@ from typing import Any
 
 import click
 
-from archive.archiver import DEFAULT_FORMATS
-from recorder.cli.options import Number, fail, json_option, root_option
-from recorder.exceptions import SessionBusyError, ThermcapError
-from recorder.storage.layout import SessionLayout
+from thermcap.archive.archiver import DEFAULT_FORMATS
+from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.exceptions import SessionBusyError, ThermcapError
+from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
 
 
 def _formats(value: str) -> list[str]:
-    from archive.formats import format_registry
+    from thermcap.archive.formats import format_registry
 
     out = [v.strip() for v in value.split(",") if v.strip()]
     unknown = [v for v in out if v not in format_registry]
@@ -43,9 +43,9 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
-    from archive.archiver import archive_session
-    from recorder.cli.progress import progress
-    from recorder.storage.reader import list_sessions, read_session_meta, resolve_session
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.cli.progress import progress
+    from thermcap.recorder.storage.reader import list_sessions, read_session_meta, resolve_session
 
     try:
         fmts = _formats(formats)
@@ -104,14 +104,15 @@ def _print_archived(r: dict[str, Any]) -> None:
 
 
 def _run_hooks(session_dir: Path, root: str) -> None:
-    """Tell interested packages (the API's index) that a session's archive verified."""
-    from importlib.metadata import entry_points
+    """Tell interested packages (the API's index, registered by the facade) that a session's
+    archive verified."""
+    from thermcap.archive.hooks import ON_ARCHIVED
 
-    for ep in entry_points(group="thermcap.on_archived"):
+    for name, hook in ON_ARCHIVED:
         try:
-            ep.load()(session_dir, Path(root))
+            hook(session_dir, Path(root))
         except Exception as exc:  # indexing can be redone with `thermcap index`; the archive stands
-            click.echo(f"warning: {ep.name} hook failed for {session_dir}: {exc}", err=True)
+            click.echo(f"warning: {name} hook failed for {session_dir}: {exc}", err=True)
 
 
 @click.command()
@@ -121,8 +122,8 @@ def _run_hooks(session_dir: Path, root: str) -> None:
 @json_option
 def verify(sessions: tuple[str, ...], root: str, formats: str | None, as_json: bool) -> None:
     """Re-check archives against the manifest's frame hashes (works after the MCAP is deleted)."""
-    from archive.verify import CopyCheck, verify_session
-    from recorder.storage.reader import resolve_session
+    from thermcap.archive.verify import CopyCheck, verify_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     out: dict[str, dict[str, CopyCheck]] = {}
     bad = False
@@ -165,10 +166,10 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
     counts them; --repair rebuilds them from a verified copy. Exit 1 if damage remains."""
     import os
 
-    from archive.blobs import open_store
-    from archive.scrub import ScrubReport, scrub_session
-    from recorder.cli.progress import progress
-    from recorder.storage.reader import list_sessions, resolve_session
+    from thermcap.archive.blobs import open_store
+    from thermcap.archive.scrub import ScrubReport, scrub_session
+    from thermcap.recorder.cli.progress import progress
+    from thermcap.recorder.storage.reader import list_sessions, resolve_session
 
     base = Path(root_arg or root)
     bucket = os.environ.get("THERMCAP_S3_BUCKET")
@@ -230,8 +231,8 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
           markdown: bool, as_json: bool) -> None:
     """Storage cost of archived sessions per sensor and kind (continuous or stills), per format and
     tier, with the format to keep for each and why, what was left out, and a fleet projection."""
-    from archive.costs import audit_sessions, load_prices, project, render_markdown, render_plain
-    from recorder.storage.reader import list_sessions, resolve_session
+    from thermcap.archive.costs import audit_sessions, load_prices, project, render_markdown, render_plain
+    from thermcap.recorder.storage.reader import list_sessions, resolve_session
 
     try:
         table = load_prices(prices)
@@ -287,8 +288,8 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
 @json_option
 def bench_archive(n_frames: int, session_s: float | None, formats: str | None, repeat: int, as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
-    from archive.bench import bench_archive as run
-    from archive.bench import bench_session, print_table
+    from thermcap.archive.bench import bench_archive as run
+    from thermcap.archive.bench import bench_session, print_table
 
     if session_s:
         res = bench_session(session_s, tuple(formats.split(",")) if formats else None, repeat=repeat)
@@ -324,9 +325,9 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, r
 def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: str, from_dir: str | None,
                  into: str | None, as_json: bool) -> None:
     """Re-read every segment vehicles shipped, re-hash every frame, and write the receipts they free space by."""
-    from archive.blobs import open_store
-    from archive.landing import land_synced
-    from archive.receipts import confirm_synced
+    from thermcap.archive.blobs import open_store
+    from thermcap.archive.landing import land_synced
+    from thermcap.archive.receipts import confirm_synced
 
     if bool(bucket) == bool(from_dir):
         fail("give one source: --bucket (with --endpoint) or --from DIR")
@@ -359,7 +360,7 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
 @json_option
 def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
     """tpred (temporal prediction) against JPEG-XL e2, PNG16 and FFV1 on still, sweeping and cued views."""
-    from archive.bench_temporal import bench_temporal
+    from thermcap.archive.bench_temporal import bench_temporal
 
     rows = bench_temporal(n_frames)
     if as_json:

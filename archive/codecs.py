@@ -18,9 +18,9 @@ from typing import Any, ClassVar, cast
 import imagecodecs
 import numpy as np
 
-from archive.exceptions import UnknownCodecError
-from recorder.exports.png import encode_png
-from recorder.registry import Registry
+from thermcap.archive.exceptions import UnknownCodecError
+from thermcap.recorder.exports.png import encode_png
+from thermcap.recorder.registry import Registry
 
 __all__ = [
     "FrameCodec",

@@ -13,8 +13,8 @@ from collections import defaultdict
 from pathlib import Path
 from typing import Any
 
-from archive.exceptions import ArchiveError
-from archive.manifest import load_manifest
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.manifest import load_manifest
 
 __all__ = ["DEFAULT_PRICES", "KINDS", "RECOMMENDATION_RULE", "audit_sessions", "load_prices", "project",
            "render_markdown", "render_plain", "session_kind", "table_rows"]
@@ -91,7 +91,7 @@ def session_kind(meta: dict[str, Any], frames: int) -> str:
 
 
 def _session_row(session_dir: Path, prices: dict[str, dict[str, Any]]) -> dict[str, Any]:
-    from recorder.storage.reader import read_session_meta
+    from thermcap.recorder.storage.reader import read_session_meta
 
     m = load_manifest(session_dir)
     frames = m["frames"].get("timestamps_ns") or []

@@ -13,9 +13,9 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from archive.manifest import file_sha256
-from archive.manifest_types import ExtrasEntry, FormatEntry, Manifest
-from recorder.storage.layout import SessionLayout
+from thermcap.archive.manifest import file_sha256
+from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, Manifest
+from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["Cover", "copy_problems", "extras_problems", "local_cover"]
 

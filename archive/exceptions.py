@@ -9,7 +9,7 @@ ArchiveError (a ThermcapError)   root: the CLI prints it and exits 1
 
 from __future__ import annotations
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 
 class ArchiveError(ThermcapError):

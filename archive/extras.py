@@ -19,10 +19,10 @@ from typing import Any
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
-from archive.manifest_types import ExtrasEntry
-from recorder.icd.topics import TOPIC_IMAGE
-from recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
-from recorder.storage.reader import session_segments
+from thermcap.archive.manifest_types import ExtrasEntry
+from thermcap.recorder.icd.topics import TOPIC_IMAGE
+from thermcap.recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
+from thermcap.recorder.storage.reader import session_segments
 
 __all__ = ["EXTRAS_NAME", "ExtrasWriter", "extras_from", "summarize_mcap", "write_extras"]
 

@@ -22,12 +22,12 @@ import shutil
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from archive.blobs import BlobStore
-from recorder.exceptions import SessionBusyError
-from recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.segments import fsync_dir
-from recorder.sync.targets import receipt_key
+from thermcap.archive.blobs import BlobStore
+from thermcap.recorder.exceptions import SessionBusyError
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.segments import fsync_dir
+from thermcap.recorder.sync.targets import receipt_key
 
 __all__ = ["LandReport", "land_synced"]
 

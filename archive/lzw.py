@@ -54,7 +54,7 @@ def lzw_encode_strips(data: bytes | bytearray | memoryview | np.ndarray, strip_b
     out = np.empty(src.size * 3 // 2 + count * 16 + (src.size // 3836 + 1) * 2 + 8, np.uint8)
     ends = np.empty(count, np.int64)
     table, used = _tables()
-    from archive.lzw_kernels import encode_strips
+    from thermcap.archive.lzw_kernels import encode_strips
 
     encode_strips(src, strip_bytes, out, ends, table, used)
     starts = [0, *ends[:-1].tolist()]

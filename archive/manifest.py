@@ -15,11 +15,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, cast, overload
 
-from archive.exceptions import ManifestError
-from archive.manifest_types import Manifest
-from recorder.storage.digest import file_sha256, frame_sha256
-from recorder.storage.layout import MANIFEST_JSON, SessionLayout
-from recorder.storage.segments import write_json_atomic
+from thermcap.archive.exceptions import ManifestError
+from thermcap.archive.manifest_types import Manifest
+from thermcap.recorder.storage.digest import file_sha256, frame_sha256
+from thermcap.recorder.storage.layout import MANIFEST_JSON, SessionLayout
+from thermcap.recorder.storage.segments import write_json_atomic
 
 __all__ = [
     "MANIFEST_NAME",

@@ -3,8 +3,7 @@
 Every archive format is a full source: ``archived_frames`` gives the same ``SessionFrame``
 stream (counts, sidecar exactly as recorded, time, segment name) as the MCAP reader did, from
 the first verified format on disk, so ``analyze``, exports and re-archiving work after
-``--delete-source``. Registered for ``recorder.storage.reader`` through the ``thermcap.session_frames``
-entry point.
+``--delete-source``. The ``thermcap`` facade registers it with ``recorder.storage.archive_readers``.
 """
 
 from __future__ import annotations
@@ -12,12 +11,12 @@ from __future__ import annotations
 from collections.abc import Iterator
 from pathlib import Path
 
-from archive.exceptions import ManifestError, VerificationError
-from archive.formats import get_format
-from archive.manifest import frame_sha256, load_manifest, sidecar_sha256
-from archive.manifest_types import Manifest
-from recorder.storage.layout import SessionLayout
-from recorder.storage.reader import SessionFrame
+from thermcap.archive.exceptions import ManifestError, VerificationError
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import frame_sha256, load_manifest, sidecar_sha256
+from thermcap.archive.manifest_types import Manifest
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["READ_PREFERENCE", "archived_frames", "frames_from_format", "verified_formats"]
 

@@ -17,11 +17,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from archive.blobs import BlobStore
-from archive.manifest import file_sha256, frame_sha256, iso_now, sidecar_sha256
-from recorder.exceptions import McapFileError
-from recorder.storage.reader import iter_segment_frames, segment_span
-from recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
+from thermcap.archive.blobs import BlobStore
+from thermcap.archive.manifest import file_sha256, frame_sha256, iso_now, sidecar_sha256
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.reader import iter_segment_frames, segment_span
+from thermcap.recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
 
 __all__ = ["ConfirmReport", "check_segment", "confirm_synced"]
 

@@ -21,18 +21,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from archive.archiver import build_format
-from archive.blobs import BlobStore, stored_sha256
-from archive.exceptions import ArchiveError
-from archive.extras import write_extras
-from archive.formats import get_format
-from archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
-from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
-from archive.reading import frames_from_format, verified_formats
-from archive.verify import verify_extras, verify_format
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
+from thermcap.archive.archiver import build_format
+from thermcap.archive.blobs import BlobStore, stored_sha256
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.extras import write_extras
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
+from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
+from thermcap.archive.reading import frames_from_format, verified_formats
+from thermcap.archive.verify import verify_extras, verify_format
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import iter_session_frames, list_sessions, read_session_meta, session_segments
 
 __all__ = ["ScrubFinding", "ScrubReport", "scrub_root", "scrub_session"]
 

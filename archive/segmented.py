@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from archive.archiver import (
+from thermcap.archive.archiver import (
     DEFAULT_FORMATS,
     BuiltCopy,
     _summary_intact,
@@ -46,18 +46,18 @@ from archive.archiver import (
     verify_format_dir,
     write_verified,
 )
-from archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
-from archive.extras import EXTRAS_NAME, ExtrasWriter, extras_from
-from archive.fanout import fan_out
-from archive.formats import ArchiveContext, get_format
-from archive.frame_summary import SUMMARY_NAME, FrameSummary, SummaryBuilder, load_summary
-from archive.manifest import archive_dir, file_sha256, load_manifest, new_manifest, save_manifest
-from archive.manifest_types import ExtrasEntry, FramesBlock, Manifest
-from archive.source_pass import SourcePass
-from recorder.storage.layout import PARTIAL_SUFFIX
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import SessionFrame, read_session_meta, segment_span, session_segments
-from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
+from thermcap.archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
+from thermcap.archive.extras import EXTRAS_NAME, ExtrasWriter, extras_from
+from thermcap.archive.fanout import fan_out
+from thermcap.archive.formats import ArchiveContext, get_format
+from thermcap.archive.frame_summary import SUMMARY_NAME, FrameSummary, SummaryBuilder, load_summary
+from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest, new_manifest, save_manifest
+from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest
+from thermcap.archive.source_pass import SourcePass
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import SessionFrame, read_session_meta, segment_span, session_segments
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 
 __all__ = ["PARTS", "SegmentPart", "archive_segment", "finalize_session", "plan_segments"]
 

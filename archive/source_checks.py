@@ -16,8 +16,8 @@ from mcap.opcode import Opcode
 from mcap.reader import make_reader
 from mcap.records import Channel
 
-from recorder.icd.topics import IMAGE_SCHEMA_NAME, TOPIC_IMAGE, TOPIC_METADATA
-from recorder.storage.recover import scan_records
+from thermcap.recorder.icd.topics import IMAGE_SCHEMA_NAME, TOPIC_IMAGE, TOPIC_METADATA
+from thermcap.recorder.storage.recover import scan_records
 
 __all__ = ["SIDECAR_SCHEMA_NAME", "channel_problems"]
 

@@ -16,13 +16,13 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from archive.exceptions import SourceDamagedError
-from archive.extras import ExtrasWriter
-from archive.frame_summary import SummaryBuilder
-from archive.manifest import frame_sha256, sidecar_sha256
-from archive.source_checks import channel_problems
-from recorder.icd.topics import TOPIC_METADATA
-from recorder.storage.reader import SessionFrame, iter_segment_frames, session_segments
+from thermcap.archive.exceptions import SourceDamagedError
+from thermcap.archive.extras import ExtrasWriter
+from thermcap.archive.frame_summary import SummaryBuilder
+from thermcap.archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.archive.source_checks import channel_problems
+from thermcap.recorder.icd.topics import TOPIC_METADATA
+from thermcap.recorder.storage.reader import SessionFrame, iter_segment_frames, session_segments
 
 __all__ = ["SourceHashes", "SourcePass"]
 

@@ -462,7 +462,7 @@ class _State3:
         """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
         (edge replicated), its pixels in the second stream and out of the pattern's learning.
         Returns the pixels not predicted from the scene."""
-        from archive import tpred_kernels
+        from thermcap.archive import tpred_kernels
 
         assert self.prev is not None
         if other is None:
@@ -515,7 +515,7 @@ class _State4(_State3):
         self.prev = f
 
     def predict(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        from archive import tpred_kernels
+        from thermcap.archive import tpred_kernels
         win, pat = self.window, self.pattern
         assert win.last is not None and pat is not None and self.prev is not None
         win.cx += dx
@@ -531,7 +531,7 @@ class _State4(_State3):
         return p, m64, other  # the mask even where it is all False: every later step takes it as it is
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
-        from archive import tpred_kernels
+        from thermcap.archive import tpred_kernels
         win, pat = self.window, self.pattern
         assert pat is not None
         sl = win._at(f.shape, win.cx, win.cy)  # predict fitted the canvas to this frame
@@ -546,7 +546,7 @@ class _State4(_State3):
         self.prev = f
 
     def trim(self, keep: int) -> None:
-        from archive import tpred_kernels
+        from thermcap.archive import tpred_kernels
         win = self.window
         while len(win.frames) > keep:
             old, ox, oy = win.frames.popleft()
@@ -619,7 +619,7 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     view): blocks whose residual against the scene is well above the frame's typical block are
     tried against the previous frame moved by each of ``VECTORS``, and take the best when it
     is clearly better. None when no block does."""
-    from archive import tpred_kernels
+    from thermcap.archive import tpred_kernels
     h, w = f.shape
     hb, wb = -(-h // BLOCK), -(-w // BLOCK)
     # which blocks to try: their residual on every other row and column (a quarter of the work)
@@ -656,7 +656,7 @@ def _with_lengths(modes: np.ndarray | None, chunks: list[bytes]) -> bytes:
 def _pack_streams4(modes: np.ndarray | None, f: np.ndarray, pred: np.ndarray,
                    other: np.ndarray | None) -> tuple[int, bytes]:
     """Version 4: the same two streams, split in one pass and each coded by ``archive.rans``."""
-    from archive import rans, tpred_kernels
+    from thermcap.archive import rans, tpred_kernels
     scene = np.empty(f.size, np.int32)
     rest = np.empty(f.size, np.int32)
     n0, n1, lo, hi = tpred_kernels.split_residuals(f, pred, np.zeros(f.shape, bool) if other is None else other,
@@ -699,7 +699,7 @@ def _stream_chunks(payload: memoryview, pos: int, counts: tuple[int, int]) -> li
 
 def _unpack_streams4(payload: memoryview, pos: int, pred: np.ndarray, other: np.ndarray | None) -> np.ndarray:
     """Version 4: the frame, from the prediction and the two ``archive.rans`` streams."""
-    from archive import rans, tpred_kernels
+    from thermcap.archive import rans, tpred_kernels
     n_other = int(np.count_nonzero(other)) if other is not None else 0
     counts = (pred.size - n_other, n_other)
     streams = []
@@ -743,7 +743,7 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     frames' profiles along the axis (the median of those lines): every shift is tried on the
     profiles, and only the best few on the lines themselves, which is 1/10 of trying every shift
     on the lines."""
-    from archive import tpred_kernels
+    from thermcap.archive import tpred_kernels
     if axis == 0:  # rows: work on the transpose
         cur, prev = cur.T, prev.T
     lines = slice(None, None, 8)
@@ -793,7 +793,7 @@ class TemporalEncoder:
         self._stuck = _StuckPixels() if bitstream >= 4 and defects is None else None
 
     def encode(self, frame: np.ndarray) -> bytes:
-        from archive import tpred_key
+        from thermcap.archive import tpred_key
         if frame.dtype != np.uint16 or frame.ndim != 2:
             raise ValueError(f"tpred encodes 2-D uint16 frames, got {frame.dtype} {frame.shape}")
         h, w = frame.shape
@@ -863,7 +863,7 @@ class TemporalDecoder:
         self._shape: tuple[int, int] | None = None
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
-        from archive import tpred_key
+        from thermcap.archive import tpred_key
         hdr = parse_header(record)
         payload = memoryview(record)[HEADER.size:]
         shape = (hdr.height, hdr.width)
@@ -950,7 +950,7 @@ def encode_gops(items: Iterable[T], pixels: Callable[[T], np.ndarray], *, worker
         enc = TemporalEncoder(window, key_interval, max_shift, bitstream, defects=defects)
         return [(item, enc.encode(pixels(item))) for item in run]
 
-    from archive.formats.base import ordered_map
+    from thermcap.archive.formats.base import ordered_map
 
     for done in ordered_map(encode, gops(), workers, window=workers):
         yield from done
@@ -983,7 +983,7 @@ def decode_gops(items: Iterable[T], record: Callable[[T], bytes], *, workers: in
                 raise TpredError(f"{name(item)}: {exc}") from None
         return out
 
-    from archive.formats.base import ordered_map
+    from thermcap.archive.formats.base import ordered_map
 
     for done in ordered_map(decode, gops(), workers, window=workers):
         yield from done

@@ -27,7 +27,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from archive import rans
+from thermcap.archive import rans
 
 __all__ = ["KeyFrameError", "decode_key", "encode_key"]
 

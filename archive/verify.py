@@ -6,10 +6,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from archive.archiver import verify_format_dir
-from archive.formats import get_format
-from archive.manifest import archive_dir, file_sha256, load_manifest
-from archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock
+from thermcap.archive.archiver import verify_format_dir
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest
+from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock
 
 __all__ = ["CopyCheck", "verify_extras", "verify_format", "verify_session"]
 
@@ -66,7 +66,7 @@ def verify_format(session_dir: Path, fid: str, entry: FormatEntry, frames: Frame
 
 def verify_extras(adir: Path, entry: ExtrasEntry) -> CopyCheck:
     """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
-    from archive.extras import summarize_mcap
+    from thermcap.archive.extras import summarize_mcap
 
     path = adir / entry["path"]
     if not entry.get("verified"):

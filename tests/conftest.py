@@ -57,7 +57,7 @@ def run_cli(*args: str, input: bytes | None = None, timeout: float = 120, env: d
             **kw) -> subprocess.CompletedProcess:
     """Run ``thermcap`` as a user would: a real process, real files."""
     full_env = {**os.environ, **(env or {})}
-    r = subprocess.run([sys.executable, "-m", "recorder", *args], input=input, capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "thermcap", *args], input=input, capture_output=True,
                        timeout=timeout, env=full_env, **kw)
     r.stdout, r.stderr = r.stdout.decode(errors="replace"), r.stderr.decode(errors="replace")
     return r
@@ -103,7 +103,7 @@ class ApiServer:
         self.port = free_port()
         self.url = f"http://127.0.0.1:{self.port}"
         full_env = {**os.environ, "THERMCAP_ROOT": str(root), **(env or {})}
-        self.proc = subprocess.Popen([sys.executable, "-m", "recorder", "serve", "--root", str(root), "--port",
+        self.proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(root), "--port",
                                       str(self.port)], env=full_env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
         try:
             wait_http(self.url + "/healthz")

@@ -23,9 +23,9 @@ import re
 from pathlib import Path
 from typing import Any
 
-from api.jobs.inbox import QUARANTINE, STATE, InboxPass, process_inbox
-from archive.blobs import BlobStore
-from recorder.exceptions import ThermcapError
+from thermcap.api.jobs.inbox import QUARANTINE, STATE, InboxPass, process_inbox
+from thermcap.archive.blobs import BlobStore
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["BUCKET_JOURNAL", "parse_bucket_url", "process_bucket_inbox"]
 
@@ -101,14 +101,14 @@ def _journal_to_bucket(store: BlobStore, rec: dict[str, Any]) -> None:
 
 
 def _sha_of(stage: Path, rel: str) -> str | None:
-    from api.jobs.inbox import _journal
+    from thermcap.api.jobs.inbox import _journal
 
     return next((sha for sha, r in _journal(stage).items() if r.get("path") == rel), None)
 
 
 def _seed_journal(stage: Path, taken: set[str]) -> None:
     """Files another watcher took (the bucket's journal) count as seen in this stage's journal."""
-    from api.jobs.inbox import _journal, _record
+    from thermcap.api.jobs.inbox import _journal, _record
 
     (stage / STATE).mkdir(exist_ok=True)
     mine = _journal(stage)

@@ -38,11 +38,11 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from api.jobs.records import archive_job_id, finish_job, start_job, submit_job
-from api.jobs.worker import Worker, WorkerPass, finished_sessions, needs_work
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import holder
-from recorder.storage.reader import read_session_meta
+from thermcap.api.jobs.records import archive_job_id, finish_job, start_job, submit_job
+from thermcap.api.jobs.worker import Worker, WorkerPass, finished_sessions, needs_work
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import holder
+from thermcap.recorder.storage.reader import read_session_meta
 
 __all__ = ["DaskJobs", "analysis_task", "finalize_task", "scrub_task", "segment_task", "segment_task_key",
            "session_task_key"]
@@ -75,7 +75,7 @@ def segment_task_key(session_dir: Path, segment: str, formats: tuple[str, ...]) 
 def _recorded(cfg: TaskConfig, key: str) -> Iterator[Any]:
     """A task's run in the jobs table: each attempt counts (a rerun after a lost worker shows
     two), and an error is kept with the job before it goes back to Dask for its retries."""
-    from api.db import make_engine
+    from thermcap.api.db import make_engine
 
     engine = make_engine(cfg.db_url)
     start_job(engine, key, _worker_name())
@@ -90,7 +90,7 @@ def _recorded(cfg: TaskConfig, key: str) -> Iterator[Any]:
 
 def segment_task(cfg: TaskConfig, session_dir: str, segment: str, first_index: int, key: str) -> str:
     """On a Dask worker: one segment's share of every format, written and verified (idempotent)."""
-    from archive.segmented import archive_segment
+    from thermcap.archive.segmented import archive_segment
 
     with _recorded(cfg, key) as engine:
         part = archive_segment(Path(session_dir), segment, first_index, list(cfg.formats))
@@ -103,10 +103,10 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
     """On a Dask worker, once every segment's task has finished (``segments_done``, which Dask
     passes in when they have): the manifest, the final folders (HDF5 from the segments'
     compressed chunks), upload, ``--delete-source``, index."""
-    from api.indexing import index_session
-    from archive.archiver import archive_session
-    from archive.blobs import open_store, upload_archive
-    from archive.segmented import finalize_session
+    from thermcap.api.indexing import index_session
+    from thermcap.archive.archiver import archive_session
+    from thermcap.archive.blobs import open_store, upload_archive
+    from thermcap.archive.segmented import finalize_session
 
     d = Path(session_dir)
     store = open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else None
@@ -126,9 +126,9 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
 
 def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True) -> dict[str, Any]:
     """On a Dask worker: one session's archived copies (and its bucket copies) re-verified."""
-    from api.indexing import index_session
-    from archive.blobs import open_store
-    from archive.scrub import ScrubReport, scrub_session
+    from thermcap.api.indexing import index_session
+    from thermcap.archive.blobs import open_store
+    from thermcap.archive.scrub import ScrubReport, scrub_session
 
     d = Path(session_dir)
     with _recorded(cfg, key) as engine:
@@ -145,8 +145,8 @@ def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True)
 def analysis_task(cfg: TaskConfig, session_dir: str, key: str, _after: Any = None) -> dict[str, Any]:
     """On a Dask worker, after the session's finalize: the detector run over every frame (from the
     MCAP source or, once it is deleted, the archive), then the index takes its results."""
-    from api.indexing import index_session
-    from recorder.analysis.offline import analyze_session
+    from thermcap.api.indexing import index_session
+    from thermcap.recorder.analysis.offline import analyze_session
 
     d = Path(session_dir)
     with _recorded(cfg, key) as engine:
@@ -167,7 +167,7 @@ def _worker_name() -> str:
 
 
 def _formats_to_write(d: Path, formats: tuple[str, ...]) -> list[str]:
-    from archive.manifest import load_manifest
+    from thermcap.archive.manifest import load_manifest
 
     m = load_manifest(d, required=False) or {}
     done = {f for f, e in (m.get("formats") or {}).items() if e.get("verified") and (d / "archive" / f).is_dir()}
@@ -221,7 +221,7 @@ class DaskJobs:
         """A session as one task per segment (in parallel on any workers) and a finalize task
         that Dask starts when they have all finished. Each is recorded in the jobs table before
         the cluster sees it, so a job never exists only in the scheduler."""
-        from archive.segmented import plan_segments
+        from thermcap.archive.segmented import plan_segments
 
         sid = read_session_meta(d).get("session_id", d.name)
         engine, formats = self.worker.engine, self.cfg.formats
@@ -244,8 +244,8 @@ class DaskJobs:
     def scrub(self, repair: bool = True) -> dict[str, Any]:
         """Every archived session re-verified as a task of its own (and repaired where another
         copy covers it); sessions where anything was found are re-indexed by their task."""
-        from recorder.storage.layout import SessionLayout
-        from recorder.storage.reader import list_sessions
+        from thermcap.recorder.storage.layout import SessionLayout
+        from thermcap.recorder.storage.reader import list_sessions
 
         futures = {}
         for d in list_sessions(self.worker.root):

@@ -30,10 +30,10 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.exceptions import ThermcapError
-from recorder.storage.digest import file_sha256
-from recorder.storage.lock import lock_session
-from recorder.storage.reader import read_session_meta
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.digest import file_sha256
+from thermcap.recorder.storage.lock import lock_session
+from thermcap.recorder.storage.reader import read_session_meta
 
 __all__ = ["InboxBusy", "InboxPass", "process_inbox", "take_file"]
 
@@ -128,7 +128,7 @@ def _earlier_sessions(root: Path, name: str) -> list[Path]:
 
 
 def _derive(session_dir: Path, out: Path) -> list[str]:
-    from recorder.exports.files import export_session
+    from thermcap.recorder.exports.files import export_session
 
     out.mkdir(exist_ok=True)
     made = []
@@ -147,8 +147,8 @@ def take_file(inbox: Path, root: Path, rel: str, digest: str, archive_formats: l
     archived, its derived products written beside it; or quarantined with the reason. Returns
     its journal record. The same call in-process or as a Dask task on a worker that sees both
     folders."""
-    from archive.archiver import archive_session
-    from recorder.importers.run import import_paths
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.importers.run import import_paths
 
     path = inbox / rel
     name = f"inbox-{digest[:16]}"  # a file's sessions are named by its content: a rerun finds them

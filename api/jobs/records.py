@@ -20,8 +20,8 @@ from sqlalchemy import insert, select, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.exc import IntegrityError
 
-from api import db
-from recorder.storage.reader import read_session_meta, session_segments
+from thermcap.api import db
+from thermcap.recorder.storage.reader import read_session_meta, session_segments
 
 __all__ = ["STATES", "JobRecord", "archive_job_id", "finish_job", "get_job", "job_id", "list_jobs", "start_job",
            "submit_job"]

@@ -21,17 +21,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from api.storage import BlobStore
-from archive.archiver import DEFAULT_FORMATS
-from archive.evidence import local_cover
-from archive.manifest import archived_files, iso_now, load_manifest, save_manifest
-from archive.manifest_types import Manifest
-from recorder.exceptions import ThermcapError
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import list_sessions, read_session_meta
-from recorder.storage.ring import load_windows
-from recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.api.storage import BlobStore
+from thermcap.archive.archiver import DEFAULT_FORMATS
+from thermcap.archive.evidence import local_cover
+from thermcap.archive.manifest import archived_files, iso_now, load_manifest, save_manifest
+from thermcap.archive.manifest_types import Manifest
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import list_sessions, read_session_meta
+from thermcap.recorder.storage.ring import load_windows
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
 
 __all__ = ["GcDecision", "GcResult", "gc_sessions"]
 

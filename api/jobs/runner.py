@@ -21,8 +21,8 @@ from typing import Any
 
 from sqlalchemy.engine import Engine
 
-from api.jobs.records import JobRecord, finish_job, start_job
-from api.storage import BlobStore
+from thermcap.api.jobs.records import JobRecord, finish_job, start_job
+from thermcap.api.storage import BlobStore
 
 __all__ = ["JobRunner", "result_key"]
 

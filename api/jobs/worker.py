@@ -23,15 +23,15 @@ from typing import Any
 
 from sqlalchemy.engine import Engine
 
-from api.indexing import index_session
-from api.storage import BlobStore
-from archive.manifest import load_manifest
-from archive.scrub import ScrubReport, scrub_session
-from recorder.exceptions import ThermcapError
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import is_locked
-from recorder.storage.reader import list_sessions, read_session_meta, session_segments
-from recorder.storage.split import split_cameras
+from thermcap.api.indexing import index_session
+from thermcap.api.storage import BlobStore
+from thermcap.archive.manifest import load_manifest
+from thermcap.archive.scrub import ScrubReport, scrub_session
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import is_locked
+from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
+from thermcap.recorder.storage.split import split_cameras
 
 __all__ = ["Worker", "WorkerPass", "finished_sessions", "needs_work"]
 

@@ -2,7 +2,7 @@
 
 from alembic import context
 
-from api.db import metadata
+from thermcap.api.db import metadata
 
 connection = context.config.attributes["connection"]
 context.configure(connection=connection, target_metadata=metadata)

@@ -28,15 +28,15 @@ from mcap.stream_reader import StreamReader
 from sqlalchemy import bindparam, select
 from sqlalchemy.engine import Engine
 
-from api import db
-from api.exceptions import FrameNotFound, FrameUnavailable
-from api.reading.mcap_frames import McapFrames
-from api.reading.zip_index import ArchiveLocations
-from api.storage import BlobStore
-from archive.codecs import get_codec
-from archive.formats import get_format
-from archive.formats.base import locate
-from archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.api import db
+from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
+from thermcap.api.reading.mcap_frames import McapFrames
+from thermcap.api.reading.zip_index import ArchiveLocations
+from thermcap.api.storage import BlobStore
+from thermcap.archive.codecs import get_codec
+from thermcap.archive.formats import get_format
+from thermcap.archive.formats.base import locate
+from thermcap.archive.manifest import frame_sha256, sidecar_sha256
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 

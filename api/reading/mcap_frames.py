@@ -19,9 +19,9 @@ from pathlib import Path
 import numpy as np
 from mcap.reader import SeekingReader, make_reader
 
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
-from recorder.storage.chunks import ChunkRecords, SegmentIndex, StaleIndexError, messages_at, read_chunk
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA, decode_image
+from thermcap.recorder.storage.chunks import ChunkRecords, SegmentIndex, StaleIndexError, messages_at, read_chunk
 
 __all__ = ["McapFrames"]
 

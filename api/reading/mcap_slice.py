@@ -23,16 +23,16 @@ from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import breakup_chunk
 
-from recorder.icd.rosmsg import SIDECAR
-from recorder.icd.topics import (
+from thermcap.recorder.icd.rosmsg import SIDECAR
+from thermcap.recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
     TOPIC_IMAGE,
     TOPIC_METADATA,
     image_message_parts,
 )
-from recorder.storage.reader import session_segments
-from recorder.storage.writer import ChunkedWriter, Compression
+from thermcap.recorder.storage.reader import session_segments
+from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["export_mcap"]
 

@@ -32,14 +32,14 @@ import numpy as np
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
-from api import db
-from api.reading.frames import BlobFile, Damage, FrameReader
-from api.storage import BlobStore
-from archive.formats import get_format
-from archive.formats.base import RowBlock, locate, positions_in
-from archive.frame_summary import FrameSummary, load_summary
-from recorder.thermography.measure import Box, Tool, bounds, shifted
-from recorder.thermography.series import STATS, series_point
+from thermcap.api import db
+from thermcap.api.reading.frames import BlobFile, Damage, FrameReader
+from thermcap.api.storage import BlobStore
+from thermcap.archive.formats import get_format
+from thermcap.archive.formats.base import RowBlock, locate, positions_in
+from thermcap.archive.frame_summary import FrameSummary, load_summary
+from thermcap.recorder.thermography.measure import Box, Tool, bounds, shifted
+from thermcap.recorder.thermography.series import STATS, series_point
 
 __all__ = ["RegionReader", "SeriesResult"]
 

@@ -26,9 +26,12 @@ from typing import Any
 
 import numpy as np
 
-from archive.formats.base import locate
+from thermcap.archive.formats.base import locate
 
-__all__ = ["ArchiveLocations", "ZipEntries", "ZipIndexCache", "read_zip_entries", "read_zip_file"]
+__all__ = ["ZIPPED_FORMATS", "ArchiveLocations", "ZipEntries", "ZipIndexCache", "read_zip_entries", "read_zip_file"]
+
+#: The archive formats whose objects are zips of one file a frame, read by offset from a zip index.
+ZIPPED_FORMATS = ("png16", "jxl", "htj2k", "jpegls")
 
 _EOCD = struct.Struct("<4sHHHHIIH")
 _ZIP64_LOCATOR = struct.Struct("<4sIQI")
@@ -205,8 +208,7 @@ class ArchiveLocations:
 
         from sqlalchemy import select
 
-        from api import db
-        from api.indexing import ZIPPED_FORMATS
+        from thermcap.api import db
 
         now = time.monotonic()
         with self._lock:

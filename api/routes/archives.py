@@ -9,11 +9,11 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
-from api import db
-from api.reading.frames import Damage
-from api.routes.common import session_row
-from api.security import check_file_name, require
-from api.verified_files import verified_stream
+from thermcap.api import db
+from thermcap.api.reading.frames import Damage
+from thermcap.api.routes.common import session_row
+from thermcap.api.security import check_file_name, require
+from thermcap.api.verified_files import verified_stream
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])

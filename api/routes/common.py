@@ -9,9 +9,9 @@ from typing import Annotated, Any
 from fastapi import HTTPException, Query, Request
 from sqlalchemy import bindparam, select
 
-from api import db
-from api.security import check_session_id
-from recorder.icd.names import iso_utc, parse_rfc3339
+from thermcap.api import db
+from thermcap.api.security import check_session_id
+from thermcap.recorder.icd.names import iso_utc, parse_rfc3339
 
 __all__ = ["CelsiusQuery", "FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size",
            "parse_time", "session_row"]
@@ -41,8 +41,8 @@ class FrameModel:
     parameters given on this request, and what to say about it in the response."""
 
     def __init__(self, request: Request, row: dict[str, Any]) -> None:
-        from recorder.exports.render import session_model
-        from recorder.radiometry.params import OBJECT_PARAMS, read_versions
+        from thermcap.recorder.exports.render import session_model
+        from thermcap.recorder.radiometry.params import OBJECT_PARAMS, read_versions
 
         self.base = session_model(row["radiometric_model"])
         self.overrides: dict[str, float] = {}
@@ -52,7 +52,7 @@ class FrameModel:
                     self.overrides[name] = float(request.query_params[name])
                 except ValueError:
                     raise HTTPException(400, f"{name} must be a number") from None
-        from recorder.radiometry.session import SessionTemperatures
+        from thermcap.recorder.radiometry.session import SessionTemperatures
 
         session_dir = request.app.state.settings.root / "sessions" / row["id"]
         try:
@@ -80,7 +80,7 @@ class FrameModel:
 
 def _bad_pixels(request: Request, row: dict[str, Any], session_dir: Any) -> Any:
     """The session's bad-pixel map, read once per indexed state of the session (its fingerprint)."""
-    from recorder.radiometry.session import read_bad_pixel_map
+    from thermcap.recorder.radiometry.session import read_bad_pixel_map
 
     cache = request.app.state.__dict__.setdefault("bad_pixel_maps", {})
     key = (row["id"], row.get("fingerprint"))

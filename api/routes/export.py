@@ -8,12 +8,12 @@ from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import StreamingResponse
 from sqlalchemy import select
 
-from api import db
-from api.reading.frames import BlobFile
-from api.reading.mcap_slice import export_mcap
-from api.routes.common import parse_time, session_row
-from api.security import require
-from recorder.storage.layout import EXTRAS_MCAP
+from thermcap.api import db
+from thermcap.api.reading.frames import BlobFile
+from thermcap.api.reading.mcap_slice import export_mcap
+from thermcap.api.routes.common import parse_time, session_row
+from thermcap.api.security import require
+from thermcap.recorder.storage.layout import EXTRAS_MCAP
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
 

@@ -9,13 +9,13 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from api.routes.common import CelsiusQuery, FrameModel, session_row
-from api.security import require
-from archive.codecs import get_codec
-from recorder.exports.colorbar import TemperatureRange
-from recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, tiff16
-from recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
-from recorder.radiometry import TemperatureUnavailable, describe_model
+from thermcap.api.routes.common import CelsiusQuery, FrameModel, session_row
+from thermcap.api.security import require
+from thermcap.archive.codecs import get_codec
+from thermcap.recorder.exports.colorbar import TemperatureRange
+from thermcap.recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, tiff16
+from thermcap.recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
+from thermcap.recorder.radiometry import TemperatureUnavailable, describe_model
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],
                    dependencies=[Depends(require("read"))])

@@ -12,10 +12,10 @@ from typing import Any, Literal
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from fastapi.responses import JSONResponse
 
-from api.jobs.records import STATES, get_job, job_id, list_jobs, submit_job
-from api.routes.measure import series_args, series_body
-from api.security import require
-from recorder.thermography.measure import Tool, ToolError, bounds
+from thermcap.api.jobs.records import STATES, get_job, job_id, list_jobs, submit_job
+from thermcap.api.routes.measure import series_args, series_body
+from thermcap.api.security import require
+from thermcap.recorder.thermography.measure import Tool, ToolError, bounds
 
 router = APIRouter(tags=["jobs"], dependencies=[Depends(require("read"))])
 
@@ -38,10 +38,10 @@ def series_task(cfg: SeriesTask, row: dict, tool: Tool, tool_text: str, stat: st
     readers (the summary, the strips, the frames)."""
     from pathlib import Path
 
-    from api.db import make_engine
-    from api.reading.frames import FrameReader
-    from api.reading.regions import RegionReader
-    from archive.blobs import open_store
+    from thermcap.api.db import make_engine
+    from thermcap.api.reading.frames import FrameReader
+    from thermcap.api.reading.regions import RegionReader
+    from thermcap.archive.blobs import open_store
 
     engine = make_engine(cfg.db_url)
     try:

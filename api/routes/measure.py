@@ -13,12 +13,12 @@ import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 from sqlalchemy import select
 
-from api import db
-from api.reading.regions import RegionReader
-from api.routes.common import CelsiusQuery, FrameModel, session_row
-from api.security import require
-from recorder.radiometry import describe_model
-from recorder.thermography.measure import (
+from thermcap.api import db
+from thermcap.api.reading.regions import RegionReader
+from thermcap.api.routes.common import CelsiusQuery, FrameModel, session_row
+from thermcap.api.security import require
+from thermcap.recorder.radiometry import describe_model
+from thermcap.recorder.thermography.measure import (
     Line,
     Tool,
     ToolError,

@@ -6,11 +6,11 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from prometheus_client import generate_latest
 from sqlalchemy import func, select
 
-from api import db
-from api.indexing import IndexReport, index_root
-from api.security import has_token, require
-from recorder.storage.layout import SessionLayout
-from recorder.storage.reader import list_sessions
+from thermcap.api import db
+from thermcap.api.indexing import IndexReport, index_root
+from thermcap.api.security import has_token, require
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.reader import list_sessions
 
 router = APIRouter()
 
@@ -47,7 +47,7 @@ def metrics(request: Request) -> Response:
 
 @router.get("/api/v1/audit", tags=["meta"], dependencies=[Depends(require("read"))])
 def audit(request: Request, prices: str | None = None) -> dict:
-    from archive.costs import audit_sessions, load_prices
+    from thermcap.archive.costs import audit_sessions, load_prices
 
     if prices is not None:
         raise HTTPException(400, "custom price tables are set on the server (thermcap audit --prices), not per request")

@@ -5,13 +5,13 @@ from __future__ import annotations
 from fastapi import APIRouter, Depends, HTTPException, Request
 from pydantic import BaseModel, Field
 
-from api.routes.common import session_row
-from api.security import require
-from recorder.exceptions import ThermcapError
-from recorder.exports.render import session_model
-from recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
-from recorder.importers.dji_sdk import find_backend
-from recorder.radiometry.params import ModelVersion, add_version, read_versions
+from thermcap.api.routes.common import session_row
+from thermcap.api.security import require
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.exports.render import session_model
+from thermcap.recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
+from thermcap.recorder.importers.dji_sdk import find_backend
+from thermcap.recorder.radiometry.params import ModelVersion, add_version, read_versions
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/radiometry", tags=["thermography"])
 

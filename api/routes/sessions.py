@@ -9,10 +9,10 @@ from typing import Any, Literal
 from fastapi import APIRouter, Depends, Query, Request
 from sqlalchemy import and_, func, literal, literal_column, or_, select, tuple_
 
-from api import db
-from api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
-from api.security import require
-from recorder.radiometry import LookupTableModel, model_from_dict
+from thermcap.api import db
+from thermcap.api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
+from thermcap.api.security import require
+from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 
@@ -111,8 +111,8 @@ def _temperature_available(model_json: str | None) -> dict:
     would only answer 409 (a DJI layout that needs DJI's SDK, not configured here)."""
     import numpy as np
 
-    from recorder.exports.render import session_model
-    from recorder.radiometry import TemperatureUnavailable
+    from thermcap.recorder.exports.render import session_model
+    from thermcap.recorder.radiometry import TemperatureUnavailable
 
     try:
         session_model(model_json).to_celsius(np.zeros((1, 1), np.uint16))
@@ -130,7 +130,7 @@ def get_foxglove_layout(request: Request, session_id: str) -> dict:
     in Foxglove with Layouts -> Import from file."""
     import numpy as np
 
-    from recorder.exports.foxglove_layout import layout_for, ranges_from_frames
+    from thermcap.recorder.exports.foxglove_layout import layout_for, ranges_from_frames
 
     row = session_row(request, session_id)
     reader = request.app.state.frames

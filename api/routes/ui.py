@@ -8,7 +8,7 @@ from urllib.parse import parse_qs
 from fastapi import APIRouter, Request
 from fastapi.responses import HTMLResponse, RedirectResponse
 
-from api.security import TOKEN_COOKIE, scopes_for_token
+from thermcap.api.security import TOKEN_COOKIE, scopes_for_token
 
 router = APIRouter(include_in_schema=False)
 _STATIC = Path(__file__).resolve().parent.parent / "static"

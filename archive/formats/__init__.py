@@ -1,10 +1,17 @@
 """The archive formats, registered by id (ids never change once files carry them)."""
 
-from archive.formats.base import ArchiveContext, ArchiveFormat, FileRecord, format_registry, get_format, register_format
-from archive.formats.hdf5 import Hdf5
-from archive.formats.temporal import TemporalFrames
-from archive.formats.tiff_lzw import TiffLzw
-from archive.formats.zipped import ZippedFrames, zipped_factory
+from thermcap.archive.formats.base import (
+           ArchiveContext,
+           ArchiveFormat,
+           FileRecord,
+           format_registry,
+           get_format,
+           register_format,
+)
+from thermcap.archive.formats.hdf5 import Hdf5
+from thermcap.archive.formats.temporal import TemporalFrames
+from thermcap.archive.formats.tiff_lzw import TiffLzw
+from thermcap.archive.formats.zipped import ZippedFrames, zipped_factory
 
 register_format("png16", zipped_factory("png16"))
 register_format("tiff-lzw", TiffLzw)

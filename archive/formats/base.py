@@ -20,11 +20,11 @@ from typing import Any, ClassVar, TypeVar
 
 import numpy as np
 
-from archive.exceptions import UnknownCodecError
-from recorder.icd.names import format_name
-from recorder.radiometry import LinearModel, model_from_dict
-from recorder.registry import Registry
-from recorder.storage.reader import SessionFrame
+from thermcap.archive.exceptions import UnknownCodecError
+from thermcap.recorder.icd.names import format_name
+from thermcap.recorder.radiometry import LinearModel, model_from_dict
+from thermcap.recorder.registry import Registry
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = [
     "ArchiveContext",
@@ -231,7 +231,7 @@ def sidecar_text(frame: SessionFrame) -> str:
 
 
 def time_from_sidecar(sidecar: bytes) -> int | None:
-    from recorder.icd.names import parse_rfc3339
+    from thermcap.recorder.icd.names import parse_rfc3339
 
     try:
         return parse_rfc3339(json.loads(sidecar)["capture"]["timestamp"])

@@ -29,9 +29,9 @@ from typing import Any
 import h5py
 import numpy as np
 
-from archive.exceptions import ArchiveError
-from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate, ordered_map
-from recorder.storage.reader import SessionFrame
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate, ordered_map
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["LIBVER", "Hdf5"]
 
@@ -245,7 +245,7 @@ class _SessionFile:
 
 def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, session_meta: dict[str, Any]) -> None:
     """Dimension scales, CF attributes and the temperature mapping (see the module docstring)."""
-    from recorder.radiometry import LinearModel, model_from_dict
+    from thermcap.recorder.radiometry import LinearModel, model_from_dict
 
     _, h, w = frames.shape
     time = f.create_dataset("time", data=times[...], dtype="<i8")

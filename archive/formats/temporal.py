@@ -16,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
-from archive.exceptions import ArchiveError
-from archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
-from archive.formats.zipped import _time_from_name, write_zip_segments
-from archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TpredError, decode_gops, encode_gops, parse_header
-from recorder.storage.reader import SessionFrame
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
+from thermcap.archive.formats.zipped import _time_from_name, write_zip_segments
+from thermcap.archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TpredError, decode_gops, encode_gops, parse_header
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["TemporalFrames"]
 

@@ -23,8 +23,8 @@ import imagecodecs
 import numpy as np
 import tifffile
 
-from archive.exceptions import ArchiveError
-from archive.formats.base import (
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats.base import (
     ArchiveContext,
     ArchiveFormat,
     DecodedFrame,
@@ -37,8 +37,8 @@ from archive.formats.base import (
     sidecar_text,
     time_from_sidecar,
 )
-from archive.lzw import lzw_encode_strips
-from recorder.storage.reader import SessionFrame
+from thermcap.archive.lzw import lzw_encode_strips
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["TiffLzw", "decode_strip", "encode_page", "write_page"]
 

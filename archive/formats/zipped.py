@@ -13,9 +13,9 @@ from pathlib import Path
 
 import numpy as np
 
-from archive.codecs import FrameCodec, get_codec
-from archive.exceptions import ArchiveError
-from archive.formats.base import (
+from thermcap.archive.codecs import FrameCodec, get_codec
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats.base import (
     ArchiveContext,
     ArchiveFormat,
     DecodedFrame,
@@ -26,7 +26,7 @@ from archive.formats.base import (
     ordered_map,
     sidecar_text,
 )
-from recorder.storage.reader import SessionFrame
+from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["ZippedFrames", "write_zip_segments"]
 
@@ -111,7 +111,7 @@ def write_zip_segments(frames: Iterable[SessionFrame], out_dir: Path, ctx: Archi
 
 
 def _time_from_name(base: str) -> int | None:
-    from recorder.icd.names import parse_name
+    from thermcap.recorder.icd.names import parse_name
 
     try:
         return parse_name(base).timestamp_ns

@@ -21,9 +21,9 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
-from recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
-from recorder.icd.quality import contrast_metrics, frame_analysis, graded_contrast
-from recorder.radiometry import RadiometricModel
+from thermcap.recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
+from thermcap.recorder.icd.quality import contrast_metrics, frame_analysis, graded_contrast
+from thermcap.recorder.radiometry import RadiometricModel
 
 __all__ = ["Detection", "EventBuilder", "HotSpotDetector", "iou"]
 
@@ -57,7 +57,7 @@ def iou(a: list[int], b: list[int]) -> float:
 
 
 def _celsius32(model: RadiometricModel, raw: np.ndarray) -> np.ndarray:
-    from recorder.radiometry import LinearModel
+    from thermcap.recorder.radiometry import LinearModel
 
     if isinstance(model, LinearModel):  # float32 all the way: half the memory traffic
         out = raw.astype(np.float32)

@@ -15,14 +15,14 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-from recorder.analysis.detector import EventBuilder, HotSpotDetector
-from recorder.exceptions import McapFileError
-from recorder.radiometry import model_from_dict
-from recorder.radiometry.session import read_bad_pixel_map
-from recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON
-from recorder.storage.lock import session_locked
-from recorder.storage.reader import archived_frame_count, iter_session_frames, read_session_meta
-from recorder.storage.segments import write_json_atomic
+from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.radiometry import model_from_dict
+from thermcap.recorder.radiometry.session import read_bad_pixel_map
+from thermcap.recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON
+from thermcap.recorder.storage.lock import session_locked
+from thermcap.recorder.storage.reader import archived_frame_count, iter_session_frames, read_session_meta
+from thermcap.recorder.storage.segments import write_json_atomic
 
 __all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
 

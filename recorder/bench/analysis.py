@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from recorder.analysis.detector import HotSpotDetector, iou
-from recorder.capture.sources.sim import SimSource, SimTarget
+from thermcap.recorder.analysis.detector import HotSpotDetector, iou
+from thermcap.recorder.capture.sources.sim import SimSource, SimTarget
 
 __all__ = ["bench_analysis", "print_table", "score"]
 
@@ -145,7 +145,7 @@ def print_table(res: dict[str, Any]) -> str:
 
 def overlay_png(temps: np.ndarray, boxes: list[list[int]], palette_name: str = "ironbow") -> bytes:
     """A heatmap of ``temps`` with each detection's box drawn in white, and its °C scale."""
-    from recorder.exports.render import colour_png, frame_range
+    from thermcap.recorder.exports.render import colour_png, frame_range
 
     return colour_png(temps, frame_range(temps), palette_name, boxes=boxes, level=6)
 
@@ -154,8 +154,8 @@ def sample_report(samples_dir: str, out_dir: str | None = None) -> list[dict[str
     """The detector on real files: hot spots per image, with an overlay PNG of each."""
     import os
 
-    from recorder.importers import ImportFileError, read_file
-    from recorder.radiometry import TemperatureUnavailable
+    from thermcap.recorder.importers import ImportFileError, read_file
+    from thermcap.recorder.radiometry import TemperatureUnavailable
 
     rows = []
     for dirpath, _d, names in sorted(os.walk(samples_dir)):

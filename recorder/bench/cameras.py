@@ -13,10 +13,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from recorder.bench.cpu import ThreadCpu, process_cpu_s
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.base import FrameSource
-from recorder.capture.sources.sim import SimSource
+from thermcap.recorder.bench.cpu import ThreadCpu, process_cpu_s
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.base import FrameSource
+from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["MIX", "bench_cameras", "measure_recording", "print_table"]
 

@@ -16,16 +16,16 @@ import time
 from pathlib import Path
 from typing import Any
 
-from recorder.importers import ImportFileError, read_file
-from recorder.importers.dji_sdk import DjiBackend
+from thermcap.recorder.importers import ImportFileError, read_file
+from thermcap.recorder.importers.dji_sdk import DjiBackend
 
 __all__ = ["bench_import", "print_table"]
 
 
 def _simulated_icd(folder: Path, frames: int) -> list[Path]:
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources import make_source
-    from recorder.exports.files import export_session
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources import make_source
+    from thermcap.recorder.exports.files import export_session
 
     rec = Recorder(make_source("sim", frames=frames, paced=False, seed=7), folder / "rec", session_id="bench",
                    analysis=False)
@@ -53,7 +53,7 @@ def _sample_corpus(samples: Path, folder: Path, copies: int) -> dict[str, list[P
 
 
 def _measure(name: str, files: list[Path], folder: Path, dji_sdk: DjiBackend | None) -> dict[str, Any]:
-    from recorder.importers.run import import_paths
+    from thermcap.recorder.importers.run import import_paths
 
     size = sum(f.stat().st_size for f in files)
     t0 = time.perf_counter()

@@ -16,8 +16,8 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from recorder.bench.cameras import measure_recording
-from recorder.capture.sources.sim import SimSource
+from thermcap.recorder.bench.cameras import measure_recording
+from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_live", "print_table"]
 
@@ -71,8 +71,8 @@ def bench_live(seconds: float = 10.0, viewers: int = 2, live_fps: float = 60.0, 
     except ImportError as exc:
         raise RuntimeError("bench live needs the websockets package for its viewers "
                            "(pip install 'thermcap[test]')") from exc
-    from recorder.live.branch import LiveBranch
-    from recorder.live.publisher import LiveOptions
+    from thermcap.recorder.live.branch import LiveBranch
+    from thermcap.recorder.live.publisher import LiveOptions
 
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         alone = measure_recording(_sim(), Path(tmp) / "alone", seconds)

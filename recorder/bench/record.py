@@ -19,12 +19,12 @@ from typing import Any
 
 import zstandard
 
-from recorder.bench.writer_run import MemorySource, WriterRun, record_once, run_isolated
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.base import CapturedFrame
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import auto_compression
-from recorder.storage.writer import Compression
+from thermcap.recorder.bench.writer_run import MemorySource, WriterRun, record_once, run_isolated
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.base import CapturedFrame
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import auto_compression
+from thermcap.recorder.storage.writer import Compression
 
 __all__ = ["MemorySource", "bench_record", "print_table", "run_soak"]
 

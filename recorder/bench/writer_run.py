@@ -27,13 +27,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from recorder.bench.cpu import process_cpu_split
-from recorder.bench.page_cache import prime
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.base import CapturedFrame, FrameSource
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy, auto_compression
-from recorder.storage.writer import Compression
+from thermcap.recorder.bench.cpu import process_cpu_split
+from thermcap.recorder.bench.page_cache import prime
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy, auto_compression
+from thermcap.recorder.storage.writer import Compression
 
 __all__ = ["MemorySource", "WriterRun", "record_once", "run_isolated", "sdk_once"]
 
@@ -130,8 +130,8 @@ def run_isolated(writer: str, width: int, height: int, frames: int, level: int, 
     """Run ``writer`` once in a fresh interpreter; its files are removed before it returns."""
     if writer not in WRITERS:
         raise ValueError(f"writer must be one of {WRITERS}, got {writer!r}")
-    cmd = [sys.executable, "-m", "recorder.bench.writer_run", writer, f"{width}x{height}", str(frames), str(level),
-           str(workdir)]
+    cmd = [sys.executable, "-m", "thermcap.recorder.bench.writer_run", writer, f"{width}x{height}", str(frames),
+           str(level), str(workdir)]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if done.returncode != 0:
         raise RuntimeError(f"bench {writer} run failed ({done.returncode}): {done.stderr.strip()[-2000:]}")

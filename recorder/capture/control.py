@@ -20,10 +20,10 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
-from recorder.storage.segments import write_json_atomic
+from thermcap.recorder.storage.segments import write_json_atomic
 
 if TYPE_CHECKING:
-    from recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.recorder import Recorder
 
 __all__ = ["MAX_BODY_BYTES", "ControlServer", "find_control", "is_loopback", "metrics_text"]
 
@@ -275,7 +275,7 @@ class ControlServer:
 
 def find_control(root: str | Path, session: str | None = None) -> dict[str, Any]:
     """The address of the running recorder under ROOT (the only one, or ``session``)."""
-    from recorder.exceptions import ThermcapError
+    from thermcap.recorder.exceptions import ThermcapError
 
     run = Path(root) / RUN_DIR
     found = []

@@ -78,5 +78,5 @@ class RecorderCounters:
     @property
     def frames_dropped(self) -> int:
         """Frames of every camera dropped (the image topics' drops)."""
-        from recorder.icd.topics import sum_image_topics
+        from thermcap.recorder.icd.topics import sum_image_topics
         return sum_image_topics(self.dropped)

@@ -33,16 +33,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from recorder import __version__
-from recorder.analysis.detector import EventBuilder, HotSpotDetector
-from recorder.capture.counters import LatencyHistogram, RecorderCounters
-from recorder.capture.sources.base import CapturedFrame, FrameSource
-from recorder.capture.triggers import TriggerPolicy, TriggerWatch
-from recorder.exceptions import RecordingError, ThermcapError
-from recorder.exports.foxglove_layout import CountsRange, write_layout
-from recorder.icd.names import FORMAT_VERSION, iso_utc
-from recorder.icd.sidecar import SidecarEncoder
-from recorder.icd.topics import (
+from thermcap.recorder import __version__
+from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector
+from thermcap.recorder.capture.counters import LatencyHistogram, RecorderCounters
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
+from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
+from thermcap.recorder.exceptions import RecordingError, ThermcapError
+from thermcap.recorder.exports.foxglove_layout import CountsRange, write_layout
+from thermcap.recorder.icd.names import FORMAT_VERSION, iso_utc
+from thermcap.recorder.icd.sidecar import SidecarEncoder
+from thermcap.recorder.icd.topics import (
     TOPIC_EVENTS,
     TOPIC_STATS,
     CameraTopics,
@@ -50,14 +50,14 @@ from recorder.icd.topics import (
     image_message_parts,
     sum_image_topics,
 )
-from recorder.radiometry import LinearModel, TemperatureUnavailable, describe_model
-from recorder.storage.layout import SessionLayout
-from recorder.storage.lock import lock_session
-from recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
-from recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
+from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, describe_model
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.lock import lock_session
+from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
+from thermcap.recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
 
 if TYPE_CHECKING:
-    from recorder.live.branch import LiveBranch
+    from thermcap.recorder.live.branch import LiveBranch
 
 __all__ = ["CameraFeed", "Recorder", "RecordingResult", "new_session_id", "sessions_dir"]
 
@@ -398,7 +398,7 @@ class Recorder:
             progress: Callable[[Recorder], None] | None = None) -> RecordingResult:
         recovered: list[str] = []
         if self.recover_leftovers:
-            from recorder.storage.recover import recover_leftovers
+            from thermcap.recorder.storage.recover import recover_leftovers
             recovered = [str(p) for p in recover_leftovers(self.root)]
         try:
             self.session_dir.mkdir(parents=True, exist_ok=False)
@@ -513,9 +513,9 @@ class Recorder:
     def _durable_frames(self) -> int:
         """Frames on disk after a write error: closed segments' counts, and the whole chunks of
         the segment the error cut (what ``recover`` keeps)."""
-        from recorder.exceptions import McapFileError
-        from recorder.storage.reader import count_frames
-        from recorder.storage.recover import durable_frames
+        from thermcap.recorder.exceptions import McapFileError
+        from thermcap.recorder.storage.reader import count_frames
+        from thermcap.recorder.storage.recover import durable_frames
 
         layout = SessionLayout.of(self.session_dir)
         n = 0

@@ -8,8 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from recorder.icd.names import CROSSOVER_GRADE
-from recorder.icd.quality import graded_contrast
+from thermcap.recorder.icd.names import CROSSOVER_GRADE
+from thermcap.recorder.icd.quality import graded_contrast
 
 __all__ = ["TriggerPolicy", "TriggerWatch"]
 

@@ -1,8 +1,8 @@
-"""The ``thermcap`` command: the root group (``root``), shared options (``options``), and the
-recorder's own subcommands, one module per group; importing them registers them on the group."""
+"""The recorder's subcommands, one module per group (importing them registers them on
+``root.cli`` and ``root.bench``), and the options every room's commands share (``options``)."""
 
-from recorder.cli import analyze, bench, files, live, record, report, sync  # noqa: F401  (registers the commands)
-from recorder.cli.options import default_root, fail, json_option, root_option
-from recorder.cli.root import cli, main
+from thermcap.recorder.cli import analyze, bench, files, live, record, report, sync  # noqa: F401  (registers the commands)
+from thermcap.recorder.cli.options import default_root, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
 
-__all__ = ["cli", "default_root", "fail", "json_option", "main", "root_option"]
+__all__ = ["cli", "default_root", "fail", "json_option", "root_option"]

@@ -6,9 +6,9 @@ import json
 
 import click
 
-from recorder.cli.options import Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
 
 
 @cli.command()
@@ -24,8 +24,8 @@ from recorder.exceptions import ThermcapError
 def analyze(sessions: tuple[str, ...], root: str, threshold: float, min_area: int, min_crossover: float,
             as_json: bool) -> None:
     """(Re)run hot-spot detection on sessions: analysis.jsonl and events.json beside the segments."""
-    from recorder.analysis.offline import analyze_session
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.analysis.offline import analyze_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     results = []
     for s in sessions:

@@ -7,8 +7,8 @@ import sys
 
 import click
 
-from recorder.cli.options import Number, fail, json_option
-from recorder.cli.root import bench
+from thermcap.recorder.cli.options import Number, fail, json_option
+from thermcap.recorder.cli.root import bench
 
 
 @bench.command("record")
@@ -25,8 +25,8 @@ from recorder.cli.root import bench
 def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | None, rounds: int,
                  as_json: bool) -> None:
     """Recorder throughput vs plain zstd-to-file, or a paced soak."""
-    from recorder.bench.record import bench_record as run_bench
-    from recorder.bench.record import print_table, run_soak
+    from thermcap.recorder.bench.record import bench_record as run_bench
+    from thermcap.recorder.bench.record import print_table, run_soak
 
     if soak:
         res = run_soak(soak, workdir=workdir)
@@ -53,8 +53,8 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
 @json_option
 def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: str, as_json: bool) -> None:
     """Import throughput per format vs reading + hashing the same files."""
-    from recorder.bench.imports import bench_import, print_table
-    from recorder.importers.dji_sdk import find_backend
+    from thermcap.recorder.bench.imports import bench_import, print_table
+    from thermcap.recorder.importers.dji_sdk import find_backend
 
     rows = bench_import(frames=n_frames, samples=samples, copies=copies, dji_sdk=find_backend(dji_sdk))
     click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
@@ -69,7 +69,7 @@ def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: s
 @json_option
 def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, as_json: bool) -> None:
     """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
-    from recorder.bench.analysis import bench_analysis, print_table, sample_report
+    from thermcap.recorder.bench.analysis import bench_analysis, print_table, sample_report
 
     res = bench_analysis(n_frames)
     if samples:
@@ -94,7 +94,7 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
 def bench_cameras_cmd(seconds: float, workdir: str | None, as_json: bool) -> None:
     """Two cameras at 640x512@60 and one at 320x256@30 in one process vs one camera alone:
     drops and CPU per camera."""
-    from recorder.bench.cameras import bench_cameras, print_table
+    from thermcap.recorder.bench.cameras import bench_cameras, print_table
 
     res = bench_cameras(seconds, workdir)
     click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
@@ -116,7 +116,7 @@ def bench_live_cmd(seconds: float, viewers: int, live_fps: float, live_width: in
                    as_json: bool) -> None:
     """Frames/s delivered to live viewers of a 640x512@60 recording, its drops, and the CPU with
     and without viewers."""
-    from recorder.bench.live import bench_live, print_table
+    from thermcap.recorder.bench.live import bench_live, print_table
 
     try:
         res = bench_live(seconds, viewers, live_fps, live_width, workdir)

@@ -16,7 +16,7 @@ from typing import Any
 
 import click
 
-from recorder.capture.sources.spec import CAMERA_KEYS
+from thermcap.recorder.capture.sources.spec import CAMERA_KEYS
 
 __all__ = ["load_config"]
 

@@ -8,9 +8,9 @@ import sys
 
 import click
 
-from recorder.cli.options import Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
 
 
 @cli.command("import")
@@ -32,9 +32,9 @@ from recorder.exceptions import ThermcapError
 def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
                dji_sdk: str, terraref_variant: str, as_json: bool) -> None:
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
-    from recorder.cli.progress import progress
-    from recorder.importers.dji_sdk import find_backend
-    from recorder.importers.run import import_paths
+    from thermcap.recorder.cli.progress import progress
+    from thermcap.recorder.importers.dji_sdk import find_backend
+    from thermcap.recorder.importers.run import import_paths
 
     backend = find_backend(dji_sdk)
     if backend is not None and not as_json:
@@ -114,8 +114,8 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
                ground_elevation: float | None, dem: str | None, truth: str | None, match_radius: float, colorbar: bool,
                model_version: int | None, bad_pixels: str, as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
-    from recorder.exports.files import export_session
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.exports.files import export_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     try:
         d = resolve_session(session, root)
@@ -160,11 +160,11 @@ def radiometry_cmd(session: str, root: str, sets: tuple[str, ...], why: str, fra
                    dji_sdk: str, as_json: bool) -> None:
     """List a session's radiometric model versions, or add one (--set ... --why ...): the stored
     counts never change; every temperature names the version it used."""
-    from recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
-    from recorder.importers.dji_sdk import find_backend
-    from recorder.radiometry import model_from_dict
-    from recorder.radiometry.params import add_version, read_versions
-    from recorder.storage.reader import read_session_meta, resolve_session
+    from thermcap.recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
+    from thermcap.recorder.importers.dji_sdk import find_backend
+    from thermcap.recorder.radiometry import model_from_dict
+    from thermcap.recorder.radiometry.params import add_version, read_versions
+    from thermcap.recorder.storage.reader import read_session_meta, resolve_session
 
     try:
         d = resolve_session(session, root)

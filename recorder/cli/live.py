@@ -8,9 +8,9 @@ import threading
 
 import click
 
-from recorder.cli.options import PORT, Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
 
 
 @cli.command()
@@ -36,9 +36,9 @@ def play(session: str, root: str, host: str, port: int, rate: float, loop: bool,
          max_width: int, duration_s: float | None, wait_for_viewer: float, as_json: bool) -> None:
     """Replay SESSION (a folder, or an id under ROOT/sessions) over the Foxglove WebSocket
     protocol: images, sidecars, annotations, temperatures and events, at the recorded pace."""
-    from recorder.live.publisher import LiveOptions, LivePublisher
-    from recorder.live.replay import replay_session
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.live.publisher import LiveOptions, LivePublisher
+    from thermcap.recorder.live.replay import replay_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     try:
         session_dir = resolve_session(session, root)

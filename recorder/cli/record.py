@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
-from recorder.cli.options import PORT, Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
 
 if TYPE_CHECKING:
-    from recorder.storage.info import SegmentInfo, SessionInfo
+    from thermcap.recorder.storage.info import SegmentInfo, SessionInfo
 
 
 # -- record ---------------------------------------------------------------------------------
@@ -114,15 +114,15 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
     With --ring it records until stopped within a disk budget; triggers (--trigger-*, the contrast
     grade under 0.3, radar cues, `thermcap ctl mark`, SIGUSR1) protect --pre/--post seconds around them.
     """
-    from recorder.capture.control import ControlServer
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources import make_source
-    from recorder.capture.sources.spec import parse_source_spec
-    from recorder.capture.triggers import TriggerPolicy
-    from recorder.storage.layout import check_session_name
-    from recorder.storage.ring import RingPolicy
-    from recorder.storage.segments import SegmentPolicy, auto_compression
-    from recorder.storage.writer import Compression, check_level
+    from thermcap.recorder.capture.control import ControlServer
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources import make_source
+    from thermcap.recorder.capture.sources.spec import parse_source_spec
+    from thermcap.recorder.capture.triggers import TriggerPolicy
+    from thermcap.recorder.storage.layout import check_session_name
+    from thermcap.recorder.storage.ring import RingPolicy
+    from thermcap.recorder.storage.segments import SegmentPolicy, auto_compression
+    from thermcap.recorder.storage.writer import Compression, check_level
 
     live_branch = None
     try:
@@ -179,15 +179,15 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             raise click.BadParameter("--control needs a token: set THERMCAP_CONTROL_TOKEN (or --control-token), "
                                      "or pass --control-insecure to run it open to every local user")
         if live:
-            from recorder.capture.control import is_loopback
+            from thermcap.recorder.capture.control import is_loopback
 
             if not is_loopback(live_host):
                 raise click.BadParameter(
                     f"--live-host {live_host}: the live view has no token of its own, so it is served on this "
                     f"machine only (127.0.0.1); reach it from elsewhere through an SSH tunnel "
                     f"(ssh -L {live_port}:127.0.0.1:{live_port} ...) or a proxy that checks a token")
-            from recorder.live.branch import LiveBranch
-            from recorder.live.publisher import LiveOptions
+            from thermcap.recorder.live.branch import LiveBranch
+            from thermcap.recorder.live.publisher import LiveOptions
 
             try:
                 live_branch = LiveBranch(LiveOptions(host=live_host, port=live_port, max_fps=live_fps,
@@ -220,7 +220,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             server = ControlServer(rec, port=control_port, token=control_token, insecure=control_insecure)
         except OSError as exc:
             fail(f"control endpoint on 127.0.0.1:{control_port}: {exc.strerror or exc}")
-    from recorder.cli.progress import verbosity
+    from thermcap.recorder.cli.progress import verbosity
 
     progress = None if as_json or not sys.stderr.isatty() or verbosity() < 0 else _progress_line()
     try:
@@ -292,7 +292,7 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
     import urllib.parse
     import urllib.request
 
-    from recorder.capture.control import find_control, is_loopback
+    from thermcap.recorder.capture.control import find_control, is_loopback
 
     try:
         base = url or find_control(root, session_id)["url"]
@@ -384,7 +384,7 @@ def _progress_line():
 @json_option
 def info(paths: tuple[str, ...], as_json: bool) -> None:
     """Describe segments (NNNN.mcap) or session folders: frames, time span, fps, drops, bytes."""
-    from recorder.storage.info import info as get_info
+    from thermcap.recorder.storage.info import info as get_info
 
     try:
         data = [get_info(p) for p in paths]
@@ -403,7 +403,7 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
     from rich.console import Console
     from rich.table import Table
 
-    from recorder.storage.info import SessionInfo
+    from thermcap.recorder.storage.info import SessionInfo
 
     plain = not sys.stdout.isatty()  # a pipe or a file: no boxes, no wrapping
     con = Console(width=10_000 if plain else None, soft_wrap=plain)
@@ -454,8 +454,8 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
 def split_cameras_cmd(session: str, root: str, delete_source: bool, as_json: bool) -> None:
     """One single-camera session per camera of SESSION (ROOT/sessions/<id>.<camera>), bit-exact:
     what the archiver, the index and the API take like any other session."""
-    from recorder.storage.reader import resolve_session
-    from recorder.storage.split import split_cameras
+    from thermcap.recorder.storage.reader import resolve_session
+    from thermcap.recorder.storage.split import split_cameras
 
     try:
         res = split_cameras(resolve_session(session, root), delete_source=delete_source)
@@ -481,7 +481,7 @@ def recover(path: str, keep_original: bool, as_json: bool) -> None:
 
     PATH is a segment, a session folder or a data root. session.json is updated to what the
     segments now hold, with what each repair kept and discarded."""
-    from recorder.storage.recover import recover_path
+    from thermcap.recorder.storage.recover import recover_path
 
     try:
         results = recover_path(path, keep_original=keep_original)

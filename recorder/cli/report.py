@@ -8,9 +8,9 @@ from pathlib import Path
 
 import click
 
-from recorder.cli.options import Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
 
 
 @cli.group("report")
@@ -19,7 +19,7 @@ def report() -> None:
 
 
 def _reference(value: str, root: str) -> tuple[Path, float | None]:
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     name, _, temp = value.partition("=")
     try:
@@ -43,9 +43,9 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
     """The ICD section 5 requirements measured from the session: NETD, FPA uniformity, temporal stability,
     absolute accuracy, linearity and bad pixels, each with its limit and pass, fail or not measurable (and why).
     Exit 1 if a requirement fails."""
-    from recorder.reports.quality import measure_quality
-    from recorder.reports.render import write_quality_report
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.reports.quality import measure_quality
+    from thermcap.recorder.reports.render import write_quality_report
+    from thermcap.recorder.storage.reader import resolve_session
 
     try:
         d = resolve_session(session, root)
@@ -76,9 +76,9 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
 def inspection_cmd(session: str, root: str, max_findings: int, out_dir: str | None, as_json: bool) -> None:
     """Detected hot spots as an inspection PDF: per finding the image with its colour bar and box, max, ΔT to the
     local background, time, position, model version and frame hash, and a provenance block `report verify` checks."""
-    from recorder.reports.inspection import build_inspection
-    from recorder.reports.render import write_inspection_report
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.reports.inspection import build_inspection
+    from thermcap.recorder.reports.render import write_inspection_report
+    from thermcap.recorder.storage.reader import resolve_session
 
     try:
         d = resolve_session(session, root)
@@ -99,7 +99,7 @@ def inspection_cmd(session: str, root: str, max_findings: int, out_dir: str | No
 def verify_cmd(report_file: str, root: str, as_json: bool) -> None:
     """Recompute every number of an inspection report (its PDF or JSON twin) from the archive; exit 1 if one no
     longer holds."""
-    from recorder.reports.inspection import verify_inspection
+    from thermcap.recorder.reports.inspection import verify_inspection
 
     try:
         res = verify_inspection(report_file, root)

@@ -10,14 +10,14 @@ from pathlib import Path
 
 import click
 
-from recorder.cli.options import Number, fail, json_option, root_option
-from recorder.cli.root import cli
-from recorder.exceptions import ThermcapError
-from recorder.sync.targets import Target
+from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.sync.targets import Target
 
 
 def _target(bucket: str | None, endpoint: str | None, region: str, prefix: str, to: str | None) -> Target:
-    from recorder.sync.targets import DirTarget, S3Target
+    from thermcap.recorder.sync.targets import DirTarget, S3Target
 
     if bool(bucket) == bool(to):
         raise ThermcapError("give one destination: --bucket (with --endpoint for SeaweedFS, MinIO, R2) or --to DIR")
@@ -53,9 +53,9 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
     """Ship closed segments, session.json, events and protected windows (those first, then segments oldest
     first) and keep each upload's state on disk: a dropped link or a reboot re-sends at most the part in flight.
     A segment is safe once the cloud's receipt (`thermcap sync-confirm`) names its exact size and sha256."""
-    from recorder.cli.progress import progress
-    from recorder.sync.engine import Syncer
-    from recorder.sync.rate import parse_rate
+    from thermcap.recorder.cli.progress import progress
+    from thermcap.recorder.sync.engine import Syncer
+    from thermcap.recorder.sync.rate import parse_rate
 
     try:
         syncer = Syncer(Path(root), _target(bucket, endpoint, region, prefix, to_dir), rate=parse_rate(max_rate),

@@ -23,16 +23,16 @@ from typing import Any
 import numpy as np
 import tifffile
 
-from recorder.exceptions import ThermcapError
-from recorder.exports.colorbar import RANGE_MODES, TemperatureRange
-from recorder.exports.geotiff import geotransform_tags, utm_tags, write_cog, write_temperature_tiff
-from recorder.exports.percentiles import percentiles
-from recorder.exports.render import colour_png, frame_range
-from recorder.icd.names import format_name, iso_utc
-from recorder.icd.rosmsg import json_payload
-from recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
-from recorder.radiometry.session import SessionTemperatures
-from recorder.storage.reader import iter_session_frames, read_session_meta
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.exports.colorbar import RANGE_MODES, TemperatureRange
+from thermcap.recorder.exports.geotiff import geotransform_tags, utm_tags, write_cog, write_temperature_tiff
+from thermcap.recorder.exports.percentiles import percentiles
+from thermcap.recorder.exports.render import colour_png, frame_range
+from thermcap.recorder.icd.names import format_name, iso_utc
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
+from thermcap.recorder.radiometry.session import SessionTemperatures
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
 
@@ -80,7 +80,7 @@ def _position(vendor: dict[str, Any]) -> dict[str, Any] | None:
 def _name_range(model: Any, vendor: dict[str, Any], temps: np.ndarray | None) -> tuple[float, float]:
     """The scene range an ICD name carries (ICD 2.1): the camera's calibrated range where the file
     says it (FLIR), a linear model's own range, a lookup table's, else the frame's own."""
-    from recorder.radiometry import LookupTableModel
+    from thermcap.recorder.radiometry import LookupTableModel
 
     if vendor.get("camera_range_c"):
         lo, hi = vendor["camera_range_c"]
@@ -222,11 +222,11 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
     image rotated and placed as the TERRA-REF pipeline does, in EPSG:4326 as it publishes (or UTM
     12N with ``crs="utm"``). A frame that cannot be placed is refused with what its file lacks,
     never placed by a guess."""
-    from recorder.maps.footprint import FootprintRefused, footprint
-    from recorder.maps.mosaic import hot_spot_points
-    from recorder.maps.pose import PoseMissing, pose_from_vendor
-    from recorder.maps.terrain import Dem, DemError
-    from recorder.maps.terraref import UTM_12N, gantry_footprint
+    from thermcap.recorder.maps.footprint import FootprintRefused, footprint
+    from thermcap.recorder.maps.mosaic import hot_spot_points
+    from thermcap.recorder.maps.pose import PoseMissing, pose_from_vendor
+    from thermcap.recorder.maps.terrain import Dem, DemError
+    from thermcap.recorder.maps.terraref import UTM_12N, gantry_footprint
 
     crs, truth = opts.crs, opts.truth
     dem = Dem.from_file(opts.dem) if opts.dem is not None else None
@@ -304,7 +304,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
         written = [path.name] if features else []
     report = None
     if kind == "hotspots" and truth is not None:
-        from recorder.maps.truth import compare_with_truth, read_truth
+        from thermcap.recorder.maps.truth import compare_with_truth, read_truth
 
         spots = [f["properties"] for f in features]
         if not spots:
@@ -321,7 +321,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
 
 def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_times: dict[int, str],
                   meta: dict[str, Any]) -> list[str]:
-    from recorder.maps.mosaic import build_mosaic
+    from thermcap.recorder.maps.mosaic import build_mosaic
 
     try:
         mosaic = build_mosaic(tiles)
@@ -341,8 +341,8 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
 
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
     """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.exports.rjpeg``)."""
-    from recorder.exports.rjpeg import rebuild_rjpeg
-    from recorder.importers.dji import kept_rjpeg_segments
+    from thermcap.recorder.exports.rjpeg import rebuild_rjpeg
+    from thermcap.recorder.importers.dji import kept_rjpeg_segments
 
     kept = kept_rjpeg_segments(session_dir)
     written, refused = [], []

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.icd.topics import camera_topics
+from thermcap.recorder.icd.topics import camera_topics
 
 __all__ = ["FOXGLOVE_LAYOUT", "CountsRange", "layout_for", "write_layout"]
 

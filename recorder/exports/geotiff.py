@@ -20,7 +20,7 @@ from xml.sax.saxutils import escape
 import numpy as np
 import tifffile
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["gcp_tags", "gdal_metadata_xml", "geotransform_tags", "utm_tags", "write_cog", "write_temperature_tiff"]
 

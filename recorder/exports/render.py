@@ -9,11 +9,11 @@ from functools import cache, lru_cache
 import numpy as np
 import tifffile
 
-from recorder.exports.colorbar import TemperatureRange, add_colorbar
-from recorder.exports.percentiles import percentiles
-from recorder.exports.png import encode_png
-from recorder.radiometry import RadiometricModel, model_from_dict
-from recorder.radiometry.session import FrameTemperatures
+from thermcap.recorder.exports.colorbar import TemperatureRange, add_colorbar
+from thermcap.recorder.exports.percentiles import percentiles
+from thermcap.recorder.exports.png import encode_png
+from thermcap.recorder.radiometry import RadiometricModel, model_from_dict
+from thermcap.recorder.radiometry.session import FrameTemperatures
 
 __all__ = ["PALETTES", "celsius", "celsius_tiff", "colour_png", "frame_range", "palette", "preview_png",
            "session_model", "tiff16"]
@@ -98,7 +98,7 @@ def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = 
     """8-bit colour PNG and its scale: the frame's own range, ``session_range``, or the fixed
     ``t_min``..``t_max`` (°C). Where the model cannot give temperatures (DJI layouts that need
     DJI's SDK) the counts are stretched, and the scale says counts."""
-    from recorder.radiometry import TemperatureUnavailable
+    from thermcap.recorder.radiometry import TemperatureUnavailable
 
     try:
         values, units = celsius(frame, model), "°C"
@@ -123,7 +123,7 @@ def tiff16(frame: np.ndarray, description: str | None = None) -> bytes:
 def celsius_tiff(temps: FrameTemperatures) -> bytes:
     """A °C GeoTIFF of one frame's ``FrameTemperatures`` (``recorder.radiometry.session``), naming
     the model version and the bad-pixel rule it used (see ``recorder.exports.geotiff``)."""
-    from recorder.exports.geotiff import write_temperature_tiff
+    from thermcap.recorder.exports.geotiff import write_temperature_tiff
 
     buf = io.BytesIO()
     said = temps.describe()

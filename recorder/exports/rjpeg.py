@@ -12,8 +12,8 @@ from typing import cast
 
 import numpy as np
 
-from recorder.importers.dji import DJI_SEGMENT, RAW_PLACEHOLDER, SEGMENTS_BLOB, app_segment
-from recorder.importers.jpeg import app_segments
+from thermcap.recorder.importers.dji import DJI_SEGMENT, RAW_PLACEHOLDER, SEGMENTS_BLOB, app_segment
+from thermcap.recorder.importers.jpeg import app_segments
 
 __all__ = ["SEGMENTS_BLOB", "rebuild_rjpeg"]
 

@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.icd.names import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
+from thermcap.recorder.icd.names import DETECTION_THRESHOLD_K, EXCELLENT_THRESHOLD_K
 
 __all__ = [
     "contrast_grade",

@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from functools import cache
 from typing import Any, NamedTuple
 
-from recorder.icd.cdr import compile_encoder, pad, phase_layouts, write_string
-from recorder.icd.topics import sum_image_topics
+from thermcap.recorder.icd.cdr import compile_encoder, pad, phase_layouts, write_string
+from thermcap.recorder.icd.topics import sum_image_topics
 
 __all__ = [
     "ANNOTATIONS",

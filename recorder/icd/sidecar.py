@@ -24,8 +24,8 @@ from typing import Any
 import fastjsonschema
 import jsonschema_rs
 
-from recorder.exceptions import SidecarError
-from recorder.icd.names import FORMAT_VERSION
+from thermcap.recorder.exceptions import SidecarError
+from thermcap.recorder.icd.names import FORMAT_VERSION
 
 __all__ = ["SIDECAR_SCHEMA", "SidecarEncoder", "dumps_sidecar", "sidecar_schema_bytes", "validate_sidecar"]
 

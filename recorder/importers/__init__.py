@@ -12,12 +12,12 @@ import mmap
 from collections.abc import Iterator
 from pathlib import Path
 
-from recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
-from recorder.importers.dji import is_dji, read_dji
-from recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
-from recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
-from recorder.importers.jpeg import app_segments
-from recorder.importers.terraref import metadata_for, read_terraref
+from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
+from thermcap.recorder.importers.dji import is_dji, read_dji
+from thermcap.recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
+from thermcap.recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
+from thermcap.recorder.importers.jpeg import app_segments
+from thermcap.recorder.importers.terraref import metadata_for, read_terraref
 
 __all__ = ["MAX_FILE_BYTES", "ImportFileError", "ImportedFrame", "TruncatedImageError", "detect", "iter_file",
            "read_file"]

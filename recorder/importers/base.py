@@ -7,8 +7,8 @@ from typing import Any
 
 import numpy as np
 
-from recorder.exceptions import ImportFileError, TruncatedImageError
-from recorder.radiometry import RadiometricModel
+from thermcap.recorder.exceptions import ImportFileError, TruncatedImageError
+from thermcap.recorder.radiometry import RadiometricModel
 
 __all__ = ["ImportFileError", "ImportedFrame", "TruncatedImageError", "read_exact"]
 

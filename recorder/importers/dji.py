@@ -14,10 +14,10 @@ from typing import Any
 
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportFileError
-from recorder.importers.exif import capture_time, exif_fields, xmp_fields
-from recorder.importers.jpeg import app_segments, concat_app
-from recorder.radiometry import DjiModel
+from thermcap.recorder.importers.base import ImportedFrame, ImportFileError
+from thermcap.recorder.importers.exif import capture_time, exif_fields, xmp_fields
+from thermcap.recorder.importers.jpeg import app_segments, concat_app
+from thermcap.recorder.radiometry import DjiModel
 
 __all__ = ["DJI_SEGMENT", "RAW_PLACEHOLDER", "SEGMENTS_BLOB", "app_segment", "dji_layout", "is_dji",
            "kept_rjpeg_segments", "read_dji"]
@@ -53,7 +53,7 @@ def kept_rjpeg_segments(session_dir: Path) -> dict[int, tuple[str, bytes]]:
     once that is deleted, the archive's extras.mcap (which keeps every attachment as recorded)."""
     from mcap.reader import make_reader
 
-    from recorder.storage.layout import SessionLayout
+    from thermcap.recorder.storage.layout import SessionLayout
 
     files = sorted(session_dir.glob("[0-9][0-9][0-9][0-9].mcap"))
     if not files and SessionLayout.of(session_dir).extras.is_file():

@@ -18,14 +18,14 @@ from pathlib import Path
 
 import numpy as np
 
-from recorder.exceptions import ThermcapError
-from recorder.exports.rjpeg import rebuild_rjpeg
-from recorder.importers.dji import kept_rjpeg_segments
-from recorder.importers.dji_sdk import DjiBackend, sdk_params_problem
-from recorder.radiometry import LookupTableModel, model_from_dict
-from recorder.radiometry.base import TemperatureUnavailable
-from recorder.radiometry.params import OBJECT_PARAMS, ModelVersion, add_version
-from recorder.storage.reader import iter_session_frames, read_session_meta
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.exports.rjpeg import rebuild_rjpeg
+from thermcap.recorder.importers.dji import kept_rjpeg_segments
+from thermcap.recorder.importers.dji_sdk import DjiBackend, sdk_params_problem
+from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
+from thermcap.recorder.radiometry.base import TemperatureUnavailable
+from thermcap.recorder.radiometry.params import OBJECT_PARAMS, ModelVersion, add_version
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["DJI_KINDS", "add_sdk_version"]
 

@@ -23,7 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["CLI_PARAMS", "ENV_VAR", "DjiBackend", "DjiSdkError", "DjiThermalCli", "LibDirp", "find_backend",
            "sdk_params_problem"]

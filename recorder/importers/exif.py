@@ -113,7 +113,7 @@ def capture_time(exif: dict[str, object], xmp: dict[str, str] | None = None) -> 
     EXIF GPS date and time (UTC by definition); last, DateTimeOriginal alone, which is the camera's
     local time in an unknown zone, taken as UTC and said so (frames of one camera still order
     correctly)."""
-    from recorder.icd.names import parse_rfc3339
+    from thermcap.recorder.icd.names import parse_rfc3339
 
     stamp = (xmp or {}).get("UTCAtExposure")
     if stamp:

@@ -10,9 +10,9 @@ from typing import Any
 import imagecodecs
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError, read_exact
-from recorder.importers.jpeg import app_segments
-from recorder.radiometry import FlirPlanckModel
+from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError, read_exact
+from thermcap.recorder.importers.jpeg import app_segments
+from thermcap.recorder.radiometry import FlirPlanckModel
 
 __all__ = ["flir_jpeg_payload", "iter_fff_records", "parse_fff", "read_fff_file", "read_flir_jpeg"]
 
@@ -192,7 +192,7 @@ def frame_from_fff(path: str, fff: bytes, fmt: str, index: int = 0) -> ImportedF
 
 
 def read_flir_jpeg(path: str, data: bytes) -> list[ImportedFrame]:
-    from recorder.importers.exif import capture_time, exif_fields, exif_position, xmp_fields
+    from thermcap.recorder.importers.exif import capture_time, exif_fields, exif_position, xmp_fields
 
     fff = flir_jpeg_payload(path, data)
     if fff is None:

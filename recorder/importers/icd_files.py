@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import tifffile
 
-from recorder.icd.names import parse_name
-from recorder.icd.sidecar import validate_sidecar
-from recorder.importers.base import ImportedFrame, ImportFileError
-from recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
+from thermcap.recorder.icd.names import parse_name
+from thermcap.recorder.icd.sidecar import validate_sidecar
+from thermcap.recorder.importers.base import ImportedFrame, ImportFileError
+from thermcap.recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
 
 __all__ = ["read_icd_raw", "read_icd_tiff", "sidecar_for"]
 
@@ -52,7 +52,7 @@ def _model(doc: dict | None):
 
 
 def _timestamp(path: str, doc: dict | None) -> int | None:
-    from recorder.icd.names import parse_rfc3339
+    from thermcap.recorder.icd.names import parse_rfc3339
 
     if doc and doc.get("capture", {}).get("timestamp"):
         try:

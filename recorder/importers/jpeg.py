@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import struct
 
-from recorder.importers.base import ImportFileError
+from thermcap.recorder.importers.base import ImportFileError
 
 __all__ = ["app_segments", "concat_app"]
 

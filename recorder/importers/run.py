@@ -23,12 +23,12 @@ from typing import Any, ClassVar, cast
 
 import numpy as np
 
-from recorder.capture.recorder import Recorder, RecordingResult, new_session_id
-from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
-from recorder.importers import ImportedFrame, ImportFileError, TruncatedImageError, iter_file
-from recorder.importers.dji_sdk import DjiBackend
-from recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
-from recorder.storage.digest import frame_sha256
+from thermcap.recorder.capture.recorder import Recorder, RecordingResult, new_session_id
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
+from thermcap.recorder.importers import ImportedFrame, ImportFileError, TruncatedImageError, iter_file
+from thermcap.recorder.importers.dji_sdk import DjiBackend
+from thermcap.recorder.radiometry import LookupTableModel, RadiometricModel, TemperatureUnavailable, describe_model
+from thermcap.recorder.storage.digest import frame_sha256
 
 __all__ = ["ImportReport", "import_paths"]
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from recorder.importers.base import ImportedFrame, ImportFileError
-from recorder.radiometry import RadiometricModel, ScaledKelvinModel, TerraRefPlanckModel
+from thermcap.recorder.importers.base import ImportedFrame, ImportFileError
+from thermcap.recorder.radiometry import RadiometricModel, ScaledKelvinModel, TerraRefPlanckModel
 
 __all__ = ["metadata_for", "read_terraref"]
 

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from recorder.live.publisher import LiveOptions, LivePublisher
-from recorder.radiometry import RadiometricModel
+from thermcap.recorder.live.publisher import LiveOptions, LivePublisher
+from thermcap.recorder.radiometry import RadiometricModel
 
 __all__ = ["LiveBranch", "LiveCounters"]
 

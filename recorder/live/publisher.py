@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 from foxglove.websocket import ServerListener
 
-from recorder.radiometry import RadiometricModel
+from thermcap.recorder.radiometry import RadiometricModel
 
 __all__ = ["CameraTopics", "LiveOptions", "LivePublisher", "subsample"]
 
@@ -206,7 +206,7 @@ def _annotations(targets: list[dict[str, Any]], stamp: Any, k: int) -> Any:
         TextAnnotation,
     )
 
-    from recorder.icd.rosmsg import BOX_RGBA, LABEL_BACKGROUND_RGBA, LABEL_RGBA, target_marks
+    from thermcap.recorder.icd.rosmsg import BOX_RGBA, LABEL_BACKGROUND_RGBA, LABEL_RGBA, target_marks
 
     def color(c: tuple[float, ...]) -> Any:
         return Color(r=c[0], g=c[1], b=c[2], a=c[3])

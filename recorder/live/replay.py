@@ -16,11 +16,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.exceptions import ThermcapError
-from recorder.live.publisher import LivePublisher
-from recorder.radiometry import RadiometricModel, model_from_dict
-from recorder.storage.layout import SessionLayout
-from recorder.storage.reader import SessionFrame, iter_session_frames, read_session_meta, session_cameras
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.live.publisher import LivePublisher
+from thermcap.recorder.radiometry import RadiometricModel, model_from_dict
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.reader import SessionFrame, iter_session_frames, read_session_meta, session_cameras
 
 __all__ = ["ReplayResult", "replay_session"]
 

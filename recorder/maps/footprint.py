@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-from recorder.maps.pose import CameraPose, PoseMissing
-from recorder.maps.terrain import Dem
+from thermcap.recorder.maps.pose import CameraPose, PoseMissing
+from thermcap.recorder.maps.terrain import Dem
 
 __all__ = ["HORIZON_MARGIN_DEG", "NADIR_TOLERANCE_DEG", "Footprint", "FootprintRefused", "footprint",
            "ground_to_pixel", "pixel_to_ground", "utm_epsg"]

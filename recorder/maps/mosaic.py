@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.maps.footprint import Footprint, footprint, pixel_to_ground
+from thermcap.recorder.maps.footprint import Footprint, footprint, pixel_to_ground
 
 __all__ = ["Mosaic", "build_mosaic", "hot_spot_points"]
 

@@ -23,7 +23,7 @@ from dataclasses import asdict, dataclass
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from recorder.maps.terrain import Dem
+    from thermcap.recorder.maps.terrain import Dem
 
 __all__ = ["LENS_TABLE", "CameraPose", "PoseMissing", "pose_from_vendor"]
 

@@ -12,11 +12,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
-from recorder.maps.footprint import footprint, pixel_to_ground
-from recorder.maps.pose import CameraPose
-from recorder.maps.terrain import Dem
-from recorder.radiometry import LinearModel
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
+from thermcap.recorder.maps.footprint import footprint, pixel_to_ground
+from thermcap.recorder.maps.pose import CameraPose
+from thermcap.recorder.maps.terrain import Dem
+from thermcap.recorder.radiometry import LinearModel
 
 __all__ = ["FlightSource", "GroundTarget", "lawnmower"]
 

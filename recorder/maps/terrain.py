@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["Dem", "DemError"]
 

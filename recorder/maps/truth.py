@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["TruthReport", "compare_with_truth", "read_truth"]
 

@@ -9,16 +9,16 @@ Each kind lives in its own module (``linear``, ``planck``, ``lookup``); importin
 registers them all, so ``model_from_dict`` knows every kind a session may name.
 """
 
-from recorder.radiometry.base import (
+from thermcap.recorder.radiometry.base import (
     RadiometricModel,
     TemperatureUnavailable,
     describe_model,
     model_from_dict,
     register_model,
 )
-from recorder.radiometry.linear import DEFAULT_MODEL, LinearModel, ScaledKelvinModel
-from recorder.radiometry.lookup import DjiModel, LookupTableModel
-from recorder.radiometry.planck import FlirPlanckModel, TerraRefPlanckModel
+from thermcap.recorder.radiometry.linear import DEFAULT_MODEL, LinearModel, ScaledKelvinModel
+from thermcap.recorder.radiometry.lookup import DjiModel, LookupTableModel
+from thermcap.recorder.radiometry.planck import FlirPlanckModel, TerraRefPlanckModel
 
 __all__ = [
     "DEFAULT_MODEL",

@@ -8,7 +8,7 @@ from typing import Any, ClassVar, Protocol, TypeVar, runtime_checkable
 
 import numpy as np
 
-from recorder.registry import Registry
+from thermcap.recorder.registry import Registry
 
 T = TypeVar("T", bound=type)
 __all__ = ["RadiometricModel", "TemperatureUnavailable", "describe_model", "model_from_dict", "register_model"]

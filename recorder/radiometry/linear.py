@@ -8,8 +8,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.icd.names import BIT_DEPTH
-from recorder.radiometry.base import register_model
+from thermcap.recorder.icd.names import BIT_DEPTH
+from thermcap.recorder.radiometry.base import register_model
 
 __all__ = ["DEFAULT_MODEL", "LinearModel", "ScaledKelvinModel"]
 

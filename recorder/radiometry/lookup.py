@@ -12,7 +12,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.radiometry.base import TemperatureUnavailable, register_model
+from thermcap.recorder.radiometry.base import TemperatureUnavailable, register_model
 
 __all__ = ["DjiModel", "LookupTableModel"]
 

@@ -16,7 +16,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from recorder.radiometry.base import RadiometricModel
+from thermcap.recorder.radiometry.base import RadiometricModel
 
 __all__ = ["OBJECT_PARAMS", "ModelVersion", "add_version", "model_for_frame", "read_versions", "reparameterise"]
 
@@ -122,7 +122,7 @@ def _measured(version: ModelVersion) -> RadiometricModel:
     """A measured version's model, built once per version read (a DJI table has thousands of
     entries, and temperatures are asked for frame by frame). Keyed by the object, which the
     entry keeps alive, so a key is never reused by another session's version."""
-    from recorder.radiometry.base import model_from_dict
+    from thermcap.recorder.radiometry.base import model_from_dict
 
     got = _MEASURED.get(id(version))
     if got is None or got[0] is not version:

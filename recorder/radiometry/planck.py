@@ -7,7 +7,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.radiometry.base import register_model
+from thermcap.recorder.radiometry.base import register_model
 
 __all__ = ["FlirPlanckModel", "TerraRefPlanckModel"]
 

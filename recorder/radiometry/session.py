@@ -18,8 +18,8 @@ from typing import Any
 
 import numpy as np
 
-from recorder.radiometry.base import RadiometricModel, model_from_dict
-from recorder.radiometry.params import ModelVersion, model_for_frame, read_versions, reparameterise
+from thermcap.recorder.radiometry.base import RadiometricModel, model_from_dict
+from thermcap.recorder.radiometry.params import ModelVersion, model_for_frame, read_versions, reparameterise
 
 __all__ = ["BAD_PIXEL_RULES", "FrameTemperatures", "SessionTemperatures", "read_bad_pixel_map"]
 
@@ -33,7 +33,7 @@ def read_bad_pixel_map(session_dir: str | Path, camera: str | None = None) -> np
     boolean mask; None where it has none."""
     from mcap.reader import make_reader
 
-    from recorder.storage.reader import frame_files
+    from thermcap.recorder.storage.reader import frame_files
 
     want = f"{camera}/bad_pixel_map.json" if camera else "bad_pixel_map.json"
     for path in frame_files(session_dir):
@@ -97,7 +97,7 @@ class SessionTemperatures:
     @classmethod
     def of(cls, session_dir: str | Path, meta: dict[str, Any] | None = None, *, version: int | None = None,
            bad_pixels: str = "nan", overrides: dict[str, float] | None = None) -> SessionTemperatures:
-        from recorder.storage.reader import read_session_meta
+        from thermcap.recorder.storage.reader import read_session_meta
 
         meta = read_session_meta(session_dir) if meta is None else meta
         base = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})

@@ -28,14 +28,14 @@ from typing import Any
 
 import numpy as np
 
-from recorder import __version__
-from recorder.exceptions import ThermcapError
-from recorder.exports.files import _positions
-from recorder.icd.names import iso_utc
-from recorder.radiometry import model_from_dict
-from recorder.radiometry.params import read_versions, reparameterise
-from recorder.storage.digest import frame_sha256
-from recorder.storage.reader import iter_session_frames, read_session_meta
+from thermcap.recorder import __version__
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.exports.files import _positions
+from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.radiometry import model_from_dict
+from thermcap.recorder.radiometry.params import read_versions, reparameterise
+from thermcap.recorder.storage.digest import frame_sha256
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["Finding", "InspectionReport", "VerifyResult", "build_inspection", "verify_inspection"]
 
@@ -149,7 +149,7 @@ def json_sha256_in_pdf(pdf: Path) -> str | None:
 
 def verify_inspection(path: str | Path, root: str | Path) -> VerifyResult:
     """Recompute every finding of a report (its JSON twin, or the PDF that names it)."""
-    from recorder.storage.reader import resolve_session
+    from thermcap.recorder.storage.reader import resolve_session
 
     path = Path(path)
     if path.suffix.lower() == ".pdf":

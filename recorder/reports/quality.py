@@ -32,10 +32,10 @@ from typing import Any
 
 import numpy as np
 
-from recorder.exceptions import ThermcapError
-from recorder.radiometry import model_from_dict
-from recorder.radiometry.session import read_bad_pixel_map
-from recorder.storage.reader import iter_session_frames, read_session_meta
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.radiometry import model_from_dict
+from thermcap.recorder.radiometry.session import read_bad_pixel_map
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["Measurement", "QualityReport", "measure_quality"]
 

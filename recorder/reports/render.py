@@ -10,9 +10,9 @@ import io
 from pathlib import Path
 from typing import Any
 
-from recorder.exceptions import ThermcapError
-from recorder.exports.percentiles import percentiles
-from recorder.reports.quality import QualityReport
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.exports.percentiles import percentiles
+from thermcap.recorder.reports.quality import QualityReport
 
 __all__ = ["write_inspection_report", "write_quality_report"]
 

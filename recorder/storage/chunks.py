@@ -30,7 +30,7 @@ import imagecodecs
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.exceptions import McapFileError
+from thermcap.recorder.exceptions import McapFileError
 
 __all__ = [
     "ChunkRecords",

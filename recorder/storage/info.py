@@ -13,14 +13,14 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from recorder.exceptions import McapFileError
-from recorder.icd.names import iso_utc
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
-from recorder.storage.layout import EVICTION_LOG, SessionLayout
-from recorder.storage.lock import session_status
-from recorder.storage.reader import archived_frame_count
-from recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
+from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
+from thermcap.recorder.storage.lock import session_status
+from thermcap.recorder.storage.reader import archived_frame_count
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
 
 __all__ = ["SegmentInfo", "SessionInfo", "TopicUsage", "info", "segment_info", "session_info"]
 

@@ -21,7 +21,7 @@ from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 
-from recorder.exceptions import SessionBusyError, StorageError
+from thermcap.recorder.exceptions import SessionBusyError, StorageError
 
 __all__ = ["LOCK_NAME", "SessionLock", "holder", "is_locked", "lock_session", "session_locked", "session_status"]
 

@@ -9,18 +9,18 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
-from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.exceptions import McapFileError
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import camera_topics, decode_image, is_image_topic
-from recorder.storage.chunks import SegmentIndex, iter_messages
-from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import camera_topics, decode_image, is_image_topic
+from thermcap.recorder.storage.archive_readers import ARCHIVE_READERS
+from thermcap.recorder.storage.chunks import SegmentIndex, iter_messages
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
 __all__ = [
     "SessionFrame",
@@ -153,8 +153,8 @@ def _segment_messages(path: Path, topics: tuple[str, ...] | None) -> Iterator[tu
 
 def iter_session_frames(session_dir: str | Path, camera: str | None = None) -> Iterator[SessionFrame]:
     """Every frame of a session (of one camera, in a session of several), from its MCAP
-    segments, or once they are deleted after archiving, from the archive. The archive package
-    registers that reader (entry-point group ``thermcap.session_frames``), so the recorder reads
+    segments, or once they are deleted after archiving, from the archive. The ``thermcap``
+    facade registers the archive's reader (``register_archive_reader``), so the recorder reads
     archives without importing them."""
     cameras = session_cameras(session_dir)
     if camera is None and cameras:  # reading /thermal/image here would find nothing, silently
@@ -169,8 +169,8 @@ def iter_session_frames(session_dir: str | Path, camera: str | None = None) -> I
                 yield frame
                 index = frame.index + 1
         return
-    for ep in entry_points(group="thermcap.session_frames"):
-        frames = ep.load()(Path(session_dir))
+    for read_archive in ARCHIVE_READERS:
+        frames = read_archive(Path(session_dir))
         if frames is not None:
             yield from frames
             return

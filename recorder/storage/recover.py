@@ -27,14 +27,14 @@ from mcap.reader import make_reader
 from mcap.records import Attachment, Channel, Chunk, Header, Message, Metadata, Schema
 from mcap.stream_reader import breakup_chunk
 
-from recorder.exceptions import McapFileError
-from recorder.icd.topics import is_image_topic
-from recorder.storage.layout import SESSION_JSON, SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import count_frames
-from recorder.storage.rosbag2 import write_bag_metadata
-from recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
-from recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.icd.topics import is_image_topic
+from thermcap.recorder.storage.layout import SESSION_JSON, SessionLayout
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import count_frames
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
+from thermcap.recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
 ORIGINAL_SUFFIX = ".orig"  # a repaired file's original, kept until the result reads back
 UNREADABLE_SUFFIX = ".unreadable"  # an empty segment moved aside: it held no frame

@@ -24,12 +24,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.icd.names import iso_utc
-from recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
-from recorder.storage.lock import holder
-from recorder.storage.reader import segment_span
-from recorder.storage.rosbag2 import write_bag_metadata
-from recorder.storage.segments import fsync_dir, write_json_atomic
+from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
+from thermcap.recorder.storage.lock import holder
+from thermcap.recorder.storage.reader import segment_span
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.recorder.storage.segments import fsync_dir, write_json_atomic
 
 __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
 
@@ -397,7 +397,7 @@ class Evictor(threading.Thread):
 
     def _confirmed(self) -> dict[str, int]:
         """Segments the cloud confirmed byte for byte: key -> size, from sync's journal."""
-        from recorder.sync.journal import Journal
+        from thermcap.recorder.sync.journal import Journal
 
         try:
             journal = Journal(self.root)

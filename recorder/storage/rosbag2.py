@@ -16,7 +16,7 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["BAG_METADATA", "bag_metadata_text", "write_bag_metadata"]
 

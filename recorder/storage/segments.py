@@ -34,10 +34,10 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from recorder import __version__
-from recorder.exceptions import RecordingError
-from recorder.icd.rosmsg import ANNOTATIONS, SIDECAR, annotations_message, message_for_topic
-from recorder.icd.topics import (
+from thermcap.recorder import __version__
+from thermcap.recorder.exceptions import RecordingError
+from thermcap.recorder.icd.rosmsg import ANNOTATIONS, SIDECAR, annotations_message, message_for_topic
+from thermcap.recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
     IMAGE_SCHEMA_TEXT,
     TOPIC_EVENTS,
@@ -45,9 +45,9 @@ from recorder.icd.topics import (
     CameraTopics,
     camera_topics,
 )
-from recorder.storage.layout import ACTIVE_SUFFIX
-from recorder.storage.rosbag2 import write_bag_metadata
-from recorder.storage.writer import ChunkedWriter, Compression
+from thermcap.recorder.storage.layout import ACTIVE_SUFFIX
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir", "segment_name",
            "write_json_atomic"]

@@ -23,11 +23,11 @@ from typing import Any
 
 from mcap.reader import make_reader
 
-from recorder.exceptions import McapFileError, ThermcapError
-from recorder.icd.topics import TOPIC_EVENTS, TOPIC_STATS, camera_topics
-from recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
-from recorder.storage.lock import holder, lock_session
-from recorder.storage.reader import (
+from thermcap.recorder.exceptions import McapFileError, ThermcapError
+from thermcap.recorder.icd.topics import TOPIC_EVENTS, TOPIC_STATS, camera_topics
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
+from thermcap.recorder.storage.lock import holder, lock_session
+from thermcap.recorder.storage.reader import (
     archived_frame_count,
     count_frames,
     iter_session_frames,
@@ -35,9 +35,9 @@ from recorder.storage.reader import (
     session_cameras,
     session_segments,
 )
-from recorder.storage.rosbag2 import write_bag_metadata
-from recorder.storage.segments import SESSION_METADATA, fsync_dir, write_json_atomic
-from recorder.storage.writer import ChunkedWriter, Compression
+from thermcap.recorder.storage.rosbag2 import write_bag_metadata
+from thermcap.recorder.storage.segments import SESSION_METADATA, fsync_dir, write_json_atomic
+from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["SplitResult", "camera_session_id", "split_cameras"]
 

@@ -49,7 +49,7 @@ from mcap.records import (
     SummaryOffset,
 )
 
-from recorder import __version__
+from thermcap.recorder import __version__
 
 __all__ = ["LEVELS", "LIBRARY", "MCAP_MAGIC", "ChunkedWriter", "Compression", "check_level"]
 

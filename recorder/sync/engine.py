@@ -24,13 +24,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from recorder.exceptions import ThermcapError
-from recorder.storage.digest import file_sha256
-from recorder.storage.ring import load_windows
-from recorder.sync.journal import Journal, ObjectState, PartState
-from recorder.sync.plan import SyncItem, plan_root
-from recorder.sync.rate import RateLimit
-from recorder.sync.targets import Target, receipt_key
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.digest import file_sha256
+from thermcap.recorder.storage.ring import load_windows
+from thermcap.recorder.sync.journal import Journal, ObjectState, PartState
+from thermcap.recorder.sync.plan import SyncItem, plan_root
+from thermcap.recorder.sync.rate import RateLimit
+from thermcap.recorder.sync.targets import Target, receipt_key
 
 __all__ = ["SyncReport", "SyncStatus", "Syncer"]
 
@@ -293,7 +293,7 @@ class Syncer:
 
     def delete_confirmed(self) -> list[str]:
         """Delete local segments the cloud confirmed, byte for byte, outside protected windows."""
-        from recorder.storage.reader import segment_span
+        from thermcap.recorder.storage.reader import segment_span
 
         freed = []
         for st in self.journal.objects.values():

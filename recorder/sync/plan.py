@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from recorder.storage.layout import EVENTS_JSON, PROTECTED_JSON, SESSION_JSON, SessionLayout
+from thermcap.recorder.storage.layout import EVENTS_JSON, PROTECTED_JSON, SESSION_JSON, SessionLayout
 
 __all__ = ["SyncItem", "plan_root"]
 

@@ -14,7 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import datetime
 
-from recorder.exceptions import ThermcapError
+from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["RateLimit", "parse_rate"]
 

@@ -17,8 +17,8 @@ import os
 from pathlib import Path
 from typing import Any, Protocol
 
-from recorder.exceptions import ThermcapError
-from recorder.storage.digest import file_sha256
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.digest import file_sha256
 
 __all__ = ["RECEIPTS_PREFIX", "DirTarget", "S3Target", "Target", "receipt_key"]
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from recorder.thermography.measure import Tool, measure
+from thermcap.recorder.thermography.measure import Tool, measure
 
 __all__ = ["STATS", "series_point"]
 

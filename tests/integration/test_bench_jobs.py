@@ -7,7 +7,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from recorder.cli import cli
+from thermcap.cli import cli
 
 pytest.importorskip("distributed", reason="Dask distributed is in the scale extra")
 

@@ -6,9 +6,9 @@ from __future__ import annotations
 
 import json
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
 from tests.conftest import run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
 
 
 def _root(tmp_path, n=2):

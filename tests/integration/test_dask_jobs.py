@@ -8,12 +8,12 @@ import json
 
 import pytest
 
-from api.db import make_engine, migrate
-from api.jobs.worker import Worker
-from archive.manifest import load_manifest
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
+from thermcap.api.db import make_engine, migrate
+from thermcap.api.jobs.worker import Worker
+from thermcap.archive.manifest import load_manifest
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 pytest.importorskip("distributed", reason="Dask distributed is in the scale extra")
 
@@ -37,7 +37,7 @@ def test_sessions_are_archived_as_tasks_on_a_local_cluster(tmp_path):
 
     with engine.connect() as c:
         assert c.execute(text("select count(*) from sessions")).scalar() == 3
-    from api.jobs.records import list_jobs
+    from thermcap.api.jobs.records import list_jobs
 
     jobs = list_jobs(engine, kind="archive")  # each session's task, as `thermcap jobs` shows it
     assert sorted(j.session_id for j in jobs) == ["s0", "s1", "s2"]
@@ -48,7 +48,7 @@ def test_sessions_are_archived_as_tasks_on_a_local_cluster(tmp_path):
 
 
 def test_the_task_key_is_the_content(tmp_path):
-    from api.jobs.dask_jobs import session_task_key
+    from thermcap.api.jobs.dask_jobs import session_task_key
 
     root = tmp_path / "root"
     Recorder(SimSource(width=64, height=48, frames=10, paced=False, seed=1), root, session_id="a",
@@ -59,8 +59,8 @@ def test_the_task_key_is_the_content(tmp_path):
     assert session_task_key(d, ("png16", "hdf5")) != k1
     engine = make_engine(f"sqlite:///{tmp_path / 'i.sqlite'}")
     migrate(engine)
-    from api.jobs.dask_jobs import DaskJobs, TaskConfig
-    from api.jobs.records import get_job
+    from thermcap.api.jobs.dask_jobs import DaskJobs, TaskConfig
+    from thermcap.api.jobs.records import get_job
 
     jobs = DaskJobs(Worker(root, engine, formats=["png16"]),
                     TaskConfig(str(root), ("png16",), f"sqlite:///{tmp_path / 'i.sqlite'}", None, False),
@@ -84,7 +84,7 @@ def test_analysis_runs_as_a_task_after_the_archive(tmp_path):
                 timeout=300)
     assert r.returncode == 0, r.stderr
     assert (root / "sessions" / "quiet" / "analysis.jsonl").is_file()
-    from api.jobs.records import list_jobs
+    from thermcap.api.jobs.records import list_jobs
 
     engine = make_engine(env["THERMCAP_DATABASE_URL"])
     kinds = {j.kind: j for j in list_jobs(engine, session_id="quiet")}

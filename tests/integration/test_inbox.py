@@ -9,11 +9,11 @@ import os
 import shutil
 import time
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.exports.files import export_session
-from recorder.storage.reader import list_sessions
 from tests.conftest import SAMPLES, run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.storage.reader import list_sessions
 
 
 def test_each_dropped_file_is_taken_once(tmp_path):
@@ -58,7 +58,7 @@ def test_each_dropped_file_is_taken_once(tmp_path):
 def test_a_crash_between_import_and_journal_imports_nothing_twice(tmp_path):
     import hashlib
 
-    from api.jobs.inbox import process_inbox
+    from thermcap.api.jobs.inbox import process_inbox
 
     rec = Recorder(SimSource(width=64, height=48, fps=30, frames=2, paced=False, seed=8), tmp_path / "src",
                    session_id="src", analysis=False)
@@ -89,7 +89,7 @@ def test_files_taken_as_dask_tasks_are_journaled_once(tmp_path):
     """The same inbox pass with its files taken in parallel as tasks on a Dask cluster."""
     from distributed import Client, LocalCluster
 
-    from api.jobs.inbox import process_inbox
+    from thermcap.api.jobs.inbox import process_inbox
 
     rec = Recorder(SimSource(width=64, height=48, fps=30, frames=5, paced=False, seed=6), tmp_path / "src",
                    session_id="src", analysis=False)

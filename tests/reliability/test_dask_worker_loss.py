@@ -15,12 +15,12 @@ import time
 
 import pytest
 
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import free_port
 from tests.support.dask_cluster import start_cluster, stop_cluster
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 pytestmark = pytest.mark.slow
 distributed = pytest.importorskip("distributed", reason="Dask distributed is in the scale extra")
@@ -52,7 +52,7 @@ def _record(root, sid):
 
 
 def _worker_cmd(root, port):
-    return [sys.executable, "-m", "recorder", "worker", "--root", str(root), "--formats", FORMATS,
+    return [sys.executable, "-m", "thermcap", "worker", "--root", str(root), "--formats", FORMATS,
             "--scheduler", f"tcp://127.0.0.1:{port}", "--once", "--json"]
 
 
@@ -66,8 +66,8 @@ def _check_one_verified_archive(session):
 def _check_job(env, sid):
     """The jobs table tells the story: the session's archive job done, every segment's job done,
     and the one the kill interrupted run more than once, on Dask."""
-    from api.db import make_engine
-    from api.jobs.records import list_jobs
+    from thermcap.api.db import make_engine
+    from thermcap.api.jobs.records import list_jobs
 
     jobs = list_jobs(make_engine(env["THERMCAP_DATABASE_URL"]), session_id=sid)
     archive = [j for j in jobs if j.kind == "archive"]

@@ -12,12 +12,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.raw import RawSource
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import McapFileError, TruncatedFrameError
-from recorder.importers import ImportFileError, read_file
-from recorder.storage.recover import recover_segment
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.raw import RawSource
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import McapFileError, TruncatedFrameError
+from thermcap.recorder.importers import ImportFileError, read_file
+from thermcap.recorder.storage.recover import recover_segment
 
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture,
                                                                        HealthCheck.too_slow])

@@ -24,11 +24,11 @@ import time
 import numpy as np
 import tifffile
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.exports.files import export_session
-from recorder.storage.digest import frame_sha256
-from recorder.storage.reader import iter_session_frames, list_sessions
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.storage.digest import frame_sha256
+from thermcap.recorder.storage.reader import iter_session_frames, list_sessions
 
 FULL = os.environ.get("THERMCAP_INBOX") == "full"
 N_FILES = 200 if FULL else 40
@@ -38,7 +38,7 @@ PAUSE_S = 0.4  # between the halves of a file: well inside the settle time, as a
 
 
 def _watch(inbox, root):
-    return subprocess.Popen([sys.executable, "-m", "recorder", "watch", str(inbox), "--root", str(root),
+    return subprocess.Popen([sys.executable, "-m", "thermcap", "watch", str(inbox), "--root", str(root),
                              "--interval", "0.3", "--settle", str(SETTLE_S), "--formats", "png16", "--json"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 

@@ -13,11 +13,11 @@ import time
 
 import pytest
 
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
@@ -34,7 +34,7 @@ def test_kill_worker_during_archive_and_upload(seaweedfs, tmp_path):
            "THERMCAP_DATABASE_URL": f"sqlite:///{tmp_path / 'i.sqlite'}"}
     rng = random.Random(7)
     for _attempt in range(int(os.environ.get("THERMCAP_ARCHIVER_KILLS", "3"))):
-        p = subprocess.Popen([sys.executable, "-m", "recorder", "worker", "--root", str(root), "--once",
+        p = subprocess.Popen([sys.executable, "-m", "thermcap", "worker", "--root", str(root), "--once",
                               "--formats", "png16,tiff-lzw,jxl", "--delete-source"], env=env,
                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         time.sleep(rng.uniform(0.5, 4.0))

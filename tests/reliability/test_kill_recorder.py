@@ -19,9 +19,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from recorder.capture.sources.sim import SimSource
-from recorder.icd.topics import decode_image
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd.topics import decode_image
 
 pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
@@ -36,7 +36,7 @@ def test_kill_9_at_random_moments(tmp_path):
     report = []
     for k in range(kills):
         root = tmp_path / f"k{k}"
-        proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "60", "--width", str(W),
+        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--duration", "60", "--width", str(W),
                                  "--height", str(H), "--segment-duration", "1", "--seed", str(k), "--root", str(root),
                                  "--session", "s", "--no-analysis"], stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)

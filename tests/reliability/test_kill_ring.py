@@ -24,10 +24,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.ring import load_windows, read_eviction_log
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.ring import load_windows, read_eviction_log
 
 pytestmark = pytest.mark.slow
 
@@ -46,7 +46,7 @@ def test_kill_9_during_eviction_loses_nothing_protected(tmp_path):
         # rolling history (a budget smaller than the windows plus --pre cannot keep a new pre-window);
         # their share is raised from half the budget so that neither window expires
         budget = 16 * seg_bytes
-        proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "60", "--width", str(W),
+        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--duration", "60", "--width", str(W),
                                  "--height", str(H), "--segment-duration", str(SEG_S), "--seed", str(k),
                                  "--root", str(root), "--session", "s", "--no-analysis", "--ring",
                                  "--max-disk", str(budget), "--max-protected", str(12 * seg_bytes),

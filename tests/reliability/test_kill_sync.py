@@ -13,12 +13,12 @@ import sys
 
 import pytest
 
-from archive.blobs import open_store
-from archive.receipts import confirm_synced
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import wait_for
+from thermcap.archive.blobs import open_store
+from thermcap.archive.receipts import confirm_synced
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 pytestmark = pytest.mark.slow
 pytest.importorskip("boto3", reason="boto3 is in the sync extra")
@@ -37,7 +37,7 @@ def test_kill_sync_mid_upload_resends_at_most_the_part_in_flight(seaweedfs, tmp_
     prefix = f"kill-{tmp_path.name}"
     env = {**os.environ, "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
            "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
-    cmd = [sys.executable, "-m", "recorder", "sync", "--root", str(root), "--bucket", seaweedfs["bucket"],
+    cmd = [sys.executable, "-m", "thermcap", "sync", "--root", str(root), "--bucket", seaweedfs["bucket"],
            "--endpoint", seaweedfs["endpoint"], "--prefix", prefix, "--part-size", "5", "--max-rate", "8MB/s", "--json"]
     journal = root / ".sync" / "journal.json"
 

@@ -27,10 +27,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from recorder.capture.sources.sim import SimSource
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import decode_image
 from tests.conftest import ApiServer, run_cli, wait_for
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import decode_image
 
 pytestmark = pytest.mark.slow  # a reliability run: CI runs its short form, `-m "not slow"` skips it
 
@@ -112,7 +112,7 @@ def test_the_whole_life_of_a_session_loses_nothing(tmp_path):
         for n, formats in enumerate(subsets):
             sid = f"life{n:02d}"
             session = root / "sessions" / sid
-            proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "30", "--width", str(W),
+            proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--duration", "30", "--width", str(W),
                                      "--height", str(H), "--segment-duration", "0.5", "--seed", str(n), "--root",
                                      str(root), "--session", sid, "--no-analysis"],
                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)

@@ -39,7 +39,7 @@ from hypothesis import HealthCheck, Phase, settings
 from hypothesis import strategies as st
 from hypothesis.stateful import RuleBasedStateMachine, invariant, precondition, rule, run_state_machine_as_test
 
-from recorder.storage.reader import iter_segment_frames
+from thermcap.recorder.storage.reader import iter_segment_frames
 
 pytestmark = pytest.mark.slow
 
@@ -65,7 +65,7 @@ def _segment_frames(path: Path) -> dict[int, str]:
 
 def _archived_frames(session: Path, offered: bool = False) -> dict[str, dict[int, str]]:
     """Per archive format on disk: (time -> pixel sha256) its files decode to, file by file."""
-    from archive.formats import get_format
+    from thermcap.archive.formats import get_format
 
     mpath = session / "archive" / "manifest.json"
     try:
@@ -171,9 +171,9 @@ class Journeys(RuleBasedStateMachine):
     # -- what users do ---------------------------------------------------------------------------
     @rule(frames=st.integers(10, 50), seg_s=st.sampled_from([0.1, 0.25, 1.0]))
     def record(self, frames: int, seg_s: float) -> None:
-        from recorder.capture.recorder import Recorder
-        from recorder.capture.sources.sim import SimSource
-        from recorder.storage.segments import SegmentPolicy
+        from thermcap.recorder.capture.recorder import Recorder
+        from thermcap.recorder.capture.sources.sim import SimSource
+        from thermcap.recorder.storage.segments import SegmentPolicy
 
         self.step("record")
         self.n += 1
@@ -196,7 +196,7 @@ class Journeys(RuleBasedStateMachine):
         self.step("record_killed")
         self.n += 1
         sid = f"s{self.n}"
-        proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--root", str(self.root), "--session",
+        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(self.root), "--session",
                                  sid, "--width", str(W), "--height", str(H), "--duration", "30", "--no-analysis",
                                  "--segment-duration", "0.2", "--seed", str(self.n)],
                                 stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -211,8 +211,8 @@ class Journeys(RuleBasedStateMachine):
     @precondition(lambda self: self.sessions())
     @rule(data=st.data(), whole=st.booleans())
     def recover(self, data: st.DataObject, whole: bool) -> None:
-        from recorder.exceptions import McapFileError
-        from recorder.storage.recover import recover_path
+        from thermcap.recorder.exceptions import McapFileError
+        from thermcap.recorder.storage.recover import recover_path
 
         self.step("recover")
         s = data.draw(st.sampled_from(self.sessions()))
@@ -228,8 +228,8 @@ class Journeys(RuleBasedStateMachine):
     @rule(data=st.data(), formats=st.sets(st.sampled_from(FORMATS), min_size=1, max_size=3),
           delete=st.booleans())
     def archive(self, data: st.DataObject, formats: set[str], delete: bool) -> None:
-        from archive.archiver import archive_session
-        from recorder.exceptions import ThermcapError
+        from thermcap.archive.archiver import archive_session
+        from thermcap.recorder.exceptions import ThermcapError
 
         self.step("archive")
         s = data.draw(st.sampled_from(self.sessions()))
@@ -247,7 +247,7 @@ class Journeys(RuleBasedStateMachine):
     @precondition(lambda self: any((s / "archive" / "manifest.json").is_file() for s in self.sessions()))
     @rule(repair=st.booleans())
     def scrub(self, repair: bool) -> None:
-        from archive.scrub import scrub_root
+        from thermcap.archive.scrub import scrub_root
 
         self.step("scrub")
         scrub_root(self.root, repair=repair)
@@ -256,7 +256,7 @@ class Journeys(RuleBasedStateMachine):
     @precondition(lambda self: any((s / "archive" / "manifest.json").is_file() for s in self.sessions()))
     @rule()
     def verify(self) -> None:
-        from archive.verify import verify_session
+        from thermcap.archive.verify import verify_session
 
         self.step("verify")
         for s in self.sessions():
@@ -267,7 +267,7 @@ class Journeys(RuleBasedStateMachine):
     @precondition(lambda self: self.sessions())
     @rule()
     def gc(self) -> None:
-        from api.jobs.retention import gc_sessions
+        from thermcap.api.jobs.retention import gc_sessions
 
         self.step("gc")
         gc_sessions(self.root, keep_days=0, max_bytes=None, require_upload=False, dry_run=False)
@@ -276,10 +276,10 @@ class Journeys(RuleBasedStateMachine):
     @precondition(lambda self: self.sessions())
     @rule(delete=st.booleans())
     def sync(self, delete: bool) -> None:
-        from archive.blobs import open_store
-        from archive.receipts import confirm_synced
-        from recorder.sync.engine import Syncer
-        from recorder.sync.targets import DirTarget
+        from thermcap.archive.blobs import open_store
+        from thermcap.archive.receipts import confirm_synced
+        from thermcap.recorder.sync.engine import Syncer
+        from thermcap.recorder.sync.targets import DirTarget
 
         self.step("sync")
         syncer = Syncer(self.root, DirTarget(self.depot), part_size=5 << 20)
@@ -296,8 +296,8 @@ class Journeys(RuleBasedStateMachine):
         """Every readable frame of every session the API indexes is listed and served bit-exact."""
         from fastapi.testclient import TestClient
 
-        from api.app import create_app
-        from api.settings import Settings
+        from thermcap.api.app import create_app
+        from thermcap.api.settings import Settings
 
         self.step("serve")
         with TestClient(create_app(Settings(root=self.root, tokens={}, rescan_interval_s=0))) as c:

@@ -11,8 +11,8 @@ import sys
 import httpx
 import numpy as np
 
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import ApiServer, run_cli
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweedfs, tmp_path):
@@ -28,7 +28,7 @@ def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweed
     expected = {f"s{i}": [f.pixels.copy() for f in iter_session_frames(root / "sessions" / f"s{i}")] for i in range(3)}
     # Two workers at once on one root and one bucket (each with its own in-process cluster): the
     # session and segment locks let one write each thing, the other finds it done.
-    procs = [subprocess.Popen([sys.executable, "-m", "recorder", "worker", "--root", str(root), "--once", "--json",
+    procs = [subprocess.Popen([sys.executable, "-m", "thermcap", "worker", "--root", str(root), "--once", "--json",
                                "--formats", "png16,hdf5"], env={**__import__("os").environ, **env},
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) for _ in range(2)]
     results = []
@@ -44,8 +44,8 @@ def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweed
         assert all(e["verified"] for e in m["formats"].values())
     again = run_cli("worker", "--root", str(root), "--once", "--json", "--formats", "png16,hdf5", env=env)
     assert json.loads(again.stdout)["archived"] == []  # nothing left to do
-    from api.db import make_engine
-    from api.jobs.records import list_jobs
+    from thermcap.api.db import make_engine
+    from thermcap.api.jobs.records import list_jobs
 
     jobs = list_jobs(make_engine(postgres_url), kind="archive", limit=1000)  # the index may be shared by other tests
     assert {"s0", "s1", "s2"} <= {j.session_id for j in jobs if j.state == "done"}

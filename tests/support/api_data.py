@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import ApiServer
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 W, H = 160, 120
 T0 = 1_800_000_000_000_000_000

@@ -12,11 +12,11 @@ import shutil
 import obstore
 from obstore.store import S3Store
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.exports.files import export_session
-from recorder.storage.reader import list_sessions
 from tests.conftest import run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.storage.reader import list_sessions
 
 
 def test_a_bucket_prefix_is_an_inbox(seaweedfs, tmp_path):

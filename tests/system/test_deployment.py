@@ -22,8 +22,8 @@ import httpx
 import numpy as np
 import pytest
 
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import free_port, wait_for, wait_http
+from thermcap.recorder.storage.reader import iter_session_frames
 
 yaml = pytest.importorskip("yaml")
 ROOT = Path(__file__).resolve().parents[2]
@@ -81,7 +81,7 @@ def _replace_option(cmd: list[str], option: str, value: str) -> list[str]:
 
 
 def _thermcap(cmd: list[str], env: dict[str, str], **kw) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "recorder", *cmd], env={**os.environ, **env}, **kw)
+    return subprocess.Popen([sys.executable, "-m", "thermcap", *cmd], env={**os.environ, **env}, **kw)
 
 
 def _stop(proc: subprocess.Popen, sig: int = signal.SIGTERM) -> None:
@@ -199,7 +199,7 @@ def test_dockerfile_context_installs_every_command(tmp_path):
                          capture_output=True, text=True, cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr
     assert all(p.startswith(str(site)) for p in out.stdout.split("\n")[0].split())  # the installed copy, not ours
-    helped = subprocess.run([sys.executable, "-m", "recorder", "--help"], capture_output=True, text=True,
+    helped = subprocess.run([sys.executable, "-m", "thermcap", "--help"], capture_output=True, text=True,
                             cwd=tmp_path, env=env)
     assert helped.returncode == 0, helped.stderr
     for command in ("record", "archive", "verify", "serve", "worker", "scrub", "gc"):

@@ -18,10 +18,10 @@ import httpx
 import numpy as np
 import pytest
 
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import ApiServer, free_port, run_cli
 from tests.support.dask_cluster import start_cluster, stop_cluster
 from tests.support.link import FlakyLink
+from thermcap.recorder.storage.reader import iter_session_frames
 
 pytest.importorskip("boto3", reason="boto3 is in the sync extra (pip install 'thermcap[sync]')")
 MiB = 1 << 20

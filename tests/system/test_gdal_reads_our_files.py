@@ -12,14 +12,14 @@ import subprocess
 import numpy as np
 import pytest
 
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.exports.files import export_session
-from recorder.importers.run import import_paths
-from recorder.radiometry import model_from_dict
-from recorder.storage.reader import iter_session_frames, read_session_meta
 from tests.conftest import SAMPLES, SAMPLES_HOW
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.importers.run import import_paths
+from thermcap.recorder.radiometry import model_from_dict
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 if shutil.which("gdalinfo") is None:
     pytest.skip("no gdalinfo here (apt-get install gdal-bin; .ci/run does this)", allow_module_level=True)

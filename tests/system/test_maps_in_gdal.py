@@ -18,12 +18,12 @@ import subprocess
 import numpy as np
 import pytest
 
-from recorder.exports.files import export_session
-from recorder.exports.geotiff import utm_tags, write_temperature_tiff
-from recorder.importers.run import import_paths
-from recorder.maps.footprint import footprint
-from recorder.maps.pose import CameraPose
 from tests.conftest import SAMPLES, SAMPLES_HOW
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.exports.geotiff import utm_tags, write_temperature_tiff
+from thermcap.recorder.importers.run import import_paths
+from thermcap.recorder.maps.footprint import footprint
+from thermcap.recorder.maps.pose import CameraPose
 
 pytest.importorskip("pyproj", reason="pyproj is in the geo extra")
 if shutil.which("gdalinfo") is None:
@@ -128,9 +128,9 @@ def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
         e_nw = 409012.2032 + 0.009 * (cx + fx / 2) - 0.9986 * (cy + fy / 2)
         n_nw = 3659974.971 + 1.0002 * (cx + fx / 2) + 0.0078 * (cy + fy / 2)
         assert (gt[0], gt[3]) == pytest.approx((e_nw, n_nw), abs=1e-3)
-    from recorder.radiometry import model_from_dict
-    from recorder.storage.reader import iter_session_frames
-    from recorder.storage.reader import read_session_meta as meta
+    from thermcap.recorder.radiometry import model_from_dict
+    from thermcap.recorder.storage.reader import iter_session_frames
+    from thermcap.recorder.storage.reader import read_session_meta as meta
 
     frame = next(iter(iter_session_frames(session))).pixels
     want = np.rot90(np.asarray(model_from_dict(meta(session)["radiometric_model"]).to_celsius(frame)), 3)
@@ -146,9 +146,9 @@ def test_a_mosaic_and_its_footprints_render_in_gdal(tmp_path):
     footprints over it; the targets show where they are."""
     from pyproj import Transformer
 
-    from recorder.capture.recorder import Recorder
-    from recorder.maps.footprint import utm_epsg
-    from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.maps.footprint import utm_epsg
+    from thermcap.recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
 
     pytest.importorskip("rasterio", reason="rasterio is in the geo extra")
     lat, lon = 33.0746, -111.975
@@ -207,7 +207,7 @@ def test_flir_samples_a_duo_pro_r_fff_has_no_attitude_and_an_xt2_laid_out_as_a_f
     duo = _import(tmp_path, fff.read_bytes(), "duo.fff")
     res = export_session(duo, "footprints", tmp_path / "duo")
     assert res["features"] == 0 and "no camera attitude" in res["refused"][0]
-    from recorder.exports.files import _import_vendor
+    from thermcap.recorder.exports.files import _import_vendor
 
     (vendor,) = _import_vendor(duo).values()
     assert vendor["field_of_view_deg"] == 45.0 and vendor["gps"]["latitude"] == pytest.approx(53.44890, abs=1e-4)

@@ -23,11 +23,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.storage.reader import iter_session_frames, session_segments
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames, session_segments
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 rosbags = pytest.importorskip("rosbags", reason="rosbags is a test dependency (pip install 'thermcap[test]')")
 from rosbags.highlevel import AnyReader  # noqa: E402
@@ -92,7 +92,7 @@ def test_each_segment_opens_alone(session):
 
 
 def test_metadata_yaml_stays_true_after_kill_and_recover(tmp_path):
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--root", str(tmp_path), "--session", "k",
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "k",
                              "--width", "96", "--height", "64", "--segment-duration", "0.5", "--no-analysis",
                              "--duration", "30"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     session = tmp_path / "sessions" / "k"
@@ -111,7 +111,7 @@ def test_metadata_yaml_stays_true_after_kill_and_recover(tmp_path):
 
 
 def test_metadata_yaml_follows_ring_eviction(tmp_path):
-    from recorder.storage.ring import RingPolicy
+    from thermcap.recorder.storage.ring import RingPolicy
 
     rec = Recorder(SimSource(width=64, height=48, fps=60, frames=900, paced=False, seed=1, cue_period_s=0), tmp_path,
                    session_id="ring", policy=SegmentPolicy(max_duration_s=0.25), analysis=False,

@@ -9,15 +9,15 @@ import time
 
 import pytest
 
-from archive.blobs import open_store
-from archive.receipts import confirm_synced
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
-from recorder.sync.engine import Syncer
-from recorder.sync.rate import parse_rate
-from recorder.sync.targets import S3Target
 from tests.support.link import FlakyLink
+from thermcap.archive.blobs import open_store
+from thermcap.archive.receipts import confirm_synced
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.sync.engine import Syncer
+from thermcap.recorder.sync.rate import parse_rate
+from thermcap.recorder.sync.targets import S3Target
 
 pytest.importorskip("boto3", reason="boto3 is in the sync extra (pip install 'thermcap[sync]')")
 MiB = 1 << 20

@@ -13,13 +13,13 @@ down_revision = None
 def upgrade() -> None:
     # The initial revision creates api.db's tables as they stood at 0001; later revisions alter
     # them with explicit operations, never by editing this one.
-    from api.db import metadata
+    from thermcap.api.db import metadata
 
     metadata.create_all(op.get_bind(), tables=[t for t in metadata.sorted_tables
                                                   if t.name not in ("leases", "jobs")])
 
 
 def downgrade() -> None:
-    from api.db import metadata
+    from thermcap.api.db import metadata
 
     metadata.drop_all(op.get_bind())

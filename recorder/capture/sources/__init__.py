@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from typing import Any
 
-from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
-from recorder.capture.sources.raw import RawSource
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import SourceError
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from thermcap.recorder.capture.sources.raw import RawSource
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import SourceError
 
 __all__ = ["CapturedFrame", "FrameSource", "Pacer", "RawSource", "SensorInfo", "SimSource", "make_source"]
 

@@ -16,7 +16,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
+from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
 __all__ = ["CapturedFrame", "FrameSource", "Pacer", "SensorInfo"]
 

@@ -23,9 +23,9 @@ from typing import Any, BinaryIO
 
 import numpy as np
 
-from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
-from recorder.exceptions import SourceError, TruncatedFrameError
-from recorder.radiometry import DEFAULT_MODEL, RadiometricModel
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from thermcap.recorder.exceptions import SourceError, TruncatedFrameError
+from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
 __all__ = ["RawSource"]
 

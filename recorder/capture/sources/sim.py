@@ -39,11 +39,11 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
-from recorder.icd.names import MAX_COUNT, iso_utc
-from recorder.icd.quality import contrast_metrics, frame_analysis
-from recorder.icd.topics import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
-from recorder.radiometry import LinearModel
+from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from thermcap.recorder.icd.names import MAX_COUNT, iso_utc
+from thermcap.recorder.icd.quality import contrast_metrics, frame_analysis
+from thermcap.recorder.icd.topics import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
+from thermcap.recorder.radiometry import LinearModel
 
 __all__ = ["SimSource", "SimTarget", "SlewToCue"]
 

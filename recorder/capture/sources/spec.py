@@ -10,8 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from recorder.exceptions import SourceError
-from recorder.icd.topics import check_camera_name
+from thermcap.recorder.exceptions import SourceError
+from thermcap.recorder.icd.topics import check_camera_name
 
 __all__ = ["CAMERA_KEYS", "SourceSpec", "parse_source_spec"]
 

@@ -8,8 +8,8 @@ import json
 
 import pytest
 
-from api.bench_nginx import find_nginx
 from tests.conftest import run_cli
+from thermcap.api.bench_nginx import find_nginx
 
 
 @pytest.mark.skipif(find_nginx() is None, reason="nginx is not installed (.ci/run installs nginx-light)")

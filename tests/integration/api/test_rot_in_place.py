@@ -11,10 +11,10 @@ import os
 import httpx
 import pytest
 
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import ApiServer
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 @pytest.fixture

@@ -12,9 +12,9 @@ import pytest
 import tifffile
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
-from recorder.storage.reader import iter_session_frames
 from tests.support.api_data import H, W
+from thermcap.recorder.icd.topics import decode_image
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 @pytest.fixture(scope="module")
@@ -182,7 +182,7 @@ def test_archive_download_range_etag_cors(client, data_root):
 def test_export_mcap_range_and_topics(client, source):
     frames = source["s-archived"]
     t_start, t_end = frames[10].log_time, frames[40].log_time
-    from recorder.icd.names import iso_utc
+    from thermcap.recorder.icd.names import iso_utc
 
     r = client.get("/api/v1/sessions/s-archived/export.mcap", params={"start": iso_utc(t_start), "end": iso_utc(t_end)})
     assert r.status_code == 200

@@ -9,11 +9,11 @@ import time
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 pytest.importorskip("distributed", reason="Dask distributed is in the scale extra")
 

@@ -10,13 +10,13 @@ import time
 
 import pytest
 
-from archive.archiver import archive_session
-from archive.manifest import load_manifest
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.manifest import load_manifest
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 W, H = 160, 120
 ALL = ["png16", "tiff-lzw", "hdf5", "jxl", "htj2k", "jpegls"]
@@ -43,7 +43,7 @@ def test_killed_archive_leaves_no_half_archive_and_rerun_finishes(tmp_path):
     Recorder(SimSource(width=320, height=256, frames=600, paced=False), root, session_id="k",
              policy=SegmentPolicy(max_duration_s=2)).run()
     session = root / "sessions" / "k"
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "archive", str(session), "--formats", "png16,jxl"],
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "archive", str(session), "--formats", "png16,jxl"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not list((session / "archive").glob("*.partial/*.zip")):

@@ -9,11 +9,11 @@ import json
 
 import pytest
 
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.importers.run import import_paths
 from tests.conftest import SAMPLES, SAMPLES_HOW, run_cli
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.importers.run import import_paths
 
 GIB = 1024**3
 

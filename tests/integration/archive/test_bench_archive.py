@@ -7,7 +7,7 @@ import json
 
 from click.testing import CliRunner
 
-from recorder.cli import cli
+from thermcap.cli import cli
 
 
 def test_bench_temporal_reports_every_sequence_against_its_anchors():

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from archive.codecs import codec_registry, get_codec
-from recorder.capture.sources.sim import SimSource
+from thermcap.archive.codecs import codec_registry, get_codec
+from thermcap.recorder.capture.sources.sim import SimSource
 
 CODECS = [get_codec(cid) for cid in sorted(codec_registry)]
 
@@ -16,8 +16,8 @@ def test_hdf5_archives_open_in_hdf5_1_10_tools(tmp_path):
     import shutil
     import subprocess
 
-    from archive.archiver import archive_session
-    from recorder.capture.recorder import Recorder
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.capture.recorder import Recorder
 
     h5dump = shutil.which("h5dump")
     if h5dump is None:

@@ -7,12 +7,12 @@ from __future__ import annotations
 import json
 import shutil
 
-from archive.blobs import open_store
-from archive.landing import land_synced
-from archive.receipts import confirm_synced
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
+from thermcap.archive.blobs import open_store
+from thermcap.archive.landing import land_synced
+from thermcap.archive.receipts import confirm_synced
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 
 def _depot(tmp_path):
@@ -56,8 +56,8 @@ def test_a_second_landing_on_the_same_root_waits_its_turn(tmp_path):
     is refused, naming who holds the root, and touches nothing."""
     import pytest
 
-    from recorder.exceptions import SessionBusyError
-    from recorder.storage.lock import lock_session
+    from thermcap.recorder.exceptions import SessionBusyError
+    from thermcap.recorder.storage.lock import lock_session
 
     _vehicle, depot = _depot(tmp_path)
     store = open_store(depot)

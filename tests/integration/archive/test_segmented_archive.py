@@ -13,15 +13,15 @@ import h5py
 import numpy as np
 import pytest
 
-from archive.archiver import archive_session
-from archive.exceptions import ArchiveError, VerificationError
-from archive.frame_summary import load_summary
-from archive.manifest import load_manifest
-from archive.segmented import PARTS, archive_segment, finalize_session, plan_segments
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.exceptions import ArchiveError, VerificationError
+from thermcap.archive.frame_summary import load_summary
+from thermcap.archive.manifest import load_manifest
+from thermcap.archive.segmented import PARTS, archive_segment, finalize_session, plan_segments
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 FORMATS = ["png16", "tiff-lzw", "hdf5"]
 

@@ -10,12 +10,12 @@ from collections import Counter
 
 import mcap.stream_reader
 
-import recorder.storage.chunks
-from archive.archiver import DEFAULT_FORMATS, archive_session
-from archive.extras import summarize_mcap
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import session_segments
+import thermcap.recorder.storage.chunks as recorder_chunks
+from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session
+from thermcap.archive.extras import summarize_mcap
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import session_segments
 
 
 def test_every_source_chunk_is_decompressed_once(tmp_path, monkeypatch):
@@ -24,7 +24,7 @@ def test_every_source_chunk_is_decompressed_once(tmp_path, monkeypatch):
     assert rec.run().ok
     seen: Counter = Counter()
     real = mcap.stream_reader.get_chunk_data_stream
-    ours = recorder.storage.chunks.read_chunk
+    ours = recorder_chunks.read_chunk
 
     def counting(chunk, validate_crc=False):
         seen[(chunk.message_start_time, chunk.message_end_time)] += 1
@@ -35,7 +35,7 @@ def test_every_source_chunk_is_decompressed_once(tmp_path, monkeypatch):
         return ours(index, chunk)
 
     monkeypatch.setattr(mcap.stream_reader, "get_chunk_data_stream", counting)
-    monkeypatch.setattr(recorder.storage.chunks, "read_chunk", counting_ours)
+    monkeypatch.setattr(recorder_chunks, "read_chunk", counting_ours)
     before = summarize_mcap(session_segments(rec.session_dir))  # reads every source chunk once
     source_chunks = set(seen)
     assert len(source_chunks) > 3

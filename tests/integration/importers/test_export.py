@@ -10,13 +10,13 @@ import numpy as np
 import pytest
 import tifffile
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exports.colorbar import png_text
-from recorder.exports.files import export_session
-from recorder.icd.sidecar import validate_sidecar
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exports.colorbar import png_text
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.icd.sidecar import validate_sidecar
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 @pytest.fixture(scope="module")
@@ -97,7 +97,7 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
     files = {f["path"].rsplit("/", 1)[-1]: f for f in json.loads(r.stdout)["files"]}
     # H20T keeps its drone-dji XMP (formats.md): it has a position, but needs DJI's SDK for temperatures,
     # so check the tags through the helper with its recorded position, and M2EA (no XMP) gets none.
-    from recorder.exports.files import _positions, geotiff_tags
+    from thermcap.recorder.exports.files import _positions, geotiff_tags
 
     h20t = root / "sessions" / files["DJI_H20T.jpg"]["session_id"]
     (pos,) = _positions(h20t).values()

@@ -18,7 +18,7 @@ def _import_peak_rss_mb(args: list[str]) -> float:
 
     code = ("import resource, subprocess, sys; subprocess.run(sys.argv[1:], check=True, stdout=subprocess.DEVNULL); "
             "print(resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss)")
-    out = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "recorder", "import", *args],
+    out = subprocess.run([sys.executable, "-c", code, sys.executable, "-m", "thermcap", "import", *args],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stderr
     return int(out.stdout.strip()) / 1024

@@ -9,8 +9,8 @@ import httpx
 import tifffile
 from mcap.reader import make_reader
 
-from recorder.importers.jpeg import app_segments, concat_app
 from tests.conftest import ApiServer, run_cli
+from thermcap.recorder.importers.jpeg import app_segments, concat_app
 
 
 def test_samples_import_archive_and_serve(samples, tmp_path):

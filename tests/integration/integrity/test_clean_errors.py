@@ -8,9 +8,9 @@ import subprocess
 
 import pytest
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 def _record(root, sid="a"):

@@ -12,8 +12,8 @@ import json
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
 from tests.conftest import run_cli
+from thermcap.recorder.icd.topics import decode_image
 
 
 def test_a_seq_whose_last_trailer_is_short_keeps_every_image(samples, tmp_path):

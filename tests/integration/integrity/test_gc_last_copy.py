@@ -8,13 +8,13 @@ import json
 import numpy as np
 import pytest
 
-import archive.archiver as archiver
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.lock import lock_session
-from recorder.storage.reader import iter_session_frames
+import thermcap.archive.archiver as archiver
 from tests.conftest import run_cli
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.lock import lock_session
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def _session(root, sid="s"):

@@ -14,13 +14,13 @@ from pathlib import Path
 
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import RecordingError
-from recorder.storage.lock import holder
-from recorder.storage.recover import recover_path, recover_segment
-from recorder.storage.segments import SegmentPolicy, SessionWriter
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import RecordingError
+from thermcap.recorder.storage.lock import holder
+from thermcap.recorder.storage.recover import recover_path, recover_segment
+from thermcap.recorder.storage.segments import SegmentPolicy, SessionWriter
 
 
 def _images(session: Path) -> int:
@@ -34,7 +34,7 @@ def _images(session: Path) -> int:
 
 
 def _record(root: Path, *args: str, analysis: bool = False) -> subprocess.Popen:
-    return subprocess.Popen([sys.executable, "-m", "recorder", "record", "--width", "320", "--height", "256",
+    return subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--width", "320", "--height", "256",
                              "--root", str(root), "--session", "s", "--analysis" if analysis else "--no-analysis",
                              *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE)
@@ -90,7 +90,7 @@ def test_recover_never_replaces_a_file_it_did_not_create(tmp_path):
     active = session / "0000.mcap.active"
     data = seg.read_bytes()
     active.write_bytes(data[: len(data) // 2])  # a cut copy waiting for recovery
-    import recorder.storage.recover as rmod
+    import thermcap.recorder.storage.recover as rmod
 
     real = rmod.ChunkedWriter.finish
 

@@ -8,14 +8,14 @@ import json
 import numpy as np
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from archive.archiver import archive_session
-from archive.manifest import load_manifest
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import run_cli
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.manifest import load_manifest
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def _flip(path, at=None):

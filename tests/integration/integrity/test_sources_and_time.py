@@ -8,11 +8,11 @@ import json
 import numpy as np
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.topics import decode_image
 from tests.conftest import run_cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.topics import decode_image
 
 W, H = 160, 128
 

@@ -8,12 +8,12 @@ import zipfile
 
 import pytest
 
-from archive.archiver import archive_session, verify_format_dir
-from archive.formats import get_format
-from archive.manifest import load_manifest, sidecar_sha256
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
+from thermcap.archive.archiver import archive_session, verify_format_dir
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import load_manifest, sidecar_sha256
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 def _session(tmp_path, n=60):

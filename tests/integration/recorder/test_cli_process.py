@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from recorder.icd.topics import decode_image
-from recorder.storage.recover import recover_segment
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.icd.topics import decode_image
+from thermcap.recorder.storage.recover import recover_segment
 
 W, H = 96, 80
 
@@ -82,7 +82,7 @@ def test_unknown_source_is_a_usage_error(tmp_path):
 
 def test_recorder_recovers_leftovers_when_it_starts(tmp_path):
     root = tmp_path / "d"
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--duration", "60", "--width", "160",
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--duration", "60", "--width", "160",
                              "--height", "128", "--root", str(root), "--session", "old"],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     active = root / "sessions" / "old" / "0000.mcap.active"
@@ -146,9 +146,9 @@ def test_recover_refuses_a_non_mcap(tmp_path):
 
 
 def test_recover_of_a_file_cut_anywhere_keeps_a_readable_prefix(tmp_path):
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
-    from recorder.storage.segments import SegmentPolicy
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
+    from thermcap.recorder.storage.segments import SegmentPolicy
 
     Recorder(SimSource(width=64, height=48, frames=40, paced=False), tmp_path, session_id="c",
              policy=SegmentPolicy(chunk_size=20_000)).run()

@@ -14,16 +14,16 @@ from itertools import pairwise
 
 import httpx
 
-from recorder.storage.info import info
-from recorder.storage.reader import iter_session_frames, read_session_meta
 from tests.conftest import run_cli, wait_for
+from thermcap.recorder.storage.info import info
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 TOKEN = "control-test-token-0123456789"
 
 
 def _start(root, *extra: str) -> tuple[subprocess.Popen, str]:
     env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--root", str(root), "--session", "c",
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(root), "--session", "c",
                              "--width", "160", "--height", "128", "--control", "--no-analysis", *extra],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     address = root / "run" / "c.control.json"

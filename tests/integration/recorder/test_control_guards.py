@@ -26,7 +26,7 @@ TOKEN = "guard-test-token-0123456789"
 @pytest.fixture
 def recorder(tmp_path):
     env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--root", str(tmp_path), "--session", "g",
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "g",
                              "--width", "64", "--height", "48", "--control", "--no-analysis"],
                             env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     address = tmp_path / "run" / "g.control.json"

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
-from recorder.storage.reader import iter_session_frames, read_session_meta
 from tests.conftest import run_cli
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 DEPLOY = Path(__file__).resolve().parents[3] / "docs" / "deploy"
 

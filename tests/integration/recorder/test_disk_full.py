@@ -12,11 +12,11 @@ import subprocess
 
 import pytest
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.recover import recover_path
-from recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.recover import recover_path
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 
 @pytest.fixture

@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 import tifffile
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exports.files import export_session
-from recorder.importers.run import import_paths
-from recorder.radiometry.base import model_from_dict
-from recorder.radiometry.params import add_version
-from recorder.radiometry.session import read_bad_pixel_map
-from recorder.storage.reader import iter_session_frames, read_session_meta
 from tests.conftest import SAMPLES, SAMPLES_HOW
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.importers.run import import_paths
+from thermcap.recorder.radiometry.base import model_from_dict
+from thermcap.recorder.radiometry.params import add_version
+from thermcap.recorder.radiometry.session import read_bad_pixel_map
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 flyr = pytest.importorskip("flyr", reason="flyr is a test dependency (pip install 'thermcap[test]')")
 FLIR = ["FLIR_T640.jpg", "FLIR_E40.jpg"]
@@ -136,7 +136,7 @@ def test_heatmap_scale_ignores_bad_pixels(sim, tmp_path):
 
 
 def test_an_unknown_model_version_is_refused(sim, tmp_path):
-    from recorder.exceptions import ThermcapError
+    from thermcap.recorder.exceptions import ThermcapError
 
     with pytest.raises(ThermcapError, match="model version 3"):
         export_session(sim, "celsius-tiff", tmp_path / "x", model_version=3)

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.cli import cli
-from recorder.storage.reader import iter_session_frames
+from thermcap.cli import cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
 
 pytest.importorskip("matplotlib", reason="the report's PDF needs matplotlib (pip install 'thermcap[report]')")
 
@@ -78,7 +78,7 @@ def test_a_real_flir_image_holds_after_a_reparameterisation(tmp_path):
 
 def test_it_still_holds_after_delete_source(reported):
     root, _ = reported
-    from archive.archiver import archive_session
+    from thermcap.archive.archiver import archive_session
 
     archive_session(root / "sessions" / "s", ["png16"], delete_source=True)
     assert not list((root / "sessions" / "s").glob("*.mcap"))

@@ -12,12 +12,12 @@ import time
 import numpy as np
 import pytest
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.radiometry import DEFAULT_MODEL
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import free_port
 from tests.support.foxglove_client import FoxgloveClient
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.radiometry import DEFAULT_MODEL
+from thermcap.recorder.storage.reader import iter_session_frames
 
 TOPICS = ["/thermal/image", "/thermal/metadata", "/thermal/annotations", "/thermal/temperature"]
 
@@ -42,7 +42,7 @@ def _frames_by_time(session_dir, camera=None) -> dict[int, np.ndarray]:
 @pytest.mark.parametrize("width", [0, 320])
 def test_viewers_see_the_recorded_counts_and_the_recording_drops_nothing(tmp_path, width):
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "record", "--root", str(tmp_path), "--session", "live",
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "live",
                              "--duration", "6", "--live", "--live-port", str(port), "--live-fps", "20",
                              "--live-width", str(width), "--json"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -88,7 +88,7 @@ def _record(root, frames: int = 30, session: str = "p") -> tuple:
 
 def _play(session_dir, *extra: str) -> tuple[list, FoxgloveClient, subprocess.Popen]:
     port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "recorder", "play", str(session_dir), "--port", str(port),
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "play", str(session_dir), "--port", str(port),
                              "--wait-for-viewer", "30", "--rate", "2", "--json", *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     client = _connect(f"ws://127.0.0.1:{port}", proc)
@@ -100,7 +100,7 @@ def _play(session_dir, *extra: str) -> tuple[list, FoxgloveClient, subprocess.Po
 
 
 def test_play_replays_every_frame_bit_exact_then_again_from_the_archive(tmp_path):
-    from archive.archiver import archive_session
+    from thermcap.archive.archiver import archive_session
 
     session_dir, _ = _record(tmp_path)
     expected = _frames_by_time(session_dir)
@@ -117,6 +117,6 @@ def test_play_replays_every_frame_bit_exact_then_again_from_the_archive(tmp_path
 
 
 def test_play_of_a_missing_session_is_a_clear_error(tmp_path):
-    r = subprocess.run([sys.executable, "-m", "recorder", "play", "nope", "--root", str(tmp_path)],
+    r = subprocess.run([sys.executable, "-m", "thermcap", "play", "nope", "--root", str(tmp_path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and "nope: no such session" in r.stderr

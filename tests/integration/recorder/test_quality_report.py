@@ -13,10 +13,10 @@ import subprocess
 import pytest
 from click.testing import CliRunner
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.cli import cli
-from recorder.reports.quality import measure_quality
+from thermcap.cli import cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.reports.quality import measure_quality
 
 pytest.importorskip("matplotlib", reason="the report's PDF needs matplotlib (pip install 'thermcap[report]')")
 SCALE = 0.036  # the simulator's °C per count

@@ -7,12 +7,12 @@ import json
 import threading
 import time
 
-from archive.manifest import frame_sha256
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.ring import RingPolicy, disk_usage, load_windows, read_eviction_log
-from recorder.storage.segments import SegmentPolicy
+from thermcap.archive.manifest import frame_sha256
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.ring import RingPolicy, disk_usage, load_windows, read_eviction_log
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 W, H, FPS = 64, 48, 60.0
 T0 = 1_800_000_000_000_000_000

@@ -12,15 +12,15 @@ from pathlib import Path
 
 import pytest
 
-from archive.blobs import open_store
-from archive.receipts import confirm_synced
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import ThermcapError
-from recorder.storage.segments import SegmentPolicy
-from recorder.sync.engine import Syncer, _Throttled
-from recorder.sync.rate import RateLimit, parse_rate
-from recorder.sync.targets import DirTarget, receipt_key
+from thermcap.archive.blobs import open_store
+from thermcap.archive.receipts import confirm_synced
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.sync.engine import Syncer, _Throttled
+from thermcap.recorder.sync.rate import RateLimit, parse_rate
+from thermcap.recorder.sync.targets import DirTarget, receipt_key
 
 MiB = 1 << 20
 
@@ -148,8 +148,8 @@ def test_a_receipt_withdrawn_since_confirmation_frees_nothing(vehicle, tmp_path)
 
 
 def test_protected_windows_are_never_freed(vehicle, tmp_path):
-    from recorder.storage.reader import segment_span
-    from recorder.storage.ring import ProtectionBook, Window
+    from thermcap.recorder.storage.reader import segment_span
+    from thermcap.recorder.storage.ring import ProtectionBook, Window
 
     root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
     session = root / "sessions" / "drive"
@@ -193,7 +193,7 @@ def test_a_ring_that_needs_receipts_evicts_only_what_the_cloud_confirmed(vehicle
     its receipt for exactly those bytes; the rest stays, and the evictor says why it is blocked."""
     import json as _json
 
-    from recorder.storage.ring import Evictor, RingPolicy
+    from thermcap.recorder.storage.ring import Evictor, RingPolicy
 
     root, dest = _copy(vehicle, tmp_path / "v"), tmp_path / "depot"
     session = root / "sessions" / "drive"

@@ -7,9 +7,9 @@ from __future__ import annotations
 
 import pytest
 
-from recorder.importers.run import import_paths
 from tests.conftest import SAMPLES, SAMPLES_HOW, ApiServer
 from tests.support.cdp import Browser
+from thermcap.recorder.importers.run import import_paths
 
 
 @pytest.fixture(scope="module")

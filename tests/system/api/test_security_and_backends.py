@@ -11,11 +11,11 @@ import numpy as np
 import pytest
 from sqlalchemy import func, select
 
-from api import db
-from api.db import make_engine, migrate
-from api.indexing import index_root
-from recorder.storage.reader import iter_session_frames
 from tests.conftest import ApiServer, run_cli
+from thermcap.api import db
+from thermcap.api.db import make_engine, migrate
+from thermcap.api.indexing import index_root
+from thermcap.recorder.storage.reader import iter_session_frames
 
 READ, WRITE = "reader-token-123", "writer-token-456"
 
@@ -54,7 +54,7 @@ def test_tokens_are_never_logged_or_echoed(locked_server):
 
 
 def test_serve_binds_loopback_by_default():
-    from api.cli import serve
+    from thermcap.api.cli import serve
 
     host = next(p for p in serve.params if p.name == "host")
     assert host.default == "127.0.0.1"

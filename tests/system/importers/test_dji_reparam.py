@@ -16,9 +16,9 @@ import pytest
 import tifffile
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
 from tests.conftest import run_cli
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
 
 DJI_CLI = shutil.which("dji-thermal-cli")
 pytestmark = pytest.mark.skipif(DJI_CLI is None, reason="dji-thermal-cli is not installed (optional, needs "

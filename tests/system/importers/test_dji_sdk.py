@@ -15,9 +15,9 @@ import numpy as np
 import pytest
 import tifffile
 
-from recorder.importers.dji_sdk import DjiSdkError, LibDirp, find_backend
-from recorder.radiometry import LookupTableModel, TemperatureUnavailable, model_from_dict
 from tests.conftest import ApiServer, run_cli
+from thermcap.recorder.importers.dji_sdk import DjiSdkError, LibDirp, find_backend
+from thermcap.recorder.radiometry import LookupTableModel, TemperatureUnavailable, model_from_dict
 
 DJI_CLI = shutil.which("dji-thermal-cli")
 needs_cli = pytest.mark.skipif(DJI_CLI is None,
@@ -293,8 +293,8 @@ def _import_and_rebuild(samples, tmp_path) -> tuple[dict, Path]:
 
 
 def test_rebuilt_rjpegs_carry_the_frame_and_every_segment_bit_exact(samples, tmp_path):
-    from recorder.importers import read_file
-    from recorder.importers.dji import SEGMENTS_BLOB
+    from thermcap.recorder.importers import read_file
+    from thermcap.recorder.importers.dji import SEGMENTS_BLOB
 
     files, out = _import_and_rebuild(samples, tmp_path)
     assert sorted(p.name for p in out.iterdir()) == sorted(files)
@@ -318,7 +318,7 @@ def test_dji_tools_measure_rebuilt_rjpegs_exactly_as_the_originals(samples, tmp_
 
 
 def test_api_serves_the_rebuilt_rjpeg_after_the_mcap_source_is_deleted(samples, tmp_path):
-    from recorder.importers import read_file
+    from thermcap.recorder.importers import read_file
 
     files, rebuilt = _import_and_rebuild(samples, tmp_path)
     root = tmp_path / "r"

@@ -6,9 +6,9 @@ from __future__ import annotations
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
 from tests.support.api_data import make_root
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
 
 
 @pytest.fixture(scope="module")

@@ -10,12 +10,12 @@ import imagecodecs
 import numpy as np
 import pytest
 
-from recorder.exports.colorbar import TemperatureRange, add_colorbar, png_text
-from recorder.exports.files import export_session
-from recorder.exports.render import palette
-from recorder.radiometry import DEFAULT_MODEL
-from recorder.storage.reader import iter_session_frames
 from tests.support.api_data import H, W
+from thermcap.recorder.exports.colorbar import TemperatureRange, add_colorbar, png_text
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.exports.render import palette
+from thermcap.recorder.radiometry import DEFAULT_MODEL
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def _url(n, **q):

@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from recorder.storage.reader import iter_session_frames
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.recorder.storage.reader import iter_session_frames
 
 SID = "s-archived"
 
@@ -51,7 +51,7 @@ def test_the_same_answer_as_the_route(client, root, fmt):
 def test_raw_counts_that_fail_the_band_checksums_are_not_served(client, root, monkeypatch):
     """A decoder bug (here: one count off in the PNG's decode) is caught by the summary's band
     CRC-32s: the frame comes from the next copy that proves itself, bit-exact."""
-    import api.fast_frames as ff
+    import thermcap.api.fast_frames as ff
 
     frames = [f.pixels for f in iter_session_frames(root / "sessions" / SID)]
     real = ff.decode_up_png
@@ -118,10 +118,10 @@ def test_raw_from_thermcaps_own_png_then_the_strips_then_libpng(tmp_path, monkey
     the tiff-lzw strips, and a damaged strip to libpng: each answer proved by its sha256."""
     import tifffile
 
-    from archive.archiver import archive_session
-    from archive.codecs import Png16
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
+    from thermcap.archive.archiver import archive_session
+    from thermcap.archive.codecs import Png16
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     for sid, writer in (("ours", "up-libdeflate"), ("libpng", "libpng")):
         Recorder(SimSource(width=160, height=150, frames=12, paced=False, seed=8), tmp_path, session_id=sid,
@@ -150,7 +150,7 @@ def test_raw_from_thermcaps_own_png_then_the_strips_then_libpng(tmp_path, monkey
 def test_a_rewritten_copy_of_the_same_size_is_read_afresh():
     """scrub --repair may rewrite a ZIP at its old size; the manifest's sha256 tells the copies
     apart, so offsets read from the old one are never used for the new one."""
-    from api.reading.zip_index import ZipIndexCache
+    from thermcap.api.reading.zip_index import ZipIndexCache
 
     def reader(data):
         return lambda a, b: data[a:b]
@@ -205,8 +205,8 @@ def test_raw_counts_of_a_session_not_archived_come_from_its_segment_as_the_route
 def test_a_damaged_segment_chunk_goes_to_the_full_application(tmp_path):
     """A chunk that fails its CRC is never served from here: the route answers, as it always did
     (and counts the damage)."""
-    from recorder.storage.chunks import SegmentIndex
     from tests.support.api_data import make_root
+    from thermcap.recorder.storage.chunks import SegmentIndex
 
     root = make_root(tmp_path)
     sid = "s-mcap-only"
@@ -228,9 +228,9 @@ def test_a_damaged_segment_chunk_goes_to_the_full_application(tmp_path):
 def test_a_session_whose_segments_were_deleted_once_archived_is_served_by_the_route(tmp_path):
     """No png16 copy and no segment left (archived as hdf5, source deleted): the index still
     names each frame's segment, but the counts come from the route's other copies."""
-    from archive.archiver import archive_session
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     Recorder(SimSource(width=96, height=64, frames=8, paced=False, seed=9), tmp_path, session_id="gone",
              analysis=False).run()

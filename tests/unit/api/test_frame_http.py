@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from recorder.cli import cli
-from recorder.storage.reader import iter_session_frames
+from thermcap.cli import cli
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 @pytest.mark.parametrize("fmt", ["png16", "raw", "tiff", "celsius-tiff", "preview"])

@@ -8,12 +8,12 @@ import pytest
 from fastapi.testclient import TestClient
 from sqlalchemy import inspect, select
 
-from api import db
-from api.app import create_app
-from api.settings import Settings
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
+from thermcap.api import db
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 @pytest.fixture(scope="module")
@@ -67,7 +67,7 @@ def test_no_row_per_frame_per_format(client):
 def test_the_catalog_and_the_search_use_their_indexes(client):
     """At 100,000 sessions a sort of every session cost 91 ms a page: the order must be the one
     the index spells (an index of the same name once stopped 0007 from making it)."""
-    from api.routes.sessions import _START
+    from thermcap.api.routes.sessions import _START
 
     engine = client.app.state.engine
     catalog = select(db.sessions).order_by(_START.desc(), db.sessions.c.id.desc()).limit(51)

@@ -10,7 +10,7 @@ from alembic import command
 from alembic.config import Config
 from sqlalchemy import select, text
 
-from api import db
+from thermcap.api import db
 
 H = [hashlib.sha256(bytes([i])).hexdigest() for i in range(4)]
 

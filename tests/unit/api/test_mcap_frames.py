@@ -9,12 +9,12 @@ import shutil
 
 import pytest
 
-from api.reading.mcap_frames import McapFrames
-from recorder.exceptions import McapFileError
-from recorder.storage.chunks import SegmentIndex
-from recorder.storage.reader import iter_segment_frames
-from recorder.storage.writer import Compression
 from tests.unit.recorder.test_segment_chunks import small_chunk_session
+from thermcap.api.reading.mcap_frames import McapFrames
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.chunks import SegmentIndex
+from thermcap.recorder.storage.reader import iter_segment_frames
+from thermcap.recorder.storage.writer import Compression
 
 
 @pytest.fixture

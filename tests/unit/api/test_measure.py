@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recorder.radiometry import DEFAULT_MODEL
-from recorder.storage.reader import iter_session_frames
-from recorder.thermography.measure import Polygon, ToolError, measure, parse_tool
+from thermcap.recorder.radiometry import DEFAULT_MODEL
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.thermography.measure import Polygon, ToolError, measure, parse_tool
 
 SID = "s-archived"
 
@@ -23,7 +23,7 @@ def temps(root):
 @pytest.fixture(scope="module")
 def masked(root, temps):
     """The reference with the session's bad pixels as NaN, as every °C product gives them (issue 37)."""
-    from recorder.radiometry.session import read_bad_pixel_map
+    from thermcap.recorder.radiometry.session import read_bad_pixel_map
 
     mask = read_bad_pixel_map(root / "sessions" / SID)
     assert mask is not None and mask.any()

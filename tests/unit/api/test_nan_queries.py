@@ -8,8 +8,8 @@ import json
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
 
 BAD = [
     ("frames/0/histogram", {"min": "nan"}),

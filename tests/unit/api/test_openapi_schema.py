@@ -8,8 +8,8 @@ from __future__ import annotations
 import warnings
 from collections import Counter
 
-from api.app import create_app
-from api.settings import Settings
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
 
 
 def test_every_operation_has_an_id_of_its_own(tmp_path):

@@ -12,11 +12,11 @@ import pytest
 from click.testing import CliRunner
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from recorder.cli import cli
-from recorder.importers.run import import_paths
 from tests.conftest import SAMPLES, SAMPLES_HOW
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.cli import cli
+from thermcap.recorder.importers.run import import_paths
 
 flyr = pytest.importorskip("flyr", reason="flyr is a test dependency (pip install 'thermcap[test]')")
 

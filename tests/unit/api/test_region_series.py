@@ -18,14 +18,14 @@ import pytest
 import tifffile
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.radiometry import DEFAULT_MODEL
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.segments import SegmentPolicy
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.radiometry import DEFAULT_MODEL
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 SID = "s-strips"
 W, H = 96, 150  # three bands of rows: 64, 64 and a short 22
@@ -124,7 +124,7 @@ def test_the_summary_is_in_the_manifest_and_uploaded_with_the_archive(world):
     manifest = json.loads((root / "sessions" / SID / "archive" / "manifest.json").read_text())
     entry = manifest["summary"]
     assert entry["frames"] == len(temps) and entry["band_rows"] == 64
-    from archive.manifest import archived_files
+    from thermcap.archive.manifest import archived_files
 
     assert "summary.npz" in {f.rel for f in archived_files(manifest)}
 
@@ -200,7 +200,7 @@ def test_bad_series_jobs_are_400s_and_unknown_jobs_404s(world):
 def test_thermcap_jobs_lists_them(world):
     from click.testing import CliRunner
 
-    from api.cli import jobs
+    from thermcap.api.cli import jobs
 
     root, client, _ = world
     client.post(f"/api/v1/sessions/{SID}/series/jobs", params={"tool": "spot:1,1"})

@@ -13,10 +13,10 @@ import pytest
 import tifffile
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from recorder.importers.run import import_paths
 from tests.conftest import SAMPLES, SAMPLES_HOW
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.recorder.importers.run import import_paths
 
 
 def test_phytooracle_parameters_through_the_api(tmp_path):

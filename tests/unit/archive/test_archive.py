@@ -11,17 +11,17 @@ import numpy as np
 import pytest
 import tifffile
 
-from archive.archiver import archive_session
-from archive.codecs import Png16
-from archive.exceptions import ArchiveError, VerificationError
-from archive.formats import format_registry, register_format
-from archive.formats.zipped import ZippedFrames
-from archive.manifest import frame_sha256, load_manifest
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
 from tests.support.archive_sessions import ALL, H, W
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.codecs import Png16
+from thermcap.archive.exceptions import ArchiveError, VerificationError
+from thermcap.archive.formats import format_registry, register_format
+from thermcap.archive.formats.zipped import ZippedFrames
+from thermcap.archive.manifest import frame_sha256, load_manifest
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def _source_frames(d):
@@ -192,7 +192,7 @@ def test_every_format_round_trips_large_and_odd_frames(tmp_path, width, height):
 
 
 def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path):
-    from recorder.importers.run import import_paths
+    from thermcap.recorder.importers.run import import_paths
 
     picks = [str(samples / "flir" / "FLIR_E40.jpg"), str(samples / "dji" / "DJI_H20T.jpg"),
              str(next((samples / "terraref").glob("*_ir.bin"))), str(samples / "flir" / "example_radiometric.tiff")]
@@ -209,8 +209,8 @@ def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path)
 def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(session):
     from mcap.reader import make_reader
 
-    from archive.extras import summarize_mcap
-    from recorder.storage.reader import session_segments
+    from thermcap.archive.extras import summarize_mcap
+    from thermcap.recorder.storage.reader import session_segments
 
     before = summarize_mcap(session_segments(session))
     assert before["attachments"]
@@ -225,7 +225,7 @@ def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(se
         reader = make_reader(f)
         assert "/thermal/image" not in {c.topic for c in reader.get_summary().channels.values()}
         names = [r.name for r in reader.iter_metadata()]
-    from recorder.storage.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
+    from thermcap.recorder.storage.segments import SEGMENT_STATS_METADATA, SESSION_METADATA
 
     assert names.count(SESSION_METADATA) == 4
     assert names.count(SEGMENT_STATS_METADATA) == 4  # each segment's own

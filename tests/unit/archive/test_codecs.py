@@ -8,10 +8,10 @@ import imagecodecs
 import numpy as np
 import pytest
 
-from archive import codecs as C
-from archive.codecs import FrameCodec, codec_registry, get_codec
-from archive.exceptions import UnknownCodecError
-from recorder.capture.sources.sim import SimSource
+from thermcap.archive import codecs as C
+from thermcap.archive.codecs import FrameCodec, codec_registry, get_codec
+from thermcap.archive.exceptions import UnknownCodecError
+from thermcap.recorder.capture.sources.sim import SimSource
 
 CODECS = [get_codec(cid) for cid in sorted(codec_registry)]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from archive.fanout import fan_out
+from thermcap.archive.fanout import fan_out
 
 
 def test_every_consumer_sees_every_item_once_in_order():

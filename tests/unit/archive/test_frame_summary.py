@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from archive.frame_summary import SummaryBuilder, band_crc32, load_summary
+from thermcap.archive.frame_summary import SummaryBuilder, band_crc32, load_summary
 
 
 @pytest.fixture

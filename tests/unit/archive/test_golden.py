@@ -10,10 +10,10 @@ from pathlib import Path
 
 import pytest
 
-from archive.archiver import verify_format_dir
-from archive.codecs import codec_registry, get_codec
-from archive.formats import format_registry, get_format
-from archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.archive.archiver import verify_format_dir
+from thermcap.archive.codecs import codec_registry, get_codec
+from thermcap.archive.formats import format_registry, get_format
+from thermcap.archive.manifest import frame_sha256, sidecar_sha256
 
 FIXTURE = Path(__file__).resolve().parents[2] / "fixture"
 

@@ -9,7 +9,7 @@ import h5py
 import numpy as np
 import pytest
 
-from archive.formats.hdf5 import _szip_encoder_available, szip_chunk
+from thermcap.archive.formats.hdf5 import _szip_encoder_available, szip_chunk
 
 pytestmark = pytest.mark.skipif(not _szip_encoder_available(), reason="this h5py build has no SZIP encoder")
 
@@ -38,9 +38,9 @@ def test_our_szip_chunks_are_the_bytes_hdf5s_filter_writes(tmp_path, shape, cont
 def test_reading_in_blocks_gives_every_frame_sidecar_and_time_in_order(tmp_path, monkeypatch, frames_per_call):
     """``Hdf5.read`` takes several frames a call; a count that is no multiple of the block, and
     a block larger than the file, still give each frame once, with its own sidecar and time."""
-    from archive.formats import ArchiveContext, get_format
-    from archive.formats import hdf5 as hdf5_format
-    from recorder.storage.reader import SessionFrame
+    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.archive.formats import hdf5 as hdf5_format
+    from thermcap.recorder.storage.reader import SessionFrame
 
     shape, n = (64, 96), 20
     monkeypatch.setattr(hdf5_format, "READ_BYTES", frames_per_call * shape[0] * shape[1] * 2)
@@ -65,10 +65,10 @@ def test_a_damaged_chunk_is_found_by_verification_and_a_reader_may_stop_early(tm
     that stops after one frame leaves no thread reading the closed file."""
     import hashlib
 
-    from archive.archiver import verify_format_dir
-    from archive.formats import ArchiveContext, get_format
-    from archive.formats import hdf5 as hdf5_format
-    from recorder.storage.reader import SessionFrame
+    from thermcap.archive.archiver import verify_format_dir
+    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.archive.formats import hdf5 as hdf5_format
+    from thermcap.recorder.storage.reader import SessionFrame
 
     shape, n = (64, 96), 20
     monkeypatch.setattr(hdf5_format, "READ_BYTES", 3 * shape[0] * shape[1] * 2)

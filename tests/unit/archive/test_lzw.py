@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 import tifffile
 
-from archive.formats.tiff_lzw import encode_page, write_page
-from archive.lzw import lzw_encode, lzw_encode_strips
+from thermcap.archive.formats.tiff_lzw import encode_page, write_page
+from thermcap.archive.lzw import lzw_encode, lzw_encode_strips
 
 
 def _cases() -> list[bytes]:

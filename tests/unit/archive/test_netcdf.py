@@ -9,11 +9,11 @@ import h5py
 import numpy as np
 import pytest
 
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import RawSource, SimSource
-from recorder.radiometry import DEFAULT_MODEL, FlirPlanckModel
-from recorder.storage.reader import iter_session_frames
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import RawSource, SimSource
+from thermcap.recorder.radiometry import DEFAULT_MODEL, FlirPlanckModel
+from thermcap.recorder.storage.reader import iter_session_frames
 
 xr = pytest.importorskip("xarray", reason="xarray is a test dependency (pip install 'thermcap[test]')")
 pytest.importorskip("h5netcdf", reason="h5netcdf is a test dependency")

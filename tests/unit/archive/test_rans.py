@@ -9,8 +9,8 @@ import glob
 import numpy as np
 import pytest
 
-from archive import rans, tpred_key
 from tests.conftest import SAMPLES
+from thermcap.archive import rans, tpred_key
 
 
 @pytest.mark.parametrize("values", [
@@ -76,7 +76,7 @@ def test_key_frames_round_trip_at_any_size_and_the_extremes(shape):
 def test_key_frames_beat_vertical_differences_on_the_simulator_and_real_frames():
     import imagecodecs
 
-    from recorder.capture.sources.sim import SimSource
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     frames = [next(iter(SimSource(width=640, height=512, frames=1, paced=False, seed=21,
                                   pixel_fpn_mk=15.0).frames())).pixels]

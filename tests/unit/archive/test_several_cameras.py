@@ -5,10 +5,10 @@ from __future__ import annotations
 
 import pytest
 
-from archive.archiver import archive_session
-from archive.exceptions import ArchiveError
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
 
 
 def test_the_archiver_refuses_a_session_of_several_cameras_and_keeps_it(tmp_path):

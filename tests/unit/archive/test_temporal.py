@@ -11,11 +11,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from archive.exceptions import ArchiveError
-from archive.formats import get_format
-from archive.manifest import frame_sha256
-from archive.temporal import HEADER, TemporalDecoder, TemporalEncoder, TpredError, decode_records, parse_header
-from recorder.capture.sources.sim import SimSource
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import frame_sha256
+from thermcap.archive.temporal import HEADER, TemporalDecoder, TemporalEncoder, TpredError, decode_records, parse_header
+from thermcap.recorder.capture.sources.sim import SimSource
 
 GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and v2, v3 beside it
 
@@ -102,9 +102,9 @@ def test_damage_is_refused_with_the_reason():
 
 
 def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
-    from archive.archiver import archive_session
-    from archive.manifest import load_manifest
-    from recorder.capture.recorder import Recorder
+    from thermcap.archive.archiver import archive_session
+    from thermcap.archive.manifest import load_manifest
+    from thermcap.recorder.capture.recorder import Recorder
 
     rec = Recorder(SimSource(width=160, height=128, frames=70, paced=False, seed=8, view="patrol"), tmp_path,
                    session_id="t", analysis=False, recover_leftovers=False)
@@ -167,7 +167,7 @@ def test_the_float_division_is_floor_division():
 def test_version_3_learns_the_sensor_pattern_under_a_pan():
     """The column pattern stays put on the sensor while the scene pans; version 3 learns it
     from the decoded frames alone, so the same frames cost less than in version 2."""
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     src = SimSource(width=640, height=512, frames=16, paced=False, seed=5, view="patrol", pixel_fpn_mk=15.0,
                     drift_mk=30.0, patrol_deg_s=10.0)
@@ -201,7 +201,7 @@ def _moving_square(n: int = 12) -> list[np.ndarray]:
 
 @pytest.mark.parametrize("version", [3, 4])
 def test_version_3_predicts_a_block_that_moves_on_its_own(version):
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     frames = _moving_square()
     enc = TemporalEncoder(bitstream=version)
@@ -221,7 +221,7 @@ def test_version_3_predicts_a_block_that_moves_on_its_own(version):
 
 def test_version_3_block_modes_on_a_frame_that_is_not_a_whole_number_of_blocks():
     """117x151: the last block row and column are partial, in the block map and in the moves."""
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     frames = [f[5:122, 3:154].copy() for f in _moving_square()]
     enc = TemporalEncoder(window=8, key_interval=64, bitstream=3)
@@ -235,7 +235,7 @@ def test_version_3_block_modes_on_a_frame_that_is_not_a_whole_number_of_blocks()
 
 @pytest.mark.parametrize("version", [3, 4])
 def test_version_3_damage_is_refused_with_the_reason(version):
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     frames = _moving_square(4)
     enc = TemporalEncoder(bitstream=version)
@@ -267,7 +267,7 @@ def test_version_4_leaves_the_sensors_defects_out_of_the_scene():
     pixels that stopped changing at the next key frame, and version 4 predicts each from its own
     last value instead of smearing it over the scene points it crosses: the listed pixels are the
     simulator's defects, and the same frames cost less than with the list emptied."""
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     src = SimSource(width=320, height=256, frames=48, paced=False, seed=5, view="patrol", patrol_deg_s=10.0,
                     pixel_fpn_mk=15.0, drift_mk=30.0, bad_pixels=6)
@@ -292,7 +292,7 @@ def test_version_4_leaves_the_sensors_defects_out_of_the_scene():
 def test_version_4_refuses_a_damaged_defect_list():
     import zlib
 
-    import archive.temporal as tp
+    import thermcap.archive.temporal as tp
 
     frames = _frames("fixed", n=2)
     key = TemporalEncoder().encode(frames[0])
@@ -359,7 +359,7 @@ def test_gops_on_two_threads_write_the_sequential_encoders_bytes():
     """``encode_gops`` cuts the sequence where the encoder would start a key (every
     ``key_interval`` frames, and at a change of size) and hands each GOP its defect list: the
     records are the sequential encoder's, byte for byte, and ``decode_gops`` reads them back."""
-    from archive.temporal import decode_gops, encode_gops
+    from thermcap.archive.temporal import decode_gops, encode_gops
 
     frames = [f.pixels for f in SimSource(width=160, height=128, frames=80, paced=False, seed=5, view="patrol",
                                           patrol_deg_s=10.0, pixel_fpn_mk=15.0, bad_pixels=6).frames()]

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import tifffile
 
-from archive.exceptions import ArchiveError
-from archive.formats import tiff_lzw
-from archive.formats.tiff_lzw import LOG_TIME_TAG, TiffLzw, write_page
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats import tiff_lzw
+from thermcap.archive.formats.tiff_lzw import LOG_TIME_TAG, TiffLzw, write_page
 
 
 def _write(path: Path, frames: list[np.ndarray], bigtiff: bool = False) -> list[tuple[bytes, int]]:

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from recorder.importers import ImportFileError, read_file
+from thermcap.recorder.importers import ImportFileError, read_file
 
 SAMPLE_FILES = ["dji/DJI_H20T.jpg", "dji/M2EA_DJI_0001_R.JPG", "dji/M30T_DJI_0001_R.JPG", "dji/M30T_DJI_0003_R.JPG",
                 "dji/M4T_DJI_0003_R.JPG", "flir/FLIR_E40.jpg", "flir/FLIR_T640.jpg", "flir/DJI_XT2.jpg",

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import struct
 
-from recorder.icd.names import iso_utc
-from recorder.importers.exif import capture_time, exif_fields
+from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.importers.exif import capture_time, exif_fields
 
 
 def _exif(ifd0: dict[int, bytes], exif: dict[int, bytes] | None = None, gps: dict[int, tuple] | None = None) -> bytes:

@@ -8,10 +8,10 @@ import re
 
 import pytest
 
-from recorder.exports.files import export_session
-from recorder.icd.names import parse_name
-from recorder.importers import read_file
-from recorder.importers.run import import_paths
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.icd.names import parse_name
+from thermcap.recorder.importers import read_file
+from thermcap.recorder.importers.run import import_paths
 
 
 def _exiftool(path):

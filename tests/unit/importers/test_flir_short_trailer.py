@@ -10,8 +10,8 @@ import struct
 import numpy as np
 import pytest
 
-from recorder.exceptions import TruncatedImageError
-from recorder.importers.flir import _byteorder, iter_fff_file
+from thermcap.recorder.exceptions import TruncatedImageError
+from thermcap.recorder.importers.flir import _byteorder, iter_fff_file
 
 
 def _dir(fff: bytes):

@@ -9,9 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from recorder.importers import read_file
-from recorder.importers.jpeg import app_segments, concat_app
-from recorder.radiometry import TemperatureUnavailable, TerraRefPlanckModel
+from thermcap.recorder.importers import read_file
+from thermcap.recorder.importers.jpeg import app_segments, concat_app
+from thermcap.recorder.radiometry import TemperatureUnavailable, TerraRefPlanckModel
 
 
 def _sha(px):

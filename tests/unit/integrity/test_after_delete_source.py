@@ -13,15 +13,15 @@ import pytest
 from fastapi.testclient import TestClient
 from mcap.reader import make_reader
 
-from api.app import create_app
-from api.reading.mcap_slice import export_mcap
-from api.settings import Settings
-from archive.archiver import archive_session
-from recorder.analysis.offline import analyze_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.segments import SegmentPolicy
+from thermcap.api.app import create_app
+from thermcap.api.reading.mcap_slice import export_mcap
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.analysis.offline import analyze_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 T0 = 1_800_000_000_000_000_000
 N = 90
@@ -100,8 +100,8 @@ def test_analyze_refuses_to_empty_events_when_no_frame_can_be_read(tmp_path):
 def test_frames_read_back_from_an_archive_are_checked_and_skip_copies_marked_damaged(tmp_path):
     """Reading a session whose source is gone must never hand on damaged counts: a copy scrub
     marked damaged is passed over for a good one, and damage scrub has not seen yet is an error."""
-    from archive.exceptions import VerificationError
-    from archive.manifest import load_manifest, save_manifest
+    from thermcap.archive.exceptions import VerificationError
+    from thermcap.archive.manifest import load_manifest, save_manifest
 
     session = _record(tmp_path)
     truth = [np.array(f.pixels) for f in iter_session_frames(session)]

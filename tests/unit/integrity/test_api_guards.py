@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings, _parse_tokens
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.raw import RawSource
 from tests.support.api_data import make_root
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings, _parse_tokens
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.raw import RawSource
 
 READ, WRITE = "integrity-read-token", "integrity-write-token"
 

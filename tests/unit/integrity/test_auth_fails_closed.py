@@ -10,8 +10,8 @@ import socket
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
 
 TOKEN = "0123456789abcdef"
 
@@ -52,7 +52,7 @@ def client(tmp_path):
 
 
 def test_health_without_a_token_says_only_the_state(client):
-    from api.reading.frames import Damage
+    from thermcap.api.reading.frames import Damage
 
     client.app.state.frames.damage.report(Damage("s", 3, "png16:0000.zip", "sha256 differs"))
     body = client.get("/healthz").json()

@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import pytest
 
-from api.jobs.retention import gc_sessions
-from archive.archiver import archive_session
-from archive.blobs import BlobStore, upload_archive
-from archive.manifest import load_manifest, save_manifest
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import ThermcapError
+from thermcap.api.jobs.retention import gc_sessions
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.blobs import BlobStore, upload_archive
+from thermcap.archive.manifest import load_manifest, save_manifest
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import ThermcapError
 
 
 @pytest.fixture

@@ -11,11 +11,11 @@ import zipfile
 
 import pytest
 
-from archive.archiver import archive_session
-from archive.manifest import load_manifest, save_manifest
-from archive.scrub import scrub_session
-from archive.verify import verify_session
-from recorder.storage.reader import iter_session_frames, session_segments
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.manifest import load_manifest, save_manifest
+from thermcap.archive.scrub import scrub_session
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.storage.reader import iter_session_frames, session_segments
 
 
 def _flip_in_image_entry(path) -> None:
@@ -75,7 +75,7 @@ def test_a_damaged_copy_is_rebuilt_not_skipped_without_delete(session):
 def test_a_damaged_copy_with_no_source_refuses_and_says_which(session):
     archive_session(session, ["png16", "hdf5"], delete_source=True)
     _flip(session)
-    from archive.exceptions import ArchiveError
+    from thermcap.archive.exceptions import ArchiveError
 
     with pytest.raises(ArchiveError, match="png16"):
         archive_session(session, ["png16"])
@@ -114,9 +114,9 @@ def test_frames_stay_served_while_the_source_is_deleted(session):
     re-indexes meanwhile still serves every frame."""
     from fastapi.testclient import TestClient
 
-    from api.app import create_app
-    from api.indexing import index_session
-    from api.settings import Settings
+    from thermcap.api.app import create_app
+    from thermcap.api.indexing import index_session
+    from thermcap.api.settings import Settings
 
     root = session.parent.parent / "root"
     (root / "sessions").mkdir(parents=True)

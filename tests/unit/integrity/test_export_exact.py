@@ -13,10 +13,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from api.reading.mcap_slice import export_mcap
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.segments import SegmentPolicy
+from thermcap.api.reading.mcap_slice import export_mcap
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 T0 = 1_800_000_000_000_000_000
 TOPICS = ["/thermal/image", "/thermal/metadata", "/recorder/stats", "/radar/cue", "/sim/ground_truth"]

@@ -6,14 +6,14 @@ from __future__ import annotations
 import json
 import shutil
 
-from api.jobs.retention import gc_sessions
-from archive.archiver import archive_session
-from recorder.storage.ring import ProtectionBook, Window
+from thermcap.api.jobs.retention import gc_sessions
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.storage.ring import ProtectionBook, Window
 
 
 def _protect(session_dir) -> None:
     first = min(p for p in session_dir.glob("*.mcap"))
-    from recorder.storage.reader import segment_span
+    from thermcap.recorder.storage.reader import segment_span
 
     start, end, _ = segment_span(first)
     ProtectionBook(session_dir).add(Window(start, end, "mark", "deer on the road"))

@@ -11,16 +11,16 @@ import json
 
 import pytest
 
-from archive.archiver import archive_session
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import McapFileError
-from recorder.storage import recover as recover_mod
-from recorder.storage.reader import count_frames, iter_session_frames
-from recorder.storage.recover import recover_path, recover_segment
-from recorder.storage.segments import SegmentPolicy
 from tests.conftest import run_cli
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.verify import verify_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage import recover as recover_mod
+from thermcap.recorder.storage.reader import count_frames, iter_session_frames
+from thermcap.recorder.storage.recover import recover_path, recover_segment
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 
 @pytest.fixture

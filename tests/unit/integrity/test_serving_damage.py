@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from fastapi.testclient import TestClient
 
-from api.app import create_app
-from api.settings import Settings
-from archive.archiver import archive_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.storage.reader import iter_session_frames
+from thermcap.api.app import create_app
+from thermcap.api.settings import Settings
+from thermcap.archive.archiver import archive_session
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.reader import iter_session_frames
 
 
 def _flip_entry(path, n: int) -> None:

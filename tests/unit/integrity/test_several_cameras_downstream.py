@@ -12,18 +12,18 @@ import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
 
-from api.db import make_engine, migrate
-from api.indexing import index_root
-from api.jobs.dask_jobs import DaskJobs, TaskConfig
-from api.jobs.worker import Worker
-from archive.verify import verify_session
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import SimSource
-from recorder.cli import cli
-from recorder.exceptions import ThermcapError
-from recorder.storage.reader import iter_session_frames, read_session_meta
-from recorder.storage.segments import SegmentPolicy
-from recorder.storage.split import split_cameras
+from thermcap.api.db import make_engine, migrate
+from thermcap.api.indexing import index_root
+from thermcap.api.jobs.dask_jobs import DaskJobs, TaskConfig
+from thermcap.api.jobs.worker import Worker
+from thermcap.archive.verify import verify_session
+from thermcap.cli import cli
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import SimSource
+from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.split import split_cameras
 
 
 def _record(root, session="mc"):

@@ -7,11 +7,11 @@ import shutil
 
 import pytest
 
-from archive.archiver import archive_session
-from archive.exceptions import ArchiveError
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
 from tests.conftest import run_cli
+from thermcap.archive.archiver import archive_session
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 @pytest.fixture

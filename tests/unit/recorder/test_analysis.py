@@ -7,12 +7,12 @@ import json
 import numpy as np
 import pytest
 
-from recorder.analysis.detector import EventBuilder, HotSpotDetector, iou
-from recorder.analysis.offline import analyze_session
-from recorder.bench.analysis import score
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource, SimTarget
-from recorder.radiometry import LinearModel
+from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector, iou
+from thermcap.recorder.analysis.offline import analyze_session
+from thermcap.recorder.bench.analysis import score
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource, SimTarget
+from thermcap.recorder.radiometry import LinearModel
 
 MODEL = LinearModel()
 
@@ -117,7 +117,7 @@ def test_frames_with_nothing_to_grade_make_no_crossover():
 
 
 def test_recorder_fills_sidecars_from_the_detector_and_writes_events(tmp_path):
-    from recorder.storage.reader import iter_session_frames
+    from thermcap.recorder.storage.reader import iter_session_frames
 
     # Paced at 60 fps, as a camera: the detector keeps up and analyses every frame.
     res = Recorder(SimSource(width=320, height=256, frames=90, paced=True, seed=5, first_cue_s=0.2,
@@ -137,8 +137,8 @@ def test_recorder_fills_sidecars_from_the_detector_and_writes_events(tmp_path):
 
 
 def test_analysis_falling_behind_skips_and_says_so(tmp_path):
-    from recorder.bench.record import MemorySource
-    from recorder.storage.reader import iter_session_frames
+    from thermcap.recorder.bench.record import MemorySource
+    from thermcap.recorder.storage.reader import iter_session_frames
 
     sim = SimSource(width=320, height=256, frames=30, paced=False, seed=6, start_time_ns=0)
     frames = list(sim.frames())
@@ -172,7 +172,7 @@ def test_analyze_is_idempotent_and_matches_the_recorder(tmp_path):
 def test_the_sliding_extremes_are_scipys_filters(shape, k):
     from scipy import ndimage
 
-    from recorder.analysis.detector import sliding_extreme
+    from thermcap.recorder.analysis.detector import sliding_extreme
 
     x = np.random.default_rng(k).standard_normal(shape).astype(np.float32)
     assert np.array_equal(sliding_extreme(x, k, np.minimum), ndimage.minimum_filter(x, size=k, mode="nearest"))
@@ -181,7 +181,7 @@ def test_the_sliding_extremes_are_scipys_filters(shape, k):
 
 @pytest.mark.parametrize("n", [1, 2, 3, 10, 101])
 def test_the_ring_median_is_numpys(n):
-    from recorder.analysis.detector import _median
+    from thermcap.recorder.analysis.detector import _median
 
     x = np.random.default_rng(n).standard_normal(n).astype(np.float32) * 30
     assert _median(x) == float(np.median(x))

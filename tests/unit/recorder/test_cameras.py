@@ -12,12 +12,12 @@ import time
 import pytest
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources import FrameSource, SimSource
-from recorder.capture.sources.spec import parse_source_spec
-from recorder.exceptions import McapFileError, SourceError
-from recorder.storage.info import info
-from recorder.storage.reader import count_frames, iter_session_frames, read_session_meta, session_cameras
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources import FrameSource, SimSource
+from thermcap.recorder.capture.sources.spec import parse_source_spec
+from thermcap.recorder.exceptions import McapFileError, SourceError
+from thermcap.recorder.storage.info import info
+from thermcap.recorder.storage.reader import count_frames, iter_session_frames, read_session_meta, session_cameras
 
 
 def _sim(w: int, h: int, fps: float, frames: int, seed: int) -> SimSource:

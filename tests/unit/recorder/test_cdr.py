@@ -10,9 +10,9 @@ from typing import Any
 import pytest
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
-from recorder.capture.sources.sim import SimSource
-from recorder.icd import rosmsg
-from recorder.icd.cdr import compile_encoder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd import rosmsg
+from thermcap.recorder.icd.cdr import compile_encoder
 
 MESSAGES = [rosmsg.SIDECAR, rosmsg.STATS, rosmsg.EVENT, rosmsg.RADAR_CUE, rosmsg.JSON_DOCUMENT]
 
@@ -119,7 +119,7 @@ def test_what_the_plan_does_not_cover_falls_back_to_mcap_ros2() -> None:
 def test_without_mcap_ros2_s_parser_helpers_its_own_encoder_is_used(monkeypatch: pytest.MonkeyPatch) -> None:
     """The helpers compile_encoder parses with are private to mcap_ros2: a release without them,
     or with a parser of another shape, must leave recording working on mcap_ros2's encoder."""
-    import recorder.icd.cdr as cdr
+    import thermcap.recorder.icd.cdr as cdr
 
     name, text = rosmsg.ANNOTATIONS.name, rosmsg.ANNOTATIONS.text
     doc = rosmsg.annotations_doc(5, [{"target_id": "T1", "bbox": [1, 2, 30, 40]}])

@@ -14,13 +14,13 @@ import zstandard
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
 
-from recorder.bench.record import MemorySource
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import McapFileError
-from recorder.storage.reader import iter_segment_frames
-from recorder.storage.segments import SegmentPolicy
-from recorder.storage.writer import Compression
+from thermcap.recorder.bench.record import MemorySource
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.reader import iter_segment_frames
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.writer import Compression
 
 
 def _noise_session(tmp_path: Path, compression: Compression) -> Path:
@@ -72,7 +72,7 @@ def test_a_byte_changed_inside_a_chunk_is_refused_by_the_frame_reader(tmp_path, 
 
 @pytest.mark.parametrize("compression", list(Compression))
 def test_a_byte_changed_inside_a_chunk_is_refused_by_the_chunk_reader(tmp_path, compression):
-    from recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
+    from thermcap.recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
 
     seg = _noise_session(tmp_path, compression)
     first = next(iter_segment_frames(seg))

@@ -9,10 +9,10 @@ import time
 import numpy as np
 from click.testing import CliRunner
 
-from recorder.cli import cli
-from recorder.live.branch import LiveBranch
-from recorder.live.publisher import LiveOptions
-from recorder.storage.reader import read_session_meta
+from thermcap.cli import cli
+from thermcap.recorder.live.branch import LiveBranch
+from thermcap.recorder.live.publisher import LiveOptions
+from thermcap.recorder.storage.reader import read_session_meta
 
 CONFIG = """
 [record]

@@ -9,11 +9,11 @@ import math
 import numpy as np
 import pytest
 
-from recorder.exceptions import SidecarError
-from recorder.icd.names import format_name, parse_name
-from recorder.icd.quality import contrast_grade, contrast_metrics, correct_bad_pixels, netd_mk
-from recorder.icd.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
-from recorder.radiometry import LinearModel, model_from_dict
+from thermcap.recorder.exceptions import SidecarError
+from thermcap.recorder.icd.names import format_name, parse_name
+from thermcap.recorder.icd.quality import contrast_grade, contrast_metrics, correct_bad_pixels, netd_mk
+from thermcap.recorder.icd.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
+from thermcap.recorder.radiometry import LinearModel, model_from_dict
 
 ICD_EXAMPLE = {
     "format_version": "1.0",

@@ -6,7 +6,7 @@ import random
 import threading
 from datetime import UTC, datetime
 
-from recorder.icd.names import iso_utc, parse_rfc3339
+from thermcap.recorder.icd.names import iso_utc, parse_rfc3339
 
 
 def _reference(ns: int) -> str:

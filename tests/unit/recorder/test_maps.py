@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from recorder.maps.footprint import FootprintRefused, footprint, ground_to_pixel, utm_epsg
-from recorder.maps.pose import CameraPose, PoseMissing, pose_from_vendor
+from thermcap.recorder.maps.footprint import FootprintRefused, footprint, ground_to_pixel, utm_epsg
+from thermcap.recorder.maps.pose import CameraPose, PoseMissing, pose_from_vendor
 
 pytest.importorskip("pyproj", reason="pyproj is in the geo extra (pip install 'thermcap[geo]')")
 
@@ -105,7 +105,7 @@ def _plane_dem(pose, slope, base=100.0, half=300.0, cell=1.0):
     """A DEM on the camera's UTM grid: z = base + slope * (easting - the camera's easting)."""
     from pyproj import CRS, Transformer
 
-    from recorder.maps.terrain import Dem
+    from thermcap.recorder.maps.terrain import Dem
 
     epsg = utm_epsg(pose.latitude, pose.longitude)
     ce, cn = Transformer.from_crs(4326, epsg, always_xy=True).transform(pose.longitude, pose.latitude)
@@ -137,7 +137,7 @@ def test_over_a_dem_each_corner_lands_on_the_terrain():
         pose_from_vendor({**vendor, "xmp_drone_dji": {k: v for k, v in vendor["xmp_drone_dji"].items()
                                                       if k != "AbsoluteAltitude"}}, 640, 512, dem=dem)
     small, _ = _plane_dem(flat, slope=0.0, half=10.0)
-    from recorder.maps.terrain import DemError
+    from thermcap.recorder.maps.terrain import DemError
 
     with pytest.raises(DemError, match="leaves the DEM"):
         footprint(pose_from_vendor(vendor, 640, 512, dem=small), dem=small)

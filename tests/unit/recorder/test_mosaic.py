@@ -16,10 +16,10 @@ import rasterio
 from affine import Affine
 from pyproj import Transformer
 
-from recorder.capture.recorder import Recorder
-from recorder.exports.files import export_session
-from recorder.maps.footprint import utm_epsg
-from recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.exports.files import export_session
+from thermcap.recorder.maps.footprint import utm_epsg
+from thermcap.recorder.maps.synthetic import FlightSource, GroundTarget, lawnmower
 
 LAT, LON, H, HFOV = 33.0746, -111.975, 40.0, 2 * math.degrees(math.atan(18 / 58))
 EPSG = utm_epsg(LAT, LON)
@@ -101,7 +101,7 @@ def test_finding_the_targets_against_ground_truth_is_one_command(tmp_path):
     truth.write_text("id,latitude,longitude\n" + "".join(f"a{i},{lat},{lon}\n" for i, (lon, lat) in enumerate(pts)))
     from click.testing import CliRunner
 
-    from recorder.cli import cli
+    from thermcap.cli import cli
 
     r = CliRunner().invoke(cli, ["export", "truth", "--root", str(tmp_path), "--to", "hotspots", "--truth", str(truth),
                                  "--out", str(tmp_path / "h"), "--json"])
@@ -147,7 +147,7 @@ def test_over_a_dem_hot_spots_land_on_the_targets_and_a_flat_plane_misses_them(t
     """A hillside rising 25 % to the east; the drone flies at a constant altitude 40 m above its
     take-off point at the foot of the slope. With the DEM the targets land within 0.3 m; with a
     flat plane at the take-off height (what a file alone says) they are metres off."""
-    from recorder.maps.terrain import Dem
+    from thermcap.recorder.maps.terrain import Dem
 
     e0, n0 = Transformer.from_crs(4326, EPSG, always_xy=True).transform(LON, LAT)
     cell, half, base, slope = 0.5, 150.0, 350.0, 0.25

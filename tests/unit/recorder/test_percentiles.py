@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from recorder.capture.sources.sim import SimSource
-from recorder.exports.percentiles import percentiles
-from recorder.exports.render import celsius, frame_range
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exports.percentiles import percentiles
+from thermcap.recorder.exports.render import celsius, frame_range
 
 QS = [(0.5, 99.5), (0, 100), (50,), (1, 2.5, 25, 75, 97.5, 99.9), (5, 25, 50, 75, 95)]
 

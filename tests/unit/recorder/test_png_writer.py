@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from recorder.exports.colorbar import png_text
-from recorder.exports.png import encode_png
+from thermcap.recorder.exports.colorbar import png_text
+from thermcap.recorder.exports.png import encode_png
 
 RNG = np.random.default_rng(5)
 

@@ -10,14 +10,14 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from recorder.bench.record import MemorySource
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.icd.rosmsg import json_payload
-from recorder.icd.sidecar import validate_sidecar
-from recorder.icd.topics import decode_image
-from recorder.storage.segments import SegmentPolicy
-from recorder.storage.writer import Compression
+from thermcap.recorder.bench.record import MemorySource
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd.rosmsg import json_payload
+from thermcap.recorder.icd.sidecar import validate_sidecar
+from thermcap.recorder.icd.topics import decode_image
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.writer import Compression
 
 W, H = 160, 128
 
@@ -152,7 +152,7 @@ def test_slow_writer_drops_are_counted_never_silent(tmp_path):
 
 
 def test_info_reports_the_session(tmp_path):
-    from recorder.storage.info import SessionInfo, info
+    from thermcap.recorder.storage.info import SessionInfo, info
 
     Recorder(_sim(frames=60, fps=60), tmp_path, session_id="i", policy=SegmentPolicy(max_duration_s=0.5)).run()
     d = info(tmp_path / "sessions" / "i")

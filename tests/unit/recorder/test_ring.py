@@ -9,12 +9,12 @@ import time
 
 import pytest
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.capture.triggers import TriggerPolicy, TriggerWatch
-from recorder.storage.reader import iter_session_frames
-from recorder.storage.ring import RingPolicy, parse_size
-from recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
+from thermcap.recorder.storage.reader import iter_session_frames
+from thermcap.recorder.storage.ring import RingPolicy, parse_size
+from thermcap.recorder.storage.segments import SegmentPolicy
 
 W, H, FPS = 64, 48, 60.0
 T0 = 1_800_000_000_000_000_000
@@ -81,7 +81,7 @@ def test_a_source_that_can_wait_waits_for_disk_instead_of_dropping(tmp_path):
 
     import numpy as np
 
-    from recorder.capture.sources.raw import RawSource
+    from thermcap.recorder.capture.sources.raw import RawSource
 
     px = np.random.default_rng(2).integers(0, 1 << 14, size=(300, 48, 64), dtype=np.uint16)
     src = RawSource("pipe", width=64, height=48, fps=60, stream=io.BytesIO(px.astype("<u2").tobytes()))
@@ -121,8 +121,8 @@ def test_segments_waiting_for_fsync_are_named_when_the_ring_cannot_free_space(tm
     has leftovers for ``recover``, which are not counted."""
     import json
 
-    from recorder.storage.lock import lock_session
-    from recorder.storage.ring import Evictor
+    from thermcap.recorder.storage.lock import lock_session
+    from thermcap.recorder.storage.ring import Evictor
 
     for name in ("r", "crashed"):
         session = tmp_path / "sessions" / name
@@ -166,7 +166,7 @@ def test_the_ring_keeps_recording_when_a_window_outgrows_its_share(tmp_path):
     logged, in protected.json's "expired", and on health."""
     import json
 
-    from recorder.storage.ring import read_eviction_log
+    from thermcap.recorder.storage.ring import read_eviction_log
 
     ring = RingPolicy(max_disk=300_000, pre_s=1e8, post_s=1e8, interval_s=0.02)  # the mark covers the run
     rec = Recorder(_sim(1200), tmp_path, session_id="r", policy=SegmentPolicy(max_duration_s=0.5),
@@ -186,7 +186,7 @@ def test_the_ring_keeps_recording_when_a_window_outgrows_its_share(tmp_path):
 
 def test_the_oldest_window_goes_first_and_health_says_so(tmp_path):
     """Two events: when their share is exceeded the older one expires, the newer one is kept."""
-    from recorder.storage.ring import Evictor, ProtectionBook, Window
+    from thermcap.recorder.storage.ring import Evictor, ProtectionBook, Window
 
     rec = Recorder(_sim(600), tmp_path, session_id="e", policy=SegmentPolicy(max_duration_s=0.5), analysis=False)
     rec.run()
@@ -204,7 +204,7 @@ def test_the_oldest_window_goes_first_and_health_says_so(tmp_path):
 
 
 def test_keep_events_keeps_every_window(tmp_path):
-    from recorder.storage.ring import Evictor, ProtectionBook, Window
+    from thermcap.recorder.storage.ring import Evictor, ProtectionBook, Window
 
     rec = Recorder(_sim(300), tmp_path, session_id="k", policy=SegmentPolicy(max_duration_s=0.5), analysis=False)
     rec.run()
@@ -222,7 +222,7 @@ def test_info_counts_evictions_after_a_crash(tmp_path):
     came only from session.json's end-of-run summary."""
     import json
 
-    from recorder.storage.info import session_info
+    from thermcap.recorder.storage.info import session_info
 
     ring = RingPolicy(max_disk=300_000, pre_s=0, post_s=0, interval_s=0.02)
     Recorder(_sim(600), tmp_path, session_id="c", policy=SegmentPolicy(max_duration_s=0.5), analysis=False,

@@ -12,12 +12,12 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.exceptions import McapFileError
-from recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
-from recorder.storage.segments import SegmentPolicy
-from recorder.storage.writer import Compression
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.chunks import SegmentIndex, messages_at, read_chunk
+from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.writer import Compression
 
 
 def small_chunk_session(tmp_path: Path, compression: Compression, seed: int = 3, frames: int = 40) -> Path:
@@ -68,7 +68,7 @@ def test_a_replaced_file_is_not_the_one_indexed(tmp_path):
 
 
 def test_a_chunk_read_through_a_stale_index_is_refused_as_stale_not_as_damage(tmp_path):
-    from recorder.storage.chunks import StaleIndexError
+    from thermcap.recorder.storage.chunks import StaleIndexError
 
     seg = small_chunk_session(tmp_path / "a", Compression.ZSTD)
     other = small_chunk_session(tmp_path / "b", Compression.ZSTD, seed=4, frames=30)
@@ -92,7 +92,7 @@ def _ours(messages) -> list[tuple[int, int, int, int, bytes]]:
 
 @pytest.mark.parametrize("compression", list(Compression))
 def test_iter_messages_is_mcaps_log_time_order_message_for_message(tmp_path, compression):
-    from recorder.storage.chunks import iter_messages
+    from thermcap.recorder.storage.chunks import iter_messages
 
     seg = small_chunk_session(tmp_path, compression)
     index = SegmentIndex.load(seg)
@@ -122,8 +122,8 @@ def _hand_written(path: Path, chunks: list[list[tuple[int, int]]]) -> Path:
 
 
 def test_messages_out_of_order_inside_chunks_come_out_as_mcap_orders_them(tmp_path):
-    from recorder.storage.chunks import iter_messages
-    from recorder.storage.reader import _segment_messages
+    from thermcap.recorder.storage.chunks import iter_messages
+    from thermcap.recorder.storage.reader import _segment_messages
 
     seg = _hand_written(tmp_path / "unsorted.mcap",
                         [[(0, 5), (1, 3), (0, 3), (1, 4), (0, 5)], [(0, 9), (1, 7), (1, 9)]])
@@ -136,8 +136,8 @@ def test_messages_out_of_order_inside_chunks_come_out_as_mcap_orders_them(tmp_pa
 
 
 def test_overlapping_chunks_are_read_through_mcaps_reader_in_its_order(tmp_path):
-    from recorder.storage.chunks import iter_messages
-    from recorder.storage.reader import _segment_messages
+    from thermcap.recorder.storage.chunks import iter_messages
+    from thermcap.recorder.storage.reader import _segment_messages
 
     seg = _hand_written(tmp_path / "overlap.mcap", [[(0, 1), (1, 8)], [(0, 4), (1, 6)], [(0, 2)]])
     index = SegmentIndex.load(seg)
@@ -158,7 +158,7 @@ def test_records_that_do_not_frame_are_refused_naming_the_chunk(tail, says):
     (a writer's bug) are refused by both readers, naming where, never read as messages."""
     import struct
 
-    from recorder.storage.chunks import ChunkRecords
+    from thermcap.recorder.storage.chunks import ChunkRecords
 
     good = b"\x05" + struct.pack("<Q", 22 + 4) + struct.pack("<HIQQ", 1, 0, 7, 7) + b"data"
     records = ChunkRecords(good + tail, "seg.mcap: chunk at byte 123")
@@ -168,7 +168,7 @@ def test_records_that_do_not_frame_are_refused_naming_the_chunk(tail, says):
 
 
 def _two_channel_writer(path: Path):
-    from recorder.storage.writer import ChunkedWriter
+    from thermcap.recorder.storage.writer import ChunkedWriter
 
     w = ChunkedWriter(path, compression=Compression.NONE, chunk_size=1 << 20, workers=0)
     w.start()
@@ -206,7 +206,7 @@ def test_a_batch_with_an_unknown_channel_is_refused_whole(tmp_path):
 def test_a_frames_messages_share_one_chunk(tmp_path):
     """The chunk closes after a batch, never between a frame's image and its sidecar: one
     decompression serves both."""
-    from recorder.storage.writer import ChunkedWriter
+    from thermcap.recorder.storage.writer import ChunkedWriter
 
     w = ChunkedWriter(tmp_path / "w.mcap", compression=Compression.NONE, chunk_size=64, workers=0)
     w.start()

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from recorder.exceptions import RecordingError
-from recorder.icd.topics import TOPIC_IMAGE, decode_image, image_message_parts
-from recorder.storage.recover import recover_path
-from recorder.storage.segments import SegmentPolicy, SessionWriter
+from thermcap.recorder.exceptions import RecordingError
+from thermcap.recorder.icd.topics import TOPIC_IMAGE, decode_image, image_message_parts
+from thermcap.recorder.storage.recover import recover_path
+from thermcap.recorder.storage.segments import SegmentPolicy, SessionWriter
 
 STEP_NS = 50_000_000  # 20 fps: a 0.1 s segment holds two frames
 
@@ -148,9 +148,9 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
     overflowed (frames dropped, counted); now every frame is written, and every segment has its
     final name once the disk answers. Meanwhile the status shows the segments waiting, and
     health names the stall."""
-    import recorder.capture.recorder as recorder_module
-    from recorder.capture.recorder import Recorder
-    from recorder.capture.sources.sim import SimSource
+    import thermcap.recorder.capture.recorder as recorder_module
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
 
     monkeypatch.setattr(recorder_module, "SETTLE_STALL_S", 0.5)
     gate, real = threading.Event(), os.fsync
@@ -201,7 +201,7 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
 
 
 def test_ctl_status_names_the_segments_waiting_for_the_disk():
-    from recorder.cli.record import status_text
+    from thermcap.recorder.cli.record import status_text
 
     st = {"session_id": "s", "paused": False, "healthy": False,
           "problems": ["disk: segment 0003.mcap has waited 42 s for fsync (2 closed segments waiting; ...)"],

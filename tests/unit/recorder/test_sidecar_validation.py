@@ -13,9 +13,9 @@ import fastjsonschema
 import numpy as np
 import pytest
 
-from recorder.exceptions import SidecarError
-from recorder.icd.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
 from tests.unit.recorder.test_data_standard import ICD_EXAMPLE
+from thermcap.recorder.exceptions import SidecarError
+from thermcap.recorder.icd.sidecar import SIDECAR_SCHEMA, SidecarEncoder, dumps_sidecar, validate_sidecar
 
 _REFERENCE = fastjsonschema.compile(SIDECAR_SCHEMA)
 _BLOCKS = ("capture", "environment", "thermal_analysis", "slew_to_cue", "targets")

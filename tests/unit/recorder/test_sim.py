@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from recorder.capture.sources.sim import SimSource
+from thermcap.recorder.capture.sources.sim import SimSource
 
 
 def _frames(**kw):

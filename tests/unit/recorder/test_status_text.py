@@ -1,6 +1,6 @@
 """Issue 36: ``ctl status`` called messages frames (2,307 "dropped" = 769 frames x 3 topics)."""
 
-from recorder.cli.record import status_text
+from thermcap.recorder.cli.record import status_text
 
 
 def test_status_counts_dropped_frames_not_messages():

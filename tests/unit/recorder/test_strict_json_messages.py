@@ -8,9 +8,9 @@ import json
 
 from mcap.reader import make_reader
 
-from recorder.capture.recorder import Recorder
-from recorder.capture.sources.sim import SimSource
-from recorder.icd.rosmsg import json_payload
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.icd.rosmsg import json_payload
 
 
 class _NanCues(SimSource):

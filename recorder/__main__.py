@@ -1,3 +1,0 @@
-from recorder.cli import main
-
-main()

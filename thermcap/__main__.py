@@ -1,0 +1,3 @@
+from thermcap.cli import main
+
+main()

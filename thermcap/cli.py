@@ -1,0 +1,106 @@
+"""The ``thermcap`` command: the root group, composed from the three rooms' subcommands.
+
+Each room keeps its commands beside its code (``recorder.cli``, ``archive.cli``, ``api.cli``);
+this module, above all three, imports them directly, so the import graph shows who depends on
+whom. Entry points remain for third-party plugins only: a command of yours in the group
+``thermcap.commands``, a benchmark in ``thermcap.bench``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import click
+
+from thermcap.api import cli as api_cli
+from thermcap.archive import cli as archive_cli
+from thermcap.recorder.cli import cli as recorder_commands
+from thermcap.recorder.cli.options import fail
+from thermcap.recorder.cli.root import bench as recorder_bench
+from thermcap.recorder.exceptions import ThermcapError
+
+__all__ = ["bench", "cli", "main"]
+
+HELP = {"help_option_names": ["-h", "--help"]}
+
+
+class _Group(click.Group):
+    """A group that also offers the commands third-party packages registered as entry points,
+    looked up only when a name is not ours or the whole list is asked for (reading the installed
+    distributions' metadata costs tens of milliseconds a start)."""
+
+    def __init__(self, *args: Any, entry_point_group: str, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._ep_group = entry_point_group
+        self._loaded = False
+
+    def _load(self) -> None:
+        if self._loaded:
+            return
+        self._loaded = True
+        from importlib.metadata import entry_points
+
+        for ep in entry_points(group=self._ep_group):
+            if ep.name not in self.commands:
+                self.add_command(ep.load(), ep.name)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        self._load()
+        return super().list_commands(ctx)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in self.commands:
+            self._load()
+        return super().get_command(ctx, name)
+
+
+@click.group(cls=_Group, entry_point_group="thermcap.commands", context_settings=HELP)
+@click.version_option(package_name="thermcap", prog_name="thermcap")
+@click.option("--config", "config", envvar="THERMCAP_CONFIG", show_envvar=True, default=None, metavar="FILE",
+              type=click.Path(dir_okay=False),
+              help="A TOML file of defaults, a table per command ([record], [serve], ...); flags still win.")
+@click.option("-q", "--quiet", is_flag=True, help="Only errors and the results a script reads; no progress.")
+@click.option("-v", "--verbose", count=True, help="More detail (log messages at INFO; -vv: DEBUG).")
+@click.pass_context
+def cli(ctx: click.Context, config: str | None, quiet: bool, verbose: int) -> None:
+    """Record, archive and serve radiometric thermal camera data (Gray16 on MCAP)."""
+    import logging
+
+    ctx.obj = {"verbosity": -1 if quiet else verbose}
+    if verbose:
+        logging.basicConfig(level=logging.DEBUG if verbose > 1 else logging.INFO,
+                            format="%(asctime)s %(name)s %(levelname)s %(message)s")
+    if config:
+        from thermcap.recorder.cli.config import load_config
+
+        assert isinstance(ctx.command, click.Group)
+        ctx.default_map = load_config(config, ctx.command, ctx)
+
+
+@cli.group(cls=_Group, entry_point_group="thermcap.bench", context_settings=HELP)
+def bench() -> None:
+    """Benchmarks: each prints ratios against a baseline measured in the same run."""
+
+
+for _name, _command in recorder_commands.commands.items():
+    cli.add_command(_command, _name)
+for _command in (archive_cli.archive, archive_cli.verify, archive_cli.audit, archive_cli.scrub,
+                 archive_cli.sync_confirm, api_cli.serve, api_cli.index, api_cli.upload, api_cli.worker,
+                 api_cli.gc, api_cli.watch, api_cli.jobs):
+    cli.add_command(_command)
+for _name, _command in recorder_bench.commands.items():
+    bench.add_command(_command, _name)
+for _command in (archive_cli.bench_archive, archive_cli.bench_temporal_cmd, api_cli.bench_jobs_cmd,
+                 api_cli.bench_series_cmd, api_cli.bench_index_cmd, api_cli.bench_api_cmd):
+    bench.add_command(_command)
+
+
+def main() -> None:
+    """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
+    (an OSError) is one line naming the file and exit 1, never a traceback."""
+    try:
+        cli(prog_name="thermcap")
+    except ThermcapError as exc:
+        fail(str(exc))
+    except OSError as exc:
+        fail(f"{exc.filename + ': ' if exc.filename else ''}{exc.strerror or exc}")
