@@ -7,6 +7,7 @@ COPY pyproject.toml README.md ./
 COPY recorder ./recorder
 COPY archive ./archive
 COPY api ./api
+COPY thermcap ./thermcap
 RUN pip install ".[scale,sync,report,geo]" && useradd --system --uid 10001 --home /data thermcap && mkdir -p /data && chown thermcap /data
 USER thermcap
 VOLUME ["/data"]

@@ -154,9 +154,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                      "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from thermcap.api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui
+    from thermcap.api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui, zarr
 
-    for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, ui):
+    for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, zarr, ui):
         app.include_router(module.router)
     return app
 

@@ -1,0 +1,53 @@
+"""A session's frames as columns: the index's per-frame rows as numpy arrays.
+
+The Zarr endpoint and ``thermcap.open`` both need every frame's time and sidecar summary at once
+(a coordinate of the dataset); reading them as arrays, once per indexed state of the session,
+costs one query however many frames there are.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from sqlalchemy import select
+from sqlalchemy.engine import Engine
+
+from thermcap.api import db
+
+__all__ = ["FRAME_FIELDS", "FrameTable", "read_frame_table"]
+
+#: The per-frame sidecar summaries offered as coordinates: name -> (index column, dtype, what it is).
+FRAME_FIELDS: dict[str, tuple[str, str, str]] = {
+    "thermal_contrast_grade": ("grade", "<f8", "the ICD's thermal contrast grade, 0 (flat) to 1; NaN: not graded"),
+    "target_count": ("target_count", "<i4", "targets the detector reported in the frame"),
+    "max_target_temp_c": ("max_target_temp_c", "<f8", "the hottest target's temperature, °C; NaN: no target"),
+    "slew_to_cue_active": ("slew_to_cue", "|b1", "the gimbal was slewing to a cue"),
+}
+
+
+@dataclass(frozen=True)
+class FrameTable:
+    session_id: str
+    index: np.ndarray  # int64 [frames]: the frame numbers (0..n-1 for a session indexed whole)
+    timestamp_ns: np.ndarray  # int64 [frames]: each frame's log time, ns since the Unix epoch
+    fields: dict[str, np.ndarray]  # FRAME_FIELDS name -> [frames]
+
+    def __len__(self) -> int:
+        return len(self.index)
+
+
+def read_frame_table(engine: Engine, session_id: str) -> FrameTable:
+    f = db.frames.c
+    cols = [f.idx, f.timestamp_ns, *(getattr(f, col) for col, _, _ in FRAME_FIELDS.values())]
+    with engine.connect() as conn:
+        rows = conn.execute(select(*cols).where(f.session_id == session_id).order_by(f.idx)).all()
+    columns = list(zip(*rows, strict=True)) if rows else [() for _ in cols]
+    fields = {}
+    for k, (name, (_, dtype, _)) in enumerate(FRAME_FIELDS.items()):
+        values = columns[2 + k]
+        if dtype == "<f8":
+            fields[name] = np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+        else:
+            fields[name] = np.array([v or 0 for v in values], dtype=np.dtype(dtype))
+    return FrameTable(session_id, np.array(columns[0], dtype=np.int64), np.array(columns[1], dtype=np.int64), fields)

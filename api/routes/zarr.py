@@ -1,0 +1,85 @@
+"""``/api/v1/sessions/{id}/zarr``: every served session as a Zarr store (see
+``api.reading.zarr_layout``), read with stock ``xr.open_zarr(url)`` over fsspec."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from fastapi import APIRouter, Depends, HTTPException, Request, Response
+
+from thermcap.api.reading.frame_table import FrameTable, read_frame_table
+from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
+from thermcap.api.routes.common import FrameModel, session_row
+from thermcap.api.security import require
+
+__all__ = ["router"]
+
+router = APIRouter(prefix="/api/v1/sessions/{session_id}/zarr", tags=["zarr"],
+                   dependencies=[Depends(require("read"))])
+
+_CACHE = {"Cache-Control": "private, max-age=3600"}
+
+
+def _table(request: Request, row: dict[str, Any]) -> FrameTable:
+    """The session's frame table, read once per indexed state (its fingerprint)."""
+    cache: dict = request.app.state.__dict__.setdefault("zarr_tables", {})
+    key = (row["id"], row.get("fingerprint"))
+    if key not in cache:
+        if len(cache) > 64:
+            cache.clear()
+        cache[key] = read_frame_table(request.app.state.engine, row["id"])
+    return cache[key]
+
+
+def _metadata(row: dict[str, Any], table: FrameTable) -> dict[str, Any]:
+    attrs = {"title": f"thermcap session {row['id']}", "source": "thermcap", "session_id": row["id"],
+             "sensor": row.get("sensor"), "sensor_id": row.get("sensor_id"), "fps": row.get("fps"),
+             "radiometric_model": row.get("radiometric_model"), "frames_dropped": row.get("frames_dropped")}
+    return store_metadata(table, int(row["width"] or 0), int(row["height"] or 0), attrs)
+
+
+@router.api_route("/{key:path}", methods=["GET", "HEAD"], operation_id="get_zarr_key",
+                  responses={200: {"content": {"application/json": {}, "application/octet-stream": {}}}})
+def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
+    """A key of the store: a metadata document (JSON) or a chunk (raw little-endian bytes)."""
+    row = session_row(request, session_id)
+    table = _table(request, row)
+    meta = _metadata(row, table)
+    if key in meta:
+        return Response(dumps(meta[key]), media_type="application/json")
+    chunk = parse_chunk_key(key)
+    if chunk is None:  # zarr.json and the like: a reader probing for format 3 must see "not here"
+        raise HTTPException(404, f"no key {key!r} in this Zarr store")
+    var, i = chunk.variable, chunk.index
+    n = len(table)
+    if var in ("counts", "temperature"):
+        if i >= n:
+            raise HTTPException(404, f"no frame {i}: the session has {n}")
+        frame = int(table.index[i])
+        counts = np.asarray(request.app.state.frames.pixels(session_id, frame))
+        if var == "counts":
+            body = counts.astype("<u2", copy=False).tobytes()
+        else:
+            body = FrameModel(request, row).temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
+        return Response(body, media_type="application/octet-stream", headers=_CACHE)
+    if i != 0 or var not in (*COORDINATES, "time", "y", "x"):
+        raise HTTPException(404, f"no key {key!r} in this Zarr store")
+    if var == "time":
+        values = table.timestamp_ns.astype("<i8")
+    elif var == "frame":
+        values = table.index.astype("<i8")
+    elif var in ("y", "x"):
+        values = np.arange(int(row["height" if var == "y" else "width"] or 0), dtype="<i4")
+    else:
+        values = table.fields[var]
+        values = values.astype(values.dtype.newbyteorder("<"), copy=False)
+    return Response(values.tobytes(), media_type="application/octet-stream", headers=_CACHE)
+
+
+def zarr_url(base: str, session_id: str) -> str:
+    return f"{base.rstrip('/')}/api/v1/sessions/{session_id}/zarr"
+
+
+__all__ += ["zarr_url"]
+

@@ -1,0 +1,345 @@
+"""A recorded session in Python, wherever it is: a folder on disk, an id under a data root, or a
+session a thermcap server serves over HTTP.
+
+``open`` returns a ``Session``: its metadata, events and radiometric model versions, frames by
+index or by time, and ``to_xarray()``, a lazy Dataset of the counts (uint16, bit-exact) and the
+temperatures (float32 °C). Every frame comes from the same verified readers ``thermcap serve``
+uses (the MCAP source while it exists, else a verified archive copy), so a count read here is
+the count recorded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from abc import ABC, abstractmethod
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from thermcap.recorder.radiometry.params import ModelVersion
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+    from thermcap.api.reading.frame_table import FrameTable
+    from thermcap.client import Client
+
+__all__ = ["Frame", "LocalSession", "ModelVersion", "RemoteSession", "Session", "open"]
+
+_SESSION_URL = re.compile(r"^(?P<base>https?://.+?)/api/v1/sessions/(?P<id>[^/?#]+)/?$")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame: its counts exactly as recorded and its ICD sidecar."""
+
+    index: int
+    time_ns: int  # log time, ns since the Unix epoch
+    counts: np.ndarray = field(repr=False)  # (H, W) uint16, read-only
+    sidecar: dict[str, Any] = field(repr=False)
+
+    @property
+    def time(self) -> np.datetime64:
+        return np.datetime64(self.time_ns, "ns")
+
+
+class Session(ABC):
+    """What every session offers, wherever it is read from."""
+
+    id: str
+    meta: dict[str, Any]
+
+    @property
+    @abstractmethod
+    def table(self) -> FrameTable:
+        """Every frame's time and sidecar summary, as arrays (read once)."""
+
+    @abstractmethod
+    def counts(self, index: int) -> np.ndarray:
+        """Frame ``index``'s counts, (H, W) uint16, bit-exact."""
+
+    @abstractmethod
+    def sidecar(self, index: int) -> dict[str, Any]:
+        """Frame ``index``'s ICD sidecar as recorded."""
+
+    @property
+    @abstractmethod
+    def events(self) -> list[dict[str, Any]]:
+        """The session's events (kind, start/end ns, detail), in time order."""
+
+    @property
+    @abstractmethod
+    def model_versions(self) -> list[ModelVersion]:
+        """The re-parameterisations after capture (``thermcap radiometry``); version 0, the model
+        recorded, is ``radiometric_model``."""
+
+    @abstractmethod
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
+        """A lazy Dataset: ``counts`` and ``temperature`` (time, y, x), read only when asked."""
+
+    # -- shared by every kind of session ------------------------------------------------------
+
+    def __len__(self) -> int:
+        return len(self.table)
+
+    def __repr__(self) -> str:
+        return f"<{type(self).__name__} {self.id!r}: {len(self)} frames, {self.width}x{self.height}>"
+
+    width: int
+    height: int
+
+    @property
+    def radiometric_model(self) -> dict[str, Any]:
+        return dict(self.meta.get("radiometric_model") or {"kind": "linear"})
+
+    @property
+    def times(self) -> np.ndarray:
+        """Every frame's time, datetime64[ns]."""
+        return self.table.timestamp_ns.astype("datetime64[ns]")
+
+    def frame(self, index: int) -> Frame:
+        n = len(self)
+        if not -n <= index < n:
+            raise IndexError(f"frame {index}: session {self.id!r} has {n} frames")
+        index %= n
+        number = int(self.table.index[index])
+        return Frame(number, int(self.table.timestamp_ns[index]), self.counts(number), self.sidecar(number))
+
+    def __getitem__(self, index: int) -> Frame:
+        return self.frame(index)
+
+    def __iter__(self) -> Iterator[Frame]:
+        for i in range(len(self)):
+            yield self.frame(i)
+
+    def frame_at(self, when: str | int | np.datetime64) -> Frame:
+        """The frame shown at ``when`` (an RFC 3339 time, a datetime64, or ns since the epoch):
+        the last one logged at or before it."""
+        if isinstance(when, int):
+            t = when
+        else:
+            text = when.rstrip("Z") if isinstance(when, str) else when  # numpy reads UTC times without the Z
+            t = int(np.datetime64(text, "ns").astype(np.int64))  # type: ignore[call-overload]
+        i = int(np.searchsorted(self.table.timestamp_ns, t, side="right")) - 1
+        if i < 0:
+            raise IndexError(f"{when}: before session {self.id!r} began")
+        return self.frame(i)
+
+
+def _coords(table: FrameTable) -> dict[str, Any]:
+    from thermcap.api.reading.frame_table import FRAME_FIELDS
+
+    coords: dict[str, Any] = {"time": ("time", table.timestamp_ns.astype("datetime64[ns]")),
+                              "frame": ("time", table.index)}
+    for name, (_, _, what) in FRAME_FIELDS.items():
+        coords[name] = ("time", table.fields[name], {"long_name": what})
+    return coords
+
+
+class LocalSession(Session):
+    """A session in a data root on this machine, read through the root's index (built or
+    brought up to date on open, as ``thermcap index`` would) and the verified frame readers."""
+
+    def __init__(self, session_dir: Path, root: Path) -> None:
+        from sqlalchemy import select
+
+        from thermcap.api import db
+        from thermcap.api.db import make_engine, migrate
+        from thermcap.api.indexing import index_session
+        from thermcap.api.reading.frames import FrameReader
+        from thermcap.api.settings import Settings
+        from thermcap.api.storage import make_store
+        from thermcap.recorder.storage.reader import read_session_meta
+
+        self.session_dir, self.root = session_dir, root
+        self.meta = read_session_meta(session_dir)
+        self.id = str(self.meta.get("session_id") or session_dir.name)
+        settings = Settings(root=root)
+        self._engine = make_engine(settings.db_url)
+        migrate(self._engine)
+        self.problems: list[str] = []  # what indexing could not read (damaged chunks), as `thermcap index` says
+        index_session(self._engine, session_dir, problems=self.problems)
+        self._reader = FrameReader(self._engine, make_store(settings), root)
+        with self._engine.connect() as conn:
+            row = conn.execute(select(db.sessions.c.width, db.sessions.c.height)
+                               .where(db.sessions.c.id == self.id)).first()
+        self.width, self.height = (int(row[0] or 0), int(row[1] or 0)) if row else (0, 0)
+
+    @cached_property
+    def table(self) -> FrameTable:
+        from thermcap.api.reading.frame_table import read_frame_table
+
+        return read_frame_table(self._engine, self.id)
+
+    def counts(self, index: int) -> np.ndarray:
+        return np.asarray(self._reader.pixels(self.id, index))
+
+    def sidecar(self, index: int) -> dict[str, Any]:
+        return self._reader.sidecar(self.id, index)
+
+    @cached_property
+    def events(self) -> list[dict[str, Any]]:
+        from sqlalchemy import select
+
+        from thermcap.api import db
+
+        e = db.events.c
+        with self._engine.connect() as conn:
+            rows = conn.execute(select(e.kind, e.start_ns, e.end_ns, e.detail).where(e.session_id == self.id)
+                                .order_by(e.start_ns, e.seq)).all()
+        return [{"kind": k, "start_ns": a, "end_ns": b, "detail": json.loads(d) if d else None} for k, a, b, d in rows]
+
+    @property
+    def model_versions(self) -> list[ModelVersion]:
+        from thermcap.recorder.radiometry.params import read_versions
+
+        return read_versions(self.session_dir)
+
+    def temperatures(self, model_version: int | None = None, bad_pixels: str = "nan") -> Any:
+        """The session's ``SessionTemperatures``: the model (a version, or the latest covering
+        each frame) and the bad-pixel rule every temperature here is computed with."""
+        from thermcap.recorder.radiometry.session import SessionTemperatures
+
+        return SessionTemperatures.of(self.session_dir, self.meta, version=model_version, bad_pixels=bad_pixels)
+
+    def temperature(self, index: int, model_version: int | None = None) -> np.ndarray:
+        """Frame ``index`` in °C (float32), bad pixels NaN."""
+        return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
+
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
+        import dask.array as da
+        import xarray as xr
+
+        if chunk_frames < 1:
+            raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
+        temps = self.temperatures(model_version)  # checks the version before anything is read
+        table, h, w = self.table, self.height, self.width
+        n = len(table)
+        sizes = tuple(min(chunk_frames, n - s) for s in range(0, n, chunk_frames)) or (0,)
+        numbers = table.index
+
+        def read_counts(block_info: dict | None = None) -> np.ndarray:
+            assert block_info is not None
+            (a, b), _, _ = block_info[None]["array-location"]
+            return np.stack([self.counts(int(k)) for k in numbers[a:b]]) if b > a else np.empty((0, h, w), np.uint16)
+
+        counts = da.map_blocks(read_counts, chunks=(sizes, (h,), (w,)), dtype=np.uint16,
+                               meta=np.empty((0, 0, 0), np.uint16), name=f"thermcap-counts-{self.id}")
+
+        def to_celsius(block: np.ndarray, block_info: dict | None = None) -> np.ndarray:
+            assert block_info is not None
+            a, b = block_info[0]["array-location"][0]
+            out = np.empty(block.shape, np.float32)
+            for j, k in enumerate(numbers[a:b]):
+                out[j] = temps.celsius(int(k), block[j]).celsius
+            return out
+
+        celsius = da.map_blocks(to_celsius, counts, dtype=np.float32, meta=np.empty((0, 0, 0), np.float32))
+        version = "latest covering each frame" if model_version is None else model_version
+        ds = xr.Dataset(
+            {"counts": (("time", "y", "x"), counts, {"long_name": "raw sensor counts", "units": "1"}),
+             "temperature": (("time", "y", "x"), celsius,
+                             {"long_name": "temperature", "standard_name": "temperature", "units": "degC",
+                              "model_version": str(version),
+                              "comment": "NaN: a pixel of the session's bad-pixel map"})},
+            coords={**_coords(table), "y": ("y", np.arange(h), {"long_name": "row, 0 at the top"}),
+                    "x": ("x", np.arange(w), {"long_name": "column, 0 at the left"})},
+            attrs={"Conventions": "CF-1.10", "title": f"thermcap session {self.id}", "source": "thermcap",
+                   "session_id": self.id, "sensor": self.meta.get("sensor") or "", "fps": self.meta.get("fps") or 0,
+                   "radiometric_model": json.dumps(self.radiometric_model)})
+        return ds
+
+
+class RemoteSession(Session):
+    """A session a thermcap server serves: frames over its HTTP API, the Dataset through its
+    Zarr endpoint (read lazily, a frame a request)."""
+
+    def __init__(self, client: Client, session_id: str) -> None:
+        self.client, self.id = client, session_id
+        self.detail = client.session(session_id)
+        self.width, self.height = self.detail.width, self.detail.height
+        self.meta = {"session_id": session_id, "width": self.detail.width, "height": self.detail.height,
+                     "sensor": self.detail.sensor, "fps": self.detail.fps,
+                     "radiometric_model": self.detail.radiometric_model}
+
+    @cached_property
+    def table(self) -> FrameTable:
+        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
+
+        infos = list(self.client.frames(self.id))
+        fields = {}
+        for name, (_, dtype, _) in FRAME_FIELDS.items():
+            values = [getattr(f, name) for f in infos]
+            fields[name] = np.array([np.nan if v is None else v for v in values] if dtype == "<f8" else
+                                    [v or 0 for v in values], dtype=np.dtype(dtype))
+        return FrameTable(self.id, np.array([f.index for f in infos], np.int64),
+                          np.array([f.timestamp_ns for f in infos], np.int64), fields)
+
+    def counts(self, index: int) -> np.ndarray:
+        return self.client.frame_counts(self.id, index)
+
+    def sidecar(self, index: int) -> dict[str, Any]:
+        return self.client.frame_metadata(self.id, index)
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        return self.client.events(self.id)
+
+    @property
+    def model_versions(self) -> list[ModelVersion]:
+        return self.client.model_versions(self.id)
+
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
+        import xarray as xr
+
+        if model_version is not None:
+            latest = max((v.version for v in self.model_versions), default=0)
+            if model_version != latest:
+                raise ValueError(f"model version {model_version}: the server's Zarr store gives the latest "
+                                 f"({latest}); compute others from `counts` with thermcap.open on the data root")
+        # the store's own chunks (a frame each): dask fetches them concurrently, chunk_frames unused
+        return xr.open_zarr(self.client.zarr_url(self.id), storage_options={"headers": self.client.headers})
+
+
+def open(where: str | os.PathLike[str], token: str | None = None, *, root: str | os.PathLike[str] | None = None
+         ) -> Session:
+    """A session: a session folder, an id under ``root`` (default ``THERMCAP_ROOT`` or
+    ``thermcap-data``), or an ``http(s)://HOST/api/v1/sessions/ID`` URL with the server's token.
+
+    Raises ``FileNotFoundError`` naming what was looked for when there is no such session.
+    """
+    text = os.fspath(where)
+    m = _SESSION_URL.match(text)
+    if m:
+        from thermcap.client import Client
+
+        return RemoteSession(Client(m.group("base"), token), m.group("id"))
+    if text.startswith(("http://", "https://")):
+        raise ValueError(f"{text}: a session URL looks like http://HOST:PORT/api/v1/sessions/ID")
+    if "://" in text:
+        raise ValueError(f"{text}: thermcap.open reads folders, ids under a root and http(s) session URLs; "
+                         f"serve the bucket's root with `thermcap serve` and open its URL")
+    path = Path(text)
+    if (path / "session.json").is_file():
+        session_dir = path.resolve()
+        if session_dir.parent.name != "sessions":
+            raise ValueError(f"{path}: not inside a data root (ROOT/sessions/ID); move it there or import it")
+        return LocalSession(session_dir, session_dir.parent.parent)
+    from thermcap.recorder.cli.options import default_root
+    from thermcap.recorder.storage.layout import check_session_name
+
+    base = Path(root) if root is not None else Path(default_root())
+    if os.sep in text or (os.altsep and os.altsep in text):
+        raise FileNotFoundError(f"{path}: no session here (no session.json)")
+    check_session_name(text)
+    session_dir = (base / "sessions" / text).resolve()
+    if not (session_dir / "session.json").is_file():
+        raise FileNotFoundError(f"no session {text!r} under {base} (looked for {session_dir / 'session.json'})")
+    return LocalSession(session_dir, session_dir.parent.parent)
+
