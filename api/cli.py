@@ -34,6 +34,8 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
     from thermcap.api.app import create_app
     from thermcap.api.settings import Settings
 
+    if not Path(root).is_dir():  # a typo would otherwise serve an empty catalog, and look fine
+        fail(f"{root}: no such data root; record or import into it first, or pass the right --root")
     os.environ["THERMCAP_ROOT"] = root  # the workers build their own app from the environment
     try:
         settings = Settings(root=Path(root))

@@ -1,7 +1,16 @@
 """The recorder's subcommands, one module per group (importing them registers them on
 ``root.cli`` and ``root.bench``), and the options every room's commands share (``options``)."""
 
-from thermcap.recorder.cli import analyze, bench, files, live, record, report, sync  # noqa: F401  (registers the commands)
+from thermcap.recorder.cli import (  # noqa: F401  (registers the commands)
+    analyze,
+    bench,
+    files,
+    listing,
+    live,
+    record,
+    report,
+    sync,
+)
 from thermcap.recorder.cli.options import default_root, fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 

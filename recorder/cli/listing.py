@@ -1,0 +1,68 @@
+"""``thermcap ls``: the sessions under a data root, a line each (or JSON for a script)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import click
+
+from thermcap.recorder.cli.options import fail, json_option, root_option
+from thermcap.recorder.cli.root import cli
+
+__all__ = ["describe_session", "ls"]
+
+
+def _size(path: Path) -> int:
+    return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+
+
+def describe_session(session_dir: Path) -> dict[str, Any]:
+    """What ``ls`` says of one session, from its session.json and manifest (no frame is read)."""
+    from thermcap.recorder.storage.layout import SessionLayout
+
+    layout = SessionLayout.of(session_dir)
+    try:
+        meta = json.loads(layout.session_json.read_text())
+    except (OSError, ValueError) as exc:
+        return {"id": session_dir.name, "state": "unreadable", "problem": f"session.json: {exc}"}
+    try:
+        manifest = json.loads(layout.manifest.read_text()) if layout.manifest.is_file() else {}
+    except (OSError, ValueError):
+        manifest = {"formats": {}, "unreadable": True}
+    formats = {f: ("damaged" if e.get("damaged") else "verified" if e.get("verified") else "unverified")
+               for f, e in (manifest.get("formats") or {}).items()}
+    start, end = meta.get("started_ns"), meta.get("ended_ns")
+    state = meta.get("status") or "unknown"
+    if layout.active_segments():
+        state = "recording" if layout.lock.exists() else "interrupted (run `thermcap recover`)"
+    return {"id": meta.get("session_id") or session_dir.name, "start": meta.get("started"),
+            "duration_s": round((end - start) / 1e9, 3) if start and end else None,
+            "frames": meta.get("frames_written", meta.get("frames")), "state": state,
+            "source_deleted": not layout.segments() and bool(formats), "archived": formats,
+            "bytes": _size(session_dir)}
+
+
+@cli.command("ls")
+@root_option
+@json_option
+def ls(root: str, as_json: bool) -> None:
+    """List the sessions under ROOT: id, start, duration, frames, state, archived formats, size."""
+    from thermcap.recorder.storage.reader import list_sessions
+
+    if not (Path(root) / "sessions").is_dir():
+        fail(f"{root}: not a thermcap data root (no sessions/ folder); pass --root or set THERMCAP_ROOT")
+    rows = [describe_session(s) for s in list_sessions(root)]
+    if as_json:
+        click.echo(json.dumps({"root": str(root), "sessions": rows}, indent=2))
+        return
+    if not rows:
+        click.echo(f"{root}: no sessions")
+        return
+    click.echo(f"{'id':24} {'start':24} {'duration':>9} {'frames':>8} {'state':10} {'bytes':>14}  archived")
+    for r in rows:
+        dur = f"{r['duration_s']:.1f} s" if r.get("duration_s") is not None else "-"
+        arch = ", ".join(f"{f}" + ("" if s == "verified" else f" ({s})") for f, s in r.get("archived", {}).items())
+        click.echo(f"{r['id'][:24]:24} {(r.get('start') or '-')[:24]:24} {dur:>9} {r.get('frames') or 0:>8} "
+                   f"{r['state'][:10]:10} {r.get('bytes', 0):>14,}  {arch or '-'}")
