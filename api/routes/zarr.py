@@ -39,8 +39,11 @@ def _metadata(row: dict[str, Any], table: FrameTable) -> dict[str, Any]:
     return store_metadata(table, int(row["width"] or 0), int(row["height"] or 0), attrs)
 
 
-@router.api_route("/{key:path}", methods=["GET", "HEAD"], operation_id="get_zarr_key",
-                  responses={200: {"content": {"application/json": {}, "application/octet-stream": {}}}})
+_KEY_RESPONSES: dict[int | str, dict] = {200: {"content": {"application/json": {}, "application/octet-stream": {}}}}
+
+
+@router.get("/{key:path}", operation_id="get_zarr_key", responses=_KEY_RESPONSES)
+@router.head("/{key:path}", operation_id="head_zarr_key", responses=_KEY_RESPONSES)
 def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     """A key of the store: a metadata document (JSON) or a chunk (raw little-endian bytes)."""
     row = session_row(request, session_id)

@@ -1,0 +1,123 @@
+"""The docs run: every ``bash`` and ``python`` block of the README and of docs/ is executed, in
+order, page by page, in a fresh folder (a new data root), so a page cannot drift from the code.
+
+A comment just before a block changes how it runs:
+- ``<!-- docs: background URL -->`` starts it in the background and waits until URL answers
+  (the block's server), stopping it when the page is done;
+- ``<!-- docs: skip REASON -->`` leaves it out, with REASON (a real camera, a vehicle, a bucket
+  of your own): the report counts these.
+
+``pip install`` lines are not run: the tests run in the environment that installed them.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import httpx
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+BLOCK = re.compile(r"(?:<!-- docs: (?P<mark>[a-z]+)(?: (?P<arg>[^\n]*?))? -->\s*\n)?"
+                   r"```(?P<lang>[a-z]*)\n(?P<body>.*?)```", re.S)
+RUN = {"bash", "python"}
+
+
+@dataclass
+class Block:
+    page: Path
+    line: int
+    lang: str
+    body: str
+    mark: str | None
+    arg: str | None
+
+    def where(self) -> str:
+        return f"{self.page.relative_to(ROOT)}:{self.line}"
+
+
+def blocks(page: Path) -> list[Block]:
+    text = page.read_text()
+    return [Block(page, text[:m.start("lang")].count("\n") + 1, m.group("lang"), m.group("body"), m.group("mark"),
+                  m.group("arg")) for m in BLOCK.finditer(text) if m.group("lang") in RUN]
+
+
+def _shell(body: str) -> str:
+    return "\n".join(":  # (installed)" if line.strip().startswith("pip install") else line
+                     for line in body.splitlines())
+
+
+def _wait_url(url: str, proc: subprocess.Popen, timeout: float = 120) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise AssertionError(f"the background block exited ({proc.returncode}) before {url} answered")
+        try:
+            if httpx.get(url, timeout=2).status_code < 500:
+                return
+        except httpx.HTTPError:
+            pass
+        time.sleep(0.05)  # polling for the event, bounded by the deadline
+    raise AssertionError(f"{url} did not answer in {timeout} s")
+
+
+PAGES_WITH_BLOCKS = [p for p in PAGES if blocks(p)]
+
+
+@pytest.mark.parametrize("page", PAGES_WITH_BLOCKS, ids=[str(p.relative_to(ROOT)) for p in PAGES_WITH_BLOCKS])
+def test_page_runs(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.delenv("THERMCAP_ROOT", raising=False)
+    monkeypatch.setenv("MPLBACKEND", "Agg")
+    env = {k: v for k, v in os.environ.items() if k != "THERMCAP_ROOT"}
+    background: list[subprocess.Popen] = []
+    namespace: dict = {"__name__": "__docs__"}
+    skipped = []
+    try:
+        for b in blocks(page):
+            if b.mark == "skip":
+                skipped.append(f"{b.where()}: {b.arg}")
+                continue
+            if b.lang == "python":
+                try:
+                    exec(compile(b.body, b.where(), "exec"), namespace)
+                except Exception as exc:
+                    raise AssertionError(f"{b.where()}: {type(exc).__name__}: {exc}") from exc
+                continue
+            if b.mark == "background":
+                proc = subprocess.Popen(["bash", "-c", _shell(b.body)], cwd=tmp_path, env=env,
+                                        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
+                background.append(proc)
+                _wait_url(b.arg or "", proc)
+                continue
+            done = subprocess.run(["bash", "-euo", "pipefail", "-c", _shell(b.body)], cwd=tmp_path, env=env,
+                                  capture_output=True, text=True, timeout=600)
+            assert done.returncode == 0, f"{b.where()} exited {done.returncode}:\n{done.stdout[-2000:]}\n" \
+                                         f"{done.stderr[-3000:]}"
+    finally:
+        for proc in background:
+            try:
+                os.killpg(proc.pid, signal.SIGTERM)
+                proc.wait(20)
+            except ProcessLookupError:
+                pass
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+    if skipped:
+        print(f"{page.relative_to(ROOT)}: skipped {len(skipped)}: " + "; ".join(skipped))
+
+
+def test_every_skip_says_why() -> None:
+    for page in PAGES:
+        for b in blocks(page):
+            if b.mark == "skip":
+                assert b.arg and len(b.arg) > 10, f"{b.where()}: a skip needs its reason"
+            assert b.mark in (None, "skip", "background"), f"{b.where()}: unknown mark {b.mark!r}"
