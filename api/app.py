@@ -95,7 +95,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
             rescan.halt.set()
         app.state.jobs.close()
 
-    app = FastAPI(title="thermcap", version=__version__, lifespan=lifespan,
+    app = FastAPI(title="thermcap", version=__version__, lifespan=lifespan, docs_url=None, redoc_url=None,
                   description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.")
     app.state.settings = settings
     app.state.engine = make_engine(settings.db_url)
@@ -154,9 +154,9 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
                      "problem": e.get("msg")} for e in exc.errors()]
         return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
 
-    from thermcap.api.routes import archives, export, frames, jobs, measure, meta, radiometry, sessions, ui, zarr
+    from thermcap.api.routes import archives, docs, export, frames, jobs, measure, meta, radiometry, sessions, ui, zarr
 
-    for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, zarr, ui):
+    for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, zarr, docs, ui):
         app.include_router(module.router)
     return app
 

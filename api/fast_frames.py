@@ -67,7 +67,10 @@ from thermcap.recorder.exceptions import McapFileError
 
 __all__ = ["FrameFastPath"]
 
-_PATH = re.compile(r"/api/v1/sessions/([A-Za-z0-9][A-Za-z0-9_.-]{0,127})/frames/([0-9]{1,9})")
+# a frame, or the same counts as a chunk of the session's Zarr store (api.routes.zarr): one frame
+# a chunk, numbered as the index numbers frames
+_PATH = re.compile(r"/api/v1/sessions/([A-Za-z0-9][A-Za-z0-9_.-]{0,127})/"
+                   r"(?:frames/([0-9]{1,9})|zarr/counts/([0-9]{1,9})\.0\.0)")
 CHECK_S = 2.0  # how stale a session's cached locations may be before its index row is looked at again
 _CACHE_CONTROL = b"public, max-age=31536000, immutable"
 _PNG16 = get_codec("png16")
@@ -170,7 +173,7 @@ class FrameFastPath:
         if m is None:
             return None
         query = dict(parse_qsl(scope.get("query_string", b"").decode("latin-1"), keep_blank_values=True))
-        fmt = query.pop("format", "png16")
+        fmt = "raw" if m.group(3) else query.pop("format", "png16")
         if query or fmt not in ("png16", "raw"):
             return None
         headers = dict(scope.get("headers", []))
@@ -182,7 +185,7 @@ class FrameFastPath:
             scopes = scopes_for_token(self.tokens, given)
             if scopes is None or "read" not in scopes:
                 return None  # the application says 401 or 403, as always
-        return m.group(1), int(m.group(2)), fmt, headers.get(b"if-none-match")
+        return m.group(1), int(m.group(2) or m.group(3)), fmt, headers.get(b"if-none-match")
 
     def _answer(self, sid: str, n: int, fmt: str) -> Any:
         """(body, ETag, headers); None for the full application; or, for a frame whose chunk is

@@ -95,6 +95,29 @@ for _command in (archive_cli.bench_archive, archive_cli.bench_temporal_cmd, api_
     bench.add_command(_command)
 
 
+@bench.command("python")
+@click.option("--frames", type=click.IntRange(10, 100_000), default=600, show_default=True)
+@click.option("--rounds", type=click.IntRange(1, 21), default=5, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="One JSON document.")
+def bench_python_cmd(frames: int, rounds: int, as_json: bool) -> None:
+    """The Python API: Zarr endpoint vs h5py, thermcap.open(url) vs a raw GET, to_xarray's open."""
+    import json
+
+    from thermcap.bench import bench_python
+
+    res = bench_python(frames=frames, rounds=rounds)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    click.echo(f"{res['frames']} frames {res['size']}, median of {res['rounds']} alternating rounds")
+    for name in ("zarr_whole_session_vs_h5py", "first_frame_open_vs_raw_get"):
+        r = res[name]
+        click.echo(f"  {name:30} ours {r['ours_s']:.4f} s  anchor {r['anchor_s']:.4f} s  ratio {r['ratio']:.2f}x"
+                   f"  (goal {r['goal']})")
+    o = res["to_xarray_open"]
+    click.echo(f"  {'to_xarray_open':30} {o['seconds']:.4f} s, {o['frames_read']} frames read  (goal {o['goal']})")
+
+
 def main() -> None:
     """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
     (an OSError) is one line naming the file and exit 1, never a traceback."""

@@ -14,8 +14,7 @@ import json
 import os
 import re
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
-from dataclasses import dataclass, field
+from collections.abc import Callable, Iterator
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -35,14 +34,27 @@ __all__ = ["Frame", "LocalSession", "ModelVersion", "RemoteSession", "Session", 
 _SESSION_URL = re.compile(r"^(?P<base>https?://.+?)/api/v1/sessions/(?P<id>[^/?#]+)/?$")
 
 
-@dataclass(frozen=True)
 class Frame:
-    """One frame: its counts exactly as recorded and its ICD sidecar."""
+    """One frame: its counts exactly as recorded, its time and its ICD sidecar. Over HTTP the
+    time and the sidecar are fetched when first asked for: most readers only want counts."""
 
-    index: int
-    time_ns: int  # log time, ns since the Unix epoch
-    counts: np.ndarray = field(repr=False)  # (H, W) uint16, read-only
-    sidecar: dict[str, Any] = field(repr=False)
+    def __init__(self, index: int, time_ns: int | Callable[[], int], counts: np.ndarray,
+                 sidecar: dict[str, Any] | Callable[[], dict[str, Any]]) -> None:
+        self.index = index
+        self.counts = counts  # (H, W) uint16, read-only
+        self._time, self._sidecar = time_ns, sidecar
+
+    def __repr__(self) -> str:
+        return f"<Frame {self.index}: {self.counts.shape[1]}x{self.counts.shape[0]} {self.counts.dtype}>"
+
+    @cached_property
+    def time_ns(self) -> int:
+        """Log time, ns since the Unix epoch."""
+        return int(self._time() if callable(self._time) else self._time)
+
+    @cached_property
+    def sidecar(self) -> dict[str, Any]:
+        return dict(self._sidecar() if callable(self._sidecar) else self._sidecar)
 
     @property
     def time(self) -> np.datetime64:
@@ -262,11 +274,33 @@ class RemoteSession(Session):
 
     def __init__(self, client: Client, session_id: str) -> None:
         self.client, self.id = client, session_id
-        self.detail = client.session(session_id)
-        self.width, self.height = self.detail.width, self.detail.height
-        self.meta = {"session_id": session_id, "width": self.detail.width, "height": self.detail.height,
-                     "sensor": self.detail.sensor, "fps": self.detail.fps,
-                     "radiometric_model": self.detail.radiometric_model}
+
+    @cached_property
+    def detail(self) -> Any:
+        """The session as the server describes it (one request, on first use)."""
+        return self.client.session(self.id)
+
+    @property
+    def width(self) -> int:  # type: ignore[override]
+        return int(self.detail.width)
+
+    @property
+    def height(self) -> int:  # type: ignore[override]
+        return int(self.detail.height)
+
+    @property
+    def meta(self) -> dict[str, Any]:  # type: ignore[override]
+        d = self.detail
+        return {"session_id": self.id, "width": d.width, "height": d.height, "sensor": d.sensor, "fps": d.fps,
+                "radiometric_model": d.radiometric_model}
+
+    def frame(self, index: int) -> Frame:
+        """One frame in one request (its counts, time and size come together); the sidecar is
+        fetched when asked for (``Frame.sidecar``)."""
+        if index < 0:
+            index += len(self)
+        return Frame(index, lambda: int(self.table.timestamp_ns[index]), self.counts(index),
+                     lambda: self.sidecar(index))
 
     @cached_property
     def table(self) -> FrameTable:

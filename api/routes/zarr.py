@@ -28,7 +28,12 @@ def _table(request: Request, row: dict[str, Any]) -> FrameTable:
     if key not in cache:
         if len(cache) > 64:
             cache.clear()
-        cache[key] = read_frame_table(request.app.state.engine, row["id"])
+        table = read_frame_table(request.app.state.engine, row["id"])
+        if not np.array_equal(table.index, np.arange(len(table))):
+            # chunk i is frame i (the frame fast path serves counts chunks by that number)
+            raise HTTPException(409, f"session {row['id']}: its index numbers frames with gaps; "
+                                     f"`thermcap index --force` rebuilds it")
+        cache[key] = table
     return cache[key]
 
 

@@ -1,0 +1,131 @@
+"""``thermcap bench python``: the Python paths against their anchors, measured in the same run.
+
+- a whole session through the Zarr endpoint (``xr.open_zarr(url).counts.values``) against h5py
+  reading the same frames from the local HDF5 archive (goal: <= 2x);
+- the first frame through ``thermcap.open(url)`` against one raw frame GET with httpx (<= 2x);
+- ``Session.to_xarray()`` opening: its time, and that it read no frame (it must not, however
+  long the session).
+
+Each pair alternates over rounds and reports the median ratio: the machine is shared and noisy.
+"""
+
+from __future__ import annotations
+
+import socket
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["bench_python"]
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def _wait(url: str, proc: subprocess.Popen, timeout: float = 120) -> None:
+    import httpx
+
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"thermcap serve exited ({proc.returncode}) before {url} answered")
+        try:
+            if httpx.get(url, timeout=2).status_code == 200:
+                return
+        except httpx.HTTPError:
+            time.sleep(0.05)
+    raise RuntimeError(f"{url} did not answer in {timeout} s")
+
+
+def _timed(fn: Callable[[], Any]) -> float:
+    t = time.perf_counter()
+    fn()
+    return time.perf_counter() - t
+
+
+def _pair(ours: Callable[[], Any], anchor: Callable[[], Any], rounds: int) -> dict[str, float]:
+    ours(), anchor()  # warm both (imports, caches, connections)
+    pairs = []
+    for _ in range(rounds):
+        o, a = _timed(ours), _timed(anchor)
+        pairs.append((o, a))
+    ratio = statistics.median(o / a for o, a in pairs)
+    return {"ours_s": round(statistics.median(o for o, _ in pairs), 4),
+            "anchor_s": round(statistics.median(a for _, a in pairs), 4), "ratio": round(ratio, 2)}
+
+
+def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds: int = 5) -> dict[str, Any]:
+    import h5py
+    import httpx
+    import numpy as np
+    import xarray as xr
+
+    import thermcap
+    from thermcap.archive.archiver import archive_session
+    from thermcap.recorder.capture.recorder import Recorder
+    from thermcap.recorder.capture.sources.sim import SimSource
+
+    with tempfile.TemporaryDirectory(prefix="thermcap-bench-python-") as tmp:
+        root = Path(tmp)
+        Recorder(SimSource(width=width, height=height, frames=frames, paced=False, seed=1), root,
+                 session_id="bench", analysis=False).run()
+        session_dir = root / "sessions" / "bench"
+        archive_session(session_dir, ["hdf5"])
+        (h5,) = sorted((session_dir / "archive" / "hdf5").glob("*.h5"))
+        port = _free_port()
+        url = f"http://127.0.0.1:{port}"
+        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(root), "--port", str(port),
+                                 "--no-access-log"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        try:
+            _wait(url + "/healthz", proc)
+            session_url = f"{url}/api/v1/sessions/bench"
+
+            def h5py_all() -> Any:
+                with h5py.File(h5, "r") as f:
+                    return f["frames"][...]
+
+            def zarr_all() -> Any:
+                return xr.open_zarr(session_url + "/zarr").counts.values
+
+            got = zarr_all()
+            if not np.array_equal(got, h5py_all()):
+                raise RuntimeError("the Zarr endpoint's counts differ from the HDF5 archive's")
+            whole = _pair(zarr_all, h5py_all, rounds)
+
+            with httpx.Client() as http:
+                def raw_get() -> Any:
+                    return http.get(f"{session_url}/frames/0", params={"format": "raw"}).content
+
+                def open_first() -> Any:
+                    return thermcap.open(session_url).frame(0).counts
+
+                first = _pair(open_first, raw_get, rounds)
+
+            local = thermcap.open("bench", root=root)
+            reads = {"n": 0}
+            original = local.counts
+
+            def counting(index: int) -> Any:
+                reads["n"] += 1
+                return original(index)
+
+            local.counts = counting  # type: ignore[method-assign]
+            opened = _timed(lambda: local.to_xarray())
+            return {"frames": frames, "size": f"{width}x{height}", "rounds": rounds,
+                    "zarr_whole_session_vs_h5py": {**whole, "goal": "<= 2"},
+                    "first_frame_open_vs_raw_get": {**first, "goal": "<= 2"},
+                    "to_xarray_open": {"seconds": round(opened, 4), "frames_read": reads["n"], "goal": "< 1 s, 0 read"}}
+        finally:
+            proc.terminate()
+            try:
+                proc.wait(10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
