@@ -108,11 +108,14 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
                    "default: the latest covering each frame; 0: as recorded).")
 @click.option("--bad-pixels", type=click.Choice(["nan", "keep"]), default="nan", show_default=True,
               help="The session's bad pixels: NaN (no temperature; magenta in pictures) or kept as measured.")
+@click.option("--allow-approximate", is_flag=True,
+              help="Export temperatures a model only approximates (DJI without its SDK), marked APPROXIMATE in "
+                   "each file's name, band description and metadata; refused otherwise.")
 @json_option
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                range_mode: str, t_min: float | None, t_max: float | None, crs: str | None,
                ground_elevation: float | None, dem: str | None, truth: str | None, match_radius: float, colorbar: bool,
-               model_version: int | None, bad_pixels: str, as_json: bool) -> None:
+               model_version: int | None, bad_pixels: str, allow_approximate: bool, as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from thermcap.recorder.exports.files import export_session
     from thermcap.recorder.storage.reader import resolve_session
@@ -125,7 +128,7 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
                              range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
                              crs=crs or "4326", ground_elevation_m=ground_elevation, truth=truth,
                              match_radius_m=match_radius, dem=dem, model_version=model_version,
-                             bad_pixels=bad_pixels)
+                             bad_pixels=bad_pixels, allow_approximate=allow_approximate)
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else

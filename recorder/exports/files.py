@@ -31,11 +31,13 @@ from thermcap.recorder.exports.render import colour_png, frame_range
 from thermcap.recorder.icd.names import format_name, iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
-from thermcap.recorder.radiometry.session import SessionTemperatures
+from thermcap.recorder.radiometry.session import APPROXIMATE_NOTE, SessionTemperatures, approximate_frames
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
 
+#: Exports of counts, not temperatures: never refused for an approximate model.
+_COUNT_KINDS = ("icd", "dji-rjpeg", "footprints")
 EXPORT_KINDS = ("celsius-tiff", "kelvin-tiff", "celsius-cog", "map-tiff", "footprints", "mosaic", "hotspots",
                 "heatmap-png", "icd", "dji-rjpeg")
 _MAP_KINDS = ("map-tiff", "footprints", "mosaic", "hotspots")
@@ -100,14 +102,16 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                    colorbar: bool = True, crs: str = "4326", ground_elevation_m: float | None = None,
                    truth: str | Path | None = None, match_radius_m: float = 3.0,
                    dem: str | Path | None = None, model_version: int | None = None,
-                   bad_pixels: str = "nan") -> dict[str, Any]:
+                   bad_pixels: str = "nan", allow_approximate: bool = False) -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
     each PNG's text chunks either way.
 
     Temperatures come from ``SessionTemperatures``: the model version covering each frame (the
     latest re-parameterisation, or ``model_version``), the session's bad pixels NaN (or kept,
-    ``bad_pixels="keep"``); every file says which version and rule it used."""
+    ``bad_pixels="keep"``); every file says which version and rule it used. Temperatures a model
+    only approximates (DJI without its SDK) are refused unless ``allow_approximate``; then every
+    file says so in its name, its band description and its metadata."""
     if kind not in EXPORT_KINDS:
         raise ThermcapError(f"unknown export {kind!r}; use one of {', '.join(EXPORT_KINDS)}")
     session_dir, out = Path(session_dir), Path(out_dir)
@@ -118,6 +122,15 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
     except ValueError as exc:
         raise ThermcapError(f"{session_dir}: {exc}") from None
     sensor_id = (meta.get("sensor") or {}).get("sensor_id", "SENSOR")
+    if kind not in _COUNT_KINDS and not allow_approximate:
+        n_frames = int(meta.get("frames_written") or meta.get("frames") or 0)
+        approx = approximate_frames(temps_of, n_frames)
+        if approx:
+            raise ThermcapError(
+                f"{session_dir}: {approx} of {n_frames} frames would get approximate temperatures (DJI's "
+                f"uncorrected blackbody formula, several °C off DJI's Thermal SDK). Import again with --dji-sdk "
+                f"(dji-thermal-cli or libdirp) to have DJI's code measure them, or pass --allow-approximate to "
+                f"export them marked APPROXIMATE")
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
         return _export_dji(session_dir, out, on_frame)
@@ -151,6 +164,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
         temps = ft.celsius if ft is not None else None
         name = format_name(f.log_time, sensor_id, *_name_range(ft.model if ft else model,
                                                                 vendors.get(f.log_time, {}), temps))
+        if ft is not None and ft.approximate:
+            name += "_APPROXIMATE"
         desc = {"session_id": meta.get("session_id"), "frame_index": f.index,
                 **(ft.describe() if ft is not None else {"radiometric_model": model.to_dict()}),
                 "position": positions.get(f.log_time)}
@@ -166,7 +181,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                                              "time": iso_utc(f.log_time),
                                              "model_version": desc.get("model_version"),
                                              "bad_pixels": desc.get("bad_pixels"),
-                                             "radiometric_model": desc["radiometric_model"]},
+                                             "radiometric_model": desc["radiometric_model"],
+                                             "temperature_quality": desc.get("temperature_quality")},
                                    geo_tags=geotiff_tags(pos, data.shape), position=pos, cog=kind == "celsius-cog")
         elif kind == "heatmap-png":
             src = temps if temps is not None else f.pixels.astype(np.float32)
@@ -289,7 +305,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
                 continue
             temps = np.rot90(ft.celsius, 3) if gantry is not None else ft.celsius  # as ``pixels`` is laid
             name = format_name(f.log_time, sensor_id, *_name_range(ft.model, vendor, temps))
-            path = out / f"{name}.map.tiff"
+            path = out / f"{name}{'_APPROXIMATE' if ft.approximate else ''}.map.tiff"
             write_temperature_tiff(path, temps, units="degC", geo_tags=tags,
                                    description=json.dumps({"units": "degC", **props}),
                                    metadata={"session_id": meta.get("session_id"), "frame_index": f.index,
@@ -314,13 +330,14 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
         (out / "hotspots.truth.json").write_text(json.dumps(report, indent=1))
         written.append("hotspots.truth.json")
     if kind == "mosaic":
-        written = _write_mosaic(out, tiles, frame_times, meta) if tiles else []
+        approx = any(getattr(temps_of.model_for(i)[0], "approximate", False) for i, _, _ in tiles)
+        written = _write_mosaic(out, tiles, frame_times, meta, approx) if tiles else []
     return {"out": str(out), "kind": kind, "files": len(written), "features": len(features), "refused": refused,
             "summary": None, **({"truth": report} if report is not None else {})}
 
 
 def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_times: dict[int, str],
-                  meta: dict[str, Any]) -> list[str]:
+                  meta: dict[str, Any], approximate: bool = False) -> list[str]:
     from thermcap.recorder.maps.mosaic import build_mosaic
 
     try:
@@ -328,7 +345,8 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
     except ValueError as exc:
         raise ThermcapError(str(exc)) from None
     rule = "each cell: the nearest pixel of the image whose centre is nearest (one real measurement)"
-    common = {"session_id": meta.get("session_id"), "gsd_m": mosaic.gsd_m, "blending": rule}
+    common = {"session_id": meta.get("session_id"), "gsd_m": mosaic.gsd_m, "blending": rule,
+              **({"temperature_quality": APPROXIMATE_NOTE} if approximate else {})}
     write_cog(out / "mosaic.tiff", mosaic.temps, geotransform=mosaic.geotransform, epsg=mosaic.epsg, units="degC",
               metadata={**common, "sources": "mosaic.sources.tiff"}, nodata=float("nan"))
     write_cog(out / "mosaic.sources.tiff", mosaic.sources, geotransform=mosaic.geotransform, epsg=mosaic.epsg,

@@ -31,6 +31,9 @@ def gdal_metadata_xml(items: dict[str, Any], units: str) -> str:
     rows = [f'<Item name="{escape(k)}">{escape(v if isinstance(v, str) else json.dumps(v))}</Item>'
             for k, v in items.items() if v is not None]
     rows.append(f'<Item name="UNITTYPE" sample="0" role="unittype">{escape(units)}</Item>')
+    if items.get("temperature_quality"):  # GDAL and QGIS show a band's description beside its values
+        rows.append(f'<Item name="DESCRIPTION" sample="0" role="description">temperature, '
+                    f'{escape(str(items["temperature_quality"]))}</Item>')
     return "<GDALMetadata>" + "".join(rows) + "</GDALMetadata>"
 
 

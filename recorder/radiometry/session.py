@@ -21,7 +21,8 @@ import numpy as np
 from thermcap.recorder.radiometry.base import RadiometricModel, model_from_dict
 from thermcap.recorder.radiometry.params import ModelVersion, model_for_frame, read_versions, reparameterise
 
-__all__ = ["BAD_PIXEL_RULES", "FrameTemperatures", "SessionTemperatures", "read_bad_pixel_map"]
+__all__ = ["APPROXIMATE_NOTE", "BAD_PIXEL_RULES", "FrameTemperatures", "SessionTemperatures", "approximate_frames",
+           "read_bad_pixel_map"]
 
 #: What happens to the pixels the bad-pixel map lists: NaN (no temperature), or kept as measured.
 BAD_PIXEL_RULES = ("nan", "keep")
@@ -54,6 +55,16 @@ def read_bad_pixel_map(session_dir: str | Path, camera: str | None = None) -> np
     return None
 
 
+#: What an approximate product says of itself, where GIS tools show it (band description, metadata).
+APPROXIMATE_NOTE = ("APPROXIMATE: DJI's uncorrected blackbody formula without DJI's Thermal SDK, several degrees C off "
+                    "(no emissivity, reflection or atmosphere correction)")
+
+
+def approximate_frames(temps: SessionTemperatures, frames: int) -> int:
+    """How many of a session's frames would get approximate temperatures from ``temps``."""
+    return sum(bool(getattr(temps.model_for(i)[0], "approximate", False)) for i in range(frames))
+
+
 @dataclass(frozen=True)
 class FrameTemperatures:
     """One frame's °C, and what made them."""
@@ -69,9 +80,15 @@ class FrameTemperatures:
         flat = self.celsius.ravel()
         return flat[np.isfinite(flat)] if self.bad_pixels and self.rule == "nan" else flat
 
+    @property
+    def approximate(self) -> bool:
+        """The model only approximates temperature (DJI's uncorrected blackbody, without the SDK)."""
+        return bool(getattr(self.model, "approximate", False))
+
     def describe(self) -> dict[str, Any]:
         """What a product says of its numbers (TIFF metadata, JSON, reports)."""
         return {"model_version": self.model_version, "radiometric_model": self.model.to_dict(),
+                **({"temperature_quality": APPROXIMATE_NOTE} if self.approximate else {}),
                 "bad_pixels": {"listed": self.bad_pixels, "rule": self.rule,
                                "meaning": "NaN: no temperature (the session's bad-pixel map)" if self.rule == "nan"
                                else "kept as the sensor measured them"}}

@@ -115,7 +115,7 @@ def test_celsius_tiff_has_geotiff_tags_where_the_source_has_a_position(samples, 
         assert geo["ModelTiepoint"][4] == pytest.approx(float(pos["latitude"]))
     m2ea = root / "sessions" / files["M2EA_DJI_0001_R.JPG"]["session_id"]
     assert _positions(m2ea) == {}
-    res = export_session(m2ea, "celsius-tiff", tmp_path / "m")
+    res = export_session(m2ea, "celsius-tiff", tmp_path / "m", allow_approximate=True)
     with tifffile.TiffFile(next((tmp_path / "m").glob("*.tiff"))) as t:
         assert 33922 not in {tag.code for tag in t.pages[0].tags}
     assert res["files"] == 1
@@ -135,3 +135,27 @@ def test_import_cli_offers_each_terraref_variant(samples, tmp_path, variant, key
     assert f["model"]["variant"] == variant
     for k in ("min", "max", "mean"):
         assert abs(f["celsius"][k] - ref[k]) < 0.01, (variant, k, f["celsius"][k], ref[k])
+
+
+def test_approximate_dji_temperatures_are_refused_unless_allowed_and_then_marked(samples, tmp_path):
+    """M2EA is iirp: without DJI's SDK its °C are only the uncorrected blackbody formula."""
+    import tifffile
+
+    sample = samples / "dji" / "M2EA_DJI_0001_R.JPG"
+    root = tmp_path / "r"
+    assert run_cli("import", str(sample), "--root", str(root), "--session", "m2ea", "--no-analysis",
+                   "--dji-sdk", "off").returncode == 0
+    for kind in ("celsius-tiff", "heatmap-png"):
+        r = run_cli("export", "m2ea", "--root", str(root), "--to", kind, "--out", str(tmp_path / kind))
+        assert r.returncode == 1 and "approximate" in r.stderr and "--allow-approximate" in r.stderr, r.stderr
+        assert not (tmp_path / kind).exists() or not any((tmp_path / kind).iterdir())
+    r = run_cli("export", "m2ea", "--root", str(root), "--to", "celsius-tiff", "--out", str(tmp_path / "ok"),
+                "--allow-approximate")
+    assert r.returncode == 0, r.stderr
+    (tiff,) = (tmp_path / "ok").glob("*.tiff")
+    assert "_APPROXIMATE" in tiff.name
+    with tifffile.TiffFile(tiff) as t:
+        gdal = t.pages[0].tags[42112].value
+    assert 'role="description">temperature, APPROXIMATE' in gdal and "temperature_quality" in gdal
+    # the counts are another matter: an ICD export of the same session is not refused
+    assert run_cli("export", "m2ea", "--root", str(root), "--to", "icd", "--out", str(tmp_path / "icd")).returncode == 0
