@@ -11,11 +11,13 @@ from fastapi import FastAPI, HTTPException, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
+from fastapi.routing import APIRoute
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
 
 from thermcap.api.db import make_engine, migrate
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.api.fast_frames import FrameFastPath
+from thermcap.api.http_conventions import HeadAsGet, JsonConventions
 from thermcap.api.indexing import index_root
 from thermcap.api.jobs.runner import JobRunner
 from thermcap.api.reading.frames import FrameReader
@@ -96,7 +98,8 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
         app.state.jobs.close()
 
     app = FastAPI(title="thermcap", version=__version__, lifespan=lifespan, docs_url=None, redoc_url=None,
-                  description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.")
+                  description="Radiometric thermal sessions: catalog, frames, exports, archives, audits.",
+                  openapi_tags=OPENAPI_TAGS, generate_unique_id_function=_operation_id)
     app.state.settings = settings
     app.state.engine = make_engine(settings.db_url)
     app.state.index_damage = {}  # session folder -> the parts the last scan could not serve, and why
@@ -119,6 +122,8 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     latency = Histogram("thermcap_http_request_seconds", "HTTP request latency", ["route"], registry=registry,
                         buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10))
 
+    app.add_middleware(HeadAsGet, router=app.router)  # innermost: HEAD as the GET, where no route has HEAD
+    app.add_middleware(JsonConventions)  # it sees the routes' own JSON answers
     app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
                        allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
 
@@ -159,4 +164,26 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, zarr, docs, ui):
         app.include_router(module.router)
     return app
+
+
+#: The OpenAPI document's tags, each with what its routes are for.
+OPENAPI_TAGS = [
+    {"name": "meta", "description": "Health, readiness, Prometheus metrics, the storage audit, re-indexing."},
+    {"name": "sessions", "description": "The catalog: sessions by time, sensor and contrast; their frames, events "
+                                        "and timelines; frames across every session."},
+    {"name": "frames", "description": "One frame: counts (raw, PNG16, TIFF), °C TIFF, previews, sidecar, a "
+                                      "pixel's temperature."},
+    {"name": "thermography", "description": "Measurements on frames (spots, lines, areas, histograms, isotherms), "
+                                            "series over time, radiometric model versions."},
+    {"name": "archives", "description": "The verified archive files of a session, hashed while they stream."},
+    {"name": "export", "description": "A cut of a session by time and topic, as one MCAP file."},
+    {"name": "jobs", "description": "Long work on the fleet's Dask cluster: series, and their results."},
+    {"name": "zarr", "description": "Every session as a Zarr store: `xr.open_zarr(url)` reads it lazily."},
+]
+
+
+def _operation_id(route: APIRoute) -> str:
+    """Operation ids are the routes' own function names (``list_sessions``), what a generated
+    client calls them; FastAPI's default appends the path and method."""
+    return route.name
 

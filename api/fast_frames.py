@@ -56,6 +56,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
+from thermcap.api.http_conventions import etag_matches
 from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
 from thermcap.api.security import given_token, scopes_for_token
@@ -158,7 +159,7 @@ class FrameFastPath:
         body, etag, headers = answer
         self.served += 1
         headers = [*headers, (b"etag", etag), (b"cache-control", _CACHE_CONTROL)]
-        if inm is not None and (inm.strip() == b"*" or etag in [t.strip() for t in inm.split(b",")]):
+        if etag_matches(inm, etag):
             await send({"type": "http.response.start", "status": 304, "headers": headers})
             await send({"type": "http.response.body", "body": b""})
             return

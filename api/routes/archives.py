@@ -10,6 +10,7 @@ from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
 from thermcap.api import db
+from thermcap.api.http_conventions import etag_matches
 from thermcap.api.reading.frames import Damage
 from thermcap.api.routes.common import session_row
 from thermcap.api.security import check_file_name, require
@@ -30,6 +31,10 @@ def _archive(request: Request, session_id: str, fmt: str) -> dict:
     if row is None or not row["verified"]:
         raise HTTPException(404, f"session {session_id} has no verified {fmt!r} archive")
     return dict(row)
+
+
+_FILE_RESPONSES: dict[int | str, dict] = {200: {"content": {"application/octet-stream": {}},
+                                                "description": "the file, or the Range asked for (206)"}}
 
 
 @router.get("/{fmt}")
@@ -61,8 +66,8 @@ def _parse_range(header: str, size: int) -> tuple[int, int] | None:
 
 
 # GET and HEAD as two routes of one function, so each operation has an OpenAPI ID of its own
-@router.get("/{fmt}/{name}")
-@router.head("/{fmt}/{name}", name="head_download")
+@router.get("/{fmt}/{name}", name="download_archive_file", response_class=Response, responses=_FILE_RESPONSES)
+@router.head("/{fmt}/{name}", name="head_archive_file", response_class=Response, responses=_FILE_RESPONSES)
 def download(request: Request, session_id: str, fmt: str, name: str, redirect: bool = False) -> Response:
     row = _archive(request, session_id, fmt)
     check_file_name(name)
@@ -79,8 +84,7 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
     size = entry["bytes"]
     base = {"ETag": etag, "Accept-Ranges": "bytes", "Cache-Control": "public, max-age=3600",
             "Content-Type": "application/octet-stream"}
-    inm = request.headers.get("if-none-match")
-    if inm and (inm.strip() == "*" or etag in [t.strip() for t in inm.split(",")]):
+    if etag_matches(request.headers.get("if-none-match"), etag):
         return Response(status_code=304, headers=base)
     if store.head(key) is None:
         raise HTTPException(404, f"{key} is listed in the manifest but missing from the store")

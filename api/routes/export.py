@@ -18,7 +18,7 @@ from thermcap.recorder.storage.layout import EXTRAS_MCAP
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
 
 
-@router.get("/export.mcap", responses={200: {"content": {"application/octet-stream": {}}}})
+@router.get("/export.mcap", name="export_mcap", responses={200: {"content": {"application/octet-stream": {}}}})
 def export(request: Request, session_id: str, start: str | None = None, end: str | None = None,
            topics: str | None = None) -> StreamingResponse:
     row = session_row(request, session_id)

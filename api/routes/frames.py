@@ -9,6 +9,7 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
+from thermcap.api.http_conventions import etag_matches
 from thermcap.api.routes.common import CelsiusQuery, FrameModel, session_row
 from thermcap.api.security import require
 from thermcap.archive.codecs import get_codec
@@ -30,8 +31,7 @@ def _send(request: Request, body: bytes, media_type: str, headers: dict[str, str
     the client holds it already, and only the headers for HEAD."""
     etag = f'"{hashlib.sha256(body).hexdigest()[:40]}"'
     headers = {**headers, "ETag": etag}
-    inm = request.headers.get("if-none-match")
-    if inm and (inm.strip() == "*" or etag in [t.strip() for t in inm.split(",")]):
+    if etag_matches(request.headers.get("if-none-match"), etag):
         return Response(status_code=304, headers=headers)
     if request.method == "HEAD":
         return Response(b"", media_type=media_type, headers={**headers, "Content-Length": str(len(body))})
@@ -50,8 +50,8 @@ _FRAME_RESPONSES: dict[int | str, dict[str, Any]] = {
 
 # GET and HEAD as two routes of one function: one route with both methods gives both operations
 # the same OpenAPI ID, and client generators then keep only one of them
-@router.get("/{n}", responses=_FRAME_RESPONSES)
-@router.head("/{n}", responses=_FRAME_RESPONSES, name="head_frame")
+@router.get("/{n}", responses=_FRAME_RESPONSES, response_class=Response)
+@router.head("/{n}", responses=_FRAME_RESPONSES, name="head_frame", response_class=Response)
 def get_frame(request: Request, session_id: str, n: int,
               format: Literal["raw", "png16", "tiff", "celsius-tiff", "preview", "dji-rjpeg"] = "png16",
               palette: Literal["ironbow", "gray", "turbo"] = "ironbow",

@@ -90,7 +90,7 @@ def submit_series(request: Request, session_id: str, tool: str = Query(...),
     return JSONResponse(body, status_code=200 if job.state == "done" else 202)
 
 
-@router.get("/api/v1/jobs")
+@router.get("/api/v1/jobs", name="list_jobs")
 def get_jobs(request: Request, state: Literal[STATES] | None = None,  # type: ignore[valid-type]
              kind: str | None = None, session: str | None = None,
              limit: int = Query(100, ge=1, le=1000)) -> dict:
@@ -98,7 +98,7 @@ def get_jobs(request: Request, state: Literal[STATES] | None = None,  # type: ig
     return {"items": [{**j.to_dict(), "links": _links(j.id)} for j in jobs]}
 
 
-@router.get("/api/v1/jobs/{jid}")
+@router.get("/api/v1/jobs/{jid}", name="get_job")
 def get_one(request: Request, jid: str) -> dict:
     job = get_job(request.app.state.engine, jid)
     if job is None:
@@ -106,7 +106,7 @@ def get_one(request: Request, jid: str) -> dict:
     return {**job.to_dict(), "links": _links(jid)}
 
 
-@router.get("/api/v1/jobs/{jid}/result")
+@router.get("/api/v1/jobs/{jid}/result", name="get_job_result")
 def get_result(request: Request, jid: str, format: Literal["json", "csv"] = "json") -> Response:
     job = get_job(request.app.state.engine, jid)
     if job is None:

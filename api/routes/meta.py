@@ -36,7 +36,8 @@ def readyz(request: Request) -> dict:
     return {"status": "ready", "sessions": n}
 
 
-@router.get("/metrics", tags=["meta"], dependencies=[Depends(require("read"))])
+@router.get("/metrics", tags=["meta"], dependencies=[Depends(require("read"))], response_class=Response,
+            responses={200: {"content": {"text/plain; version=0.0.4": {}}, "description": "Prometheus metrics"}})
 def metrics(request: Request) -> Response:
     with request.app.state.engine.connect() as conn:
         unverified = select(func.count()).select_from(db.archives).where(db.archives.c.verified.is_(False))

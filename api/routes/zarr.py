@@ -47,8 +47,8 @@ def _metadata(row: dict[str, Any], table: FrameTable) -> dict[str, Any]:
 _KEY_RESPONSES: dict[int | str, dict] = {200: {"content": {"application/json": {}, "application/octet-stream": {}}}}
 
 
-@router.get("/{key:path}", operation_id="get_zarr_key", responses=_KEY_RESPONSES)
-@router.head("/{key:path}", operation_id="head_zarr_key", responses=_KEY_RESPONSES)
+@router.get("/{key:path}", responses=_KEY_RESPONSES, response_class=Response)
+@router.head("/{key:path}", name="head_zarr_key", responses=_KEY_RESPONSES, response_class=Response)
 def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     """A key of the store: a metadata document (JSON) or a chunk (raw little-endian bytes)."""
     row = session_row(request, session_id)
