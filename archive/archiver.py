@@ -49,7 +49,7 @@ from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "BuiltCopy", "archive_session", "build_format", "format_entry",
            "fresh_partial", "take_name", "verify_format_dir", "write_verified"]
 
-DEFAULT_FORMATS = ("png16", "tiff-lzw", "hdf5")
+from thermcap.archive.defaults import DEFAULT_FORMATS
 
 
 def _fsync_tree(path: Path) -> None:

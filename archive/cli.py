@@ -9,7 +9,7 @@ from typing import Any
 
 import click
 
-from thermcap.archive.archiver import DEFAULT_FORMATS
+from thermcap.archive.defaults import DEFAULT_FORMATS
 from thermcap.recorder.cli.options import Number, fail, json_option, root_option
 from thermcap.recorder.exceptions import SessionBusyError, ThermcapError
 from thermcap.recorder.storage.layout import SessionLayout

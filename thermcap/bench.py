@@ -129,3 +129,16 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
                 proc.wait(10)
             except subprocess.TimeoutExpired:
                 proc.kill()
+
+
+def bench_startup(rounds: int = 7) -> dict[str, Any]:
+    """``thermcap --help`` and ``thermcap record --help`` against ``python -c "import click"``, each
+    a fresh interpreter, alternated; the goal is <= 3x."""
+    anchor = [sys.executable, "-c", "import click"]
+    cases = {"thermcap --help": [sys.executable, "-m", "thermcap", "--help"],
+             "thermcap record --help": [sys.executable, "-m", "thermcap", "record", "--help"]}
+
+    def run(cmd: list[str]) -> Callable[[], Any]:
+        return lambda: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    return {name: {**_pair(run(cmd), run(anchor), rounds), "goal": "<= 3"} for name, cmd in cases.items()}

@@ -118,6 +118,24 @@ def bench_python_cmd(frames: int, rounds: int, as_json: bool) -> None:
     click.echo(f"  {'to_xarray_open':30} {o['seconds']:.4f} s, {o['frames_read']} frames read  (goal {o['goal']})")
 
 
+@bench.command("startup")
+@click.option("--rounds", type=click.IntRange(1, 51), default=7, show_default=True)
+@click.option("--json", "as_json", is_flag=True, help="One JSON document.")
+def bench_startup_cmd(rounds: int, as_json: bool) -> None:
+    """How fast the command starts: --help against `python -c "import click"`."""
+    import json
+
+    from thermcap.bench import bench_startup
+
+    res = bench_startup(rounds)
+    if as_json:
+        click.echo(json.dumps(res, indent=2))
+        return
+    for name, r in res.items():
+        click.echo(f"  {name:24} {r['ours_s'] * 1000:7.1f} ms  import click {r['anchor_s'] * 1000:6.1f} ms  "
+                   f"ratio {r['ratio']:.2f}x  (goal {r['goal']})")
+
+
 def main() -> None:
     """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
     (an OSError) is one line naming the file and exit 1, never a traceback."""

@@ -7,13 +7,16 @@ import signal
 import sys
 import threading
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 
 from thermcap.recorder.cli.options import Number, fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import ThermcapError
-from thermcap.recorder.sync.targets import Target
+
+if TYPE_CHECKING:
+    from thermcap.recorder.sync.targets import Target
 
 
 def _target(bucket: str | None, endpoint: str | None, region: str, prefix: str, to: str | None) -> Target:
