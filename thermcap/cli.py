@@ -15,7 +15,7 @@ import click
 from thermcap.api import cli as api_cli
 from thermcap.archive import cli as archive_cli
 from thermcap.recorder.cli import cli as recorder_commands
-from thermcap.recorder.cli.options import fail
+from thermcap.recorder.cli.options import fail, root_option
 from thermcap.recorder.cli.root import bench as recorder_bench
 from thermcap.recorder.exceptions import ThermcapError
 
@@ -93,6 +93,38 @@ for _name, _command in recorder_bench.commands.items():
 for _command in (archive_cli.bench_archive, archive_cli.bench_temporal_cmd, api_cli.bench_jobs_cmd,
                  api_cli.bench_series_cmd, api_cli.bench_index_cmd, api_cli.bench_api_cmd):
     bench.add_command(_command)
+
+
+@cli.command("cut")
+@click.argument("session")
+@root_option
+@click.option("--start", default=None, metavar="TIME",
+              help="From this time: RFC 3339, or seconds from the first frame.")
+@click.option("--end", default=None, metavar="TIME", help="Until this time (not included); as --start.")
+@click.option("--topics", default=None, metavar="T1,T2", help="Only these topics (default: all).")
+@click.option("--out", "out", required=True, type=click.Path(dir_okay=False), help="The MCAP file to write.")
+@click.option("--json", "as_json", is_flag=True, help="One JSON document.")
+def cut(session: str, root: str, start: str | None, end: str | None, topics: str | None, out: str,
+        as_json: bool) -> None:
+    """Part of SESSION, by time and topic, as one MCAP file (the source's chunks copied where they
+    lie inside; from the archive once the source is deleted)."""
+    import json
+    from pathlib import Path
+
+    from thermcap.cut import cut_session
+    from thermcap.recorder.storage.reader import resolve_session
+
+    try:
+        d = resolve_session(session, root)
+        res = cut_session(Path(d), Path(d).parent.parent, Path(out), start, end,
+                          [t for t in (topics or "").split(",") if t] or None)
+    except (ValueError, FileExistsError) as exc:
+        fail(str(exc))
+    if as_json:
+        click.echo(json.dumps({"out": str(res.out), "bytes": res.bytes, "start_ns": res.start_ns,
+                               "end_ns": res.end_ns, "topics": res.topics}, indent=2))
+    else:
+        click.echo(f"{res.out}: {res.bytes:,} bytes")
 
 
 @bench.command("python")

@@ -1,0 +1,59 @@
+"""``thermcap cut``: part of a session by time and topic, bit-exact, from the source or the archive."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+
+from tests.conftest import run_cli
+from thermcap.recorder.icd.topics import decode_image
+from thermcap.recorder.storage.reader import iter_session_frames
+
+pytestmark = pytest.mark.integration
+
+
+def _images(path):
+    with open(path, "rb") as f:
+        return [(m.log_time, decode_image(m.data)[1].copy())
+                for _, c, m in make_reader(f).iter_messages(topics=["/thermal/image"])]
+
+
+@pytest.fixture
+def root(tmp_path):
+    root = tmp_path / "root"
+    assert run_cli("record", "--root", str(root), "--session", "s", "--duration", "1", "--width", "64",
+                   "--height", "48").returncode == 0
+    return root
+
+
+@pytest.mark.parametrize("delete_source", [False, True], ids=["from-source", "from-archive"])
+def test_a_cut_holds_exactly_the_frames_in_range(root, tmp_path, delete_source):
+    frames = list(iter_session_frames(root / "sessions" / "s"))
+    if delete_source:
+        r = run_cli("archive", "s", "--root", str(root), "--formats", "png16", "--delete-source")
+        assert r.returncode == 0, r.stderr
+    t0 = frames[0].log_time
+    out = tmp_path / "cut.mcap"
+    r = run_cli("cut", "s", "--root", str(root), "--start", "0.25", "--end", "0.5", "--out", str(out), "--json")
+    assert r.returncode == 0, r.stderr
+    want = [f for f in frames if t0 + 250_000_000 <= f.log_time < t0 + 500_000_000]
+    got = _images(out)
+    assert [t for t, _ in got] == [f.log_time for f in want] and want
+    for (_, px), f in zip(got, want, strict=True):
+        assert np.array_equal(px, f.pixels)
+    only = tmp_path / "meta.mcap"
+    assert run_cli("cut", "s", "--root", str(root), "--topics", "/thermal/metadata", "--out", str(only)).returncode == 0
+    assert _images(only) == []
+
+
+def test_a_cut_never_overwrites_and_says_what_is_wrong(root, tmp_path):
+    out = tmp_path / "cut.mcap"
+    out.write_bytes(b"mine")
+    r = run_cli("cut", "s", "--root", str(root), "--out", str(out))
+    assert r.returncode == 1 and "exists" in r.stderr and out.read_bytes() == b"mine"
+    r = run_cli("cut", "s", "--root", str(root), "--start", "yesterday", "--out", str(tmp_path / "x.mcap"))
+    assert r.returncode == 1 and "--start" in r.stderr and "Traceback" not in r.stderr
+    r = run_cli("cut", "s", "--root", str(root), "--start", "2", "--end", "1", "--out", str(tmp_path / "y.mcap"))
+    assert r.returncode == 1 and "after" in r.stderr
+    assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "y.mcap").exists()

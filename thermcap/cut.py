@@ -1,0 +1,79 @@
+"""``thermcap cut``: part of a session, by time and topic, as one MCAP file (like ``mcap filter``),
+from the MCAP source while it exists, else from the verified archive and its extras.mcap: the
+same slicer ``GET /export.mcap`` streams."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["CutResult", "cut_session", "parse_instant"]
+
+
+@dataclass(frozen=True)
+class CutResult:
+    out: Path
+    bytes: int
+    start_ns: int | None
+    end_ns: int | None
+    topics: list[str] | None
+
+
+def parse_instant(value: str | None, first_ns: int, name: str) -> int | None:
+    """An RFC 3339 time, or seconds from the session's first frame (``12.5``)."""
+    from thermcap.recorder.icd.names import parse_rfc3339
+
+    if value is None:
+        return None
+    try:
+        seconds = float(value)
+    except ValueError:
+        try:
+            return parse_rfc3339(value)
+        except ValueError as exc:
+            raise ValueError(f"--{name} {value!r}: an RFC 3339 time or seconds from the first frame ({exc})") from None
+    if not seconds >= 0 or seconds == float("inf"):
+        raise ValueError(f"--{name} {value!r}: seconds from the first frame must be 0 or more")
+    return first_ns + round(seconds * 1e9)
+
+
+def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end: str | None,
+                topics: list[str] | None) -> CutResult:
+    import io
+
+    from thermcap.api.reading.mcap_slice import export_mcap
+    from thermcap.recorder.storage.layout import SessionLayout
+    from thermcap.recorder.storage.reader import session_segments
+    from thermcap.session import LocalSession
+
+    if out.exists():
+        raise FileExistsError(f"{out} exists; thermcap does not overwrite a file (remove it or name another)")
+    session = LocalSession(session_dir, root)
+    times = session.table.timestamp_ns
+    first = int(times[0]) if len(times) else 0
+    t0, t1 = parse_instant(start, first, "start"), parse_instant(end, first, "end")
+    if t0 is not None and t1 is not None and t1 <= t0:
+        raise ValueError("--end must be after --start")
+    frames = extras = None
+    if not session_segments(session_dir):
+        reader, sid = session._reader, session.id
+        keep = [(int(i), int(t)) for i, t in zip(session.table.index, times, strict=True)
+                if (t0 is None or t >= t0) and (t1 is None or t < t1)]
+        frames = ((i, t, (lambda i=i: reader.pixels(sid, i)), (lambda i=i: reader.sidecar(sid, i))) for i, t in keep)
+        path = SessionLayout.of(session_dir).extras
+        if path.is_file():
+            def extras() -> io.BufferedReader:
+                return open(path, "rb")
+    part = out.with_name(out.name + ".partial")
+    try:
+        with open(part, "xb") as f:
+            for block in export_mcap(session_dir, t0, t1, topics, frames, extras):
+                f.write(block)
+            f.flush()
+            os.fsync(f.fileno())
+        part.replace(out)
+    except BaseException:
+        part.unlink(missing_ok=True)
+        raise
+    return CutResult(out, out.stat().st_size, t0, t1, topics)
