@@ -112,6 +112,13 @@ class HotSpotDetector:
     ring_px: int = 6
     bad_pixel_map: np.ndarray | None = None
     max_targets: int = 64
+    # The worst case is bounded: a frame where more than this share of the coarse cells stands
+    # above the background holds noise or texture, not targets (the simulator's busiest scenes
+    # stay under 3%); and at most this many candidate regions are examined at full resolution,
+    # the most prominent first. Either cap, when it bites, is named in the sidecar.
+    max_candidate_fraction: float = 0.25
+    max_regions: int = 32
+    max_examined_share: float = 0.1  # of the frame's area, in the candidate regions' boxes
     _tracks: list[tuple[str, list[int]]] = field(default_factory=list, repr=False)
     _bad_coords: np.ndarray | None = field(default=None, repr=False)
     _next_id: int = field(default=1, repr=False)
@@ -172,9 +179,16 @@ class HotSpotDetector:
         f = self._F
         h, w = temps.shape
         opened, local_mean, cmax, padded = self._coarse(temps)
-        cells = (cmax - opened) >= self.threshold_k
+        excess_cells = cmax - opened
+        cells = excess_cells >= self.threshold_k
         dets: list[Detection] = []
         per_target = []
+        capped: dict[str, Any] | None = None
+        share = float(cells.mean())
+        if share > self.max_candidate_fraction:
+            capped = {"rule": "candidate_cell_fraction", "value": round(share, 4), "limit": self.max_candidate_fraction,
+                      "why": "more of the frame stands above its background than targets can: noise or texture"}
+            cells = np.zeros_like(cells)
         if cells.any():
             def bg(y0: int, y1: int, x0: int, x1: int) -> np.ndarray:
                 """The background over a full-resolution window, from the coarse grid (only
@@ -184,9 +198,30 @@ class HotSpotDetector:
                 full = np.repeat(np.repeat(block, f, axis=0), f, axis=1)
                 return full[y0 - cy0 * f:y1 - cy0 * f, x0 - cx0 * f:x1 - cx0 * f]
 
-            regions, _ = ndimage.label(cells, structure=self._EIGHT)
+            regions, n_regions = ndimage.label(cells, structure=self._EIGHT)
+            objects = ndimage.find_objects(regions)
+            examine: list[int] = list(range(1, n_regions + 1))
+            budget = self.max_examined_share * cells.size  # in coarse cells
+            boxes = [(o[0].stop - o[0].start) * (o[1].stop - o[1].start) for o in objects]
+            if n_regions > self.max_regions or sum(boxes) > budget:
+                # the most prominent regions first, until the count or the area budget is spent
+                tops = np.asarray(ndimage.maximum(excess_cells, regions, index=np.arange(1, n_regions + 1)))
+                chosen: list[int] = []
+                spent = 0
+                for k in (int(j) + 1 for j in np.argsort(-tops, kind="stable")):
+                    if len(chosen) >= self.max_regions:
+                        break
+                    if spent + boxes[k - 1] > budget:  # a region this wide is texture, not a target
+                        continue
+                    chosen.append(k)
+                    spent += boxes[k - 1]
+                capped = {"rule": "max_regions", "value": int(n_regions), "examined": len(chosen),
+                          "limit": self.max_regions, "area_budget": self.max_examined_share,
+                          "why": "only the most prominent candidate regions were examined"}
+                examine = sorted(chosen)
             found = []
-            for k, rsl in enumerate(ndimage.find_objects(regions), start=1):
+            for k in examine:
+                rsl = objects[k - 1]
                 # Regions whose warmest cell does not stand out from the local mean are texture:
                 # dropped here, at quarter resolution, before any full-resolution work. (The max
                 # over the region's own slice: scipy's labelled maximum sorts the whole grid.)
@@ -212,6 +247,10 @@ class HotSpotDetector:
                         found.append((int(areas[i]), sl[0].start + ry0, sl[0].stop + ry0, sl[1].start + rx0,
                                       sl[1].stop + rx0, labels[sl] == i))
             found.sort(key=lambda c: -c[0])
+            if len(found) > 4 * self.max_targets:  # the largest first; the rest not examined
+                capped = capped or {"rule": "max_candidates", "value": len(found), "limit": 4 * self.max_targets,
+                                    "why": "only the largest candidates were examined"}
+                found = found[:4 * self.max_targets]
             for _area, y0, y1, x0, x1, own in found:
                 if len(dets) >= self.max_targets:
                     break
@@ -250,7 +289,10 @@ class HotSpotDetector:
                 per_target.append(m)
         self._track(dets)
         conf = max((d.confidence for d in dets), default=None)
-        return dets, frame_analysis(per_target, source="detector", confidence=round(conf, 3) if conf else None)
+        analysis = frame_analysis(per_target, source="detector", confidence=round(conf, 3) if conf else None)
+        if capped is not None:
+            analysis["detection_capped"] = capped
+        return dets, analysis
 
     def _track(self, dets: list[Detection]) -> None:
         """Keep a target's id while its box overlaps the one it had in the previous frame."""

@@ -106,6 +106,8 @@ SIDECAR_SCHEMA: dict[str, Any] = {
                     "snr_db": _nnum,
                     "detection_confidence": {"type": ["number", "null"], "minimum": 0, "maximum": 1},
                     "source": {"enum": ["ground_truth", "detector", "skipped", "none"]},
+                    # present only when the detector's worst-case bound cut its work short
+                    "detection_capped": {"type": "object"},
                 },
                 ["thermal_contrast_grade", "max_target_temp_c", "min_background_temp_c", "delta_t_deg_c",
                  "snr_db", "detection_confidence"],

@@ -185,3 +185,27 @@ def test_the_ring_median_is_numpys(n):
 
     x = np.random.default_rng(n).standard_normal(n).astype(np.float32) * 30
     assert _median(x) == float(np.median(x))
+
+
+def test_the_detectors_worst_case_is_bounded_and_named():
+    """Uniform noise (every cell a candidate) and wide noise regions are capped, and the sidecar
+    says which cap bit; a typical scene is not capped."""
+    import numpy as np
+
+    from thermcap.recorder.analysis.detector import HotSpotDetector
+    from thermcap.recorder.capture.sources.sim import SimSource
+    from thermcap.recorder.icd.sidecar import SIDECAR_SCHEMA
+
+    model = SimSource(frames=1).model
+    rng = np.random.default_rng(1)
+    det = HotSpotDetector(model)
+    dets, analysis = det.detect(rng.integers(0, 16383, (256, 320), dtype=np.uint16))
+    assert dets == [] and analysis["detection_capped"]["rule"] == "candidate_cell_fraction"
+    det = HotSpotDetector(model, max_regions=3)
+    _, analysis = det.detect((2000 + rng.normal(0, 45, (256, 320))).astype(np.uint16))
+    capped = analysis["detection_capped"]
+    assert capped["rule"] == "max_regions" and capped["examined"] <= 3
+    assert "detection_capped" in SIDECAR_SCHEMA["properties"]["thermal_analysis"]["properties"]
+    typical = SimSource(frames=5, paced=False, seed=3, start_time_ns=0)
+    det = HotSpotDetector(typical.model, bad_pixel_map=typical.bad_pixel_map)
+    assert all("detection_capped" not in det.detect(f.pixels)[1] for f in typical.frames())
