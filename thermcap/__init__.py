@@ -25,11 +25,12 @@ _wiring.connect()
 
 if TYPE_CHECKING:
     from thermcap.client import Client, ServerError
-    from thermcap.session import Frame, ModelVersion, Session, open
+    from thermcap.opening import open
+    from thermcap.session import Frame, ModelVersion, Session
 
 __all__ = ["Client", "Frame", "ModelVersion", "ServerError", "Session", "__version__", "open"]
 
-_WHERE = {"open": "thermcap.session", "Session": "thermcap.session", "Frame": "thermcap.session",
+_WHERE = {"open": "thermcap.opening", "Session": "thermcap.session", "Frame": "thermcap.session",
           "ModelVersion": "thermcap.session", "Client": "thermcap.client", "ServerError": "thermcap.client"}
 
 

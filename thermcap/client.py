@@ -202,7 +202,7 @@ class Client:
 
     def open(self, session_id: str) -> Any:
         """The session as a ``thermcap.Session`` (frames, ``to_xarray()`` over the Zarr endpoint)."""
-        from thermcap.session import RemoteSession
+        from thermcap.remote import RemoteSession
 
         return RemoteSession(self, session_id)
 

@@ -11,8 +11,6 @@ the count recorded.
 from __future__ import annotations
 
 import json
-import os
-import re
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Iterator
 from functools import cached_property
@@ -27,12 +25,8 @@ if TYPE_CHECKING:
     import xarray as xr
 
     from thermcap.api.reading.frame_table import FrameTable
-    from thermcap.client import Client
 
-__all__ = ["Frame", "LocalSession", "ModelVersion", "RemoteSession", "Session", "open"]
-
-_SESSION_URL = re.compile(r"^(?P<base>https?://.+?)/api/v1/sessions/(?P<id>[^/?#]+)/?$")
-
+__all__ = ["Frame", "LocalSession", "ModelVersion", "Session"]
 
 class Frame:
     """One frame: its counts exactly as recorded, its time and its ICD sidecar. Over HTTP the
@@ -266,114 +260,3 @@ class LocalSession(Session):
                    "session_id": self.id, "sensor": self.meta.get("sensor") or "", "fps": self.meta.get("fps") or 0,
                    "radiometric_model": json.dumps(self.radiometric_model)})
         return ds
-
-
-class RemoteSession(Session):
-    """A session a thermcap server serves: frames over its HTTP API, the Dataset through its
-    Zarr endpoint (read lazily, a frame a request)."""
-
-    def __init__(self, client: Client, session_id: str) -> None:
-        self.client, self.id = client, session_id
-
-    @cached_property
-    def detail(self) -> Any:
-        """The session as the server describes it (one request, on first use)."""
-        return self.client.session(self.id)
-
-    @property
-    def width(self) -> int:  # type: ignore[override]
-        return int(self.detail.width)
-
-    @property
-    def height(self) -> int:  # type: ignore[override]
-        return int(self.detail.height)
-
-    @property
-    def meta(self) -> dict[str, Any]:  # type: ignore[override]
-        d = self.detail
-        return {"session_id": self.id, "width": d.width, "height": d.height, "sensor": d.sensor, "fps": d.fps,
-                "radiometric_model": d.radiometric_model}
-
-    def frame(self, index: int) -> Frame:
-        """One frame in one request (its counts, time and size come together); the sidecar is
-        fetched when asked for (``Frame.sidecar``)."""
-        if index < 0:
-            index += len(self)
-        return Frame(index, lambda: int(self.table.timestamp_ns[index]), self.counts(index),
-                     lambda: self.sidecar(index))
-
-    @cached_property
-    def table(self) -> FrameTable:
-        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
-
-        infos = list(self.client.frames(self.id))
-        fields = {}
-        for name, (_, dtype, _) in FRAME_FIELDS.items():
-            values = [getattr(f, name) for f in infos]
-            fields[name] = np.array([np.nan if v is None else v for v in values] if dtype == "<f8" else
-                                    [v or 0 for v in values], dtype=np.dtype(dtype))
-        return FrameTable(self.id, np.array([f.index for f in infos], np.int64),
-                          np.array([f.timestamp_ns for f in infos], np.int64), fields)
-
-    def counts(self, index: int) -> np.ndarray:
-        return self.client.frame_counts(self.id, index)
-
-    def sidecar(self, index: int) -> dict[str, Any]:
-        return self.client.frame_metadata(self.id, index)
-
-    @property
-    def events(self) -> list[dict[str, Any]]:
-        return self.client.events(self.id)
-
-    @property
-    def model_versions(self) -> list[ModelVersion]:
-        return self.client.model_versions(self.id)
-
-    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
-        import xarray as xr
-
-        if model_version is not None:
-            latest = max((v.version for v in self.model_versions), default=0)
-            if model_version != latest:
-                raise ValueError(f"model version {model_version}: the server's Zarr store gives the latest "
-                                 f"({latest}); compute others from `counts` with thermcap.open on the data root")
-        # the store's own chunks (a frame each): dask fetches them concurrently, chunk_frames unused
-        return xr.open_zarr(self.client.zarr_url(self.id), storage_options={"headers": self.client.headers})
-
-
-def open(where: str | os.PathLike[str], token: str | None = None, *, root: str | os.PathLike[str] | None = None
-         ) -> Session:
-    """A session: a session folder, an id under ``root`` (default ``THERMCAP_ROOT`` or
-    ``thermcap-data``), or an ``http(s)://HOST/api/v1/sessions/ID`` URL with the server's token.
-
-    Raises ``FileNotFoundError`` naming what was looked for when there is no such session.
-    """
-    text = os.fspath(where)
-    m = _SESSION_URL.match(text)
-    if m:
-        from thermcap.client import Client
-
-        return RemoteSession(Client(m.group("base"), token), m.group("id"))
-    if text.startswith(("http://", "https://")):
-        raise ValueError(f"{text}: a session URL looks like http://HOST:PORT/api/v1/sessions/ID")
-    if "://" in text:
-        raise ValueError(f"{text}: thermcap.open reads folders, ids under a root and http(s) session URLs; "
-                         f"serve the bucket's root with `thermcap serve` and open its URL")
-    path = Path(text)
-    if (path / "session.json").is_file():
-        session_dir = path.resolve()
-        if session_dir.parent.name != "sessions":
-            raise ValueError(f"{path}: not inside a data root (ROOT/sessions/ID); move it there or import it")
-        return LocalSession(session_dir, session_dir.parent.parent)
-    from thermcap.recorder.cli.options import default_root
-    from thermcap.recorder.storage.layout import check_session_name
-
-    base = Path(root) if root is not None else Path(default_root())
-    if os.sep in text or (os.altsep and os.altsep in text):
-        raise FileNotFoundError(f"{path}: no session here (no session.json)")
-    check_session_name(text)
-    session_dir = (base / "sessions" / text).resolve()
-    if not (session_dir / "session.json").is_file():
-        raise FileNotFoundError(f"no session {text!r} under {base} (looked for {session_dir / 'session.json'})")
-    return LocalSession(session_dir, session_dir.parent.parent)
-

@@ -193,8 +193,8 @@ def test_dockerfile_context_installs_every_command(tmp_path):
     assert r.returncode == 0, r.stderr[-2000:]
     env = {**os.environ, "PYTHONPATH": str(site)}
     out = subprocess.run([sys.executable, "-c", "from importlib.metadata import entry_points;"
-                          "import recorder, archive, api;"
-                          "print(recorder.__file__, archive.__file__, api.__file__);"
+                          "import thermcap.recorder as r, thermcap.archive as a, thermcap.api as p;"
+                          "print(r.__file__, a.__file__, p.__file__);"
                           "print([e.value for e in entry_points(group='console_scripts', name='thermcap')])"],
                          capture_output=True, text=True, cwd=tmp_path, env=env)
     assert out.returncode == 0, out.stderr

@@ -191,7 +191,8 @@ def test_a_live_camera_drops_nothing_while_fsync_stalls(tmp_path, monkeypatch):
     assert not any(res.dropped.values()), res.dropped
     assert res.frames_written == 150
     waiting = [s for s, _ in seen if s]
-    assert waiting and waiting[-1][0]["name"] == "0000.mcap" and waiting[-1][0]["waiting_s"] > 0.5
+    # the first segment, stalled, is shown waiting (the last sample may fall after the disk answered it)
+    assert any(w[0]["name"] == "0000.mcap" and w[0]["waiting_s"] > 0.5 for w in waiting), waiting[-3:]
     assert any(any(p.startswith("disk: segment 0000.mcap has waited") for p in problems) for _, problems in seen)
     assert agree and all(agree)
     assert rec.status()["segments_settling"] == [] and rec.health()[0]

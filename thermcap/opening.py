@@ -1,0 +1,52 @@
+"""``thermcap.open``: a session from wherever it is, as a ``Session``."""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+from thermcap.session import LocalSession, Session
+
+__all__ = ["open"]
+
+_SESSION_URL = re.compile(r"^(?P<base>https?://.+?)/api/v1/sessions/(?P<id>[^/?#]+)/?$")
+
+
+def open(where: str | os.PathLike[str], token: str | None = None, *, root: str | os.PathLike[str] | None = None
+         ) -> Session:
+    """A session: a session folder, an id under ``root`` (default ``THERMCAP_ROOT`` or
+    ``thermcap-data``), or an ``http(s)://HOST/api/v1/sessions/ID`` URL with the server's token.
+
+    Raises ``FileNotFoundError`` naming what was looked for when there is no such session.
+    """
+    text = os.fspath(where)
+    m = _SESSION_URL.match(text)
+    if m:
+        from thermcap.client import Client
+        from thermcap.remote import RemoteSession
+
+        return RemoteSession(Client(m.group("base"), token), m.group("id"))
+    if text.startswith(("http://", "https://")):
+        raise ValueError(f"{text}: a session URL looks like http://HOST:PORT/api/v1/sessions/ID")
+    if "://" in text:
+        raise ValueError(f"{text}: thermcap.open reads folders, ids under a root and http(s) session URLs; "
+                         f"serve the bucket's root with `thermcap serve` and open its URL")
+    path = Path(text)
+    if (path / "session.json").is_file():
+        session_dir = path.resolve()
+        if session_dir.parent.name != "sessions":
+            raise ValueError(f"{path}: not inside a data root (ROOT/sessions/ID); move it there or import it")
+        return LocalSession(session_dir, session_dir.parent.parent)
+    from thermcap.recorder.cli.options import default_root
+    from thermcap.recorder.storage.layout import check_session_name
+
+    base = Path(root) if root is not None else Path(default_root())
+    if os.sep in text or (os.altsep and os.altsep in text):
+        raise FileNotFoundError(f"{path}: no session here (no session.json)")
+    check_session_name(text)
+    session_dir = (base / "sessions" / text).resolve()
+    if not (session_dir / "session.json").is_file():
+        raise FileNotFoundError(f"no session {text!r} under {base} (looked for {session_dir / 'session.json'})")
+    return LocalSession(session_dir, session_dir.parent.parent)
+

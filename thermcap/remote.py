@@ -1,0 +1,93 @@
+"""A session a thermcap server serves, read over its HTTP API (``thermcap.Client``)."""
+
+from __future__ import annotations
+
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from thermcap.recorder.radiometry.params import ModelVersion
+from thermcap.session import Frame, Session
+
+if TYPE_CHECKING:
+    import xarray as xr
+
+    from thermcap.api.reading.frame_table import FrameTable
+
+__all__ = ["RemoteSession"]
+
+
+class RemoteSession(Session):
+    """A session a thermcap server serves: frames over its HTTP API, the Dataset through its
+    Zarr endpoint (read lazily, a frame a request)."""
+
+    def __init__(self, client: Any, session_id: str) -> None:  # a thermcap.Client
+        self.client, self.id = client, session_id
+
+    @cached_property
+    def detail(self) -> Any:
+        """The session as the server describes it (one request, on first use)."""
+        return self.client.session(self.id)
+
+    @property
+    def width(self) -> int:  # type: ignore[override]
+        return int(self.detail.width)
+
+    @property
+    def height(self) -> int:  # type: ignore[override]
+        return int(self.detail.height)
+
+    @property
+    def meta(self) -> dict[str, Any]:  # type: ignore[override]
+        d = self.detail
+        return {"session_id": self.id, "width": d.width, "height": d.height, "sensor": d.sensor, "fps": d.fps,
+                "radiometric_model": d.radiometric_model}
+
+    def frame(self, index: int) -> Frame:
+        """One frame in one request (its counts, time and size come together); the sidecar is
+        fetched when asked for (``Frame.sidecar``)."""
+        if index < 0:
+            index += len(self)
+        return Frame(index, lambda: int(self.table.timestamp_ns[index]), self.counts(index),
+                     lambda: self.sidecar(index))
+
+    @cached_property
+    def table(self) -> FrameTable:
+        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
+
+        infos = list(self.client.frames(self.id))
+        fields = {}
+        for name, (_, dtype, _) in FRAME_FIELDS.items():
+            values = [getattr(f, name) for f in infos]
+            fields[name] = np.array([np.nan if v is None else v for v in values] if dtype == "<f8" else
+                                    [v or 0 for v in values], dtype=np.dtype(dtype))
+        return FrameTable(self.id, np.array([f.index for f in infos], np.int64),
+                          np.array([f.timestamp_ns for f in infos], np.int64), fields)
+
+    def counts(self, index: int) -> np.ndarray:
+        return self.client.frame_counts(self.id, index)
+
+    def sidecar(self, index: int) -> dict[str, Any]:
+        return self.client.frame_metadata(self.id, index)
+
+    @property
+    def events(self) -> list[dict[str, Any]]:
+        return self.client.events(self.id)
+
+    @property
+    def model_versions(self) -> list[ModelVersion]:
+        return self.client.model_versions(self.id)
+
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
+        import xarray as xr
+
+        if model_version is not None:
+            latest = max((v.version for v in self.model_versions), default=0)
+            if model_version != latest:
+                raise ValueError(f"model version {model_version}: the server's Zarr store gives the latest "
+                                 f"({latest}); compute others from `counts` with thermcap.open on the data root")
+        # the store's own chunks (a frame each): dask fetches them concurrently, chunk_frames unused
+        return xr.open_zarr(self.client.zarr_url(self.id), storage_options={"headers": self.client.headers})
+
+
