@@ -5,7 +5,9 @@ A comment just before a block changes how it runs:
 - ``<!-- docs: background URL -->`` starts it in the background and waits until URL answers
   (the block's server), stopping it when the page is done;
 - ``<!-- docs: skip REASON -->`` leaves it out, with REASON (a real camera, a vehicle, a bucket
-  of your own): the report counts these.
+  of your own): the report counts these;
+- ``<!-- docs: samples -->``: the block reads real camera files from ``$THERMCAP_SAMPLES``; it
+  runs where they are, and the page is skipped, saying how to get them, where they are not.
 
 ``pip install`` lines are not run: the tests run in the environment that installed them.
 """
@@ -22,6 +24,8 @@ from pathlib import Path
 
 import httpx
 import pytest
+
+from tests.conftest import SAMPLES, SAMPLES_HOW
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
@@ -77,6 +81,9 @@ def test_page_runs(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) 
     monkeypatch.delenv("THERMCAP_ROOT", raising=False)
     monkeypatch.setenv("MPLBACKEND", "Agg")
     env = {k: v for k, v in os.environ.items() if k != "THERMCAP_ROOT"}
+    env["THERMCAP_SAMPLES"] = str(SAMPLES)
+    if any(b.mark == "samples" for b in blocks(page)) and not SAMPLES.is_dir():
+        pytest.skip(f"{page.name} reads real camera files, not present at {SAMPLES}: {SAMPLES_HOW}")
     background: list[subprocess.Popen] = []
     namespace: dict = {"__name__": "__docs__"}
     skipped = []
@@ -120,4 +127,4 @@ def test_every_skip_says_why() -> None:
         for b in blocks(page):
             if b.mark == "skip":
                 assert b.arg and len(b.arg) > 10, f"{b.where()}: a skip needs its reason"
-            assert b.mark in (None, "skip", "background"), f"{b.where()}: unknown mark {b.mark!r}"
+            assert b.mark in (None, "skip", "background", "samples"), f"{b.where()}: unknown mark {b.mark!r}"
