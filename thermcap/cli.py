@@ -171,8 +171,18 @@ def bench_startup_cmd(rounds: int, as_json: bool) -> None:
 def main() -> None:
     """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
     (an OSError) is one line naming the file and exit 1, never a traceback."""
+    import sys
+
     try:
         cli(prog_name="thermcap")
+    except ModuleNotFoundError as exc:
+        from thermcap.extras import missing_extra_message
+
+        command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
+        message = missing_extra_message(exc, command)
+        if message is None:
+            raise
+        fail(message)
     except ThermcapError as exc:
         fail(str(exc))
     except OSError as exc:
