@@ -8,7 +8,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CutResult", "cut_session", "parse_instant"]
+__all__ = ["CutResult", "cut_session"]
 
 
 @dataclass(frozen=True)
@@ -20,29 +20,12 @@ class CutResult:
     topics: list[str] | None
 
 
-def parse_instant(value: str | None, first_ns: int, name: str) -> int | None:
-    """An RFC 3339 time, or seconds from the session's first frame (``12.5``)."""
-    from thermcap.recorder.icd.names import parse_rfc3339
-
-    if value is None:
-        return None
-    try:
-        seconds = float(value)
-    except ValueError:
-        try:
-            return parse_rfc3339(value)
-        except ValueError as exc:
-            raise ValueError(f"--{name} {value!r}: an RFC 3339 time or seconds from the first frame ({exc})") from None
-    if not seconds >= 0 or seconds == float("inf"):
-        raise ValueError(f"--{name} {value!r}: seconds from the first frame must be 0 or more")
-    return first_ns + round(seconds * 1e9)
-
-
 def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end: str | None,
                 topics: list[str] | None) -> CutResult:
     import io
 
     from thermcap.api.reading.mcap_slice import export_mcap
+    from thermcap.recorder.cli.options import parse_instant
     from thermcap.recorder.storage.layout import SessionLayout
     from thermcap.recorder.storage.reader import session_segments
     from thermcap.session import LocalSession

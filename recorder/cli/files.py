@@ -5,10 +5,11 @@ from __future__ import annotations
 import json
 import os
 import sys
+from typing import Any
 
 import click
 
-from thermcap.recorder.cli.options import Number, fail, json_option, root_option
+from thermcap.recorder.cli.options import Number, fail, json_option, parse_instant, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import ThermcapError
 
@@ -108,6 +109,11 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
                    "default: the latest covering each frame; 0: as recorded).")
 @click.option("--bad-pixels", type=click.Choice(["nan", "keep"]), default="nan", show_default=True,
               help="The session's bad pixels: NaN (no temperature; magenta in pictures) or kept as measured.")
+@click.option("--frames", "frame_range", default=None, metavar="START:END",
+              help="Only frames START..END-1 (numbers from 0; either side may be left out).")
+@click.option("--start", default=None, metavar="TIME", help="Only frames from this time: RFC 3339, or seconds "
+                                                            "from the first frame.")
+@click.option("--end", default=None, metavar="TIME", help="Only frames before this time; as --start.")
 @click.option("--allow-approximate", is_flag=True,
               help="Export temperatures a model only approximates (DJI without its SDK), marked APPROXIMATE in "
                    "each file's name, band description and metadata; refused otherwise.")
@@ -115,7 +121,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
 def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary: str | None, palette: str,
                range_mode: str, t_min: float | None, t_max: float | None, crs: str | None,
                ground_elevation: float | None, dem: str | None, truth: str | None, match_radius: float, colorbar: bool,
-               model_version: int | None, bad_pixels: str, allow_approximate: bool, as_json: bool) -> None:
+               model_version: int | None, bad_pixels: str, frame_range: str | None, start: str | None,
+               end: str | None, allow_approximate: bool, as_json: bool) -> None:
     """Export frames as temperature TIFFs, heatmap PNGs, ICD TIFF+JSON pairs or rebuilt DJI R-JPEGs (and a summary)."""
     from thermcap.recorder.exports.files import export_session
     from thermcap.recorder.storage.reader import resolve_session
@@ -124,11 +131,12 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         d = resolve_session(session, root)
         if t_min is not None and t_max is not None and range_mode == "session":
             range_mode = "fixed"  # --min and --max alone mean a fixed scale
+        select = _selection(d, frame_range, start, end)
         res = export_session(d, kind, out_dir or d / "export" / kind, summary=summary, palette_name=palette,
                              range_mode=range_mode, t_min=t_min, t_max=t_max, colorbar=colorbar,
                              crs=crs or "4326", ground_elevation_m=ground_elevation, truth=truth,
                              match_radius_m=match_radius, dem=dem, model_version=model_version,
-                             bad_pixels=bad_pixels, allow_approximate=allow_approximate)
+                             bad_pixels=bad_pixels, allow_approximate=allow_approximate, select=select)
     except ThermcapError as exc:
         fail(str(exc))
     click.echo(json.dumps(res, indent=2) if as_json else
@@ -144,6 +152,32 @@ def export_cmd(session: str, root: str, kind: str, out_dir: str | None, summary:
         sys.exit(1)
 
 
+
+
+def _selection(session_dir: Any, frame_range: str | None, start: str | None, end: str | None) -> Any:
+    """--frames, --start and --end as a FrameSelection; a malformed one is a ThermcapError."""
+    from thermcap.recorder.exports.files import FrameSelection
+    from thermcap.recorder.storage.reader import iter_session_frames
+
+    first = stop = None
+    if frame_range is not None:
+        a, sep, b = frame_range.partition(":")
+        try:
+            first, stop = (int(a) if a else None), (int(b) if b else None)
+        except ValueError:
+            raise ThermcapError(f"--frames {frame_range!r}: use START:END, frame numbers from 0") from None
+        if not sep or (first is not None and first < 0) or (stop is not None and first is not None and stop <= first):
+            raise ThermcapError(f"--frames {frame_range!r}: use START:END with 0 <= START < END")
+    t0 = t1 = None
+    if start is not None or end is not None:
+        first_ns = next((f.log_time for f in iter_session_frames(session_dir)), 0)
+        try:
+            t0, t1 = parse_instant(start, first_ns, "start"), parse_instant(end, first_ns, "end")
+        except ValueError as exc:
+            raise ThermcapError(str(exc)) from None
+        if t0 is not None and t1 is not None and t1 <= t0:
+            raise ThermcapError("--end must be after --start")
+    return FrameSelection(first, stop, t0, t1)
 
 
 @cli.command("radiometry")

@@ -68,3 +68,22 @@ PORT = Number(minimum=0, maximum=65535, integer=True)
 
 def port_option(*names: str, default: int, help: str) -> Callable[[F], F]:
     return click.option(*names, type=PORT, default=default, show_default=True, help=help)
+
+
+def parse_instant(value: str | None, first_ns: int, name: str) -> int | None:
+    """An RFC 3339 time, or seconds from the session's first frame (``12.5``): what ``--start``
+    and ``--end`` take in ``cut`` and ``export``."""
+    from thermcap.recorder.icd.names import parse_rfc3339
+
+    if value is None:
+        return None
+    try:
+        seconds = float(value)
+    except ValueError:
+        try:
+            return parse_rfc3339(value)
+        except ValueError as exc:
+            raise ValueError(f"--{name} {value!r}: an RFC 3339 time or seconds from the first frame ({exc})") from None
+    if not seconds >= 0 or seconds == float("inf"):
+        raise ValueError(f"--{name} {value!r}: seconds from the first frame must be 0 or more")
+    return first_ns + round(seconds * 1e9)

@@ -15,7 +15,7 @@ from __future__ import annotations
 import csv
 import json
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,6 +35,28 @@ from thermcap.recorder.radiometry.session import APPROXIMATE_NOTE, SessionTemper
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
+
+@dataclass(frozen=True)
+class FrameSelection:
+    """Which frames an export takes: frame numbers [first, stop) and log times [start_ns, end_ns);
+    None: no bound."""
+
+    first: int | None = None
+    stop: int | None = None
+    start_ns: int | None = None
+    end_ns: int | None = None
+
+    def frames(self, session_dir: Path) -> Iterator[Any]:
+        for f in iter_session_frames(session_dir):
+            if (self.stop is not None and f.index >= self.stop) or (self.end_ns is not None
+                                                                    and f.log_time >= self.end_ns):
+                return  # frames come in order: nothing later is wanted
+            if (self.first is None or f.index >= self.first) and (self.start_ns is None
+                                                                   or f.log_time >= self.start_ns):
+                yield f
+
+
+ALL_FRAMES = FrameSelection()
 
 #: Exports of counts, not temperatures: never refused for an approximate model.
 _COUNT_KINDS = ("icd", "dji-rjpeg", "footprints")
@@ -102,7 +124,8 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                    colorbar: bool = True, crs: str = "4326", ground_elevation_m: float | None = None,
                    truth: str | Path | None = None, match_radius_m: float = 3.0,
                    dem: str | Path | None = None, model_version: int | None = None,
-                   bad_pixels: str = "nan", allow_approximate: bool = False) -> dict[str, Any]:
+                   bad_pixels: str = "nan", allow_approximate: bool = False,
+                   select: FrameSelection = ALL_FRAMES) -> dict[str, Any]:
     """``heatmap-png``: one scale for the session (default), each frame's own, or ``fixed``
     (``t_min``..``t_max`` °C); a colour bar drawn in unless ``colorbar`` is off, and the range in
     each PNG's text chunks either way.
@@ -133,17 +156,17 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                 f"export them marked APPROXIMATE")
     out.mkdir(parents=True, exist_ok=True)
     if kind == "dji-rjpeg":
-        return _export_dji(session_dir, out, on_frame)
+        return _export_dji(session_dir, out, on_frame, select)
     if kind in _MAP_KINDS:
         return _export_map(session_dir, kind, out, temps_of, sensor_id, meta, on_frame,
-                           MapOptions(crs, ground_elevation_m, dem, truth, match_radius_m))
+                           MapOptions(crs, ground_elevation_m, dem, truth, match_radius_m), select)
     vendors = _import_vendor(session_dir)
     positions = {t: p for t, v in vendors.items() if (p := _position(v)) is not None}
     if range_mode not in RANGE_MODES:
         raise ThermcapError(f"range must be one of {', '.join(RANGE_MODES)}, got {range_mode!r}")
     if range_mode == "fixed" and (t_min is None or t_max is None or t_max <= t_min):
         raise ThermcapError("a fixed range needs --min and --max, with max above min")
-    frames = list(iter_session_frames(session_dir)) if kind == "heatmap-png" else None
+    frames = list(select.frames(session_dir)) if kind == "heatmap-png" else None
     has_temps = _has_temps(model)
     session_rng: TemperatureRange | None = None
     if frames is not None and range_mode == "session":  # one colour scale for the whole session
@@ -153,7 +176,7 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
             session_rng = TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session",
                                            "°C" if has_temps else "counts")
     written, stats, refused = [], [], []
-    for f in frames if frames is not None else iter_session_frames(session_dir):
+    for f in frames if frames is not None else select.frames(session_dir):
         ft = None
         try:
             ft = temps_of.celsius(f.index, f.pixels) if kind != "icd" or summary else None
@@ -232,7 +255,8 @@ class MapOptions:
 
 def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemperatures, sensor_id: str,
                 meta: dict[str, Any],
-                on_frame: Callable[[int], None] | None, opts: MapOptions) -> dict[str, Any]:
+                on_frame: Callable[[int], None] | None, opts: MapOptions,
+                select: FrameSelection = ALL_FRAMES) -> dict[str, Any]:
     """``footprints``: one GeoJSON feature per frame whose pose places it; ``map-tiff``: each such
     frame as a °C GeoTIFF (``recorder.maps``): a drone image in its UTM zone; a TERRA-REF gantry
     image rotated and placed as the TERRA-REF pipeline does, in EPSG:4326 as it publishes (or UTM
@@ -252,7 +276,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
     refused: list[str] = []
     tiles: list[tuple[int, Any, np.ndarray]] = []  # mosaic: (frame, footprint, °C)
     frame_times: dict[int, str] = {}
-    for f in iter_session_frames(session_dir):
+    for f in select.frames(session_dir):
         h, w = f.pixels.shape
         vendor = vendors.get(f.log_time, {})
         pixels = f.pixels
@@ -357,14 +381,15 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
     return ["mosaic.tiff", "mosaic.sources.tiff", "mosaic.frames.json"]
 
 
-def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None) -> dict[str, Any]:
+def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None,
+                select: FrameSelection = ALL_FRAMES) -> dict[str, Any]:
     """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.exports.rjpeg``)."""
     from thermcap.recorder.exports.rjpeg import rebuild_rjpeg
     from thermcap.recorder.importers.dji import kept_rjpeg_segments
 
     kept = kept_rjpeg_segments(session_dir)
     written, refused = [], []
-    for f in iter_session_frames(session_dir):
+    for f in select.frames(session_dir):
         if f.log_time not in kept:
             refused.append(f"frame {f.index}: not imported from a DJI R-JPEG (no DJI segments kept)")
             continue

@@ -159,3 +159,20 @@ def test_approximate_dji_temperatures_are_refused_unless_allowed_and_then_marked
     assert 'role="description">temperature, APPROXIMATE' in gdal and "temperature_quality" in gdal
     # the counts are another matter: an ICD export of the same session is not refused
     assert run_cli("export", "m2ea", "--root", str(root), "--to", "icd", "--out", str(tmp_path / "icd")).returncode == 0
+
+
+def test_export_takes_a_frame_or_time_range(tmp_path):
+    root = tmp_path / "r"
+    assert run_cli("record", "--root", str(root), "--session", "s", "--duration", "0.5", "--width", "32",
+                   "--height", "24").returncode == 0
+    r = run_cli("export", "s", "--root", str(root), "--to", "icd", "--frames", "3:7", "--out", str(tmp_path / "a"),
+                "--json")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["files"] == 4
+    r = run_cli("export", "s", "--root", str(root), "--to", "icd", "--start", "0", "--end", "0.1",
+                "--out", str(tmp_path / "b"), "--json")
+    assert r.returncode == 0, r.stderr
+    assert 4 <= json.loads(r.stdout)["files"] <= 8  # 0.1 s at 60 fps
+    for bad in (["--frames", "7:3"], ["--frames", "x"], ["--start", "noon"], ["--start", "1", "--end", "0.5"]):
+        r = run_cli("export", "s", "--root", str(root), "--to", "icd", *bad, "--out", str(tmp_path / "c"))
+        assert r.returncode == 1 and "Traceback" not in r.stderr and ("--" in r.stderr), (bad, r.stderr)
