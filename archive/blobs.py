@@ -19,10 +19,11 @@ __all__ = ["BlobStore", "open_store", "stored_sha256", "upload_archive"]
 
 
 class BlobStore:
-    def __init__(self, store: Any, *, prefix: str = "", kind: str = "local") -> None:
+    def __init__(self, store: Any, *, prefix: str = "", kind: str = "local", url: str | None = None) -> None:
         self.store = store
         self.prefix = prefix.strip("/")
         self.kind = kind
+        self.url = url  # s3://BUCKET, where others read its objects from (reference files name it)
 
     def _key(self, key: str) -> str:
         return f"{self.prefix}/{key}" if self.prefix else key
@@ -109,7 +110,7 @@ def open_store(root: Path, *, bucket: str | None = None, endpoint: str | None = 
         for env, key in (("AWS_ACCESS_KEY_ID", "access_key_id"), ("AWS_SECRET_ACCESS_KEY", "secret_access_key")):
             if os.environ.get(env):
                 kwargs[key] = os.environ[env]
-        return BlobStore(S3Store(bucket, **kwargs), prefix=prefix, kind="s3")
+        return BlobStore(S3Store(bucket, **kwargs), prefix=prefix, kind="s3", url=f"s3://{bucket}")
     root.mkdir(parents=True, exist_ok=True)
     return BlobStore(LocalStore(str(root.resolve())), kind="local")
 
@@ -156,8 +157,41 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         keys.append(key)
         if head.get("e_tag"):
             etags[key] = str(head["e_tag"])
-    manifest["upload"] = {"complete": True, "keys": keys, "etags": etags, "at": iso_now(), "store": store.kind}
+    references = _upload_references(store, root, session_dir, [k for k in keys if k.endswith(".h5")])
+    manifest["upload"] = {"complete": True, "keys": keys, "etags": etags, "at": iso_now(), "store": store.kind,
+                          "references": references}
     save_manifest(session_dir, manifest)
     manifest_path = SessionLayout.of(session_dir).manifest
     store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)
     return keys
+
+
+def _upload_references(store: BlobStore, root: Path, session_dir: Path, h5_keys: list[str]) -> dict[str, Any]:
+    """A kerchunk reference file beside each HDF5 archive in a bucket (``archive.hdf5_refs``), so
+    xarray reads its chunks straight from S3; what could not be written is said, never fatal:
+    the archive itself is uploaded and verified."""
+    if store.kind != "s3" or not h5_keys or store.url is None:
+        return {}
+    try:
+        from thermcap.archive.hdf5_refs import REFS_SUFFIX, hdf5_references
+    except ImportError as exc:
+        return {"skipped": f"kerchunk is not installed ({exc.name}); pip install 'thermcap[python]'"}
+    import json
+    import tempfile
+
+    written: dict[str, Any] = {}
+    for key in h5_keys:
+        path = root / key
+        try:
+            refs = hdf5_references(path, f"{store.url}/{store._key(key)}")
+        except Exception as exc:  # the archive stands without its references
+            written[key] = {"error": f"{type(exc).__name__}: {exc}"}
+            continue
+        with tempfile.NamedTemporaryFile("w", suffix=".json", delete=False) as tmp:
+            json.dump(refs, tmp)
+        try:
+            store.put_file(key + REFS_SUFFIX, Path(tmp.name))
+        finally:
+            Path(tmp.name).unlink(missing_ok=True)
+        written[key] = {"references": key + REFS_SUFFIX}
+    return written

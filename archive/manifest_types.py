@@ -87,6 +87,7 @@ class UploadBlock(TypedDict, total=False):
     at: str
     store: str
     damaged: dict[str, str]
+    references: dict[str, Any]  # h5 key -> its kerchunk reference file beside it (archive.hdf5_refs), or why not
 
 
 class Manifest(TypedDict, total=False):
