@@ -4,6 +4,7 @@ HDF5 archive, and stock xarray reads the frames' chunks straight from S3 (Seawee
 from __future__ import annotations
 
 import json
+import uuid
 
 import numpy as np
 import pytest
@@ -20,7 +21,9 @@ def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweed
     import xarray as xr
 
     root = make_root(tmp_path / "root")
+    prefix = f"refs-{uuid.uuid4().hex[:12]}"  # the bucket is shared with other tests' sessions of this name
     env = {"THERMCAP_S3_BUCKET": seaweedfs["bucket"], "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"],
+           "THERMCAP_S3_PREFIX": prefix,
            "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
            "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
     r = run_cli("upload", "s-archived", "--root", str(root), "--json", env=env)
@@ -34,7 +37,7 @@ def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweed
     imagecodecs.numcodecs.register_codecs()  # the frames' SZIP chunks
     ds = xr.open_dataset("reference://", engine="zarr", backend_kwargs={
         "consolidated": False,
-        "storage_options": {"fo": f"s3://{seaweedfs['bucket']}/{refs_key}", "target_options": s3,
+        "storage_options": {"fo": f"s3://{seaweedfs['bucket']}/{prefix}/{refs_key}", "target_options": s3,
                             "remote_protocol": "s3", "remote_options": {**s3, "asynchronous": True}}})
     frames = list(iter_session_frames(root / "sessions" / "s-archived"))
     assert ds.frames.dtype == np.uint16
