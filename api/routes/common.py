@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import base64
 import json
-from typing import Annotated, Any
+from collections.abc import Callable, Hashable
+from typing import Annotated, Any, TypeVar
 
 from fastapi import HTTPException, Query, Request
 from sqlalchemy import bindparam, select
@@ -19,6 +20,8 @@ __all__ = ["CelsiusQuery", "FrameModel", "decode_cursor", "encode_cursor", "fram
 
 #: Built once: building ``select(...).where(...)`` costs more than running it (SQLAlchemy coerces
 #: every operand), and every frame request looks its session up.
+T = TypeVar("T")
+
 _SESSION_ROW = select(db.sessions).where(db.sessions.c.id == bindparam("session_id"))
 
 #: A temperature from a query string: finite and physical, or a 422 naming it (NaN had reached
@@ -78,20 +81,28 @@ class FrameModel:
             raise HTTPException(409, str(exc)) from None
 
 
+def kept(request: Request, name: str, key: Hashable, build: Callable[[], T], keep: int = 256) -> T:
+    """``build()``, computed once per ``key`` and kept on the application under ``name``, at most
+    ``keep`` of them (a full cache is dropped whole: the next requests rebuild what they use)."""
+    cache: dict[Hashable, Any] = request.app.state.__dict__.setdefault(name, {})
+    if key not in cache:
+        if len(cache) >= keep:
+            cache.clear()
+        cache[key] = build()
+    return cache[key]
+
+
 def _bad_pixels(request: Request, row: dict[str, Any], session_dir: Any) -> Any:
     """The session's bad-pixel map, read once per indexed state of the session (its fingerprint)."""
     from thermcap.recorder.radiometry.session import read_bad_pixel_map
 
-    cache = request.app.state.__dict__.setdefault("bad_pixel_maps", {})
-    key = (row["id"], row.get("fingerprint"))
-    if key not in cache:
-        if len(cache) > 256:
-            cache.clear()
+    def read() -> Any:
         try:
-            cache[key] = read_bad_pixel_map(session_dir)
+            return read_bad_pixel_map(session_dir)
         except Exception:  # the folder is gone (served from a bucket): no map to apply
-            cache[key] = None
-    return cache[key]
+            return None
+
+    return kept(request, "bad_pixel_maps", (row["id"], row.get("fingerprint")), read)
 
 
 def frame_model(request: Request, row: dict[str, Any], frame: int) -> tuple[Any, dict[str, Any]]:

@@ -10,7 +10,7 @@ import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
 from thermcap.api.http_conventions import etag_matches
-from thermcap.api.routes.common import CelsiusQuery, FrameModel, session_row
+from thermcap.api.routes.common import CelsiusQuery, FrameModel, kept, session_row
 from thermcap.api.security import require
 from thermcap.archive.codecs import get_codec
 from thermcap.recorder.exports.colorbar import TemperatureRange
@@ -104,19 +104,17 @@ def _session_range(request: Request, row: dict, model) -> TemperatureRange | Non
     """One scale for a whole session: the widest 0.5..99.5 percentiles of 16 frames spread over
     it, computed once per session and model (a re-parameterised model has its own scale) and
     kept, up to a bound."""
-    cache = request.app.state.__dict__.setdefault("session_ranges", {})
-    key = (row["id"], row["frames"], model)  # models are frozen dataclasses: hashable, compared by value
-    if key not in cache:
-        if len(cache) >= 256:
-            cache.clear()
+    def measure() -> TemperatureRange | None:
         reader = request.app.state.frames
         picks = sorted({int(i) for i in np.linspace(0, row["frames"] - 1, num=min(16, row["frames"]))})
         try:
             parts = [frame_range(celsius(reader.pixels(row["id"], i), model)) for i in picks]
         except TemperatureUnavailable:
             return None
-        cache[key] = TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session")
-    return cache[key]
+        return TemperatureRange(min(p.lo for p in parts), max(p.hi for p in parts), "session")
+
+    # models are frozen dataclasses: hashable, compared by value
+    return kept(request, "session_ranges", (row["id"], row["frames"], model), measure)
 
 
 @router.get("/{n}/metadata")

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from thermcap.api.reading.frame_table import FrameTable, read_frame_table
 from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
-from thermcap.api.routes.common import FrameModel, session_row
+from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
 
 __all__ = ["router"]
@@ -21,20 +21,19 @@ router = APIRouter(prefix="/api/v1/sessions/{session_id}/zarr", tags=["zarr"],
 _CACHE = {"Cache-Control": "private, max-age=3600"}
 
 
-def _table(request: Request, row: dict[str, Any]) -> FrameTable:
-    """The session's frame table, read once per indexed state (its fingerprint)."""
-    cache: dict = request.app.state.__dict__.setdefault("zarr_tables", {})
-    key = (row["id"], row.get("fingerprint"))
-    if key not in cache:
-        if len(cache) > 64:
-            cache.clear()
+def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str, Any]]:
+    """The session's frame table and the store's metadata documents, built once per indexed
+    state of the session (its fingerprint), not for every key a reader asks for."""
+
+    def build() -> tuple[FrameTable, dict[str, Any]]:
         table = read_frame_table(request.app.state.engine, row["id"])
         if not np.array_equal(table.index, np.arange(len(table))):
             # chunk i is frame i (the frame fast path serves counts chunks by that number)
             raise HTTPException(409, f"session {row['id']}: its index numbers frames with gaps; "
                                      f"`thermcap index --force` rebuilds it")
-        cache[key] = table
-    return cache[key]
+        return table, _metadata(row, table)
+
+    return kept(request, "zarr_stores", (row["id"], row.get("fingerprint")), build, keep=64)
 
 
 def _metadata(row: dict[str, Any], table: FrameTable) -> dict[str, Any]:
@@ -52,8 +51,7 @@ _KEY_RESPONSES: dict[int | str, dict] = {200: {"content": {"application/json": {
 def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     """A key of the store: a metadata document (JSON) or a chunk (raw little-endian bytes)."""
     row = session_row(request, session_id)
-    table = _table(request, row)
-    meta = _metadata(row, table)
+    table, meta = _store(request, row)
     if key in meta:
         return Response(dumps(meta[key]), media_type="application/json")
     chunk = parse_chunk_key(key)
