@@ -43,8 +43,8 @@ def hdf5_references(path: Path, url: str) -> dict[str, Any]:
         if "frames/.zarray" in table or d.compression != "szip":
             return refs
         plist = d.id.get_create_plist()
-        flags, _, values, _name = next(plist.get_filter(i) for i in range(plist.get_nfilters())
-                                       if plist.get_filter(i)[3] == b"szip")
+        values = next(plist.get_filter(i)[2] for i in range(plist.get_nfilters())
+                      if plist.get_filter(i)[3] == b"szip")  # (flags, options, client values, name)
         options_mask, pixels_per_block, bits_per_pixel, pixels_per_scanline = values
         n, h, w = d.shape
         table["frames/.zarray"] = json.dumps({
@@ -63,5 +63,4 @@ def hdf5_references(path: Path, url: str) -> dict[str, Any]:
                 raise ValueError(f"{path}: chunk {k} skipped a filter; not referenced")
             i = info.chunk_offset[0] // d.chunks[0]
             table[f"frames/{i}.0.0"] = [url, int(info.byte_offset), int(info.size)]
-    del flags
     return refs

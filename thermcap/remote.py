@@ -54,14 +54,10 @@ class RemoteSession(Session):
 
     @cached_property
     def table(self) -> FrameTable:
-        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
+        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable, field_array
 
         infos = list(self.client.frames(self.id))
-        fields = {}
-        for name, (_, dtype, _) in FRAME_FIELDS.items():
-            values = [getattr(f, name) for f in infos]
-            fields[name] = np.array([np.nan if v is None else v for v in values] if dtype == "<f8" else
-                                    [v or 0 for v in values], dtype=np.dtype(dtype))
+        fields = {name: field_array(name, [getattr(f, name) for f in infos]) for name in FRAME_FIELDS}
         return FrameTable(self.id, np.array([f.index for f in infos], np.int64),
                           np.array([f.timestamp_ns for f in infos], np.int64), fields)
 

@@ -7,7 +7,9 @@ costs one query however many frames there are.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from sqlalchemy import select
@@ -15,7 +17,7 @@ from sqlalchemy.engine import Engine
 
 from thermcap.api import db
 
-__all__ = ["FRAME_FIELDS", "FrameTable", "read_frame_table"]
+__all__ = ["FRAME_FIELDS", "FrameTable", "field_array", "read_frame_table"]
 
 #: The per-frame sidecar summaries offered as coordinates: name -> (index column, dtype, what it is).
 FRAME_FIELDS: dict[str, tuple[str, str, str]] = {
@@ -37,17 +39,20 @@ class FrameTable:
         return len(self.index)
 
 
+def field_array(name: str, values: Sequence[Any]) -> np.ndarray:
+    """A FRAME_FIELDS column as its array: a missing float is NaN (not graded, no target), a
+    missing count or flag is 0 / False."""
+    dtype = FRAME_FIELDS[name][1]
+    if dtype == "<f8":
+        return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
+    return np.array([v or 0 for v in values], dtype=np.dtype(dtype))
+
+
 def read_frame_table(engine: Engine, session_id: str) -> FrameTable:
     f = db.frames.c
     cols = [f.idx, f.timestamp_ns, *(getattr(f, col) for col, _, _ in FRAME_FIELDS.values())]
     with engine.connect() as conn:
         rows = conn.execute(select(*cols).where(f.session_id == session_id).order_by(f.idx)).all()
     columns = list(zip(*rows, strict=True)) if rows else [() for _ in cols]
-    fields = {}
-    for k, (name, (_, dtype, _)) in enumerate(FRAME_FIELDS.items()):
-        values = columns[2 + k]
-        if dtype == "<f8":
-            fields[name] = np.array([np.nan if v is None else v for v in values], dtype=np.float64)
-        else:
-            fields[name] = np.array([v or 0 for v in values], dtype=np.dtype(dtype))
+    fields = {name: field_array(name, columns[2 + k]) for k, name in enumerate(FRAME_FIELDS)}
     return FrameTable(session_id, np.array(columns[0], dtype=np.int64), np.array(columns[1], dtype=np.int64), fields)
