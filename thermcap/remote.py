@@ -79,10 +79,15 @@ class RemoteSession(Session):
         import xarray as xr
 
         if model_version is not None:
-            latest = max((v.version for v in self.model_versions), default=0)
-            if model_version != latest:
-                raise ValueError(f"model version {model_version}: the server's Zarr store gives the latest "
-                                 f"({latest}); compute others from `counts` with thermcap.open on the data root")
+            # the server's store gives each frame the latest version covering it: that is one
+            # version for the whole session only when the latest covers every frame
+            versions = self.model_versions
+            latest = max(versions, key=lambda v: v.version, default=None)
+            whole = latest is None or latest.frames is None
+            if model_version != (latest.version if latest else 0) or not whole:
+                raise ValueError(f"model version {model_version}: the server's Zarr store gives each frame the "
+                                 f"latest version covering it (pass model_version=None for that); compute other "
+                                 f"versions from `counts` with thermcap.open on the data root")
         # the store's own chunks (a frame each): dask fetches them concurrently, chunk_frames unused
         return xr.open_zarr(self.client.zarr_url(self.id), storage_options={"headers": self.client.headers})
 
