@@ -168,6 +168,22 @@ def bench_startup_cmd(rounds: int, as_json: bool) -> None:
                    f"ratio {r['ratio']:.2f}x  (goal {r['goal']})")
 
 
+def _command_named(args: list[str]) -> str | None:
+    """The subcommand in a command line: the first word that is neither an option of the root
+    group nor the value of one (``thermcap --config f.toml serve`` -> ``serve``)."""
+    takes_value = {o for p in cli.params if isinstance(p, click.Option) and not p.is_flag and not p.count
+                   for o in p.opts}
+    skip = False
+    for a in args:
+        if skip:
+            skip = False
+        elif a in takes_value:
+            skip = True
+        elif not a.startswith("-"):
+            return a
+    return None
+
+
 def main() -> None:
     """The console entry point: an error thermcap expected (a ThermcapError) or one from the disk
     (an OSError) is one line naming the file and exit 1, never a traceback."""
@@ -178,8 +194,7 @@ def main() -> None:
     except ModuleNotFoundError as exc:
         from thermcap.extras import missing_extra_message
 
-        command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-        message = missing_extra_message(exc, command)
+        message = missing_extra_message(exc, _command_named(sys.argv[1:]))
         if message is None:
             raise
         fail(message)

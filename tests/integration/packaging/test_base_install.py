@@ -64,3 +64,10 @@ def test_a_command_missing_its_extra_says_which(tmp_path, args, extra):
     r = _base(*[a.format(root=root) for a in args], cwd=tmp_path)
     assert r.returncode == 1, r.stderr
     assert f"pip install 'thermcap[{extra}]'" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_the_message_names_the_command_after_root_options(tmp_path):
+    config = tmp_path / "thermcap.toml"
+    config.write_text("")
+    r = _base("--config", str(config), "serve", "--root", str(tmp_path), "--port", "0", cwd=tmp_path)
+    assert r.returncode == 1 and "`thermcap serve` needs" in r.stderr, r.stderr
