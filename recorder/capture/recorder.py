@@ -54,7 +54,7 @@ from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, de
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
-from thermcap.recorder.storage.segments import SegmentPolicy, SessionWriter, write_json_atomic
+from thermcap.recorder.storage.segments import DiskStalled, SegmentPolicy, SessionWriter, write_json_atomic
 
 if TYPE_CHECKING:
     from thermcap.recorder.live.branch import LiveBranch
@@ -247,6 +247,7 @@ class Recorder:
         self._interval_latency = LatencyHistogram()
         self._stop = threading.Event()
         self._writer_error: str | None = None
+        self._disk_stalled = False  # fsync stopped answering: the last writes cannot wait for it
         self._unavailable_why: str | None = None
         self._stop_seen = False  # the writer took every capture thread's stop token
         self._signals = 0
@@ -479,7 +480,7 @@ class Recorder:
             lost_on_disk = max(0, self.counters.frames_written - written)
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
-                              {"session_id": self.session_id, "events": events})
+                              {"session_id": self.session_id, "events": events}, fsync=not self._disk_stalled)
         with contextlib.suppress(OSError):  # a full disk: `thermcap layout` writes it again
             write_layout(self.session_dir, {f.name: f.counts_range.bounds() for f in self.feeds})
         result = RecordingResult(
@@ -504,7 +505,7 @@ class Recorder:
             summary["cameras"] = {str(f.name): {**meta["cameras"][str(f.name)], **result.cameras[str(f.name)],
                                                 "pauses": f.pauses} for f in self.feeds}
         try:
-            write_json_atomic(SessionLayout.of(self.session_dir).session_json, summary)
+            write_json_atomic(SessionLayout.of(self.session_dir).session_json, summary, fsync=not self._disk_stalled)
         except OSError as exc:
             result.error = result.error or f"cannot write session summary: {exc.strerror or exc}"
         lock.release()
@@ -697,6 +698,7 @@ class Recorder:
             session.close()
         except RecordingError as exc:
             self._writer_error = str(exc)
+            self._disk_stalled = isinstance(exc, DiskStalled)
             self._abort(session, running)
         except Exception as exc:
             self._writer_error = f"writer failed: {type(exc).__name__}: {exc}"

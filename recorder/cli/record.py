@@ -48,6 +48,10 @@ EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the sam
               help="Simulator: seconds between radar cues (0: none).")
 @click.option("--segment-duration", type=Number(minimum=0, unit="s"), default=60.0, show_default=True,
               help="Rotate segments after this many seconds.")
+@click.option("--settle-timeout", type=Number(minimum=0, above=True, maximum=86_400, unit="s"), default=60.0,
+              show_default=True,
+              help="At the end, wait this long for the disk to confirm the last segments (fsync); past it the "
+                   "recorder exits 1 naming them, and `thermcap recover` finishes them once the disk answers.")
 @click.option("--segment-size", type=Number(minimum=0, unit="MiB"), default=4096.0, show_default=True,
               help="Rotate segments after this many MiB.")
 @click.option("--compression", type=click.Choice(["auto", "zstd", "lz4", "none"]), default="auto", show_default=True,
@@ -102,7 +106,8 @@ EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the sam
 def record(sources: tuple[str, ...], duration: float | None, fps: float, width: int, height: int, sensor_id: str | None,
            root: str, session_id: str | None, pace: bool | None, timestamps: str, seed: int, crossover: bool,
            cue_period: float,
-           segment_duration: float, segment_size: float, compression: str, level: int | None, queue_frames: int,
+           segment_duration: float, settle_timeout: float,
+           segment_size: float, compression: str, level: int | None, queue_frames: int,
            analysis: bool, ring: bool, max_disk: str | None, min_free: str | None, evict_only_synced: bool,
            max_protected: str | None, keep_events: bool,
            pre_s: float, post_s: float,
@@ -163,7 +168,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             check_level(comp, level)
         policy = SegmentPolicy(max_duration_s=segment_duration or None,
                                max_bytes=int(segment_size * 1024 * 1024) if segment_size else None,
-                               compression=comp, compression_level=default_level if level is None else level)
+                               compression=comp, compression_level=default_level if level is None else level,
+                               settle_timeout_s=settle_timeout)
         if (max_disk or min_free or max_protected or keep_events) and not ring:
             raise click.BadParameter("--max-disk, --min-free, --max-protected and --keep-events need --ring")
         ring_policy = RingPolicy.parse(max_disk, min_free, pre_s, post_s, evict_only_synced, max_protected,

@@ -21,12 +21,14 @@ from __future__ import annotations
 
 import json
 import os
+import queue
 import socket
 import threading
 import time
 from collections import deque
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -49,8 +51,8 @@ from thermcap.recorder.storage.layout import ACTIVE_SUFFIX
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
 from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
-__all__ = ["ACTIVE_SUFFIX", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir", "segment_name",
-           "write_json_atomic"]
+__all__ = ["ACTIVE_SUFFIX", "DiskStalled", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir",
+           "segment_name", "write_json_atomic"]
 
 SEGMENT_STATS_METADATA = "thermcap.segment"
 SESSION_METADATA = "thermcap.session"
@@ -72,21 +74,25 @@ def fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
-    """Write JSON to a temporary name, fsync, rename: a reader sees the old file or the new one."""
+def write_json_atomic(path: Path, data: Any, *, fsync: bool = True) -> None:
+    """Write JSON to a temporary name, fsync, rename: a reader sees the old file or the new one.
+    ``fsync=False`` only where the disk is known not to answer fsync: the rename still makes the
+    new file whole for every reader, only its surviving a power cut is not promised."""
     tmp = path.with_name(path.name + ".tmp")
     try:
         with open(tmp, "w") as f:
             json.dump(data, f, indent=2, sort_keys=False)
             f.write("\n")
             f.flush()
-            os.fsync(f.fileno())
+            if fsync:
+                os.fsync(f.fileno())
         os.replace(tmp, path)
     except BaseException:  # a full disk: the old file stays, and no empty .tmp is left beside it
         with suppress(OSError):
             tmp.unlink(missing_ok=True)
         raise
-    fsync_dir(path.parent)
+    if fsync:
+        fsync_dir(path.parent)
 
 
 def auto_compression(width: int, height: int, fps: float) -> tuple[Compression, int]:
@@ -110,6 +116,9 @@ class SegmentPolicy:
     max_chunk_age_s: float = 0.25
     workers: int = 2
     fsync_interval_s: float = 1.0
+    # How long a clean close waits for the disk to confirm its closed segments: a disk whose
+    # fsync never returns (a lost NFS mount, a dying card) must not hold the recorder's exit.
+    settle_timeout_s: float = 60.0
 
 
 @dataclass
@@ -160,9 +169,49 @@ class _Syncer(threading.Thread):
             finally:
                 os.close(fd)
 
-    def stop(self) -> None:
+    def stop(self, timeout_s: float | None = None) -> None:
+        """Stop; a thread stuck in an fsync that never returns is left behind (a daemon)."""
         self._halt.set()
-        self.join()
+        self.join(timeout_s)
+
+
+class _SettlingThread:
+    """One daemon thread running settles in order. Not a ThreadPoolExecutor: its workers are
+    joined at interpreter exit, so one fsync that never returns would keep the process alive
+    for ever after the recorder has said what it could not confirm."""
+
+    def __init__(self) -> None:
+        self._jobs: queue.SimpleQueue[tuple[Callable[..., None], tuple[Any, ...], Future[None]] | None] = \
+            queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name="segment-settle", daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while (job := self._jobs.get()) is not None:
+            fn, args, future = job
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                fn(*args)
+            except BaseException as exc:
+                future.set_exception(exc)
+            else:
+                future.set_result(None)
+
+    def submit(self, fn: Callable[..., None], *args: Any) -> Future[None]:
+        future: Future[None] = Future()
+        self._jobs.put((fn, args, future))
+        return future
+
+    def shutdown(self, timeout_s: float | None) -> bool:
+        """Let the queued settles finish within ``timeout_s``; True if they did."""
+        self._jobs.put(None)
+        self._thread.join(timeout_s)
+        return not self._thread.is_alive()
+
+
+class DiskStalled(RecordingError):
+    """Closed segments the disk has not confirmed (fsync has not returned) within the deadline."""
 
 
 class _Settling(NamedTuple):
@@ -206,8 +255,9 @@ class SessionWriter:
         self._syncer = _Syncer(self.policy.fsync_interval_s) if self.policy.fsync_interval_s > 0 else None
         if self._syncer:
             self._syncer.start()
-        self._settler: ThreadPoolExecutor | None = ThreadPoolExecutor(1, thread_name_prefix="segment-settle")
+        self._settler: _SettlingThread | None = _SettlingThread()
         self._settling: deque[_Settling] = deque()
+        self._stalled = False  # a settle outlived its deadline: nothing more is waited for
         self._next_index = self._first_free_index()
 
     def _first_free_index(self) -> int:
@@ -336,9 +386,22 @@ class SessionWriter:
         now = time.monotonic()
         return [(s.name, now - s.since) for s in list(self._settling) if not s.future.done()]
 
-    def settle(self) -> None:
-        """Wait until every closed segment has its final name (raises its error if one failed)."""
-        self._reap(keep=0)
+    def settle(self, timeout_s: float | None = None) -> None:
+        """Wait until every closed segment has its final name (raises its error if one failed);
+        past ``timeout_s``, raise DiskStalled naming the segments still waiting."""
+        deadline = None if timeout_s is None else time.monotonic() + timeout_s
+        while self._settling:
+            left = None if deadline is None else max(0.0, deadline - time.monotonic())
+            try:
+                self._settling[0].future.result(timeout=left)
+            except FutureTimeout:
+                self._stalled = True
+                waiting = [name for name, _ in self.settling()]
+                raise DiskStalled(
+                    f"the disk has not confirmed {', '.join(waiting)} in {self.dir} after {timeout_s:g} s (fsync "
+                    f"has not returned): their frames are written, complete in the .active files, but may not "
+                    f"survive a power cut; once the disk answers, run `thermcap recover {self.dir}`") from None
+            self._settling.popleft()
 
     def _maybe_rotate(self, log_time: int, incoming: int) -> None:
         info = self.current
@@ -425,11 +488,11 @@ class SessionWriter:
             raise RecordingError(f"fsync of {self.dir} failed: {err.strerror or err}")
 
     def close(self) -> None:
-        """Close the open segment cleanly, wait until every segment has its final name, and stop
-        the helper threads."""
+        """Close the open segment cleanly, wait until every segment has its final name (at most
+        the policy's settle timeout), and stop the helper threads."""
         try:
             self.close_segment()
-            self.settle()
+            self.settle(self.policy.settle_timeout_s)
         finally:
             self.shutdown()
 
@@ -443,12 +506,15 @@ class SessionWriter:
         self.shutdown()
 
     def shutdown(self) -> None:
+        """Stop the helper threads; settles still queued get the policy's settle timeout, and a
+        thread stuck in fsync past it is left behind rather than waited for."""
+        timeout = 0.0 if self._stalled else self.policy.settle_timeout_s
         if self._settler:
-            self._settler.shutdown(wait=True)
+            self._settler.shutdown(timeout)
             self._settler = None
             self._settling.clear()
         if self._syncer:
-            self._syncer.stop()
+            self._syncer.stop(timeout)
             self._syncer = None
         if self._executor:
             self._executor.shutdown(wait=True)
