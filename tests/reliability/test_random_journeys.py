@@ -2,9 +2,10 @@
 drawn by hypothesis's stateful testing, with one invariant checked after every step.
 
 Steps: record (in-process, and a real ``thermcap record`` killed with SIGKILL once a segment has
-closed), recover (a session or one file), archive (a random set of formats, with or without
-``--delete-source``), scrub (with and without ``--repair``), verify, gc, sync to a folder depot
-with the depot's receipts and ``--delete-confirmed``, serve and read every frame over the API.
+closed), ring recording within a budget with and without a mark, recover (a session or one
+file), archive (a random set of formats, with or without ``--delete-source``), scrub (with and
+without ``--repair``), verify, gc, sync to a folder depot with the depot's receipts and
+``--delete-confirmed``, serve and read every frame over the API.
 Faults: flip a byte in, truncate or remove an archive file or a segment.
 
 The model is what exists: for every frame ever seen, its pixels' sha256 (the truth), and after
@@ -186,6 +187,37 @@ class Journeys(RuleBasedStateMachine):
         self.command_done("record")
         written = {k for k in self.readable if k[0] == sid}
         assert len(written) == res.frames_written == frames, (len(written), res.frames_written)
+
+    @precondition(lambda self: self.n < 8)
+    @rule(frames=st.integers(60, 200), mark=st.booleans(), window_s=st.sampled_from([0.5, 1e8]))
+    def ring_record(self, frames: int, mark: bool, window_s: float) -> None:
+        """Always-on recording in a budget a little above what the root holds: it must evict
+        (its own older segments, or an earlier ring session's), log every eviction, keep
+        recording through a protected window (past its share the window expires, logged), and
+        write every frame it was given."""
+        from thermcap.recorder.capture.recorder import Recorder
+        from thermcap.recorder.capture.sources.sim import SimSource
+        from thermcap.recorder.storage.ring import RingPolicy, disk_usage, read_eviction_log
+        from thermcap.recorder.storage.segments import SegmentPolicy
+
+        self.step("ring_record")
+        self.n += 1
+        sid = f"s{self.n}"
+        budget = (disk_usage(self.root) if self.root.is_dir() else 0) + 80_000
+        ring = RingPolicy(max_disk=budget, pre_s=window_s, post_s=window_s, interval_s=0.02)
+        rec = Recorder(SimSource(width=W, height=H, frames=frames, paced=False, seed=self.n, cue_period_s=0,
+                                 start_time_ns=1_800_000_000_000_000_000 + self.n * 10**12),
+                       self.root, session_id=sid, analysis=False, recover_leftovers=False,
+                       policy=SegmentPolicy(max_duration_s=0.1, chunk_size=8 << 10), ring=ring)
+        if mark:
+            rec.mark("journey")
+        res = rec.run()
+        assert res.error is None, res.error
+        assert res.frames_written == res.frames_captured == frames and res.frames_dropped == 0, res
+        self.command_done("ring_record")
+        kept = sum(1 for k in self.readable if k[0] == sid)
+        evicted = sum(e["frames"] for e in read_eviction_log(self.root) if e.get("session") == sid)
+        assert kept + evicted == frames, (kept, evicted, frames)
 
     @precondition(lambda self: self.n < 6)
     @rule()
