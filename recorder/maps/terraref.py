@@ -7,8 +7,13 @@ sensor's ``rail_height_offset``; the bounds' corners go from scanalyzer coordina
 y west) to UTM zone 12N by the published linear transform (``scanalyzer_to_utm``), then to
 latitude and longitude, with the pipeline's fixed shift. The pipeline rotates the raw 480x640
 image with ``numpy.rot90(raw, 3)`` before writing (extractors-multispectral ``flir2tif``), and
-writes EPSG:4326 north-up; UTM 12N is offered too. The sensor's fixed values that the raw
-LemnaTec JSON lacks come from terraref/sensor-metadata (``sensors/flirIrCamera``).
+writes EPSG:4326 north-up. The sensor's fixed values that the raw LemnaTec JSON lacks come from
+terraref/sensor-metadata (``sensors/flirIrCamera``).
+
+One placement for every CRS: the pipeline publishes only those shifted latitude/longitude
+bounds, and where terrautils speaks UTM it projects the same bounds (``tuples_to_utm``), so the
+UTM 12N product is the published ground box projected, not the unshifted linear transform (which
+sits the fixed shift, about 2.5 m, away). Both products name this rule (``PLACEMENT``).
 """
 
 from __future__ import annotations
@@ -16,7 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["FLIR_FIXED", "GantryFootprint", "gantry_footprint", "scanalyzer_to_utm"]
+__all__ = ["FLIR_FIXED", "PLACEMENT", "GantryFootprint", "gantry_footprint", "scanalyzer_to_utm"]
 
 UTM_12N = 32612
 # terrautils spatial.scanalyzer_to_utm: Mx = ax + bx*Gx + cx*Gy, My = ay + by*Gx + cy*Gy
@@ -24,6 +29,11 @@ _AX, _BX, _CX = 409012.2032, 0.009, -0.9986
 _AY, _BY, _CY = 3659974.971, 1.0002, 0.0078
 # terrautils spatial._get_bounding_box_with_formula's fixed shift of the lat/lon bounds
 _LAT_SHIFT, _LON_SHIFT = 0.000015258894, 0.000020308287
+PLACEMENT = ("terrautils calculate_gps_bounds (flirIrCamera): gantry position + camera box, field of view scaled "
+             "to the height above the canopy, scanalyzer->UTM 12N linear transform of the NW and SE corners, to "
+             f"latitude/longitude, then the pipeline's fixed shift (latitude -{_LAT_SHIFT} deg, longitude "
+             f"+{_LON_SHIFT} deg); north-up in EPSG:4326 as published; in UTM 12N the same published bounds "
+             "projected (terrautils tuples_to_utm), so both CRSs place the image on the same ground")
 
 #: terraref/sensor-metadata sensors/flirIrCamera/sensor_fixed_metadata.json (2018-08-30), by start date
 FLIR_FIXED: list[dict[str, Any]] = [
@@ -44,7 +54,7 @@ class GantryFootprint:
     lat_max: float
     lon_min: float
     lon_max: float
-    corners_utm: list[tuple[float, float]]  # NW, NE, SE, SW of the rotated image, UTM 12N
+    corners_utm: list[tuple[float, float]]  # NW, NE, SE, SW by the linear transform alone (before the shift)
     fov_m: tuple[float, float]  # on the canopy: along x (north), along y (west)
     height_above_canopy_m: float
     source: str
@@ -54,13 +64,31 @@ class GantryFootprint:
         return (self.lon_min, (self.lon_max - self.lon_min) / width, 0.0, self.lat_max, 0.0,
                 -(self.lat_max - self.lat_min) / height)
 
+    def published_corners_utm(self) -> list[tuple[float, float]]:
+        """NW, NE, SE, SW of the published (shifted) bounds in UTM 12N."""
+        from pyproj import Transformer
+
+        to_utm = Transformer.from_crs(4326, UTM_12N, always_xy=True)
+        return [to_utm.transform(lon, lat) for lon, lat in
+                ((self.lon_min, self.lat_max), (self.lon_max, self.lat_max), (self.lon_max, self.lat_min),
+                 (self.lon_min, self.lat_min))]
+
     def geotransform_utm(self, width: int, height: int) -> tuple[float, ...]:
-        (e0, n0), (e1, n1), _, (e3, n3) = self.corners_utm
+        """The published ground box in UTM 12N: an affine through its NW, NE and SW corners (the
+        box, a rectangle in latitude/longitude, is a parallelogram in UTM to well under a mm)."""
+        (e0, n0), (e1, n1), _, (e3, n3) = self.published_corners_utm()
         return e0, (e1 - e0) / width, (e3 - e0) / height, n0, (n1 - n0) / width, (n3 - n0) / height
 
+    def shift_m(self) -> tuple[float, float]:
+        """How far the pipeline's fixed shift moves the image on the ground: (east, north) metres."""
+        (e_pub, n_pub), (e_lin, n_lin) = self.published_corners_utm()[0], self.corners_utm[0]
+        return e_pub - e_lin, n_pub - n_lin
+
     def to_properties(self) -> dict[str, Any]:
+        east, north = self.shift_m()
         return {"crs_published": "EPSG:4326", "bounds": [self.lat_min, self.lat_max, self.lon_min, self.lon_max],
                 "fov_on_canopy_m": list(self.fov_m), "height_above_canopy_m": round(self.height_above_canopy_m, 4),
+                "placement": PLACEMENT, "pipeline_shift_m": {"east": round(east, 3), "north": round(north, 3)},
                 "source": self.source}
 
 

@@ -125,9 +125,17 @@ def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
         assert (gt[3], gt[0]) == pytest.approx((33.07462, -111.97504), abs=2e-5)  # the field's SE corner area
     else:
         assert info["coordinateSystem"]["wkt"].rstrip().endswith('ID["EPSG",32612]]')
+        # The published placement (terrautils: linear transform, to lat/lon, the fixed shift),
+        # projected back to UTM 12N as terrautils' tuples_to_utm does: not the unshifted transform.
+        from pyproj import Transformer
+
         e_nw = 409012.2032 + 0.009 * (cx + fx / 2) - 0.9986 * (cy + fy / 2)
         n_nw = 3659974.971 + 1.0002 * (cx + fx / 2) + 0.0078 * (cy + fy / 2)
-        assert (gt[0], gt[3]) == pytest.approx((e_nw, n_nw), abs=1e-3)
+        lon, lat = Transformer.from_crs(32612, 4326, always_xy=True).transform(e_nw, n_nw)
+        want = Transformer.from_crs(4326, 32612, always_xy=True).transform(lon + 0.000020308287, lat - 0.000015258894)
+        assert (gt[0], gt[3]) == pytest.approx(want, abs=1e-3)
+        assert math.dist((gt[0], gt[3]), (e_nw, n_nw)) == pytest.approx(2.54, abs=0.02)  # the documented shift
+    assert "fixed shift" in json.loads(info["metadata"][""]["TIFFTAG_IMAGEDESCRIPTION"])["placement"]
     from thermcap.recorder.radiometry import model_from_dict
     from thermcap.recorder.storage.reader import iter_session_frames
     from thermcap.recorder.storage.reader import read_session_meta as meta
@@ -139,6 +147,32 @@ def test_the_terraref_sample_lands_where_the_pipeline_puts_it(tmp_path, crs):
     import tifffile
 
     np.testing.assert_allclose(tifffile.imread(out), want, rtol=1e-6)
+
+
+def test_the_terraref_sample_is_on_the_same_ground_in_both_crs(tmp_path):
+    """Issue 37: the UTM product sat 2.54 m from the EPSG:4326 one (the pipeline's fixed shift was
+    applied to one only). Every corner and the centre of the two GeoTIFFs, as GDAL reads them,
+    must land within a centimetre of each other."""
+    from pyproj import Transformer
+
+    binf = SAMPLES / "terraref" / "c3c21db1-deb5-481a-8180-ad447f356a95_ir.bin"
+    if not binf.is_file():
+        pytest.skip(f"{binf} is not here: {SAMPLES_HOW}")
+    root = tmp_path / "root"
+    import_paths([str(binf)], root, session="tr", analysis=False)
+    ground = {}
+    for crs in ("4326", "utm"):
+        export_session(root / "sessions" / "tr", "map-tiff", tmp_path / crs, crs=crs)
+        (path,) = (tmp_path / crs).glob("*.map.tiff")
+        info = _info(path)
+        gt, (w, h) = info["geoTransform"], info["size"]
+        px = [(0, 0), (w, 0), (w, h), (0, h), (w / 2, h / 2)]
+        xy = [(gt[0] + c * gt[1] + r * gt[2], gt[3] + c * gt[4] + r * gt[5]) for c, r in px]
+        if crs == "4326":
+            xy = [Transformer.from_crs(4326, 32612, always_xy=True).transform(*p) for p in xy]
+        ground[crs] = xy
+    for a, b in zip(ground["4326"], ground["utm"], strict=True):
+        assert math.dist(a, b) < 0.01, (a, b)
 
 
 def test_a_mosaic_and_its_footprints_render_in_gdal(tmp_path):
