@@ -215,7 +215,10 @@ def export_session(session_dir: str | Path, kind: str, out_dir: str | Path, *, s
                 rng = session_rng or frame_range(ft.finite() if ft is not None else src, "frame",
                                                  "°C" if temps is not None else "counts")
             path = out / f"{name}.png"
-            path.write_bytes(colour_png(src, rng, palette_name, colorbar=colorbar, level=6))
+            said = {"thermcap:model_version": str(ft.model_version), "thermcap:bad_pixels": ft.rule,
+                    **({"thermcap:temperature_quality": APPROXIMATE_NOTE} if ft.approximate else {})} \
+                if ft is not None else None
+            path.write_bytes(colour_png(src, rng, palette_name, colorbar=colorbar, level=6, text=said))
         else:
             path = out / f"{name}.tiff"
             tifffile.imwrite(path, np.ascontiguousarray(f.pixels, dtype=np.uint16), photometric="minisblack",
@@ -276,6 +279,7 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
     refused: list[str] = []
     tiles: list[tuple[int, Any, np.ndarray]] = []  # mosaic: (frame, footprint, °C)
     frame_times: dict[int, str] = {}
+    frame_versions: dict[int, int] = {}  # mosaic: the model version each frame's temperatures used
     for f in select.frames(session_dir):
         h, w = f.pixels.shape
         vendor = vendors.get(f.log_time, {})
@@ -306,21 +310,34 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
             if gantry is not None:
                 refused.append(f"frame {f.index}: hot spots on the map are for drone images")
                 continue
-            for pt in hot_spot_points(fp, f.sidecar_dict().get("targets") or []):
+            targets = f.sidecar_dict().get("targets") or []
+            if not targets:
+                continue
+            try:  # the hot spots' temperatures in the version asked for, not the detector's at capture
+                ft = temps_of.celsius(f.index, f.pixels)
+            except TemperatureUnavailable as exc:
+                refused.append(f"frame {f.index}: {exc}")
+                continue
+            for pt in hot_spot_points(fp, targets, ft.celsius):
                 features.append({"type": "Feature",
                                  "geometry": {"type": "Point", "coordinates": [pt["longitude"], pt["latitude"]]},
-                                 "properties": {"frame_index": f.index, "time": iso_utc(f.log_time), **pt}})
+                                 "properties": {"frame_index": f.index, "time": iso_utc(f.log_time), **pt,
+                                                "model_version": ft.model_version,
+                                                **({"temperature_quality": APPROXIMATE_NOTE}
+                                                   if ft.approximate else {})}})
         elif kind == "mosaic":
             if gantry is not None or not fp.nadir:
                 refused.append(f"frame {f.index}: not near nadir, so not in the mosaic (its pixels are not on "
                                f"one scale; export it with --to map-tiff)")
                 continue
             try:
-                tiles.append((f.index, fp, temps_of.celsius(f.index, f.pixels).celsius))
+                ft = temps_of.celsius(f.index, f.pixels)
             except TemperatureUnavailable as exc:
                 refused.append(f"frame {f.index}: {exc}")
                 continue
+            tiles.append((f.index, fp, ft.celsius))
             frame_times[f.index] = iso_utc(f.log_time)
+            frame_versions[f.index] = ft.model_version
         else:
             try:
                 ft = temps_of.celsius(f.index, f.pixels)
@@ -355,13 +372,15 @@ def _export_map(session_dir: Path, kind: str, out: Path, temps_of: SessionTemper
         written.append("hotspots.truth.json")
     if kind == "mosaic":
         approx = any(getattr(temps_of.model_for(i)[0], "approximate", False) for i, _, _ in tiles)
-        written = _write_mosaic(out, tiles, frame_times, meta, approx) if tiles else []
+        written = _write_mosaic(out, tiles, frame_times, frame_versions, meta, temps_of.bad_pixels, approx) \
+            if tiles else []
     return {"out": str(out), "kind": kind, "files": len(written), "features": len(features), "refused": refused,
             "summary": None, **({"truth": report} if report is not None else {})}
 
 
 def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_times: dict[int, str],
-                  meta: dict[str, Any], approximate: bool = False) -> list[str]:
+                  frame_versions: dict[int, int], meta: dict[str, Any], bad_pixel_rule: str,
+                  approximate: bool = False) -> list[str]:
     from thermcap.recorder.maps.mosaic import build_mosaic
 
     try:
@@ -370,6 +389,9 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
         raise ThermcapError(str(exc)) from None
     rule = "each cell: the nearest pixel of the image whose centre is nearest (one real measurement)"
     common = {"session_id": meta.get("session_id"), "gsd_m": mosaic.gsd_m, "blending": rule,
+              "model_versions": sorted({frame_versions[i] for i in mosaic.frames}),
+              "bad_pixels": {"rule": bad_pixel_rule, "meaning": "NaN: no temperature (the session's bad-pixel map)"
+                             if bad_pixel_rule == "nan" else "kept as the sensor measured them"},
               **({"temperature_quality": APPROXIMATE_NOTE} if approximate else {})}
     write_cog(out / "mosaic.tiff", mosaic.temps, geotransform=mosaic.geotransform, epsg=mosaic.epsg, units="degC",
               metadata={**common, "sources": "mosaic.sources.tiff"}, nodata=float("nan"))
@@ -377,7 +399,8 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
               units=None, metadata={**common, "value": "frame index of each cell (-1: none)"}, nodata=-1)
     (out / "mosaic.frames.json").write_text(json.dumps(
         {"epsg": mosaic.epsg, "gsd_m": mosaic.gsd_m, "blending": rule,
-         "frames": [{"frame_index": i, "time": frame_times[i]} for i in mosaic.frames]}, indent=1))
+         "frames": [{"frame_index": i, "time": frame_times[i], "model_version": frame_versions[i]}
+                    for i in mosaic.frames]}, indent=1))
     return ["mosaic.tiff", "mosaic.sources.tiff", "mosaic.frames.json"]
 
 

@@ -68,10 +68,11 @@ NO_TEMPERATURE_RGB = (255, 0, 255)
 
 
 def colour_png(values: np.ndarray, rng: TemperatureRange, palette_name: str = "ironbow", *,
-               colorbar: bool = True, level: int = 1, boxes: list[list[int]] | tuple = ()) -> bytes:
+               colorbar: bool = True, level: int = 1, boxes: list[list[int]] | tuple = (),
+               text: dict[str, str] | None = None) -> bytes:
     """Values (°C, or counts) as an 8-bit colour PNG on ``rng``, with ``boxes`` (inclusive pixel
     boxes, e.g. detections) outlined in white: a colour bar drawn in, for people; always the
-    range in its text chunks, for programs."""
+    range in its text chunks, for programs, with ``text`` beside it (the model version used)."""
     lut = palette(palette_name)
     missing = np.isnan(values) if values.dtype.kind == "f" else None
     if missing is not None and missing.any():
@@ -89,7 +90,7 @@ def colour_png(values: np.ndarray, rng: TemperatureRange, palette_name: str = "i
         rgb[y0:y1 + 1, x0] = rgb[y0:y1 + 1, x1] = 255
     if colorbar:
         rgb = add_colorbar(rgb, rng, lut)
-    return encode_png(rgb, level, rng.text())
+    return encode_png(rgb, level, {**rng.text(), **(text or {})})
 
 
 def preview_png(frame: np.ndarray, model: RadiometricModel, palette_name: str = "ironbow",

@@ -76,8 +76,12 @@ def build_mosaic(images: list[tuple[int, Footprint, np.ndarray]], gsd_m: float |
     return Mosaic(temps, sources, (e0, gsd, 0.0, n0, 0.0, -gsd), zone, gsd, [i for i, _, _ in images])
 
 
-def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[str, Any]]:
-    """Detected targets as map points: each target's centroid through the footprint."""
+def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]],
+                    celsius: np.ndarray | None = None) -> list[dict[str, Any]]:
+    """Detected targets as map points: each target's centroid through the footprint. With
+    ``celsius`` (the frame's temperatures in the model version asked for, bad pixels NaN), a
+    target's ``max_temp_c`` is measured again over its box: the detector's figure is of the
+    model at capture, kept as ``max_temp_c_at_capture``."""
     from pyproj import Transformer
 
     to_ll = Transformer.from_crs(fp.epsg, 4326, always_xy=True)
@@ -88,9 +92,16 @@ def hot_spot_points(fp: Footprint, targets: list[dict[str, Any]]) -> list[dict[s
             continue
         e, n = pixel_to_ground(fp, np.array([float(cen[0]) + 0.5]), np.array([float(cen[1]) + 0.5]))
         lon, lat = to_ll.transform(float(e[0]), float(n[0]))
+        hottest = t.get("max_temp_c")
+        box = t.get("bbox")
+        if celsius is not None and box and len(box) == 4:
+            x0, y0, x1, y1 = (int(v) for v in box)
+            region = celsius[max(0, y0):y1 + 1, max(0, x0):x1 + 1]
+            hottest = round(float(np.nanmax(region)), 4) if region.size and np.isfinite(region).any() else None
         out.append({"easting": float(e[0]), "northing": float(n[0]), "epsg": fp.epsg, "longitude": lon,
                     "latitude": lat,
-                    "target_id": t.get("target_id"), "max_temp_c": t.get("max_temp_c"),
+                    "target_id": t.get("target_id"), "max_temp_c": hottest,
+                    **({"max_temp_c_at_capture": t.get("max_temp_c")} if celsius is not None else {}),
                     "classification": t.get("classification"), "uncertainty_m": round(fp.uncertainty_m, 2)})
     return out
 
