@@ -32,8 +32,8 @@ from thermcap.recorder import __version__
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.exports.files import _positions
 from thermcap.recorder.icd.names import iso_utc
-from thermcap.recorder.radiometry import model_from_dict
-from thermcap.recorder.radiometry.params import read_versions, reparameterise
+from thermcap.recorder.radiometry.params import read_versions
+from thermcap.recorder.radiometry.session import SessionTemperatures
 from thermcap.recorder.storage.digest import frame_sha256
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
@@ -78,33 +78,31 @@ class VerifyResult:
 
 
 def _numbers(temps: np.ndarray, box: list[int]) -> tuple[float, float, float]:
-    """(max in the box, median of the ring around it, their difference), rounded as reported."""
+    """(max in the box, median of the ring around it, their difference), rounded as reported;
+    pixels without a temperature (NaN: the session's bad pixels) are in none of them."""
     h, w = temps.shape
     x0, y0, x1, y1 = box
     inner = temps[max(0, y0):y1 + 1, max(0, x0):x1 + 1]
+    inner = inner[np.isfinite(inner)]
     if inner.size == 0:
-        raise ThermcapError(f"box {box} is outside the {w}x{h} frame")
+        raise ThermcapError(f"box {box} holds no pixel with a temperature in the {w}x{h} frame")
     ring = np.zeros(temps.shape, bool)
     ring[max(0, y0 - RING[1]):y1 + RING[1] + 1, max(0, x0 - RING[1]):x1 + RING[1] + 1] = True
     ring[max(0, y0 - RING[0]):y1 + RING[0] + 1, max(0, x0 - RING[0]):x1 + RING[0] + 1] = False
-    ref = float(np.median(temps[ring])) if ring.any() else float(np.median(temps))
+    ring &= np.isfinite(temps)
+    ref = float(np.median(temps[ring])) if ring.any() else float(np.nanmedian(temps))
     top = float(inner.max())
     return round(top, 3), round(ref, 3), round(top - ref, 3)
 
 
-def _model(meta: dict[str, Any], session_dir: Path, version: int | None, frame: int) -> tuple[Any, int]:
-    base = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
-    versions = read_versions(session_dir)
-    if version is None:  # the latest covering the frame
-        chosen = next((v for v in reversed(versions) if v.covers(frame)), None)
-    elif version == 0:
-        chosen = None
-    else:
-        chosen = next((v for v in versions if v.version == version), None)
-        if chosen is None:
-            raise ThermcapError(f"{session_dir}: the report names radiometric model version {version}, which the "
-                                f"session no longer has")
-    return (reparameterise(base, chosen.params) if chosen else base), (chosen.version if chosen else 0)
+def _temperatures(session_dir: Path, meta: dict[str, Any], version: int | None) -> SessionTemperatures:
+    """The one place temperatures come from: the version asked for (None: the latest covering
+    each frame), the session's bad pixels NaN."""
+    try:
+        return SessionTemperatures.of(session_dir, meta, version=version)
+    except ValueError:
+        raise ThermcapError(f"{session_dir}: the report names radiometric model version {version}, which the "
+                            f"session no longer has") from None
 
 
 def build_inspection(session_dir: str | Path, *, max_findings: int = 12) -> InspectionReport:
@@ -124,9 +122,10 @@ def build_inspection(session_dir: str | Path, *, max_findings: int = 12) -> Insp
     positions = _positions(session_dir)
     findings = []
     images: dict[int, np.ndarray] = {}
+    temps_of = _temperatures(session_dir, meta, None)
     for tid, (_, index, target, pixels, log_time) in sorted(best.items(), key=lambda kv: -kv[1][0])[:max_findings]:
-        model, version = _model(meta, session_dir, None, index)
-        temps = np.asarray(model.to_celsius(pixels), dtype=np.float64)
+        ft = temps_of.celsius(index, pixels)
+        temps, version = ft.celsius.astype(np.float64), ft.model_version
         box = [int(v) for v in target["bbox"]]
         top, ref, dt = _numbers(temps, box)
         images[index] = temps
@@ -174,6 +173,7 @@ def verify_inspection(path: str | Path, root: str | Path) -> VerifyResult:
     wanted = {int(f["frame"]) for f in doc["findings"]}
     frames = {fr.index: fr.pixels.copy() for fr in iter_session_frames(session_dir) if fr.index in wanted}
     checks = []
+    by_version: dict[int, SessionTemperatures] = {}
     for f in doc["findings"]:
         pixels = frames.get(int(f["frame"]))
         if pixels is None:
@@ -184,8 +184,11 @@ def verify_inspection(path: str | Path, root: str | Path) -> VerifyResult:
             checks.append({"frame": f["frame"], "target_id": f["target_id"], "holds": False,
                            "why": "the frame's sha256 differs: the stored counts changed"})
             continue
-        model, _ = _model(meta, session_dir, int(f["model_version"]), int(f["frame"]))
-        top, ref, dt = _numbers(np.asarray(model.to_celsius(pixels), dtype=np.float64), f["box"])
+        version = int(f["model_version"])
+        if version not in by_version:
+            by_version[version] = _temperatures(session_dir, meta, version)
+        temps = by_version[version].celsius(int(f["frame"]), pixels).celsius.astype(np.float64)
+        top, ref, dt = _numbers(temps, f["box"])
         differs = [f"{k} {f[k]} -> {v}" for k, v in (("max_c", top), ("reference_c", ref), ("delta_t_c", dt))
                    if abs(float(f[k]) - v) > 5e-4]
         checks.append({"frame": f["frame"], "target_id": f["target_id"], "holds": not differs,

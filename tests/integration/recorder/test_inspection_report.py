@@ -116,3 +116,34 @@ def test_the_pdf_renders_to_pages(reported):
     for p in pages:
         lo, hi = Image.open(p).convert("L").getextrema()
         assert hi - lo > 100, f"{p.name} is blank"
+
+
+def test_listed_bad_pixels_are_in_no_number(tmp_path):
+    """Issue 37: the report took a box's max and its ring's median over every pixel, so a listed
+    hot pixel (549.8 °C on the simulator) inside a box became the finding's temperature. With
+    bad pixels dense enough to fall in the boxes, every number is the good pixels' own."""
+    from thermcap.recorder.radiometry.session import read_bad_pixel_map
+
+    rec = Recorder(SimSource(width=320, height=256, frames=60, paced=False, seed=4, bad_pixels=2500), tmp_path,
+                   session_id="b", analysis=True, recover_leftovers=False)
+    assert rec.run().ok
+    r = _run("report", "inspection", "b", "--root", str(tmp_path), "--out", str(tmp_path / "r"), "--json")
+    assert r.exit_code == 0, r.output
+    rep = json.loads(r.output)
+    session = tmp_path / "sessions" / "b"
+    mask = read_bad_pixel_map(session)
+    frames = {f.index: f.pixels for f in iter_session_frames(session)}
+    hit = 0
+    for f in rep["findings"]:
+        temps = frames[f["frame"]].astype(np.float64) * 0.036 - 40.0
+        temps[mask] = np.nan
+        x0, y0, x1, y1 = f["box"]
+        hit += int(mask[y0:y1 + 1, x0:x1 + 1].any())
+        assert f["max_c"] == pytest.approx(np.nanmax(temps[y0:y1 + 1, x0:x1 + 1]), abs=1e-3)
+        ring = np.zeros(temps.shape, bool)
+        ring[max(0, y0 - 10):y1 + 11, max(0, x0 - 10):x1 + 11] = True
+        ring[max(0, y0 - 3):y1 + 4, max(0, x0 - 3):x1 + 4] = False
+        assert f["reference_c"] == pytest.approx(np.nanmedian(temps[ring]), abs=1e-3)
+    assert hit, "no listed bad pixel fell in a box: the test proves nothing"
+    r = _run("report", "verify", str(tmp_path / "r" / "inspection.json"), "--root", str(tmp_path))
+    assert r.exit_code == 0 and "the report holds" in r.output, r.output
