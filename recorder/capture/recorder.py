@@ -103,6 +103,9 @@ class RecordingResult:
     evicted_bytes: int = 0
     cameras: dict[str, dict[str, Any]] = field(default_factory=dict)  # a session of several cameras
     live: dict[str, Any] | None = None
+    # complete in .active files but never confirmed by the disk (fsync stalled): not counted as
+    # written, since a power cut may still take them; `thermcap recover` keeps them once it answers
+    frames_unconfirmed: int = 0
 
     @property
     def ok(self) -> bool:
@@ -133,7 +136,8 @@ class RecordingResult:
     def to_dict(self) -> dict[str, Any]:
         return {"session_id": self.session_id, "session_dir": str(self.session_dir),
                 "frames_captured": self.frames_captured, "frames_written": self.frames_written,
-                "frames_dropped": self.frames_dropped, "dropped": self.dropped, "segments": self.segments,
+                "frames_unconfirmed": self.frames_unconfirmed, "frames_dropped": self.frames_dropped,
+                "dropped": self.dropped, "segments": self.segments,
                 "wall_s": round(self.wall_s, 3), "write_latency_ms": self.write_latency_ms,
                 "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
                 "analysis_skipped": self.analysis_skipped, "analysis_unavailable": self.analysis_unavailable,
@@ -474,10 +478,10 @@ class Recorder:
         events = [e for f in self.feeds for e in self._camera_events(f)] + self._recorder_events
         SessionLayout.of(self.session_dir).reserve.unlink(missing_ok=True)  # room for what follows
         written = self.counters.frames_written
-        lost_on_disk = 0
+        lost_on_disk = unconfirmed = 0
         if self._writer_error:  # count what is durably there, not what was handed to the writer
-            written = self._durable_frames()
-            lost_on_disk = max(0, self.counters.frames_written - written)
+            written, unconfirmed = self._durable_frames()
+            lost_on_disk = max(0, self.counters.frames_written - written - unconfirmed)
         with contextlib.suppress(OSError):  # a full disk: the events can be rebuilt with `thermcap analyze`
             write_json_atomic(SessionLayout.of(self.session_dir).events_json,
                               {"session_id": self.session_id, "events": events}, fsync=not self._disk_stalled)
@@ -494,7 +498,7 @@ class Recorder:
             evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
             cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
-            live=self.live.snapshot() if self.live is not None else None)
+            live=self.live.snapshot() if self.live is not None else None, frames_unconfirmed=unconfirmed)
         if lost_on_disk:
             result.error = (f"{result.error}; {lost_on_disk} frames handed to the writer never reached a closed "
                             f"chunk and are lost ({written} are on disk)")
@@ -511,20 +515,24 @@ class Recorder:
         lock.release()
         return result
 
-    def _durable_frames(self) -> int:
+    def _durable_frames(self) -> tuple[int, int]:
         """Frames on disk after a write error: closed segments' counts, and the whole chunks of
-        the segment the error cut (what ``recover`` keeps)."""
+        the segment the error cut (what ``recover`` keeps); and, apart, the frames of segments the
+        disk never confirmed (a stalled fsync), which a user must not be told are safe."""
         from thermcap.recorder.exceptions import McapFileError
         from thermcap.recorder.storage.reader import count_frames
         from thermcap.recorder.storage.recover import durable_frames
 
         layout = SessionLayout.of(self.session_dir)
-        n = 0
+        n = unconfirmed = 0
         with contextlib.suppress(McapFileError, OSError):
             n += sum(count_frames(self.session_dir).values())
         for active in layout.active_segments():
-            n += durable_frames(active)
-        return n
+            if self._disk_stalled:
+                unconfirmed += durable_frames(active)
+            else:
+                n += durable_frames(active)
+        return n, unconfirmed
 
     def _camera_events(self, feed: CameraFeed) -> list[dict[str, Any]]:
         events = feed.events.finish()

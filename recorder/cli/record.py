@@ -251,7 +251,9 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             click.echo(f"recovered leftover segment {p}")
         lat = result.write_latency_ms
         fps_eff = result.frames_written / result.wall_s if result.wall_s else 0.0
-        click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, "
+        unconfirmed = (f"{result.frames_unconfirmed} unconfirmed by the disk (complete in .active files), "
+                       if result.frames_unconfirmed else "")
+        click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, {unconfirmed}"
                    f"{result.frames_dropped} dropped  ({fps_eff:.1f} fps over {result.wall_s:.1f} s)")
         timing = result.timing
         click.echo(f"timestamps: {timing.get('time_basis')}  declared {timing.get('declared_fps')} fps, "

@@ -64,7 +64,7 @@ def _segment_frames(path: Path) -> dict[int, str]:
     return out
 
 
-def _archived_frames(session: Path, offered: bool = False) -> dict[str, dict[int, str]]:
+def _archived_frames(session: Path) -> dict[str, dict[int, str]]:
     """Per archive format on disk: (time -> pixel sha256) its files decode to, file by file."""
     from thermcap.archive.formats import get_format
 
@@ -76,8 +76,6 @@ def _archived_frames(session: Path, offered: bool = False) -> dict[str, dict[int
     times = m.get("frames", {}).get("timestamps_ns") or []
     out: dict[str, dict[int, str]] = {}
     for fid, entry in m.get("formats", {}).items():
-        if offered and (not entry.get("verified") or entry.get("damaged")):
-            continue  # a copy the manifest does not offer: it keeps frames, but serve does not use it
         fdir = session / "archive" / fid
         if not fdir.is_dir():
             continue
@@ -130,12 +128,13 @@ class Journeys(RuleBasedStateMachine):
                 here.append(_segment_frames(seg))
                 for t in here[-1]:
                     self.segment_of.setdefault((s.name, t), seg.name)
-            offered = here + list(_archived_frames(s, offered=True).values())  # what serve may use
+            # every intact file serves its frames, in a copy scrub marked damaged too: a damaged
+            # part hides only itself
             here = here + list(_archived_frames(s).values())
             depot = self.depot / "sessions" / s.name
             there = [_segment_frames(seg) for seg in sorted(depot.glob("[0-9][0-9][0-9][0-9].mcap"))] \
                 if depot.is_dir() else []
-            for copies, into in ((here, None), (offered, local), (there, None)):
+            for copies, into in ((here, local), (there, None)):
                 for copy in copies:
                     for t, sha in copy.items():
                         key = (s.name, t)

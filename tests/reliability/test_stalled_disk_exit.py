@@ -9,6 +9,7 @@ the disk answers again, ``recover`` must give back every frame.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import textwrap
@@ -48,12 +49,17 @@ def _frames(folder) -> int:
     return n
 
 
+def _confirmed(folder) -> int:
+    """Frames in segments with their final name: renamed only after fsync returned."""
+    return _frames(folder)
+
+
 def test_a_disk_that_never_answers_does_not_hold_the_exit(tmp_path):
     root = tmp_path / "data"
     proc = subprocess.run(
         [sys.executable, "-c", STALLED_DISK, "record", "--root", str(root), "--session", "s", "--duration", "1.5",
          "--fps", "20", "--width", "64", "--height", "48", "--segment-duration", "0.5", "--no-analysis",
-         "--settle-timeout", "2"],
+         "--settle-timeout", "2", "--json"],
         capture_output=True, text=True, timeout=120)
     assert "fsync stalled" in proc.stderr, proc.stderr  # the fault was really injected
     assert proc.returncode != 0, proc.stderr
@@ -61,6 +67,12 @@ def test_a_disk_that_never_answers_does_not_hold_the_exit(tmp_path):
     assert "disk has not confirmed" in proc.stderr, proc.stderr
     assert "0000.mcap" in proc.stderr, proc.stderr
     assert "thermcap recover" in proc.stderr, proc.stderr
+    # No frame the disk never confirmed is counted as written (a power cut may still take it):
+    # they are counted apart, and together they are every frame captured.
+    summary = json.loads(proc.stdout)
+    assert summary["frames_written"] == _confirmed(root / "sessions" / "s")
+    assert summary["frames_unconfirmed"] > 0
+    assert summary["frames_written"] + summary["frames_unconfirmed"] == summary["frames_captured"] == 30
     session = root / "sessions" / "s"
     assert sorted(p.name for p in session.glob("*.mcap.active")), "the unconfirmed segments stay for recover"
     # The disk answers again: recover names the finished segments and keeps every frame.

@@ -93,3 +93,25 @@ def test_a_damaged_sidecar_entry_is_never_served_and_another_copy_is(root):
         assert r.status_code == 200
         assert r.json() == truth[4]
         assert c.get("/healthz").json()["damaged_copies_seen"] >= 1
+
+
+def test_a_copy_scrub_marked_damaged_still_serves_its_intact_entries(root):
+    """A damaged part hides only itself. With the source gone and png16 the only copy, scrub marks
+    png16 damaged for one bad entry; the other frames are still in intact entries of that copy,
+    and each is checked against the manifest's hash before it goes out: served, bit-exact. The
+    damaged frame alone answers 503. (Before, the whole copy was hidden: every frame 503.)"""
+    from thermcap.archive.manifest import load_manifest
+    from thermcap.archive.scrub import scrub_session
+
+    session = root / "sessions" / "s"
+    truth = [np.array(f.pixels) for f in iter_session_frames(session)]
+    archive_session(session, ["png16"], delete_source=True)
+    _flip_entry(session / "archive" / "png16" / "0000.zip", 2)
+    scrub_session(session)
+    assert load_manifest(session)["formats"]["png16"].get("damaged"), "scrub marked the copy"
+    with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
+        assert c.get("/api/v1/sessions/s/frames/2", params={"format": "raw"}).status_code == 503
+        for i in (0, 1, 3, 19):
+            r = c.get(f"/api/v1/sessions/s/frames/{i}", params={"format": "raw"})
+            assert r.status_code == 200, (i, r.text)
+            assert r.content == truth[i].astype("<u2").tobytes()
