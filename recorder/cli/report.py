@@ -35,11 +35,14 @@ def _reference(value: str, root: str) -> tuple[Path, float | None]:
               help="The session looks at a blackbody at this temperature (else its source's, if it says).")
 @click.option("--reference", "references", multiple=True, metavar="SESSION[=TEMP_C]",
               help="Blackbody sessions at other temperatures, for linearity (repeat).")
+@click.option("--model-version", type=Number(minimum=0, integer=True), default=None, metavar="N",
+              help="Measure temperatures with this radiometric model version (default: the latest covering "
+                   "each frame; see `thermcap radiometry`).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder for quality.html, .pdf and .json (default: SESSION/report).")
 @json_option
-def quality_cmd(session: str, root: str, blackbody: float | None, references: tuple[str, ...], out_dir: str | None,
-                as_json: bool) -> None:
+def quality_cmd(session: str, root: str, blackbody: float | None, references: tuple[str, ...],
+                model_version: int | None, out_dir: str | None, as_json: bool) -> None:
     """The ICD section 5 requirements measured from the session: NETD, FPA uniformity, temporal stability,
     absolute accuracy, linearity and bad pixels, each with its limit and pass, fail or not measurable (and why).
     Exit 1 if a requirement fails."""
@@ -49,7 +52,8 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
 
     try:
         d = resolve_session(session, root)
-        rep = measure_quality(d, blackbody_c=blackbody, references=[_reference(r, root) for r in references])
+        rep = measure_quality(d, blackbody_c=blackbody, references=[_reference(r, root) for r in references],
+                              model_version=model_version)
         paths = write_quality_report(rep, Path(out_dir) if out_dir else d / "report")
     except ThermcapError as exc:
         fail(str(exc))
@@ -60,6 +64,8 @@ def quality_cmd(session: str, root: str, blackbody: float | None, references: tu
         for m in out["measurements"]:
             value = "-" if m["value"] is None else f"{m['value']} {m['unit']}"
             click.echo(f"{m['requirement']:20} {value:>14}  {m['limit']:24} {m['verdict']}")
+        click.echo(f"temperatures from radiometric model version "
+                   f"{', '.join(f'v{v}' for v in out['model_versions'])}")
         click.echo(f"written: {paths['html']}, {paths['pdf']}")
     if not out["passed"]:
         sys.exit(1)

@@ -33,8 +33,7 @@ from typing import Any
 import numpy as np
 
 from thermcap.recorder.exceptions import ThermcapError
-from thermcap.recorder.radiometry import model_from_dict
-from thermcap.recorder.radiometry.session import read_bad_pixel_map
+from thermcap.recorder.radiometry.session import SessionTemperatures
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["Measurement", "QualityReport", "measure_quality"]
@@ -67,9 +66,11 @@ class QualityReport:
     series: dict[str, list[float]]  # the flat frames' (t_s, mean °C): the stability plot
     flat_mean: np.ndarray | None = field(default=None, repr=False)  # the time-averaged flat field, counts
     flat_level: float | None = None  # its mean over good pixels, counts
+    model_versions: list[int] = field(default_factory=lambda: [0])  # the radiometric model versions used
 
     def to_dict(self) -> dict[str, Any]:
         return {"session_id": self.session_id, "frames": self.frames, "flat_frames": self.flat_frames,
+                "model_versions": self.model_versions,
                 "flat_source": self.flat_source, "blackbody_c": self.blackbody_c,
                 "measurements": [{**asdict(m), "verdict": m.verdict} for m in self.measurements],
                 "passed": all(m.passed is not False for m in self.measurements)}
@@ -103,20 +104,30 @@ class _Accumulator:
 
 
 def measure_quality(session_dir: str | Path, *, blackbody_c: float | None = None,
-                    references: list[tuple[str | Path, float | None]] | None = None) -> QualityReport:
+                    references: list[tuple[str | Path, float | None]] | None = None,
+                    model_version: int | None = None) -> QualityReport:
+    """The temperatures (the flat frames' means, the °C per count behind NETD) come from
+    ``SessionTemperatures``, as every product's do: the model version covering each frame (or
+    ``model_version`` for all), so a report after ``thermcap radiometry`` measures with the
+    thermographer's parameters, and names the versions it used."""
     session_dir = Path(session_dir)
     meta = read_session_meta(session_dir)
     source = meta.get("source") or {}
     if blackbody_c is None and source.get("blackbody_c") is not None:
         blackbody_c = float(source["blackbody_c"])
-    model = model_from_dict(meta.get("radiometric_model") or {"kind": "linear"})
+    try:
+        temps = SessionTemperatures.of(session_dir, meta, version=model_version)
+    except ValueError as exc:
+        raise ThermcapError(f"{session_dir.name}: {exc}") from None
+    model = temps.base
+    used: set[int] = set()
     flat, scene = _Accumulator(), _Accumulator()
     lo = hi = None  # per pixel: ever below the top, ever above 0; and any change
     first: np.ndarray | None = None
     changed: np.ndarray | None = None
     times: list[float] = []
     series_c: list[float] = []
-    bpm = read_bad_pixel_map(session_dir)
+    bpm = temps.bad_pixel_map
     n = 0
     t0 = None
     prev_index = -2
@@ -140,16 +151,20 @@ def measure_quality(session_dir: str | Path, *, blackbody_c: float | None = None
         acc.add(px, consecutive=fr.index == prev_index + 1)
         other.break_run()
         prev_index = fr.index
-        if is_flat:  # the frame's mean temperature, without mapped or pinned pixels
-            valid = (px > 0) & (px < top)
-            if bpm is not None and bpm.shape == px.shape:
-                valid &= ~bpm
+        if is_flat:  # the frame's mean temperature, without mapped (NaN) or pinned pixels
+            ft = temps.celsius(fr.index, px)
+            used.add(ft.model_version)
+            model = ft.model
+            valid = (px > 0) & (px < top) & np.isfinite(ft.celsius)
             times.append(round((fr.log_time - t0) / 1e9, 6))
-            series_c.append(float(np.asarray(model.to_celsius(px[valid]), dtype=np.float64).mean()))
+            series_c.append(float(ft.celsius[valid].astype(np.float64).mean()))
     if n == 0 or first is None:
         raise ThermcapError(f"{session_dir}: no frames to measure")
+    if not used:  # no flat frame: NETD's °C per count in the version of the last frame
+        model = temps.model_for(prev_index if prev_index >= 0 else 0)[0]
     assert changed is not None and lo is not None and hi is not None
-    stuck = ~changed | ~lo | ~hi
+    # one frame cannot show a pixel stuck (nothing to change from): then only pinned ones count
+    stuck = (~changed if n >= 2 else np.zeros_like(changed)) | ~lo | ~hi
     good = ~stuck
     flat_source = ("blackbody" if blackbody_c is not None else "shutter") if flat.n else "none"
     out: list[Measurement] = []
@@ -158,7 +173,8 @@ def measure_quality(session_dir: str | Path, *, blackbody_c: float | None = None
     series_t = times
 
     def c_per_count(level: float) -> float:
-        """The model's °C per count at a level (the slope of a Planck or lookup model there)."""
+        """The model's °C per count at a level (the slope of a Planck or lookup model there), in
+        the version of the last flat frame measured (else the last frame's)."""
         c = np.array([int(level), int(level) + 1], np.uint16)
         t = np.asarray(model.to_celsius(c), dtype=np.float64)
         return float(t[1] - t[0])
@@ -222,7 +238,8 @@ def measure_quality(session_dir: str | Path, *, blackbody_c: float | None = None
                            + ("" if n >= 30 else f" (only {n} frames: a still pixel may look stuck)"), detail))
     return QualityReport(meta.get("session_id", session_dir.name), n, flat.n, flat_source, blackbody_c, out,
                          {"t_s": series_t, "mean_c": series_c}, flat_mean,
-                         float(flat_mean[good].mean()) if flat_mean is not None else None)
+                         float(flat_mean[good].mean()) if flat_mean is not None else None,
+                         sorted(used) or [temps.model_for(max(0, n - 1))[1]])
 
 
 def _fit_slope(t: np.ndarray, y: np.ndarray) -> tuple[float, float]:

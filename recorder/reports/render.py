@@ -56,6 +56,10 @@ def _table_rows(rep: QualityReport) -> list[list[str]]:
     return rows
 
 
+def _versions(rep: QualityReport) -> str:
+    return ", ".join(f"v{v}" for v in rep.model_versions)
+
+
 def _html(rep: QualityReport, images: list[bytes]) -> str:
     head = ("<!doctype html><html lang=en><meta charset=utf-8><title>ICD section 5 quality report: "
             f"{html.escape(rep.session_id)}</title><style>body{{font:14px system-ui;margin:2em;max-width:70em}}"
@@ -65,6 +69,7 @@ def _html(rep: QualityReport, images: list[bytes]) -> str:
     body = [f"<h1>ICD section 5 quality report</h1><p>Session <b>{html.escape(rep.session_id)}</b>: {rep.frames} "
             f"frames, {rep.flat_frames} of them flat ({html.escape(rep.flat_source)})"
             + (f", blackbody at {rep.blackbody_c:g} °C" if rep.blackbody_c is not None else "")
+            + f"; temperatures from radiometric model version {_versions(rep)}"
             + f". Overall: <b style='color:{_COLOURS[overall]}'>{overall}</b> (not measurable counts as neither).</p>",
             "<table><tr><th>requirement</th><th>measured</th><th>limit</th><th>verdict</th><th>how</th></tr>"]
     for row in _table_rows(rep):
@@ -101,7 +106,8 @@ def write_quality_report(rep: QualityReport, out_dir: Path) -> dict[str, Path]:
         page.text(0.06, 0.95, "ICD section 5 quality report", fontsize=16, weight="bold")
         page.text(0.06, 0.92, f"session {rep.session_id}: {rep.frames} frames, {rep.flat_frames} flat "
                               f"({rep.flat_source})" + (f", blackbody {rep.blackbody_c:g} °C"
-                                                        if rep.blackbody_c is not None else ""), fontsize=9)
+                                                        if rep.blackbody_c is not None else "")
+                              + f"; radiometric model version {_versions(rep)}", fontsize=9)
         rows = _table_rows(rep)
         table = page.add_axes((0.04, 0.35, 0.92, 0.54))
         table.set_axis_off()

@@ -99,3 +99,48 @@ def test_the_pdf_renders_to_pages(tmp_path):
         img = Image.open(p).convert("L")
         lo, hi = img.getextrema()
         assert hi - lo > 100, f"{p.name} is blank"
+
+
+def test_the_report_measures_with_the_model_version_and_names_it(tmp_path):
+    """Issue 37: the quality report's temperatures come from the version covering each frame. A real
+    FLIR T640 frame looked at as a blackbody: the measured mean is flyr's mean at the capture
+    emissivity, then at 0.8 after `thermcap radiometry`, and the report names the version."""
+    from tests.conftest import SAMPLES, SAMPLES_HOW
+    from thermcap.recorder.importers.run import import_paths
+    from thermcap.recorder.radiometry.base import model_from_dict
+    from thermcap.recorder.radiometry.params import add_version
+    from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
+
+    flyr = pytest.importorskip("flyr", reason="flyr is a test dependency (pip install 'thermcap[test]')")
+    path = SAMPLES / "flir" / "FLIR_T640.jpg"
+    if not path.is_file():
+        pytest.skip(f"{path} is not here: {SAMPLES_HOW}")
+    import_paths([str(path)], tmp_path, session="t640", analysis=False)
+    d = tmp_path / "sessions" / "t640"
+    [frame] = list(iter_session_frames(d))
+    base = model_from_dict(read_session_meta(d)["radiometric_model"])
+    top = (1 << int(getattr(base, "bit_depth", 14) or 14)) - 1
+    valid = (frame.pixels > 0) & (frame.pixels < top)
+
+    def reference(emissivity=None):
+        th = flyr.unpack(str(path))
+        th = th.adjust_metadata(emissivity=emissivity) if emissivity is not None else th
+        return float(np.asarray(th.celsius, dtype=np.float64)[valid].mean())
+
+    import numpy as np
+
+    v0 = measure_quality(d, blackbody_c=30.0)
+    assert v0.model_versions == [0]
+    assert v0.series["mean_c"][0] == pytest.approx(reference(), abs=1e-3)
+    add_version(d, base, {"emissivity": 0.8}, who="test", why="a painted surface")
+    v1 = measure_quality(d, blackbody_c=30.0)
+    assert v1.model_versions == [1] and v1.to_dict()["model_versions"] == [1]
+    assert v1.series["mean_c"][0] == pytest.approx(reference(0.8), abs=1e-3)
+    assert abs(v1.series["mean_c"][0] - v0.series["mean_c"][0]) > 0.5  # the change is real, not noise
+    pinned = measure_quality(d, blackbody_c=30.0, model_version=0)
+    assert pinned.model_versions == [0] and pinned.series["mean_c"] == v0.series["mean_c"]
+    r = CliRunner().invoke(cli, ["report", "quality", str(d), "--blackbody", "30", "--out", str(tmp_path / "r")])
+    assert "model version v1" in r.output, r.output
+    assert "model version v1" in (tmp_path / "r" / "quality.html").read_text()
+    r = CliRunner().invoke(cli, ["report", "quality", str(d), "--blackbody", "30", "--model-version", "7"])
+    assert r.exit_code != 0 and "model version 7" in r.output and "Traceback" not in r.output, r.output
