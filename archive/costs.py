@@ -207,7 +207,7 @@ def table_rows(report: dict[str, Any], tier: str = "s3-standard") -> list[tuple[
     """The audit as rows (one per group and format), for the plain, Markdown and rich renderings."""
     label = report["prices"].get(tier, {}).get("label", tier)
     rows: list[tuple[str, ...]] = [("sensor", "kind", "format", "sessions", "per hour / per image", "ratio",
-                                    f"{label} $/month", "")]
+                                    f"{label} $/month", "note")]
     for g in report["groups"]:
         for fid, f in sorted(g["formats"].items(), key=lambda kv: kv[1]["bytes"]):
             per = f"{f['gib_per_recorded_hour']:.2f} GiB/h" if g["kind"] == "continuous" and \
