@@ -33,7 +33,7 @@ from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
-__all__ = ["IndexReport", "fingerprint", "index_root", "index_session"]
+__all__ = ["IndexReport", "fingerprint", "index_root", "index_session", "sidecar_summary"]
 
 
 @dataclass
@@ -159,6 +159,16 @@ def _ts(sidecar: dict[str, Any]) -> int | None:
     return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
 
 
+def sidecar_summary(sc: dict[str, Any]) -> dict[str, Any]:
+    """A frame's searchable summary, by the index's column names (``FRAME_FIELDS`` reads them)."""
+    ta = sc.get("thermal_analysis") or {}
+    targets = sc.get("targets") or []
+    # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
+    return {"grade": graded_contrast(ta), "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
+            "target_count": len(targets),
+            "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)}
+
+
 def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                   problems: list[str] | None = None) -> bool:
     """Index one session; returns False when it was already indexed as it is. What could not be
@@ -208,17 +218,11 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
     hashes = (manifest or {}).get("frames", {}).get("sha256") or []
     sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
     for i, (sc, t) in enumerate(zip(sidecars, times, strict=True)):
-        ta = sc.get("thermal_analysis") or {}
-        targets = sc.get("targets") or []
         frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0),
                            "segment": segs[i] if i < len(segs) else None,
                            "sha256": hashes[i] if i < len(hashes) else None,
                            "sidecar_sha256": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
-                           # an unanalysed frame, or one with no target, has no grade (0.0 is a placeholder)
-                           "grade": graded_contrast(ta),
-                           "slew_to_cue": bool((sc.get("slew_to_cue") or {}).get("slew_to_cue_active")),
-                           "target_count": len(targets),
-                           "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)})
+                           **sidecar_summary(sc)})
     grades = [r["grade"] for r in frame_rows if r["grade"] is not None]
     sensor = meta.get("sensor") or (manifest or {}).get("session", {}).get("sensor") or {}
     model = meta.get("radiometric_model") or (manifest or {}).get("session", {}).get("radiometric_model")

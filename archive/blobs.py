@@ -158,12 +158,32 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         if head.get("e_tag"):
             etags[key] = str(head["e_tag"])
     references = _upload_references(store, root, session_dir, [k for k in keys if k.endswith(".h5")])
+    documents = _upload_documents(store, root, session_dir)
     manifest["upload"] = {"complete": True, "keys": keys, "etags": etags, "at": iso_now(), "store": store.kind,
-                          "references": references}
+                          "references": references, "documents": documents}
     save_manifest(session_dir, manifest)
     manifest_path = SessionLayout.of(session_dir).manifest
     store.put_file(manifest_path.resolve().relative_to(root.resolve()).as_posix(), manifest_path)
     return keys
+
+
+#: The session's own small documents, sent beside the archive so a reader of the bucket alone
+#: (``thermcap.open("s3://...")``) has its metadata, events and model versions. They change (a
+#: new ``thermcap radiometry`` version), so each upload overwrites them; the archive files never.
+SESSION_DOCUMENTS = ("session.json", "events.json", "radiometry.json")
+
+
+def _upload_documents(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
+    if store.kind != "s3":
+        return []  # a local store is the root itself: they are already there
+    sent = []
+    for name in SESSION_DOCUMENTS:
+        path = session_dir / name
+        if path.is_file():
+            key = path.resolve().relative_to(root.resolve()).as_posix()
+            store.put_file(key, path)
+            sent.append(key)
+    return sent
 
 
 def _upload_references(store: BlobStore, root: Path, session_dir: Path, h5_keys: list[str]) -> dict[str, Any]:

@@ -88,6 +88,7 @@ class UploadBlock(TypedDict, total=False):
     store: str
     damaged: dict[str, str]
     references: dict[str, Any]  # h5 key -> its kerchunk reference file beside it (archive.hdf5_refs), or why not
+    documents: list[str]  # session.json, events.json, radiometry.json sent beside the archive (overwritten)
 
 
 class Manifest(TypedDict, total=False):

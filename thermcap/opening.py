@@ -16,7 +16,9 @@ _SESSION_URL = re.compile(r"^(?P<base>https?://.+?)/api/v1/sessions/(?P<id>[^/?#
 def open(where: str | os.PathLike[str], token: str | None = None, *, root: str | os.PathLike[str] | None = None
          ) -> Session:
     """A session: a session folder, an id under ``root`` (default ``THERMCAP_ROOT`` or
-    ``thermcap-data``), or an ``http(s)://HOST/api/v1/sessions/ID`` URL with the server's token.
+    ``thermcap-data``), an ``http(s)://HOST/api/v1/sessions/ID`` URL with the server's token, or
+    an uploaded archive, ``s3://BUCKET[/PREFIX]/sessions/ID`` (its endpoint from
+    ``THERMCAP_S3_ENDPOINT``, credentials from ``AWS_ACCESS_KEY_ID`` / ``AWS_SECRET_ACCESS_KEY``).
 
     Raises ``FileNotFoundError`` naming what was looked for when there is no such session.
     """
@@ -29,9 +31,13 @@ def open(where: str | os.PathLike[str], token: str | None = None, *, root: str |
         return RemoteSession(Client(m.group("base"), token), m.group("id"))
     if text.startswith(("http://", "https://")):
         raise ValueError(f"{text}: a session URL looks like http://HOST:PORT/api/v1/sessions/ID")
+    if text.startswith("s3://"):
+        from thermcap.bucket import open_bucket_session
+
+        return open_bucket_session(text)
     if "://" in text:
-        raise ValueError(f"{text}: thermcap.open reads folders, ids under a root and http(s) session URLs; "
-                         f"serve the bucket's root with `thermcap serve` and open its URL")
+        raise ValueError(f"{text}: thermcap.open reads folders, ids under a root, http(s) session URLs and "
+                         f"s3://BUCKET/sessions/ID")
     path = Path(text)
     if (path / "session.json").is_file():
         session_dir = path.resolve()

@@ -219,44 +219,50 @@ class LocalSession(Session):
         return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
 
     def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
-        import dask.array as da
-        import xarray as xr
+        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)
 
-        if chunk_frames < 1:
-            raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
-        temps = self.temperatures(model_version)  # checks the version before anything is read
-        table, h, w = self.table, self.height, self.width
-        n = len(table)
-        sizes = tuple(min(chunk_frames, n - s) for s in range(0, n, chunk_frames)) or (0,)
-        numbers = table.index
 
-        def read_counts(block_info: dict | None = None) -> np.ndarray:
-            assert block_info is not None
-            (a, b), _, _ = block_info[None]["array-location"]
-            return np.stack([self.counts(int(k)) for k in numbers[a:b]]) if b > a else np.empty((0, h, w), np.uint16)
+def lazy_dataset(session: Session, temps: Any, model_version: int | None, chunk_frames: int) -> xr.Dataset:
+    """The Dataset of a session whose frames this process reads itself (a folder, a bucket):
+    dask chunks of ``chunk_frames`` frames through ``session.counts``, temperatures through
+    ``temps`` (a ``SessionTemperatures``, checked before anything is read)."""
+    import dask.array as da
+    import xarray as xr
 
-        counts = da.map_blocks(read_counts, chunks=(sizes, (h,), (w,)), dtype=np.uint16,
-                               meta=np.empty((0, 0, 0), np.uint16), name=f"thermcap-counts-{self.id}")
+    if chunk_frames < 1:
+        raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
+    table, h, w = session.table, session.height, session.width
+    n = len(table)
+    sizes = tuple(min(chunk_frames, n - s) for s in range(0, n, chunk_frames)) or (0,)
+    numbers = table.index
 
-        def to_celsius(block: np.ndarray, block_info: dict | None = None) -> np.ndarray:
-            assert block_info is not None
-            a, b = block_info[0]["array-location"][0]
-            out = np.empty(block.shape, np.float32)
-            for j, k in enumerate(numbers[a:b]):
-                out[j] = temps.celsius(int(k), block[j]).celsius
-            return out
+    def read_counts(block_info: dict | None = None) -> np.ndarray:
+        assert block_info is not None
+        (a, b), _, _ = block_info[None]["array-location"]
+        return np.stack([session.counts(int(k)) for k in numbers[a:b]]) if b > a else np.empty((0, h, w), np.uint16)
 
-        celsius = da.map_blocks(to_celsius, counts, dtype=np.float32, meta=np.empty((0, 0, 0), np.float32))
-        version = "latest covering each frame" if model_version is None else model_version
-        ds = xr.Dataset(
-            {"counts": (("time", "y", "x"), counts, {"long_name": "raw sensor counts", "units": "1"}),
-             "temperature": (("time", "y", "x"), celsius,
-                             {"long_name": "temperature", "standard_name": "temperature", "units": "degC",
-                              "model_version": str(version),
-                              "comment": "NaN: a pixel of the session's bad-pixel map"})},
-            coords={**_coords(table), "y": ("y", np.arange(h), {"long_name": "row, 0 at the top"}),
-                    "x": ("x", np.arange(w), {"long_name": "column, 0 at the left"})},
-            attrs={"Conventions": "CF-1.10", "title": f"thermcap session {self.id}", "source": "thermcap",
-                   "session_id": self.id, "sensor": self.meta.get("sensor") or "", "fps": self.meta.get("fps") or 0,
-                   "radiometric_model": json.dumps(self.radiometric_model)})
-        return ds
+    counts = da.map_blocks(read_counts, chunks=(sizes, (h,), (w,)), dtype=np.uint16,
+                           meta=np.empty((0, 0, 0), np.uint16), name=f"thermcap-counts-{type(session).__name__}-"
+                                                                      f"{session.id}")
+
+    def to_celsius(block: np.ndarray, block_info: dict | None = None) -> np.ndarray:
+        assert block_info is not None
+        a, b = block_info[0]["array-location"][0]
+        out = np.empty(block.shape, np.float32)
+        for j, k in enumerate(numbers[a:b]):
+            out[j] = temps.celsius(int(k), block[j]).celsius
+        return out
+
+    celsius = da.map_blocks(to_celsius, counts, dtype=np.float32, meta=np.empty((0, 0, 0), np.float32))
+    version = "latest covering each frame" if model_version is None else model_version
+    return xr.Dataset(
+        {"counts": (("time", "y", "x"), counts, {"long_name": "raw sensor counts", "units": "1"}),
+         "temperature": (("time", "y", "x"), celsius,
+                         {"long_name": "temperature", "standard_name": "temperature", "units": "degC",
+                          "model_version": str(version),
+                          "comment": "NaN: a pixel of the session's bad-pixel map"})},
+        coords={**_coords(table), "y": ("y", np.arange(h), {"long_name": "row, 0 at the top"}),
+                "x": ("x", np.arange(w), {"long_name": "column, 0 at the left"})},
+        attrs={"Conventions": "CF-1.10", "title": f"thermcap session {session.id}", "source": "thermcap",
+               "session_id": session.id, "sensor": session.meta.get("sensor") or "",
+               "fps": session.meta.get("fps") or 0, "radiometric_model": json.dumps(session.radiometric_model)})

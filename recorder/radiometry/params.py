@@ -18,7 +18,8 @@ from typing import Any
 
 from thermcap.recorder.radiometry.base import RadiometricModel
 
-__all__ = ["OBJECT_PARAMS", "ModelVersion", "add_version", "model_for_frame", "read_versions", "reparameterise"]
+__all__ = ["OBJECT_PARAMS", "ModelVersion", "add_version", "model_for_frame", "read_versions", "reparameterise",
+           "versions_from"]
 
 OBJECT_PARAMS = ("emissivity", "reflected_temp_c", "object_distance_m", "atmospheric_temp_c",
                  "relative_humidity_pct", "ir_window_temp_c", "ir_window_transmission")
@@ -89,6 +90,11 @@ def read_versions(session_dir: str | os.PathLike) -> list[ModelVersion]:
         return []
     except ValueError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
+    return versions_from(doc)
+
+
+def versions_from(doc: dict[str, Any]) -> list[ModelVersion]:
+    """The versions a ``radiometry.json`` document holds (read from a folder, or a bucket)."""
     return [ModelVersion(v["version"], v["at"], v["who"], v["why"], dict(v["params"]),
                          tuple(v["frames"]) if v.get("frames") else None, v.get("model"))
             for v in doc.get("versions", [])]

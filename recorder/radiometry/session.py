@@ -14,7 +14,7 @@ from __future__ import annotations
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 
@@ -22,7 +22,7 @@ from thermcap.recorder.radiometry.base import RadiometricModel, model_from_dict
 from thermcap.recorder.radiometry.params import ModelVersion, model_for_frame, read_versions, reparameterise
 
 __all__ = ["APPROXIMATE_NOTE", "BAD_PIXEL_RULES", "FrameTemperatures", "SessionTemperatures", "approximate_frames",
-           "read_bad_pixel_map"]
+           "bad_pixel_mask", "read_bad_pixel_map"]
 
 #: What happens to the pixels the bad-pixel map lists: NaN (no temperature), or kept as measured.
 BAD_PIXEL_RULES = ("nan", "keep")
@@ -32,27 +32,38 @@ def read_bad_pixel_map(session_dir: str | Path, camera: str | None = None) -> np
     """The session's bad-pixel map (the ``bad_pixel_map.json`` attachment every segment, and the
     archive's extras.mcap, carry; ``CAMERA/bad_pixel_map.json`` in a session of several) as a
     boolean mask; None where it has none."""
-    from mcap.reader import make_reader
-
     from thermcap.recorder.storage.reader import frame_files
 
-    want = f"{camera}/bad_pixel_map.json" if camera else "bad_pixel_map.json"
     for path in frame_files(session_dir):
         try:
             with open(path, "rb") as f:
-                found = {att.name: att.data for att in make_reader(f, validate_crcs=True).iter_attachments()
-                         if att.name.endswith("bad_pixel_map.json")}
-            data = found.get(want) or (next(iter(found.values())) if camera is None and len(found) == 1 else None)
-            if data is None:
-                continue
-            bpm = json.loads(data)
-            mask = np.zeros((int(bpm["height"]), int(bpm["width"])), bool)
-            for x, y in bpm.get("pixels", []):
-                mask[int(y), int(x)] = True
-            return mask
-        except (OSError, ValueError, KeyError, IndexError):
+                mask = bad_pixel_mask(f, camera)
+        except OSError:
             continue
+        if mask is not None:
+            return mask
     return None
+
+
+def bad_pixel_mask(f: BinaryIO, camera: str | None = None) -> np.ndarray | None:
+    """The bad-pixel map attached to one MCAP file (a segment, an extras.mcap on disk or read
+    from a bucket by ranges), as a boolean mask; None where it has none or cannot be read."""
+    from mcap.reader import make_reader
+
+    want = f"{camera}/bad_pixel_map.json" if camera else "bad_pixel_map.json"
+    try:
+        found = {att.name: att.data for att in make_reader(f, validate_crcs=True).iter_attachments()
+                 if att.name.endswith("bad_pixel_map.json")}
+        data = found.get(want) or (next(iter(found.values())) if camera is None and len(found) == 1 else None)
+        if data is None:
+            return None
+        bpm = json.loads(data)
+        mask = np.zeros((int(bpm["height"]), int(bpm["width"])), bool)
+        for x, y in bpm.get("pixels", []):
+            mask[int(y), int(x)] = True
+        return mask
+    except (OSError, ValueError, KeyError, IndexError):
+        return None
 
 
 #: What an approximate product says of itself, where GIS tools show it (band description, metadata).

@@ -256,3 +256,19 @@ def test_browser_pages_are_served(client):
     t = client.get("/api/v1/sessions/s-crossover/timeline", params={"bins": 10}).json()
     assert len(t["bins"]) == 10
     assert min(b["min"] for b in t["bins"]) < 0.3
+
+
+def test_the_histogram_the_workbench_draws_leaves_bad_pixels_out(client, source, data_root):
+    """Issue 37: the UI's histogram (the workbench asks this route) had spanned -40..550 °C, the
+    simulator's dead and hot pixels; the session's listed pixels are in no bin and no edge."""
+    from thermcap.recorder.radiometry.session import read_bad_pixel_map
+
+    listed = read_bad_pixel_map(data_root / "sessions" / "s-archived")
+    assert listed is not None and listed.any()
+    exp = source["s-archived"][5].pixels
+    good = exp[~listed].astype(np.float64) * 0.036 - 40
+    h = client.get("/api/v1/sessions/s-archived/frames/5/histogram", params={"bins": 16}).json()
+    assert h["pixels"] == exp.size - int(listed.sum())
+    assert h["edges_c"][0] == pytest.approx(good.min(), abs=1e-3)
+    assert h["edges_c"][-1] == pytest.approx(good.max(), abs=1e-3)
+    assert sum(h["counts"]) == h["pixels"]

@@ -1,0 +1,211 @@
+"""A session read straight from the bucket ``thermcap upload`` wrote, with no server.
+
+The bucket holds what ``upload`` sends: each verified archive file, the manifest (every frame's
+time and sha256, which formats hold it), ``extras.mcap`` (the sidecars, the bad-pixel map) and
+the session's own small documents (``session.json``, ``events.json``, ``radiometry.json``, as of
+the last upload). A frame is read from the first archive copy that has it, by ranged reads, and
+checked against the manifest's sha256 before it is returned: a damaged object is skipped for the
+next copy, never returned.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from functools import cached_property
+from typing import TYPE_CHECKING, Any
+from urllib.parse import urlparse
+
+import numpy as np
+
+from thermcap.recorder.radiometry.params import ModelVersion
+from thermcap.session import Session
+
+if TYPE_CHECKING:
+    from thermcap.api.reading.frame_table import FrameTable
+    from thermcap.archive.blobs import BlobStore
+
+__all__ = ["BucketSession", "open_bucket_session"]
+
+#: Cheapest random access first: a stored ZIP entry is one ranged read, an HDF5 chunk a few.
+_ORDER = ("png16", "htj2k", "jpegls", "jxl", "hdf5", "tiff-lzw", "tpred")
+
+
+def open_bucket_session(url: str, *, endpoint: str | None = None, region: str | None = None) -> BucketSession:
+    """``s3://BUCKET[/PREFIX]/sessions/ID``: the bucket's endpoint from ``endpoint`` or
+    ``THERMCAP_S3_ENDPOINT``, credentials from ``AWS_ACCESS_KEY_ID`` / ``AWS_SECRET_ACCESS_KEY``."""
+    import os
+    from pathlib import Path
+
+    from thermcap.archive.blobs import open_store
+    from thermcap.recorder.storage.layout import check_session_name
+
+    parts = urlparse(url)
+    path = parts.path.strip("/").split("/")
+    if parts.scheme != "s3" or not parts.netloc or len(path) < 2 or path[-2] != "sessions" or not path[-1]:
+        raise ValueError(f"{url}: a session in a bucket looks like s3://BUCKET/sessions/ID "
+                         f"(or s3://BUCKET/PREFIX/sessions/ID, as THERMCAP_S3_PREFIX uploaded it)")
+    session_id = check_session_name(path[-1])
+    store = open_store(Path("."), bucket=parts.netloc, endpoint=endpoint or os.environ.get("THERMCAP_S3_ENDPOINT"),
+                       region=region or os.environ.get("THERMCAP_S3_REGION", "us-east-1"),
+                       prefix="/".join(path[:-2]))
+    return BucketSession(store, session_id, url)
+
+
+class BucketSession(Session):
+    """A session in a bucket: its manifest, its documents, its frames from the archive objects."""
+
+    def __init__(self, store: BlobStore, session_id: str, url: str = "") -> None:
+        self.store, self.id, self.url = store, session_id, url or f"{store.url}/sessions/{session_id}"
+        self._base = f"sessions/{session_id}"
+        manifest = self._document("archive/manifest.json")
+        if manifest is None:
+            raise FileNotFoundError(f"{self.url}: no session here (no archive/manifest.json; `thermcap upload` "
+                                    f"puts one beside the archive)")
+        self.manifest: dict[str, Any] = manifest
+        recorded = self._document("session.json") or {}
+        self.meta = {**(manifest.get("session") or {}), **recorded, "session_id": session_id}
+        source = manifest.get("source") or {}
+        self.width, self.height = int(source.get("width") or 0), int(source.get("height") or 0)
+        frames = manifest.get("frames") or {}
+        self._sha256: list[str] = list(frames.get("sha256") or [])
+        self._sidecar_sha256: list[str] = list(frames.get("sidecar_sha256") or [])
+        offered = {f: e for f, e in (manifest.get("formats") or {}).items()
+                   if e.get("verified") and not e.get("damaged") and e.get("files")}
+        self._copies = [(f, offered[f]) for f in sorted(offered, key=lambda f: (*_ORDER, f).index(f))]
+
+    def __repr__(self) -> str:
+        return f"<BucketSession {self.url!r}: {len(self)} frames, {self.width}x{self.height}>"
+
+    # -- the bucket's documents -----------------------------------------------------------------
+    def _key(self, rel: str) -> str:
+        return f"{self._base}/{rel}"
+
+    def _document(self, rel: str) -> Any:
+        head = self.store.head(self._key(rel))
+        if head is None:
+            return None
+        data = self.store.get_range(self._key(rel), 0, int(head["size"]))
+        try:
+            return json.loads(data)
+        except ValueError as exc:
+            raise ValueError(f"{self.url}/{rel}: not valid JSON ({exc})") from None
+
+    def _object(self, rel: str) -> Any:
+        """A bucket object as a seekable file, read by ranges."""
+        from thermcap.api.reading.frames import BlobFile
+
+        head = self.store.head(self._key(rel))
+        if head is None:
+            raise FileNotFoundError(f"{self.url}/{rel} is not in the bucket")
+        return io.BufferedReader(BlobFile(self.store, self._key(rel), int(head["size"])), buffer_size=256 * 1024)
+
+    # -- what every session offers --------------------------------------------------------------
+    @cached_property
+    def _sidecars(self) -> list[dict[str, Any]]:
+        """Every frame's sidecar from extras.mcap (one pass over it), in frame order; empty where
+        the bucket has none."""
+        from mcap.reader import make_reader
+
+        from thermcap.recorder.icd.rosmsg import json_payload
+        from thermcap.recorder.icd.topics import TOPIC_METADATA
+
+        if not (self.manifest.get("extras") or {}).get("path"):
+            return []
+        try:
+            with self._object("archive/" + self.manifest["extras"]["path"]) as f:
+                return [json.loads(json_payload(ch.message_encoding, msg.data)) for _, ch, msg in
+                        make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA])]
+        except FileNotFoundError:
+            return []
+
+    @cached_property
+    def table(self) -> FrameTable:
+        from thermcap.api.indexing import sidecar_summary
+        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable, field_array
+
+        times = np.array((self.manifest.get("frames") or {}).get("timestamps_ns") or [], np.int64)
+        sidecars = self._sidecars if len(self._sidecars) == len(times) else [{}] * len(times)
+        rows = [sidecar_summary(sc) for sc in sidecars]
+        fields = {name: field_array(name, [r[col] for r in rows]) for name, (col, _, _) in FRAME_FIELDS.items()}
+        return FrameTable(self.id, np.arange(len(times), dtype=np.int64), times, fields)
+
+    def _verified(self, index: int, part: str) -> Any:
+        from thermcap.api.exceptions import FrameUnavailable
+        from thermcap.archive.formats import get_format
+        from thermcap.archive.manifest import frame_sha256, sidecar_sha256
+
+        n = len(self._sha256)
+        if not 0 <= index < n:
+            raise IndexError(f"frame {index}: session {self.id!r} has {n} frames")
+        hashes = self._sha256 if part == "pixels" else self._sidecar_sha256
+        want = hashes[index] if index < len(hashes) else None
+        problems = []
+        for fmt, entry in self._copies:
+            def open_file(rel: str, fmt: str = fmt) -> Any:
+                return self._object(f"archive/{fmt}/{rel}")
+
+            try:
+                frame = get_format(entry.get("config") or fmt).read_frame(open_file, entry["files"], index)
+            except Exception as exc:  # a missing or damaged object may fail anywhere inside a reader
+                problems.append(f"{fmt}: {type(exc).__name__}: {exc}")
+                continue
+            value: Any = frame.pixels if part == "pixels" else frame.sidecar
+            got = frame_sha256(value) if part == "pixels" else sidecar_sha256(value)
+            if want and got != want:
+                problems.append(f"{fmt}: {part} sha256 differs from the manifest")
+                continue
+            return value
+        raise FrameUnavailable(f"frame {index} of {self.url}: no copy in the bucket matches the manifest"
+                               + (f" ({'; '.join(problems)})" if problems else " (no verified archive format)"))
+
+    def counts(self, index: int) -> np.ndarray:
+        px = np.asarray(self._verified(index, "pixels"), dtype=np.uint16)
+        px.setflags(write=False)
+        return px
+
+    def sidecar(self, index: int) -> dict[str, Any]:
+        return dict(json.loads(self._verified(index, "sidecar") or b"{}"))
+
+    @cached_property
+    def events(self) -> list[dict[str, Any]]:
+        doc = self._document("events.json") or {}
+        return sorted(doc.get("events") or [], key=lambda e: (e.get("start_ns") or 0))
+
+    @cached_property
+    def model_versions(self) -> list[ModelVersion]:
+        from thermcap.recorder.radiometry.params import versions_from
+
+        return versions_from(self._document("radiometry.json") or {})
+
+    @cached_property
+    def bad_pixel_map(self) -> np.ndarray | None:
+        from thermcap.recorder.radiometry.session import bad_pixel_mask
+
+        path = (self.manifest.get("extras") or {}).get("path")
+        if not path:
+            return None
+        try:
+            with self._object("archive/" + path) as f:
+                return bad_pixel_mask(f)
+        except FileNotFoundError:
+            return None
+
+    def temperatures(self, model_version: int | None = None, bad_pixels: str = "nan") -> Any:
+        """The ``SessionTemperatures`` every temperature of this session is computed with (the
+        model versions and the bad-pixel map as of the last upload)."""
+        from thermcap.recorder.radiometry.base import model_from_dict
+        from thermcap.recorder.radiometry.session import SessionTemperatures
+
+        return SessionTemperatures(model_from_dict(self.radiometric_model), self.model_versions,
+                                   self.bad_pixel_map if bad_pixels == "nan" else None,
+                                   version=model_version, bad_pixels=bad_pixels)
+
+    def temperature(self, index: int, model_version: int | None = None) -> np.ndarray:
+        """Frame ``index`` in °C (float32), bad pixels NaN."""
+        return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
+
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> Any:
+        from thermcap.session import lazy_dataset
+
+        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)
