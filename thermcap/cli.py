@@ -130,14 +130,16 @@ def cut(session: str, root: str, start: str | None, end: str | None, topics: str
 @bench.command("python")
 @click.option("--frames", type=click.IntRange(10, 100_000), default=600, show_default=True)
 @click.option("--rounds", type=click.IntRange(1, 21), default=5, show_default=True)
+@click.option("--hour", is_flag=True,
+              help="Also open a real one-hour session (216,000 frames, recorded first: minutes).")
 @click.option("--json", "as_json", is_flag=True, help="One JSON document.")
-def bench_python_cmd(frames: int, rounds: int, as_json: bool) -> None:
+def bench_python_cmd(frames: int, rounds: int, hour: bool, as_json: bool) -> None:
     """The Python API: Zarr endpoint vs h5py, thermcap.open(url) vs a raw GET, to_xarray's open."""
     import json
 
     from thermcap.bench import bench_python
 
-    res = bench_python(frames=frames, rounds=rounds)
+    res = bench_python(frames=frames, rounds=rounds, hour=hour)
     if as_json:
         click.echo(json.dumps(res, indent=2))
         return
@@ -148,6 +150,11 @@ def bench_python_cmd(frames: int, rounds: int, as_json: bool) -> None:
                    f"  (goal {r['goal']})")
     o = res["to_xarray_open"]
     click.echo(f"  {'to_xarray_open':30} {o['seconds']:.4f} s, {o['frames_read']} frames read  (goal {o['goal']})")
+    if "to_xarray_open_one_hour" in res:
+        h = res["to_xarray_open_one_hour"]
+        click.echo(f"  {'to_xarray_open_one_hour':30} {h['seconds']:.4f} s for {h['frames']:,} frames "
+                   f"({h['chunks']:,} chunks), {h['frames_read']} frames read, {h['peak_python_mb']} MB peak; "
+                   f"imports {h['imports_s']} s apart  (goal {h['goal']})")
 
 
 @bench.command("startup")
