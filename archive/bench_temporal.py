@@ -38,6 +38,12 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
                                                                patrol_deg_s=3.0).frames()],
         "turret on radar cues": [f.pixels for f in SimSource(**common, **honest, view="turret", cue_period_s=2.0,
                                                                first_cue_s=0.2).frames()],
+        # what real uncooled cameras do that the views above do not: the shutter closing for a
+        # flat-field correction (a frame-wide step), and temporal noise above the scene's detail
+        "shutter (NUC) every 0.5 s": [f.pixels for f in SimSource(**common, **honest,
+                                                                    shutter_every_s=0.5).frames()],
+        "temporal noise above detail (NETD 400 mK)": [f.pixels for f in SimSource(**common, **honest,
+                                                                                    netd_mk=400.0).frames()],
     }
 
 

@@ -367,10 +367,10 @@ def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
         click.echo(json.dumps(rows, indent=2))
         return
     prev = f"v{rows[0]['previous_bitstream']}" if rows else "prev"
-    click.echo(f"{'sequence':32} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'ffv1':>6} {'png16':>6} "
+    click.echo(f"{'sequence':42} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'ffv1':>6} {'png16':>6} "
                f"{'fps 1c':>7} {'fps 2c':>7} {prev + ' x jxl':>8} {prev + ' 2c':>6}")
     for r in rows:
-        click.echo(f"{r['sequence']:32} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
+        click.echo(f"{r['sequence']:42} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
                    f"{r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} {r['tpred_fps_1_core']:>7} "
                    f"{r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
                    f"{r['tpred_previous_fps_2_cores']:>6}")

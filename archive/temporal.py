@@ -78,7 +78,7 @@ predicted from the scene, then the others (block modes and unseen points, whose 
 larger). The frame is ``P + residual``. Payload type 1 or 2 says whether both streams hold
 int16 or int32.
 
-Bitstream, version 4 (magic ``b"TPF4"``; what thermcap writes): version 3 with three changes.
+Bitstream, version 4 (magic ``b"TPF4"``): version 3 with three changes.
 
 - A key record's payload starts with the sensor's defect list: ``u32`` length ``L`` and ``L``
   bytes, the zlib stream of the defects' flat pixel indices (``r * width + c``) as ``u32``,
@@ -91,6 +91,20 @@ Bitstream, version 4 (magic ``b"TPF4"``; what thermcap writes): version 3 with t
   predicted from a defect; where only defects saw a point, it is unseen.
 - Both residual streams are ``archive.rans`` streams (specified there) instead of pcodec
   chunks; the payload type is the residuals' range as before.
+
+Bitstream, version 5 (magic ``b"TPF5"``; what thermcap writes): version 4 and one more record
+kind, 2 (intra), for the mode decision every video codec makes. An intra record has version 4's
+predicted header (``window``, ``dx``, ``dy`` as a predicted record would have them; payload type
+2) and its payload is the frame coded alone, as a version 4 key frame codes it (``archive.
+tpred_key``) without the defect list. The decoder takes the frame from the payload, then does
+what it does after a predicted record with no block modes: the prediction's scene part ``M``
+and unseen pixels are computed from ``(dx, dy)`` as for a predicted record, and the frame is
+learned and pushed with them. So the sequence goes on (the window, the pattern, the defects)
+and the next key stays where the key interval puts it. The encoder writes an intra record when
+the frame coded alone is smaller than its predicted record (it tries once the predicted record
+reaches ``INTRA_TRY`` of the last frame it coded alone, a key or a trial): a shutter (NUC)
+frame, a gain step, a cut, or temporal noise above the scene's detail, where real uncooled
+cameras made every predicted frame 15-43 % larger than the key frame.
 
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference, each difference clipped at 16 counts, on every 8th line;
@@ -121,13 +135,18 @@ import numpy as np
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_gops",
            "decode_records", "encode_gops", "parse_header"]
 
-BITSTREAM_VERSION = 4  # what the encoder writes by default; every earlier version decodes
-MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4"}
+BITSTREAM_VERSION = 5  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4", 5: b"TPF5"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
 T = TypeVar("T")
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
-KEY, PREDICTED = 0, 1
+KEY, PREDICTED, INTRA = 0, 1, 2
 _INT16, _INT32 = 1, 2
+#: A predicted record at least this share of the last frame coded alone (a key, or the last
+#: trial) is compared with the frame coded alone (version 5's mode decision). Below it, coding
+#: alone was never smaller on any sequence measured (``thermcap bench temporal``); skipping
+#: the trial there keeps the encoder fast where prediction wins narrowly (heavy noise).
+INTRA_TRY = 0.97
 
 
 class TpredError(ValueError):
@@ -154,7 +173,8 @@ def parse_header(buf: bytes | memoryview) -> RecordHeader:
     version = _VERSION_OF.get(bytes(magic))
     if version is None:
         raise TpredError(f"not a tpred record of version 1..{BITSTREAM_VERSION} (magic {bytes(magic)!r})")
-    if kind not in (KEY, PREDICTED) or ptype not in (_INT16, _INT32) or (kind == PREDICTED and window == 0):
+    kinds = (KEY, PREDICTED, INTRA) if version >= 5 else (KEY, PREDICTED)
+    if kind not in kinds or ptype not in (_INT16, _INT32) or (kind != KEY and window == 0):
         raise TpredError(f"a tpred record with kind {kind}, window {window}, payload type {ptype}")
     if len(buf) != HEADER.size + n:
         raise TpredError(f"a tpred record says {n} payload bytes and holds {len(buf) - HEADER.size}")
@@ -736,6 +756,7 @@ def _window_for(version: int) -> _Window | _SceneWindow | _State3:
     return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3() if version == 3 else _State4()
 
 
+
 def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, other: int = 0) -> int:
     """The shift along ``axis`` (1: columns, dx; 0: rows, dy) that best maps ``prev`` onto
     ``cur``: the least mean absolute difference (each clipped at ``_CLIP``) over the overlap, on
@@ -791,9 +812,15 @@ class TemporalEncoder:
         self._since_key = 0
         self._known_defects = defects
         self._stuck = _StuckPixels() if bitstream >= 4 and defects is None else None
+        self._alone = 0  # bytes of the last frame coded alone (a key, or a trial): what it costs here
+        self.intra_decided = 0  # frames written as intra records, being smaller coded alone
 
     def encode(self, frame: np.ndarray) -> bytes:
-        from thermcap.archive import tpred_key
+        """The frame's record. In version 5 a frame is never written larger than coded alone:
+        once its predicted record reaches ``INTRA_TRY`` of the last frame coded alone, the frame is
+        coded alone too and the smaller written (an intra record, which carries the sequence on
+        as a predicted frame does). Where prediction loses: temporal noise above the scene's
+        detail, a shutter (NUC) or gain step, a cut."""
         if frame.dtype != np.uint16 or frame.ndim != 2:
             raise ValueError(f"tpred encodes 2-D uint16 frames, got {frame.dtype} {frame.shape}")
         h, w = frame.shape
@@ -801,27 +828,15 @@ class TemporalEncoder:
         if self._stuck is not None:
             self._stuck.see(f)
         if self._prev is None or self._prev.shape != frame.shape or self._since_key >= self.key_interval:
-            self._state.reset()
-            if isinstance(self._state, _State4):
-                defects = self._stuck.listed() if self._stuck is not None else self._known_defects
-                assert defects is not None
-                ptype, payload = _INT32, _pack_defects(defects) + tpred_key.encode_key(f)
-                self._state.key(f, defects)
-            elif isinstance(self._state, _State3):
-                ptype, payload = _pack_vertical(f)
-                self._state.key(f)
-            else:
-                ptype, payload = _pack_vertical(f)
-                self._state.push(f)
-            self._state.trim(self.window)
-            self._prev, self._since_key = f, 1
-            return HEADER.pack(self._magic, KEY, 0, w, h, 0, 0, ptype, 0, len(payload)) + payload
+            return self._key(f, *self._intra(f))
         dx, dy = self._motion(f)
         st = self._state
+        kind = PREDICTED
         if isinstance(st, _State3):
             used = len(st.frames)
             pred, m64, other = st.predict(dx, dy)
             assert st.prev is not None
+            scene_other = other.copy() if other is not None else None  # what an intra record carries on
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
                 other = st.with_modes(modes, pred, other)
@@ -829,6 +844,14 @@ class TemporalEncoder:
                 ptype, payload = _pack_streams4(modes, f, pred, other)
             else:
                 ptype, payload = _pack_streams(modes, f - pred, other)
+            if self.bitstream >= 5 and HEADER.size + len(payload) >= INTRA_TRY * self._alone:
+                from thermcap.archive import tpred_key
+
+                alone = tpred_key.encode_key(f)
+                self._alone = HEADER.size + len(alone)
+                if len(alone) < len(payload):  # the mode decision: coded alone, it is smaller
+                    kind, ptype, payload, other = INTRA, _INT32, alone, scene_other
+                    self.intra_decided += 1
             st.push(f, m64, other)
         else:
             pred, used = st.predict(dx, dy)
@@ -837,7 +860,36 @@ class TemporalEncoder:
         st.trim(self.window)
         self._prev = f
         self._since_key += 1
-        return HEADER.pack(self._magic, PREDICTED, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
+        return HEADER.pack(self._magic, kind, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
+
+    def _intra(self, f: np.ndarray) -> tuple[int, bytes, np.ndarray | None]:
+        """(payload type, payload, defects) of ``f`` coded alone, changing no state."""
+        from thermcap.archive import tpred_key
+
+        if isinstance(self._state, _State4):
+            defects = self._stuck.listed() if self._stuck is not None else self._known_defects
+            assert defects is not None
+            return _INT32, _pack_defects(defects) + tpred_key.encode_key(f), defects
+        ptype, payload = _pack_vertical(f)
+        return ptype, payload, None
+
+    def _key(self, f: np.ndarray, ptype: int, payload: bytes, defects: np.ndarray | None) -> bytes:
+        """Start the sequence again at ``f``, as a decoder does at a key record."""
+        h, w = f.shape
+        self._since_key = 0
+        self._state.reset()
+        if isinstance(self._state, _State4):
+            self._state.key(f, defects)
+        elif isinstance(self._state, _State3):
+            self._state.key(f)
+        else:
+            self._state.push(f)
+        self._state.trim(self.window)
+        self._prev = f
+        self._since_key += 1
+        record = HEADER.pack(self._magic, KEY, 0, w, h, 0, 0, ptype, 0, len(payload)) + payload
+        self._alone = len(record)
+        return record
 
     def _motion(self, f: np.ndarray) -> tuple[int, int]:
         assert self._prev is not None
@@ -891,7 +943,15 @@ class TemporalDecoder:
                 raise TpredError(f"the record averages {hdr.window} frames, the decoder holds "
                                  f"{len(self._state.frames)}")
             st = self._state
-            if isinstance(st, _State3):
+            if hdr.kind == INTRA:  # coded alone, and carried on as a predicted frame is
+                if not isinstance(st, _State4):
+                    raise TpredError("an intra record in a sequence of version 3 or older")
+                _, m64, other = st.predict(hdr.dx, hdr.dy)
+                try:
+                    f = tpred_key.decode_key(payload, shape).astype(np.int32)
+                except tpred_key.KeyFrameError as exc:
+                    raise TpredError(str(exc)) from None
+            elif isinstance(st, _State3):
                 modes, pos = _unpack_modes(payload, shape)
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
                 if modes is not None:

@@ -14,7 +14,17 @@ import pytest
 from thermcap.archive.exceptions import ArchiveError
 from thermcap.archive.formats import get_format
 from thermcap.archive.manifest import frame_sha256
-from thermcap.archive.temporal import HEADER, TemporalDecoder, TemporalEncoder, TpredError, decode_records, parse_header
+from thermcap.archive.temporal import (
+    BITSTREAM_VERSION,
+    HEADER,
+    INTRA,
+    TemporalDecoder,
+    TemporalEncoder,
+    TpredError,
+    decode_gops,
+    decode_records,
+    parse_header,
+)
 from thermcap.recorder.capture.sources.sim import SimSource
 
 GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and v2, v3 beside it
@@ -61,7 +71,7 @@ def test_the_extremes_and_a_frame_that_changes_size():
     assert all(np.array_equal(x, y) for x, y in zip(seq, decode_records(records), strict=True))
 
 
-@pytest.mark.parametrize("version", [1, 2, 3, 4])
+@pytest.mark.parametrize("version", [1, 2, 3, 4, 5])
 def test_each_versions_golden_records_decode_bit_exact_today(version):
     golden = GOLDEN.parent / f"tpred-v{version}"
     if not golden.is_dir():
@@ -111,7 +121,7 @@ def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
     assert rec.run().ok
     m = archive_session(rec.session_dir, ["tpred"])
     entry = m["formats"]["tpred"]
-    assert entry["verified"] and entry["config"]["bitstream"] == 4
+    assert entry["verified"] and entry["config"]["bitstream"] == BITSTREAM_VERSION
     fmt = get_format(entry["config"])
     folder = rec.session_dir / "archive" / "tpred"
     def open_file(rel: str):
@@ -376,3 +386,41 @@ def test_gops_on_two_threads_write_the_sequential_encoders_bytes():
     damaged[20] = damaged[20][:-3]
     with pytest.raises(TpredError, match="record 20: a tpred record says"):
         list(decode_gops(range(len(damaged)), lambda i: damaged[i], name=lambda i: f"record {i}"))
+
+
+@pytest.mark.parametrize("kind", ["shutter", "noise"])
+def test_version_5_never_codes_a_frame_larger_than_alone(kind):
+    """Issue 40: on real uncooled cameras every predicted frame was larger than the key frame
+    (+15 to +43 %), and a shutter (NUC) frame is flat where the prediction expects the scene.
+    Version 5's mode decision writes such a frame as an intra record (coded alone, carried on
+    as a predicted frame is): no record is larger than the frame's own intra coding, and the
+    sequence still decodes bit-exact, sequentially and a GOP a thread."""
+    from thermcap.archive import tpred_key
+
+    kw = {"shutter_every_s": 0.2} if kind == "shutter" else {"netd_mk": 2000.0}
+    seq = _frames("fixed", 40, **kw)
+    enc = TemporalEncoder(key_interval=32)
+    records = [enc.encode(f) for f in seq]
+    assert enc.intra_decided > 0, "the sequence must exercise the mode decision"
+    assert any(parse_header(r).kind == INTRA for r in records)
+    for f, r in zip(seq, records, strict=True):
+        alone = HEADER.size + len(tpred_key.encode_key(f.astype(np.int32)))
+        assert len(r) <= alone + 64, (parse_header(r), len(r), alone)  # a key also lists the defects
+    assert all(np.array_equal(a, b) for a, b in zip(seq, decode_records(records), strict=True))
+    par = [f for _, f in decode_gops(records, lambda r: r)]
+    assert all(np.array_equal(a, b) for a, b in zip(seq, par, strict=True))
+    # version 4 on the same frames: no intra records, and the shutter frames cost more than alone
+    v4 = TemporalEncoder(key_interval=32, bitstream=4)
+    old = [v4.encode(f) for f in seq]
+    assert not any(parse_header(r).kind == INTRA for r in old)
+    if kind == "shutter":
+        assert sum(map(len, records)) < sum(map(len, old))
+
+
+def test_an_intra_record_is_refused_before_version_5():
+    enc = TemporalEncoder(key_interval=32)
+    records = [enc.encode(f) for f in _frames("fixed", 20, shutter_every_s=0.2)]
+    intra = next(r for r in records if parse_header(r).kind == INTRA)
+    forged = b"TPF4" + intra[4:]
+    with pytest.raises(TpredError, match="kind 2"):
+        parse_header(forged)
