@@ -115,7 +115,10 @@ class HotSpotDetector:
     # The worst case is bounded: a frame where more than this share of the coarse cells stands
     # above the background holds noise or texture, not targets (the simulator's busiest scenes
     # stay under 3%); and at most this many candidate regions are examined at full resolution,
-    # the most prominent first. Either cap, when it bites, is named in the sidecar.
+    # the most prominent first, per 640x512 frame (in proportion to the frame's area, at least
+    # 8: a region costs about the same whatever the frame, and the writer's work a frame is in
+    # proportion to its area, so the detector keeps pace with it on every scene). Either cap,
+    # when it bites, is named in the sidecar.
     max_candidate_fraction: float = 0.25
     max_regions: int = 32
     max_examined_share: float = 0.1  # of the frame's area, in the candidate regions' boxes
@@ -203,20 +206,21 @@ class HotSpotDetector:
             examine: list[int] = list(range(1, n_regions + 1))
             budget = self.max_examined_share * cells.size  # in coarse cells
             boxes = [(o[0].stop - o[0].start) * (o[1].stop - o[1].start) for o in objects]
-            if n_regions > self.max_regions or sum(boxes) > budget:
+            region_limit = max(min(8, self.max_regions), round(self.max_regions * h * w / (640 * 512)))
+            if n_regions > region_limit or sum(boxes) > budget:
                 # the most prominent regions first, until the count or the area budget is spent
                 tops = np.asarray(ndimage.maximum(excess_cells, regions, index=np.arange(1, n_regions + 1)))
                 chosen: list[int] = []
                 spent = 0
                 for k in (int(j) + 1 for j in np.argsort(-tops, kind="stable")):
-                    if len(chosen) >= self.max_regions:
+                    if len(chosen) >= region_limit:
                         break
                     if spent + boxes[k - 1] > budget:  # a region this wide is texture, not a target
                         continue
                     chosen.append(k)
                     spent += boxes[k - 1]
                 capped = {"rule": "max_regions", "value": int(n_regions), "examined": len(chosen),
-                          "limit": self.max_regions, "area_budget": self.max_examined_share,
+                          "limit": region_limit, "area_budget": self.max_examined_share,
                           "why": "only the most prominent candidate regions were examined"}
                 examine = sorted(chosen)
             found = []
