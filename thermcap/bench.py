@@ -64,6 +64,19 @@ def _pair(ours: Callable[[], Any], anchor: Callable[[], Any], rounds: int) -> di
             "anchor_s": round(statistics.median(a for _, a in pairs), 4), "ratio": round(ratio, 2)}
 
 
+def _count_reads(session: Any) -> dict[str, int]:
+    """Count the frames ``session`` reads from here on (opening a Dataset must read none)."""
+    reads = {"n": 0}
+    original = session.counts
+
+    def counting(index: int) -> Any:
+        reads["n"] += 1
+        return original(index)
+
+    session.counts = counting
+    return reads
+
+
 def bench_one_hour_open(fps: int = 60) -> dict[str, Any]:
     """``to_xarray()`` of a one-hour session: seconds to open (median of 3, imports warmed first),
     frames read while opening (0), and the peak Python memory it allocated."""
@@ -87,14 +100,7 @@ def bench_one_hour_open(fps: int = 60) -> dict[str, Any]:
         t = time.perf_counter()
         session = thermcap.open("hour", root=root)
         indexed = time.perf_counter() - t
-        reads = {"n": 0}
-        original = session.counts
-
-        def counting(index: int) -> Any:
-            reads["n"] += 1
-            return original(index)
-
-        session.counts = counting  # type: ignore[method-assign]
+        reads = _count_reads(session)
         times = []
         for _ in range(3):
             t = time.perf_counter()
@@ -159,14 +165,7 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
                 first = _pair(open_first, raw_get, rounds)
 
             local = thermcap.open("bench", root=root)
-            reads = {"n": 0}
-            original = local.counts
-
-            def counting(index: int) -> Any:
-                reads["n"] += 1
-                return original(index)
-
-            local.counts = counting  # type: ignore[method-assign]
+            reads = _count_reads(local)
             opened = _timed(lambda: local.to_xarray())
             out = {"frames": frames, "size": f"{width}x{height}", "rounds": rounds,
                    "zarr_whole_session_vs_h5py": {**whole, "goal": "<= 2"},
