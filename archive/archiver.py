@@ -20,6 +20,8 @@ from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from thermcap.archive.codecs import library_versions
 from thermcap.archive.evidence import copy_problems, extras_problems, local_cover
 from thermcap.archive.exceptions import ArchiveError, SourceDamagedError, VerificationError
@@ -37,7 +39,8 @@ from thermcap.archive.manifest import (
     save_manifest,
     sidecar_sha256,
 )
-from thermcap.archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest
+from thermcap.archive.manifest_types import FileEntry, FormatEntry, Manifest
+from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
@@ -70,12 +73,16 @@ def _summary_intact(adir: Path, manifest: Manifest) -> bool:
 
 
 def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping[str, Any]],
-                      expected: list[str], *, where: str, sidecars: list[str] | None = None,
-                      times: list[int] | None = None, hash_files: bool = True) -> tuple[list[str], float]:
+                      expected: Sequence[str | bytes], *, where: str, sidecars: list[str] | None = None,
+                      times: list[int] | None = None, hash_files: bool = True,
+                      digest: tuple[str, Callable[[np.ndarray], str | bytes]] = ("sha256", frame_sha256)) \
+        -> tuple[list[str], float]:
     """Decode every file with the format's reader and compare each frame's pixels, sidecar and
     time with the source's hashes; return (problems, decode seconds). ``sidecars`` and ``times``
     are absent only in manifests written before they were recorded. ``hash_files=False`` where
-    the caller has just hashed the files to make their entries (the writer's own check)."""
+    the caller has just hashed the files to make their entries (the writer's own check), which
+    may also compare pixels by another ``digest`` of the same source read (see ``read_back``)."""
+    digest_name, pixel_digest = digest
     problems: list[str] = []
     index = 0
     decode_s = 0.0
@@ -95,8 +102,8 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping
                 if i >= len(expected):
                     problems.append(f"{where}/{rec['path']}: holds more frames than the session ({i + 1}+)")
                     break
-                if frame_sha256(frame.pixels) != expected[i]:
-                    problems.append(f"frame {i} ({where}/{rec['path']}): sha256 differs")
+                if pixel_digest(frame.pixels) != expected[i]:
+                    problems.append(f"frame {i} ({where}/{rec['path']}): {digest_name} differs")
                 if sidecars and sidecar_sha256(frame.sidecar) != sidecars[i]:
                     problems.append(f"frame {i} ({where}/{rec['path']}): sidecar differs from the source's")
                 if times and frame.log_time is not None and frame.log_time != times[i]:
@@ -132,7 +139,7 @@ class BuiltCopy:
 
 
 def write_verified(fmt: ArchiveFormat, fid: str, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext,
-                   expected: Callable[[], FramesBlock]) -> BuiltCopy:
+                   expected: Callable[[], ReadBack]) -> BuiltCopy:
     """Write ``frames`` into ``out_dir`` and decode every file back with the format's reader,
     comparing each frame with ``expected()`` (called once the stream has ended: the single read
     of the source gives the hashes only then). A writer or source failure removes ``out_dir``."""
@@ -149,13 +156,17 @@ def write_verified(fmt: ArchiveFormat, fid: str, frames: Iterable[SessionFrame],
         rec.sha256 = file_sha256(p)
     files: list[FileEntry] = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, "sha256": r.sha256}
                               for r in records]
-    want = expected()
-    problems, decode_s = verify_format_dir(fmt, out_dir, files, want["sha256"], where=fid,
+    back = expected()
+    want = back.frames
+    name, digest, pixels = back.pixel_digest
+    problems, decode_s = verify_format_dir(fmt, out_dir, files, pixels, where=fid,
                                            sidecars=want.get("sidecar_sha256"), times=want.get("timestamps_ns"),
-                                           hash_files=False)
+                                           hash_files=False, digest=(name, digest))
+    how = ("the pixels by xxh3-128 taken on the same read as the manifest's sha256" if name == "xxh3-128"
+           else "the pixels by the manifest's sha256")
     return BuiltCopy(files, problems, encode_s, decode_s,
                      f"bit-exact: {len(want['sha256'])} frames decoded with the format's reader match the MCAP "
-                     f"source's pixels, sidecars and times (sha256)")
+                     f"source's pixels, sidecars and times ({how}; sidecars by sha256)")
 
 
 def format_entry(fmt: ArchiveFormat, built: BuiltCopy, frames: int, raw_bytes: int) -> FormatEntry:
@@ -225,11 +236,13 @@ def fresh_partial(session_dir: Path, fid: str) -> Path:
 
 def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
                  manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
-                 on_progress: Callable[[str, int, int], None] | None = None) -> list[str]:
+                 on_progress: Callable[[str, int, int], None] | None = None,
+                 read_back_xxh3: Callable[[], list[bytes] | None] | None = None) -> list[str]:
     """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
     manifest's hashes, and only then take the final name (replacing an older copy only now) and
     record it in the manifest. Returns the problems; a failed copy never takes the final name.
-    The archiver feeds it the MCAP source; ``scrub --repair`` any verified copy."""
+    The archiver feeds it the MCAP source (and ``read_back_xxh3``, the digests its read took,
+    when it took the manifest's hashes on that read); ``scrub --repair`` any verified copy."""
     session_id = manifest.get("session_id", session_dir.name)
     total = sum(per_segment.values())
     partial = fresh_partial(session_dir, fid)
@@ -243,12 +256,12 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
     ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=total,
                          frames_per_segment=per_segment, workers=workers, on_frame=tick)
 
-    def expected() -> FramesBlock:
+    def expected() -> ReadBack:
         # read only now: the archiver's single read of the source gives the manifest its hashes
         # when the frame stream ends, which is before any writer returns
         if on_progress:
             on_progress(f"verifying {fid}", 0, total)
-        return manifest["frames"]
+        return ReadBack(manifest["frames"], read_back_xxh3() if read_back_xxh3 is not None else None)
 
     built = write_verified(fmt, fid, frames, partial, ctx, expected)
     entry = format_entry(fmt, built, len(manifest["frames"]["sha256"]), manifest["source"]["raw_bytes"])
@@ -349,7 +362,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     def writer_for(fid: str) -> Callable[[Iterable[SessionFrame]], list[str]]:
         def write(frames: Iterable[SessionFrame]) -> list[str]:
             return build_format(session_dir, fid, fmts[fid], frames, manifest, meta, per_segment,
-                                workers=workers, on_progress=on_progress)
+                                workers=workers, on_progress=on_progress,
+                                read_back_xxh3=lambda: source.hashes.xxh3 if source.hashes is not None else None)
         return write
 
     try:

@@ -148,9 +148,14 @@ class SummaryBuilder:
             self._min, self._max, self._sum = (np.concatenate([a, np.zeros(grow, a.dtype)])
                                                for a in (self._min, self._max, self._sum))
             self._crc = np.concatenate([self._crc, np.zeros((grow, self._crc.shape[1]), np.uint32)])
-        self._min[self.n] = pixels.min()
-        self._max[self.n] = pixels.max()
-        self._sum[self.n] = int(pixels.sum(dtype=np.uint64))
+        if pixels.ndim == 2 and pixels.dtype == np.uint16 and pixels.size:
+            from thermcap.archive.summary_kernels import frame_stats  # numba: imported on first use
+
+            self._min[self.n], self._max[self.n], self._sum[self.n] = frame_stats(pixels)
+        else:
+            self._min[self.n] = pixels.min()
+            self._max[self.n] = pixels.max()
+            self._sum[self.n] = int(pixels.sum(dtype=np.uint64))
         self._crc[self.n] = band_crc32(pixels, self.band_rows)
         self.n += 1
 

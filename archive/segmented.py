@@ -53,6 +53,7 @@ from thermcap.archive.formats import ArchiveContext, get_format
 from thermcap.archive.frame_summary import SUMMARY_NAME, FrameSummary, SummaryBuilder, load_summary
 from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest, new_manifest, save_manifest
 from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest
+from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX
 from thermcap.recorder.storage.lock import holder, lock_session
@@ -175,11 +176,11 @@ def _archive_segment_locked(session_dir: Path, seg: Path, first_index: int, form
     ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=n, frames_per_segment={segment: n},
                          workers=workers)
 
-    def expected() -> FramesBlock:
+    def expected() -> ReadBack:
         h = source.hashes
         assert h is not None  # the stream ended and the segment agreed with itself
-        return {"sha256": h.sha256, "sidecar_sha256": h.sidecar_sha256, "timestamps_ns": h.timestamps_ns,
-                "segments": h.segments}
+        return ReadBack({"sha256": h.sha256, "sidecar_sha256": h.sidecar_sha256, "timestamps_ns": h.timestamps_ns,
+                         "segments": h.segments}, h.xxh3)
 
     def writer(fid: str) -> Callable[[Iterable[SessionFrame]], BuiltCopy]:
         def write(frames: Iterable[SessionFrame]) -> BuiltCopy:
@@ -209,7 +210,7 @@ def _archive_segment_locked(session_dir: Path, seg: Path, first_index: int, form
         summary.finish().save(partial / SUMMARY_NAME)
         h = source.hashes
         assert h is not None
-        part = SegmentPart(segment, seg.stat().st_size, first_index, expected(), h.width, h.height,
+        part = SegmentPart(segment, seg.stat().st_size, first_index, expected().frames, h.width, h.height,
                            {fid: {"files": b.files, "encode_s": b.encode_s, "decode_s": b.decode_s}
                             for fid, b in built.items()})
         (partial / PART_JSON).write_text(json.dumps(part.to_dict()))

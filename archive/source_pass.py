@@ -20,6 +20,7 @@ from thermcap.archive.exceptions import SourceDamagedError
 from thermcap.archive.extras import ExtrasWriter
 from thermcap.archive.frame_summary import SummaryBuilder
 from thermcap.archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.archive.read_back import frame_xxh3
 from thermcap.archive.source_checks import channel_problems
 from thermcap.recorder.icd.topics import TOPIC_METADATA
 from thermcap.recorder.storage.reader import SessionFrame, iter_segment_frames, session_segments
@@ -35,6 +36,8 @@ class SourceHashes:
     sidecar_sha256: list[str] = field(default_factory=list)
     timestamps_ns: list[int] = field(default_factory=list)
     segments: list[str] = field(default_factory=list)
+    #: xxh3-128 of the same pixels, for this run's read-back alone (``read_back``); not kept
+    xxh3: list[bytes] = field(default_factory=list)
     width: int = 0
     height: int = 0
 
@@ -69,6 +72,7 @@ class SourcePass:
             for f in iter_segment_frames(seg, first_index=index, others=others):
                 if self.hash_frames:
                     got.sha256.append(frame_sha256(f.pixels))
+                    got.xxh3.append(frame_xxh3(f.pixels))
                     got.sidecar_sha256.append(sidecar_sha256(f.sidecar))
                     got.timestamps_ns.append(f.log_time)
                     got.segments.append(f.segment)

@@ -8,6 +8,7 @@ __all__ = ["EXTRA_FOR", "missing_extra_message"]
 #: a module's top-level import name -> (the distribution, the extra that installs it)
 EXTRA_FOR: dict[str, tuple[str, str]] = {
     "h5py": ("h5py", "archive"), "numba": ("numba", "archive"), "obstore": ("obstore", "archive"),
+    "xxhash": ("xxhash", "archive"),
     "fastapi": ("fastapi", "server"), "starlette": ("fastapi", "server"), "uvicorn": ("uvicorn", "server"),
     "sqlalchemy": ("SQLAlchemy", "server"), "alembic": ("alembic", "server"),
     "swagger_ui_bundle": ("swagger-ui-bundle", "server"), "httptools": ("httptools", "server"),

@@ -169,6 +169,25 @@ def test_delete_source_refused_when_verification_fails(session):
     assert not m["formats"]["broken-test"]["verified"]
 
 
+def test_read_back_compares_by_the_digest_its_source_read_took(session):
+    """The first archive compares each read-back frame by xxh3-128 taken on the same source read
+    as the manifest's sha256; a format added later, whose source may have rotted since, by the
+    manifest's sha256. A one-count change is caught either way."""
+    register_format("broken-test", _Broken)
+    try:
+        with pytest.raises(VerificationError, match="frame 7") as first:
+            archive_session(session, ["png16", "broken-test"])
+        assert "xxh3-128 differs" in str(first.value.problems)
+        assert "xxh3-128 taken on the same read" in load_manifest(session)["formats"]["png16"]["verification"]
+        with pytest.raises(VerificationError, match="frame 7") as later:
+            archive_session(session, ["broken-test"])
+        assert "sha256 differs" in str(later.value.problems)
+        archive_session(session, ["tiff-lzw"])
+        assert "by the manifest's sha256" in load_manifest(session)["formats"]["tiff-lzw"]["verification"]
+    finally:
+        format_registry.pop("broken-test")
+
+
 def test_rerun_skips_verified_formats(session):
     archive_session(session, ["png16"])
     before = (session / "archive" / "png16" / "0000.zip").stat().st_mtime_ns
