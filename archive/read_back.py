@@ -24,14 +24,14 @@ import xxhash
 
 from thermcap.archive.manifest import frame_sha256
 from thermcap.archive.manifest_types import FramesBlock
+from thermcap.recorder.storage.digest import frame_bytes
 
 __all__ = ["ReadBack", "frame_xxh3"]
 
 
 def frame_xxh3(pixels: np.ndarray) -> bytes:
-    """xxh3-128 of the same bytes ``frame_sha256`` covers (uint16 LE, row-major)."""
-    arr = np.ascontiguousarray(pixels, dtype="<u2")
-    return xxhash.xxh3_128_digest(arr.data.cast("B"))
+    """xxh3-128 of the same bytes ``frame_sha256`` covers."""
+    return xxhash.xxh3_128_digest(frame_bytes(pixels))
 
 
 @dataclass(frozen=True)

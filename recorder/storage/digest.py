@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["file_sha256", "frame_sha256"]
+__all__ = ["file_sha256", "frame_bytes", "frame_sha256"]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -20,7 +20,12 @@ def file_sha256(path: str | Path) -> str:
     return h.hexdigest()
 
 
+def frame_bytes(pixels: np.ndarray) -> memoryview:
+    """The bytes every frame digest covers: uint16 LE, row-major (a copy only where the array is
+    not already laid out so)."""
+    return np.ascontiguousarray(pixels, dtype="<u2").data.cast("B")
+
+
 def frame_sha256(pixels: np.ndarray) -> str:
     """The project-wide frame hash: sha256 of the uint16 LE row-major bytes."""
-    arr = np.ascontiguousarray(pixels, dtype="<u2")
-    return hashlib.sha256(arr.data.cast("B")).hexdigest()
+    return hashlib.sha256(frame_bytes(pixels)).hexdigest()
