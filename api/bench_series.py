@@ -58,9 +58,8 @@ def bench_series(seconds: float = 60.0, tool: str = "box:300,200,339,239", *, th
         index_session(engine, d)
         with engine.connect() as conn:
             row = dict(conn.execute(select(db.sessions).where(db.sessions.c.id == "s")).mappings().one())
-            times = dict(conn.execute(select(db.frames.c.idx, db.frames.c.timestamp_ns)
-                                      .where(db.frames.c.session_id == "s")).all())
         store = open_store(root)
+        times = dict(enumerate(FrameReader(engine, store, root).columns.get("s").timestamp_ns.tolist()))
         model = session_model(row["radiometric_model"])
 
         def reader(cache: int = 0) -> tuple[FrameReader, RegionReader]:

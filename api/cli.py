@@ -185,8 +185,9 @@ def bench_jobs_cmd(sessions: int, seconds: float, segment_seconds: float, format
 
 
 @click.command("index")
-@click.option("--sessions", type=int, default=100_000, show_default=True, help="Synthetic sessions in the catalog.")
-@click.option("--frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=10_000_000,
+@click.option("--sessions", type=Number(minimum=1, maximum=10_000_000, integer=True), default=100_000,
+              show_default=True, help="Synthetic sessions in the catalog.")
+@click.option("--frames", type=Number(minimum=1, maximum=1_000_000_000, integer=True), default=10_000_000,
               show_default=True, help="Synthetic frames across them.")
 @click.option("--db", "db_url", default=None, metavar="postgresql://...",
               help="A PostgreSQL server to measure on (a fresh database is made there and dropped); default SQLite.")

@@ -19,7 +19,6 @@ from sqlalchemy import (
     String,
     Table,
     Text,
-    TypeDecorator,
     create_engine,
     event,
 )
@@ -28,13 +27,13 @@ from sqlalchemy.engine import Engine
 __all__ = [
     "archives",
     "events",
-    "frames",
     "jobs",
     "make_engine",
     "metadata",
     "migrate",
     "segments",
     "sessions",
+    "target_seconds",
 ]
 
 metadata = MetaData()
@@ -62,6 +61,7 @@ sessions = Table(
     Column("source_deleted", Boolean, nullable=False, default=False),
     Column("fingerprint", Text, nullable=False),
     Column("summary", Text),  # the archive's frame summary (path, bytes, sha256, band rows) as JSON
+    Column("frames_key", Text),  # the session's frames file in the blob store (api.reading.frame_columns)
     Column("indexed_at", BigInteger, nullable=False),
 )
 Index("ix_sessions_start", sessions.c.start_ns)
@@ -86,41 +86,25 @@ archives = Table(
     Column("verified", Boolean, nullable=False),
 )
 
-class Digest(TypeDecorator[str]):
-    """A sha256 stored as its 32 bytes and read back as the hex the manifests and ETags use.
-    Two hex digests were half of a frame's row; as bytes a camera-hour's index is 23% smaller
-    (migration 0008 converts what an older index holds; a hex value it has not reached yet
-    reads back as it is)."""
-
-    impl = LargeBinary
-    cache_ok = True
-
-    def process_bind_param(self, value: str | bytes | None, dialect: object) -> bytes | None:
-        if value is None or isinstance(value, bytes):
-            return value
-        return bytes.fromhex(value)
-
-    def process_result_value(self, value: bytes | str | None, dialect: object) -> str | None:
-        if value is None or isinstance(value, str):
-            return value
-        return bytes(value).hex()
-
-
-frames = Table(
-    "frames", metadata,
+# A session's frames (time, segment, hashes, sidecar summary) are not rows here: they are one
+# columnar file in the blob store (api.reading.frame_columns), named by ``sessions.frames_key``.
+# What a search across sessions needs is here, a row per second that holds a target: the
+# hottest target, the lowest grade, and that second's frames with a target, packed
+# (``api.reading.frame_search.HOT_FRAME``), so a camera-hour costs at most 3,600 rows whatever
+# the scene, and a search reads no session's file.
+target_seconds = Table(
+    "target_seconds", metadata,
     Column("session_id", String(128), ForeignKey("sessions.id", ondelete="CASCADE"), primary_key=True),
-    Column("idx", Integer, primary_key=True),
-    Column("timestamp_ns", BigInteger, nullable=False),
-    Column("segment", String(64)),
-    Column("grade", Float),
-    Column("slew_to_cue", Boolean, nullable=False, default=False),
-    Column("target_count", Integer, nullable=False, default=0),
-    Column("max_target_temp_c", Float),
-    # The manifest's hashes: every copy of the frame is checked against them before it is served.
-    Column("sha256", Digest()),
-    Column("sidecar_sha256", Digest()),
+    Column("second", BigInteger, primary_key=True),  # the frames' log time // 1e9
+    Column("max_target_temp_c", Float, nullable=False),
+    Column("min_target_temp_c", Float, nullable=False),  # a page's cursor skips the seconds wholly above it
+    Column("min_grade", Float),  # over the second's frames with a target that were graded
+    Column("frames", LargeBinary, nullable=False),
 )
-Index("ix_frames_time", frames.c.session_id, frames.c.timestamp_ns)
+# In the search's own order (hottest first, then session and second): a search walks it from the
+# top and stops once no later second can beat the page it holds.
+Index("ix_target_seconds_hot", target_seconds.c.max_target_temp_c.desc(), target_seconds.c.session_id,
+      target_seconds.c.second)
 
 # Where each frame's image and sidecar sit inside a stored-ZIP archive is not kept here: the
 # ZIP's own central directory says it (api.reading.zip_index), so no row per frame per format.

@@ -57,6 +57,7 @@ from sqlalchemy.engine import Engine
 
 from thermcap.api import db
 from thermcap.api.http_conventions import etag_matches
+from thermcap.api.reading.frame_columns import FrameColumns, FrameColumnsCache
 from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
 from thermcap.api.security import given_token, scopes_for_token
@@ -95,12 +96,10 @@ _ROUTE = _Route()
 class _Session:
     indexed_at: int
     frames: int
-    sha256: list[bytes | None]  # the frame's pixel hash (raw LE bytes)
+    columns: FrameColumns  # each frame's log time, MCAP segment and pixel hash
     checked: float
     tiff: list[dict[str, Any]]  # tiff-lzw files ({path: key, frames}), in session order
     summary: str | None  # the index's entry for archive/summary.npz (JSON), if the archive has one
-    times: np.ndarray  # int64 [frames]: each frame's log time (0: not in the index)
-    segments: list[str | None]  # each frame's MCAP segment, where the index names one
 
 
 @dataclass
@@ -132,6 +131,7 @@ class FrameFastPath:
         self._segment_pool = ThreadPoolExecutor(4, thread_name_prefix="thermcap-segments")
         frames = getattr(state, "frames", None)
         self._mcap: McapFrames | None = getattr(frames, "mcap", None)  # the application's, where there is one
+        self._columns: FrameColumnsCache | None = getattr(frames, "columns", None)
         self.served = 0  # requests answered here (the rest went to the application)
         #: raw answers by where the counts came from: the PNG's own IDAT undone here (``png-up``,
         #: the fast one), the tiff-lzw strips, or libpng (a PNG another writer made)
@@ -198,13 +198,13 @@ class FrameFastPath:
         if blob is None:
             if fmt != "raw":  # a PNG made on request costs more than the layers skipped
                 return None
-            mcap, segment = self._mcap, s.segments[n]
+            mcap, segment = self._mcap, s.columns.segment(n)
             if mcap is None or not segment:
                 return None
-            path, log_time = self.root / "sessions" / sid / segment, int(s.times[n])
+            path, log_time = self.root / "sessions" / sid / segment, int(s.columns.timestamp_ns[n])
             if not path.is_file():  # e.g. deleted once archived
                 return None
-            read = functools.partial(self._from_segment, mcap, path, log_time, s.sha256[n])
+            read = functools.partial(self._from_segment, mcap, path, log_time, s.columns.sha256_raw(n))
             return read() if mcap.is_kept(path, log_time) else read
         data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
         if data is None or imagecodecs.deflate_crc32(data) != blob["crc32"]:
@@ -212,7 +212,7 @@ class FrameFastPath:
         if fmt == "png16":
             etag = b'"' + hashlib.sha256(data).hexdigest()[:40].encode() + b'"'
             return data, etag, [(b"content-type", b"image/png")]
-        want = s.sha256[n]
+        want = s.columns.sha256_raw(n)
         if want is None:
             return None
         summary = self._summary(sid, s, n)
@@ -354,25 +354,19 @@ class FrameFastPath:
             if s is not None and s.indexed_at == row[0]:
                 s.checked = now
                 return s
-            hashes = conn.execute(select(db.frames.c.idx, db.frames.c.sha256, db.frames.c.timestamp_ns,
-                                         db.frames.c.segment).where(db.frames.c.session_id == sid)).all()
             tiff_files = conn.execute(select(db.archives.c.files).where(
                 db.archives.c.session_id == sid, db.archives.c.format == "tiff-lzw",
                 db.archives.c.verified.is_(True))).scalar()
-        frames = int(row[1])
-        sha: list[bytes | None] = [None] * frames
-        times = np.zeros(frames, np.int64)
-        segments: list[str | None] = [None] * frames
-        names: dict[str, str] = {}  # one string per segment name, not one per frame
-        for idx, h, t, seg in hashes:
-            if 0 <= idx < frames:
-                if h:
-                    sha[idx] = bytes.fromhex(h)
-                times[idx] = t
-                segments[idx] = names.setdefault(seg, seg) if seg else None
+        if self._columns is None:
+            return None
+        try:
+            cols = self._columns.get(sid)
+        except LookupError:  # no frame table yet: the application answers (and says why)
+            return None
+        frames = min(int(row[1]), len(cols))
         tiff = [{"path": f"sessions/{sid}/archive/tiff-lzw/{r['path']}", "frames": int(r["frames"])}
                 for r in json.loads(tiff_files)] if tiff_files else []
-        s = _Session(int(row[0]), frames, sha, now, tiff, row[2], times, segments)
+        s = _Session(int(row[0]), frames, cols, now, tiff, row[2])
         with self._lock:
             self._sessions[sid] = s
             while len(self._sessions) > self._keep_sessions:

@@ -6,10 +6,15 @@ twice changes nothing and a session archived while the service was down is picke
 next scan. Per-frame rows come from the sidecars (in a stored-ZIP archive when there is one,
 else the MCAP source); for zipped archives each frame's byte range is recorded, so a frame is
 one ranged read from local disk or S3.
+
+A session's per-frame facts are written as one columnar file beside the archives in the blob
+store (``api.reading.frame_columns``); the database keeps the session's row and a row per second
+that holds a target (``api.reading.frame_search``), so it grows by seconds, not by frames.
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import statistics
@@ -20,11 +25,14 @@ from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
-from sqlalchemy import delete, insert, select
+from sqlalchemy import delete, insert, select, text
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
+from thermcap.api.reading.frame_columns import FrameColumns, frames_key
+from thermcap.api.reading.frame_search import target_second_rows
 from thermcap.api.reading.zip_index import ZIPPED_FORMATS, read_zip_file
+from thermcap.archive.blobs import BlobStore, open_store
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.quality import graded_contrast
 from thermcap.recorder.icd.rosmsg import json_payload
@@ -33,7 +41,7 @@ from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
-__all__ = ["IndexReport", "fingerprint", "index_root", "index_session", "sidecar_summary"]
+__all__ = ["IndexReport", "convert_legacy_frames", "fingerprint", "index_root", "index_session", "sidecar_summary"]
 
 
 @dataclass
@@ -51,7 +59,8 @@ class IndexReport:
         return asdict(self)
 
 #: Bumped whenever what the index derives from the files changes, so old rows are rebuilt.
-INDEX_RULES_VERSION = 4  # 2: frames with no graded target have no grade; 3: the frame summary; 4: no frame_blobs
+INDEX_RULES_VERSION = 5  # 2: frames with no graded target have no grade; 3: the frame summary; 4: no frame_blobs;
+# 5: frames in a columnar file, target_seconds
 
 
 def fingerprint(session_dir: Path) -> str:
@@ -170,17 +179,20 @@ def sidecar_summary(sc: dict[str, Any]) -> dict[str, Any]:
 
 
 def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
-                  problems: list[str] | None = None) -> bool:
+                  problems: list[str] | None = None, store: BlobStore | None = None) -> bool:
     """Index one session; returns False when it was already indexed as it is. What could not be
-    read (a damaged chunk, a segment cut short) is added to ``problems``: the rest is indexed."""
+    read (a damaged chunk, a segment cut short) is added to ``problems``: the rest is indexed.
+    The frames file goes to ``store`` (default: the local store at the session's data root)."""
     problems = [] if problems is None else problems
     session_dir = Path(session_dir)
+    store = store if store is not None else open_store(session_dir.parent.parent)
     meta = read_session_meta(session_dir)
     sid = meta.get("session_id") or session_dir.name
     fp = fingerprint(session_dir)
     with engine.connect() as conn:
-        old = conn.execute(select(db.sessions.c.fingerprint).where(db.sessions.c.id == sid)).scalar()
-    if old == fp and not force:
+        old = conn.execute(select(db.sessions.c.fingerprint, db.sessions.c.frames_key)
+                           .where(db.sessions.c.id == sid)).first()
+    if old is not None and old[0] == fp and old[1] is not None and not force:
         return False
     manifest = _load_manifest(session_dir)
     # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
@@ -251,6 +263,10 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                   "objects": e["objects"], "ratio": e.get("compression_ratio"),
                   "verified": bool(e.get("verified")) and not e.get("damaged")}
                  for f, e in (manifest or {}).get("formats", {}).items()]
+    columns = FrameColumns.from_rows(sid, frame_rows)
+    row["frames_key"] = key = frames_key(sid, row["fingerprint"])
+    store.put_bytes(key, columns.to_parquet())  # before the row names it: a reader never finds it missing
+    target_rows = target_second_rows(columns)
     event_rows = []
     events_path = SessionLayout.of(session_dir).events_json
     if events_path.is_file():
@@ -260,16 +276,77 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                                    "end_ns": ev["end_ns"], "detail": json.dumps(ev.get("detail", {}))})
         except (ValueError, KeyError, TypeError):
             pass
-    with engine.begin() as conn:
-        for table in (db.frames, db.archives, db.segments, db.events):
-            conn.execute(delete(table).where(table.c.session_id == sid))
-        conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
-        conn.execute(insert(db.sessions), [row])
-        for table, rows in ((db.segments, seg_rows), (db.archives, arch_rows), (db.frames, frame_rows),
-                            (db.events, event_rows)):
-            for i in range(0, len(rows), 5000):
-                conn.execute(insert(table), rows[i:i + 5000])
+    old_key = old[1] if old is not None else None
+    try:
+        with engine.begin() as conn:
+            _delete_session_rows(conn, sid)
+            conn.execute(insert(db.sessions), [row])
+            for table, rows in ((db.segments, seg_rows), (db.archives, arch_rows), (db.target_seconds, target_rows),
+                                (db.events, event_rows)):
+                for i in range(0, len(rows), 5000):
+                    conn.execute(insert(table), rows[i:i + 5000])
+    except Exception:
+        if key != old_key:
+            _forget(store, key)
+        raise
+    if old_key and old_key != key:
+        _forget(store, old_key)  # readers holding it keep their cached copy; a new read takes the new key
     return True
+
+
+def _forget(store: BlobStore, key: str) -> None:
+    """Delete a frames file the index no longer names (gone already is fine: another indexer of
+    the same index may have been first)."""
+    with contextlib.suppress(FileNotFoundError):
+        store.delete(key)
+
+
+def _delete_session_rows(conn: Any, sid: str) -> None:
+    for table in (db.target_seconds, db.archives, db.segments, db.events):
+        conn.execute(delete(table).where(table.c.session_id == sid))
+    conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+
+
+def convert_legacy_frames(engine: Engine, store: BlobStore) -> list[str]:
+    """Write a frames file for every session an index before 0009 kept as rows (``frames_legacy``),
+    then drop the rows: a session served from a bucket alone, whose folder is gone and so is
+    never indexed again, keeps its frames. Returns the sessions converted."""
+    with engine.connect() as conn:
+        if not conn.dialect.has_table(conn, "frames_legacy"):
+            return []
+        sids = [r[0] for r in conn.execute(text("SELECT DISTINCT session_id FROM frames_legacy"))]
+    done = []
+    for sid in sids:
+        with engine.connect() as conn:
+            session = conn.execute(select(db.sessions.c.fingerprint, db.sessions.c.frames_key)
+                                   .where(db.sessions.c.id == sid)).first()
+            legacy = conn.execute(text(
+                "SELECT idx, timestamp_ns, segment, grade, slew_to_cue, target_count, max_target_temp_c, sha256, "
+                "sidecar_sha256 FROM frames_legacy WHERE session_id = :sid ORDER BY idx"),
+                {"sid": sid}).mappings().all()
+        if session is not None and session[1] is None:
+            rows: list[dict[str, Any]] = [{}] * (max(r["idx"] for r in legacy) + 1)
+            for r in legacy:
+                hashes = {k: (bytes(r[k]).hex() if isinstance(r[k], bytes | memoryview) else r[k])
+                          for k in ("sha256", "sidecar_sha256")}
+                rows[r["idx"]] = {**r, **hashes}
+            columns = FrameColumns.from_rows(sid, rows)
+            key = frames_key(sid, f"legacy:{session[0]}")
+            store.put_bytes(key, columns.to_parquet())
+            with engine.begin() as conn:
+                conn.execute(delete(db.target_seconds).where(db.target_seconds.c.session_id == sid))
+                targets = target_second_rows(columns)
+                if targets:
+                    conn.execute(insert(db.target_seconds), targets)
+                conn.execute(db.sessions.update().where(db.sessions.c.id == sid).values(frames_key=key))
+                conn.execute(text("DELETE FROM frames_legacy WHERE session_id = :sid"), {"sid": sid})
+            done.append(sid)
+        else:
+            with engine.begin() as conn:  # no session, or indexed anew already: the rows are stale
+                conn.execute(text("DELETE FROM frames_legacy WHERE session_id = :sid"), {"sid": sid})
+    with engine.begin() as conn:
+        conn.execute(text("DROP TABLE frames_legacy"))
+    return done
 
 
 def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> IndexReport:
@@ -277,6 +354,8 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
     bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
     report = IndexReport()
+    store = store if store is not None else open_store(Path(root))
+    convert_legacy_frames(engine, store)
     present = set()
     for d in list_sessions(root):
         layout = SessionLayout.of(d)
@@ -296,7 +375,8 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
         present.add(meta.get("session_id") or d.name)
         problems: list[str] = []
         try:
-            (report.indexed if index_session(engine, d, force=force, problems=problems) else report.unchanged
+            (report.indexed if index_session(engine, d, force=force, problems=problems, store=store)
+             else report.unchanged
              ).append(d.name)
         except Exception as exc:  # one broken session must not stop the others
             report.failed[d.name] = f"{type(exc).__name__}: {exc}"
@@ -305,12 +385,14 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     with engine.begin() as conn:
         known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
         gone = sorted(known - present)
-        if store is not None and store.kind != "local":
+        if store.kind != "local":
             in_store = {sid for sid in gone if store.head(f"sessions/{sid}/archive/manifest.json") is not None}
             gone = [sid for sid in gone if sid not in in_store]
+        keys = [k for sid in gone for k in conn.execute(select(db.sessions.c.frames_key)
+                                                        .where(db.sessions.c.id == sid)).scalars() if k]
         for sid in gone:
-            for table in (db.frames, db.archives, db.segments, db.events):
-                conn.execute(delete(table).where(table.c.session_id == sid))
-            conn.execute(delete(db.sessions).where(db.sessions.c.id == sid))
+            _delete_session_rows(conn, sid)
+    for key in keys:
+        _forget(store, key)
     report.removed = gone
     return report

@@ -12,6 +12,7 @@ EXTRA_FOR: dict[str, tuple[str, str]] = {
     "fastapi": ("fastapi", "server"), "starlette": ("fastapi", "server"), "uvicorn": ("uvicorn", "server"),
     "sqlalchemy": ("SQLAlchemy", "server"), "alembic": ("alembic", "server"),
     "swagger_ui_bundle": ("swagger-ui-bundle", "server"), "httptools": ("httptools", "server"),
+    "pyarrow": ("pyarrow", "server"),
     "boto3": ("boto3", "sync"), "botocore": ("boto3", "sync"),
     "psycopg": ("psycopg", "fleet"), "distributed": ("distributed", "fleet"),
     "pyproj": ("pyproj", "maps"), "rasterio": ("rasterio", "maps"),

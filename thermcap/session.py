@@ -179,9 +179,7 @@ class LocalSession(Session):
 
     @cached_property
     def table(self) -> FrameTable:
-        from thermcap.api.reading.frame_table import read_frame_table
-
-        return read_frame_table(self._engine, self.id)
+        return self._reader.columns.get(self.id).table()
 
     def counts(self, index: int) -> np.ndarray:
         return np.asarray(self._reader.pixels(self.id, index))

@@ -1,8 +1,8 @@
-"""A session's frames as columns: the index's per-frame rows as numpy arrays.
+"""A session's frames as columns: each frame's time and sidecar summary as numpy arrays.
 
 The Zarr endpoint and ``thermcap.open`` both need every frame's time and sidecar summary at once
-(a coordinate of the dataset); reading them as arrays, once per indexed state of the session,
-costs one query however many frames there are.
+(a coordinate of the dataset); the index's frames file has them as columns
+(``api.reading.frame_columns``), read once per indexed state of the session.
 """
 
 from __future__ import annotations
@@ -12,12 +12,8 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from sqlalchemy import select
-from sqlalchemy.engine import Engine
 
-from thermcap.api import db
-
-__all__ = ["FRAME_FIELDS", "FrameTable", "field_array", "read_frame_table"]
+__all__ = ["FRAME_FIELDS", "FrameTable", "field_array"]
 
 #: The per-frame sidecar summaries offered as coordinates: name -> (index column, dtype, what it is).
 FRAME_FIELDS: dict[str, tuple[str, str, str]] = {
@@ -46,13 +42,3 @@ def field_array(name: str, values: Sequence[Any]) -> np.ndarray:
     if dtype == "<f8":
         return np.array([np.nan if v is None else v for v in values], dtype=np.float64)
     return np.array([v or 0 for v in values], dtype=np.dtype(dtype))
-
-
-def read_frame_table(engine: Engine, session_id: str) -> FrameTable:
-    f = db.frames.c
-    cols = [f.idx, f.timestamp_ns, *(getattr(f, col) for col, _, _ in FRAME_FIELDS.values())]
-    with engine.connect() as conn:
-        rows = conn.execute(select(*cols).where(f.session_id == session_id).order_by(f.idx)).all()
-    columns = list(zip(*rows, strict=True)) if rows else [() for _ in cols]
-    fields = {name: field_array(name, columns[2 + k]) for k, name in enumerate(FRAME_FIELDS)}
-    return FrameTable(session_id, np.array(columns[0], dtype=np.int64), np.array(columns[1], dtype=np.int64), fields)

@@ -25,11 +25,12 @@ import numpy as np
 from mcap.reader import make_reader
 from mcap.records import Attachment
 from mcap.stream_reader import StreamReader
-from sqlalchemy import bindparam, select
+from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
+from thermcap.api.reading.frame_columns import FrameColumnsCache
 from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
 from thermcap.api.storage import BlobStore
@@ -39,10 +40,6 @@ from thermcap.archive.formats.base import locate
 from thermcap.archive.manifest import frame_sha256, sidecar_sha256
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
-
-#: Built once, as ``api.routes.common``'s session lookup: every frame request runs it
-_FRAME_ROW = select(db.frames).where(db.frames.c.session_id == bindparam("session_id"),
-                                     db.frames.c.idx == bindparam("idx"))
 
 log = logging.getLogger("thermcap.api")
 
@@ -126,6 +123,7 @@ class FrameReader:
         self.store = store
         self.root = root
         self.damage = DamageLog()
+        self.columns = FrameColumnsCache(engine, store)  # each session's frame times, segments and hashes
         self.locations = ArchiveLocations(engine, store)  # stored-ZIP copies, from their central directories
         self.mcap = McapFrames()  # sessions not archived yet: their segments' chunk indexes and last chunks
         # Recently decoded frames (a recorded frame never changes): the browser's temperature
@@ -148,11 +146,7 @@ class FrameReader:
         return f"sessions/{session_id}/archive/{blob['format']}/{blob['file']}"
 
     def _frame_row(self, session_id: str, idx: int) -> dict[str, Any]:
-        with self.engine.connect() as conn:
-            row = conn.execute(_FRAME_ROW, {"session_id": session_id, "idx": idx}).mappings().first()
-        if row is None:
-            raise FrameNotFound(f"session {session_id} has no frame {idx}")
-        return dict(row)
+        return self.columns.get(session_id).row(idx)
 
     def _other_formats(self, session_id: str, zipped: set[str],
                        verified: bool = True) -> list[tuple[str, list[dict[str, Any]]]]:

@@ -4,11 +4,10 @@ from __future__ import annotations
 
 import io
 
+import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import StreamingResponse
-from sqlalchemy import select
 
-from thermcap.api import db
 from thermcap.api.reading.frames import BlobFile
 from thermcap.api.reading.mcap_slice import export_mcap
 from thermcap.api.routes.common import parse_time, session_row
@@ -29,12 +28,14 @@ def export(request: Request, session_id: str, start: str | None = None, end: str
     session_dir = request.app.state.settings.root / "sessions" / session_id
     frames = None
     if not session_dir.is_dir() or row["source_deleted"]:
-        f = db.frames.c
-        where = [f.session_id == session_id] + ([f.timestamp_ns >= t0] if t0 is not None else []) + \
-            ([f.timestamp_ns < t1] if t1 is not None else [])
-        with request.app.state.engine.connect() as conn:
-            rows = conn.execute(select(f.idx, f.timestamp_ns).where(*where).order_by(f.idx)).all()
         reader = request.app.state.frames
+        times = reader.columns.get(session_id).timestamp_ns
+        keep = np.ones(len(times), bool)
+        if t0 is not None:
+            keep &= times >= t0
+        if t1 is not None:
+            keep &= times < t1
+        rows = [(int(i), int(times[i])) for i in np.flatnonzero(keep)]
         frames = ((i, t, (lambda i=i: reader.pixels(session_id, i)), (lambda i=i: reader.sidecar(session_id, i)))
                   for i, t in rows)
     extras = None

@@ -11,9 +11,7 @@ from typing import Annotated, Literal
 import imagecodecs
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
-from sqlalchemy import select
 
-from thermcap.api import db
 from thermcap.api.reading.regions import RegionReader
 from thermcap.api.routes.common import CelsiusQuery, FrameModel, session_row
 from thermcap.api.security import require
@@ -111,9 +109,7 @@ def series_args(request: Request, session_id: str, tool: str, start: int, end: i
     if tool == "frame":  # the whole frame: what the frame summary answers without decoding
         tool = f"box:0,0,{(row['width'] or 1) - 1},{(row['height'] or 1) - 1}"
     t = _tools([tool])[0]
-    with request.app.state.engine.connect() as conn:
-        times = dict(conn.execute(select(db.frames.c.idx, db.frames.c.timestamp_ns)
-                                  .where(db.frames.c.session_id == session_id)).all())
+    times = dict(enumerate(request.app.state.frames.columns.get(session_id).timestamp_ns.tolist()))
     return row, t, range(start, max(start, stop), step), FrameModel(request, row), times
 
 

@@ -6,10 +6,12 @@ import json
 from itertools import pairwise
 from typing import Any, Literal
 
+import numpy as np
 from fastapi import APIRouter, Depends, Query, Request
-from sqlalchemy import and_, func, literal, literal_column, or_, select, tuple_
+from sqlalchemy import func, literal, literal_column, or_, select, tuple_
 
 from thermcap.api import db
+from thermcap.api.reading.frame_search import search_targets
 from thermcap.api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
 from thermcap.api.security import require
 from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
@@ -148,30 +150,33 @@ def list_frames(request: Request, session_id: str, start: str | None = None, end
                 cursor: str | None = None) -> dict:
     session_row(request, session_id)
     n = page_size(request, limit)
-    f = db.frames.c
-    where = [f.session_id == session_id]
+    cols = request.app.state.frames.columns.get(session_id)
+    keep = np.ones(len(cols), bool)
     t0, t1 = parse_time(start, "start"), parse_time(end, "end")
     if t0 is not None:
-        where.append(f.timestamp_ns >= t0)
+        keep &= cols.timestamp_ns >= t0
     if t1 is not None:
-        where.append(f.timestamp_ns < t1)
+        keep &= cols.timestamp_ns < t1
     if min_grade is not None:
-        where.append(f.grade >= min_grade)
+        keep &= cols.grade >= min_grade  # NaN (not graded) passes neither bound
     if max_grade is not None:
-        where.append(f.grade <= max_grade)
+        keep &= cols.grade <= max_grade
     if slew_to_cue is not None:
-        where.append(f.slew_to_cue == slew_to_cue)
+        keep &= cols.slew_to_cue == slew_to_cue
     if has_targets is not None:
-        where.append(f.target_count > 0 if has_targets else f.target_count == 0)
+        keep &= (cols.target_count > 0) == has_targets
     after = decode_cursor(cursor, (int,))
+    picks = np.flatnonzero(keep)
     if after:
-        where.append(f.idx > int(after[0]))
-    with request.app.state.engine.connect() as conn:
-        rows = conn.execute(select(db.frames).where(*where).order_by(f.idx).limit(n + 1)).mappings().all()
-    items = [{"index": r["idx"], "timestamp": iso(r["timestamp_ns"]), "timestamp_ns": r["timestamp_ns"],
-              "segment": r["segment"], "thermal_contrast_grade": r["grade"], "slew_to_cue_active": r["slew_to_cue"],
-              "target_count": r["target_count"], "max_target_temp_c": r["max_target_temp_c"]} for r in rows[:n]]
-    return {"items": items, "next_cursor": encode_cursor([rows[n - 1]["idx"]]) if len(rows) > n else None}
+        picks = picks[picks > int(after[0])]
+    items = []
+    for i in picks[:n].tolist():
+        r = cols.row(i)
+        items.append({"index": i, "timestamp": iso(r["timestamp_ns"]), "timestamp_ns": r["timestamp_ns"],
+                      "segment": r["segment"], "thermal_contrast_grade": r["grade"],
+                      "slew_to_cue_active": r["slew_to_cue"], "target_count": r["target_count"],
+                      "max_target_temp_c": r["max_target_temp_c"]})
+    return {"items": items, "next_cursor": encode_cursor([items[-1]["index"]]) if len(picks) > n else None}
 
 
 @router.get("/frames")
@@ -184,34 +189,15 @@ def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, 
     partial indexes (graded frames, frames with a target), so the frames without either cost
     nothing however many there are."""
     n = page_size(request, limit)
-    f, s = db.frames.c, db.sessions.c
-    where: list[Any] = [f.max_target_temp_c.is_not(None)]
-    if min_target_c is not None:
-        where.append(f.max_target_temp_c >= min_target_c)
-    if max_grade is not None:
-        where.append(f.grade <= max_grade)
-    q = select(f.session_id, f.idx, f.timestamp_ns, f.grade, f.target_count, f.max_target_temp_c)
-    if sensor:
-        q = q.join(db.sessions, s.id == f.session_id)
-        where.append(or_(s.sensor_id == sensor, s.sensor == sensor))
     after = decode_cursor(cursor, (float, str, int))
-    if after:
-        t, sid, idx = after
-        where.append(or_(f.max_target_temp_c < t, and_(f.max_target_temp_c == t, or_(
-            f.session_id > sid, and_(f.session_id == sid, f.idx > idx)))))
-    order = [f.max_target_temp_c.desc(), f.session_id, f.idx]
-    with request.app.state.engine.begin() as conn:
-        if conn.dialect.name == "postgresql":
-            # PostgreSQL takes the grade and the target as independent and expects a few dozen
-            # matches, so it gathers every match in a bitmap and sorts them (538 ms at 10 M frames).
-            # The index is in the search's own order: walking it stops at a page (0.4 ms).
-            conn.exec_driver_sql("SET LOCAL enable_bitmapscan = off")
-        rows = conn.execute(q.where(*where).order_by(*order).limit(n + 1)).mappings().all()
-    items = [{"session_id": r["session_id"], "index": r["idx"], "timestamp": iso(r["timestamp_ns"]),
-              "thermal_contrast_grade": r["grade"], "target_count": r["target_count"],
-              "max_target_temp_c": r["max_target_temp_c"]} for r in rows[:n]]
-    last = rows[n - 1] if len(rows) > n else None
-    nxt = encode_cursor([float(last["max_target_temp_c"]), last["session_id"], last["idx"]]) if last else None
+    with request.app.state.engine.connect() as conn:
+        found = search_targets(conn, limit=n + 1, min_target_c=min_target_c, max_grade=max_grade, sensor=sensor,
+                               after=(float(after[0]), str(after[1]), int(after[2])) if after else None)
+    items = [{"session_id": r.session_id, "index": r.idx, "timestamp": iso(r.timestamp_ns),
+              "thermal_contrast_grade": r.grade, "target_count": r.target_count,
+              "max_target_temp_c": r.max_target_temp_c} for r in found[:n]]
+    last = found[n - 1] if len(found) > n else None
+    nxt = encode_cursor([last.max_target_temp_c, last.session_id, last.idx]) if last else None
     return {"items": items, "next_cursor": nxt}
 
 
@@ -219,15 +205,18 @@ def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, 
 def timeline(request: Request, session_id: str, bins: int = Query(400, ge=1, le=4000)) -> dict:
     """The contrast grade over the session in ``bins`` buckets (min, mean, max): for the browser view."""
     row = session_row(request, session_id)
-    n = max(1, row["frames"])
-    f = db.frames.c
-    with request.app.state.engine.connect() as conn:
-        rows = conn.execute(select(func.min(f.idx), func.min(f.grade), func.avg(f.grade), func.max(f.grade),
-                                   func.max(f.target_count), func.max(func.cast(f.slew_to_cue, db.Integer)))
-                            .where(f.session_id == session_id).group_by(func.floor(f.idx * bins / n))
-                            .order_by(func.min(f.idx))).all()
-    return {"frames": row["frames"], "bins": [{"first_frame": r[0], "min": r[1], "mean": r[2], "max": r[3],
-                                               "targets": r[4], "slew_to_cue": bool(r[5])} for r in rows]}
+    cols = request.app.state.frames.columns.get(session_id)
+    n = max(1, len(cols))
+    out = []
+    for k in np.unique(np.arange(len(cols)) * bins // n):
+        part = slice(-(-int(k) * n // bins), -(-(int(k) + 1) * n // bins))
+        grade = cols.grade[part]
+        graded = grade[~np.isnan(grade)]
+        out.append({"first_frame": part.start, "min": float(graded.min()) if len(graded) else None,
+                    "mean": float(graded.mean()) if len(graded) else None,
+                    "max": float(graded.max()) if len(graded) else None,
+                    "targets": int(cols.target_count[part].max()), "slew_to_cue": bool(cols.slew_to_cue[part].any())})
+    return {"frames": row["frames"], "bins": out}
 
 
 @router.get("/sessions/{session_id}/events")

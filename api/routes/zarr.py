@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
-from thermcap.api.reading.frame_table import FrameTable, read_frame_table
+from thermcap.api.reading.frame_table import FrameTable
 from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
 from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
@@ -26,11 +26,7 @@ def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str,
     state of the session (its fingerprint), not for every key a reader asks for."""
 
     def build() -> tuple[FrameTable, dict[str, Any]]:
-        table = read_frame_table(request.app.state.engine, row["id"])
-        if not np.array_equal(table.index, np.arange(len(table))):
-            # chunk i is frame i (the frame fast path serves counts chunks by that number)
-            raise HTTPException(409, f"session {row['id']}: its index numbers frames with gaps; "
-                                     f"`thermcap index --force` rebuilds it")
+        table = request.app.state.frames.columns.get(row["id"]).table()  # chunk i is frame i
         return table, _metadata(row, table)
 
     return kept(request, "zarr_stores", (row["id"], row.get("fingerprint")), build, keep=64)

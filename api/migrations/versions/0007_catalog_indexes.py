@@ -14,9 +14,13 @@ down_revision = "0006"
 
 
 def upgrade() -> None:
-    have = {i["name"] for t in ("sessions", "frames") for i in sa.inspect(op.get_bind()).get_indexes(t)}
+    inspector = sa.inspect(op.get_bind())
+    tables = [t for t in ("sessions", "frames") if t in inspector.get_table_names()]  # no frames table since 0009
+    have = {i["name"] for t in tables for i in inspector.get_indexes(t)}
     if "ix_sessions_catalog" not in have:
         op.create_index("ix_sessions_catalog", "sessions", [sa.text("coalesce(start_ns, 0)"), "id"])
+    if "frames" not in tables:
+        return
     if "ix_frames_hot" not in have:
         # In the search's own order (hottest first, then session and frame), with the grade in it:
         # a search walks it from the top and stops at a page, never fetching the frames it skips.

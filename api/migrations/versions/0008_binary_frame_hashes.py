@@ -18,6 +18,8 @@ _COLUMNS = ("sha256", "sidecar_sha256")
 
 def _convert(to_bytes: bool) -> None:
     """Every frame hash to bytes (``to_bytes``) or back to hex, whichever it is now."""
+    if "frames" not in sa.inspect(op.get_bind()).get_table_names():  # a fresh schema since 0009
+        return
     if op.get_bind().dialect.name == "sqlite":
         # SQLite keeps any value in any column: the values change, the declared type can stay.
         # Before 3.41 it has no unhex(): this does the same on the migration's own connection.

@@ -60,6 +60,17 @@ def test_serve_binds_loopback_by_default():
     assert host.default == "127.0.0.1"
 
 
+def _frames_indexed(engine, root) -> int:
+    """Frames in the sessions' frames files (the index keeps no row per frame)."""
+    from thermcap.api.reading.frame_columns import FrameColumnsCache
+    from thermcap.archive.blobs import open_store
+
+    with engine.connect() as conn:
+        sids = conn.execute(select(db.sessions.c.id)).scalars().all()
+    cache = FrameColumnsCache(engine, open_store(root))
+    return sum(len(cache.get(sid)) for sid in sids)
+
+
 def test_indexing_is_idempotent_and_picks_up_new_archives(data_root, tmp_path):
     root = tmp_path / "r"
     shutil.copytree(data_root / "sessions", root / "sessions")
@@ -71,8 +82,9 @@ def test_indexing_is_idempotent_and_picks_up_new_archives(data_root, tmp_path):
 
     def snapshot():
         with engine.connect() as conn:
-            return {t.name: conn.execute(select(func.count()).select_from(t)).scalar()
-                    for t in (db.sessions, db.frames, db.archives)}
+            counts = {t.name: conn.execute(select(func.count()).select_from(t)).scalar()
+                      for t in (db.sessions, db.target_seconds, db.archives)}
+        return {**counts, "frames": _frames_indexed(engine, root)}
 
     before = snapshot()
     again = index_root(engine, root)
@@ -96,7 +108,7 @@ def test_archive_indexes_through_the_hook(data_root, tmp_path):
     engine = make_engine(f"sqlite:///{root / 'index.sqlite'}")
     with engine.connect() as conn:
         assert conn.execute(select(func.count()).select_from(db.archives)).scalar() == 1
-        assert conn.execute(select(func.count()).select_from(db.frames)).scalar() == 30
+    assert _frames_indexed(engine, root) == 30
 
 
 def test_postgresql_index_same_code_and_migrations(postgres_url, data_root):
@@ -109,8 +121,7 @@ def test_postgresql_index_same_code_and_migrations(postgres_url, data_root):
     res = index_root(engine, data_root)
     assert sorted(res.indexed) == ["s-archived", "s-crossover", "s-mcap-only"]
     assert index_root(engine, data_root).indexed == []
-    with engine.connect() as conn:
-        assert conn.execute(select(func.count()).select_from(db.frames)).scalar() == 60 + 120 + 30
+    assert _frames_indexed(engine, data_root) == 60 + 120 + 30
 
 
 def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url, seaweedfs, data_root, tmp_path):
@@ -155,11 +166,12 @@ def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url
     assert "thermcap-test-secret" not in log_text
 
 
-def test_binary_hashes_on_postgresql(postgres_url):
-    """Migration 0008 on PostgreSQL (bytea via decode/encode), on a database of its own."""
+def test_legacy_frames_on_postgresql(postgres_url, tmp_path):
+    """Migrations 0008 (bytea via decode/encode) and 0009, and the frames files written from an
+    older index's rows, on PostgreSQL, on a database of its own."""
     from sqlalchemy import create_engine, text
 
-    from tests.unit.api.test_hash_migration import check_binary_hashes
+    from tests.unit.api.test_frames_migration import check_legacy_frames
 
     admin = create_engine(postgres_url, isolation_level="AUTOCOMMIT")
     with admin.connect() as conn:
@@ -167,7 +179,7 @@ def test_binary_hashes_on_postgresql(postgres_url):
         conn.execute(text("CREATE DATABASE thermcap_migration_0008"))
     try:
         engine = make_engine(postgres_url.rsplit("/", 1)[0] + "/thermcap_migration_0008")
-        check_binary_hashes(engine)
+        check_legacy_frames(engine, tmp_path)
         engine.dispose()
     finally:
         with admin.connect() as conn:

@@ -1,6 +1,7 @@
 """Frames searched across every session (``GET /api/v1/frames``), against a plain filter of every
-frame row: the same frames, hottest first, paged without a repeat or a gap. The index keeps no
-row per frame per format: a frame's place in a ZIP comes from the ZIP itself."""
+frame of every session's frames file: the same frames, hottest first, paged without a repeat or
+a gap, though the search reads only ``target_seconds``. The index keeps no row per frame: a
+frame's place in a ZIP comes from the ZIP itself, its facts from the session's frames file."""
 
 from __future__ import annotations
 
@@ -29,7 +30,12 @@ def client(tmp_path_factory):
 
 def _all_rows(client):
     with client.app.state.engine.connect() as conn:
-        return [dict(r) for r in conn.execute(select(db.frames)).mappings()]
+        sids = conn.execute(select(db.sessions.c.id)).scalars().all()
+    out = []
+    for sid in sids:
+        cols = client.app.state.frames.columns.get(sid)
+        out += [{"session_id": sid, **cols.row(i)} for i in range(len(cols))]
+    return out
 
 
 @pytest.mark.parametrize(("max_grade", "min_target_c"), [(None, None), (1.0, None), (0.5, None), (None, 30.0),
@@ -58,7 +64,7 @@ def test_the_same_frames_as_a_plain_filter(client, max_grade, min_target_c):
 
 def test_no_row_per_frame_per_format(client):
     names = inspect(client.app.state.engine).get_table_names()
-    assert "frame_blobs" not in names
+    assert "frame_blobs" not in names and "frames" not in names
     r = client.get("/api/v1/sessions/hot1/frames/5", params={"format": "png16"})
     assert r.status_code == 200 and r.content[:8] == b"\x89PNG\r\n\x1a\n"
     assert client.get("/api/v1/frames", params={"cursor": "bm9wZQ"}).status_code == 400
@@ -71,11 +77,31 @@ def test_the_catalog_and_the_search_use_their_indexes(client):
 
     engine = client.app.state.engine
     catalog = select(db.sessions).order_by(_START.desc(), db.sessions.c.id.desc()).limit(51)
-    f = db.frames.c
-    search = select(f.session_id).where(f.max_target_temp_c.is_not(None), f.max_target_temp_c >= 40) \
-        .order_by(f.max_target_temp_c.desc()).limit(101)
+    t = db.target_seconds.c
+    search = select(t.session_id, t.frames).where(t.max_target_temp_c >= 40) \
+        .order_by(t.max_target_temp_c.desc(), t.session_id, t.second).limit(256)
     with engine.connect() as conn:
-        for q, index in ((catalog, "ix_sessions_catalog"), (search, "ix_frames_hot")):
+        for q, index in ((catalog, "ix_sessions_catalog"), (search, "ix_target_seconds_hot")):
             sql = str(q.compile(engine, compile_kwargs={"literal_binds": True}))
             plan = " ".join(str(r[-1]) for r in conn.exec_driver_sql("EXPLAIN QUERY PLAN " + sql))
             assert index in plan and "TEMP B-TREE" not in plan, plan
+
+
+def test_a_page_stops_at_the_first_second_that_cannot_beat_it(client):
+    """The rows say how much is read, never what is found: ties at the page's edge are resolved
+    by session and frame, and a cursor into a second continues inside it."""
+    from thermcap.api.reading.frame_search import search_targets
+
+    engine = client.app.state.engine
+    with engine.connect() as conn:
+        whole = search_targets(conn, limit=10_000)
+        seconds = conn.execute(select(db.target_seconds.c.session_id)).all()
+        assert len(whole) > len(seconds)  # seconds hold several frames each
+        one_by_one, after = [], None
+        while True:
+            page = search_targets(conn, limit=1, after=after, batch=1)
+            if not page:
+                break
+            one_by_one += page
+            after = (page[0].max_target_temp_c, page[0].session_id, page[0].idx)
+    assert one_by_one == whole

@@ -1,0 +1,49 @@
+"""A session's frames leave the database: their per-frame facts go to one columnar file per
+session in the blob store (``sessions.frames_key``), and a search across sessions reads
+``target_seconds``, a row per second that holds a target. 157 bytes a frame (34 MB a
+camera-hour) become a few per second.
+
+The rows an older index holds are not dropped here: the table is renamed ``frames_legacy`` and
+the next scan (``api.indexing.convert_legacy_frames``) writes each session's file from them,
+so a session the index serves from a bucket alone, whose folder is gone, keeps its frames.
+
+Revision ID: 0009
+Revises: 0008
+"""
+
+import sqlalchemy as sa
+from alembic import op
+
+revision = "0009"
+down_revision = "0008"
+
+
+def upgrade() -> None:
+    inspector = sa.inspect(op.get_bind())
+    tables = inspector.get_table_names()
+    if "frames_key" not in {c["name"] for c in inspector.get_columns("sessions")}:
+        op.add_column("sessions", sa.Column("frames_key", sa.Text(), nullable=True))
+    if "target_seconds" not in tables:  # 0001 made it already on a fresh database
+        op.create_table(
+            "target_seconds",
+            sa.Column("session_id", sa.String(128), sa.ForeignKey("sessions.id", ondelete="CASCADE"),
+                      primary_key=True),
+            sa.Column("second", sa.BigInteger(), primary_key=True),
+            sa.Column("max_target_temp_c", sa.Float(), nullable=False),
+            sa.Column("min_target_temp_c", sa.Float(), nullable=False),
+            sa.Column("min_grade", sa.Float()),
+            sa.Column("frames", sa.LargeBinary(), nullable=False),
+        )
+        op.create_index("ix_target_seconds_hot", "target_seconds",
+                        [sa.text("max_target_temp_c DESC"), "session_id", "second"])
+    if "frames" in tables:
+        for index in inspector.get_indexes("frames"):
+            if index["name"]:
+                op.drop_index(index["name"], "frames")
+        op.rename_table("frames", "frames_legacy")
+
+
+def downgrade() -> None:
+    op.drop_index("ix_target_seconds_hot", "target_seconds")
+    op.drop_table("target_seconds")
+    op.drop_column("sessions", "frames_key")

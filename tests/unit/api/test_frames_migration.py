@@ -1,0 +1,86 @@
+"""An index made before the frames files: migration 0008 turns its hex frame hashes into 32
+bytes, 0009 keeps its frame rows aside (``frames_legacy``), and the next scan writes each
+session's frames file from them, every value kept, so a session served from a bucket alone
+(never indexed again from a folder) still serves its frames. On SQLite here, on PostgreSQL in
+the system tier (``test_legacy_frames_on_postgresql``)."""
+
+from __future__ import annotations
+
+import hashlib
+from pathlib import Path
+
+import sqlalchemy as sa
+from alembic import command
+from alembic.config import Config
+from sqlalchemy import inspect, select, text
+
+from thermcap.api import db
+from thermcap.api.indexing import convert_legacy_frames
+from thermcap.api.reading.frame_columns import FrameColumnsCache
+from thermcap.archive.blobs import open_store
+
+H = [hashlib.sha256(bytes([i])).hexdigest() for i in range(4)]
+
+
+def _alembic(conn):
+    cfg = Config()
+    cfg.set_main_option("script_location", str(db.__file__).replace("db.py", "migrations"))
+    cfg.attributes["connection"] = conn
+    return cfg
+
+
+def _old_frames_table() -> sa.Table:
+    """``frames`` as every index before 0009 had it (hashes as hex before 0008)."""
+    return sa.Table("frames", sa.MetaData(),
+                    sa.Column("session_id", sa.String(128), primary_key=True),
+                    sa.Column("idx", sa.Integer, primary_key=True),
+                    sa.Column("timestamp_ns", sa.BigInteger, nullable=False), sa.Column("segment", sa.String(64)),
+                    sa.Column("grade", sa.Float), sa.Column("slew_to_cue", sa.Boolean, nullable=False),
+                    sa.Column("target_count", sa.Integer, nullable=False), sa.Column("max_target_temp_c", sa.Float),
+                    sa.Column("sha256", sa.String(64)), sa.Column("sidecar_sha256", sa.String(64)))
+
+
+def check_legacy_frames(engine, root: Path) -> None:
+    with engine.begin() as conn:
+        command.upgrade(_alembic(conn), "0007")
+        frames = _old_frames_table()
+        frames.create(conn)
+        for sid in ("m", "n"):
+            conn.execute(text("INSERT INTO sessions (id, path, frames, frames_dropped, has_targets, "
+                              "has_slew_to_cue, source_deleted, fingerprint, indexed_at, frames_key) VALUES "
+                              "(:sid, :sid, 2, 0, true, false, false, 'fp', 0, :key)"),
+                         {"sid": sid, "key": None if sid == "m" else "index/frames/n/new.parquet"})
+        conn.execute(frames.insert(), [
+            {"session_id": "m", "idx": 0, "timestamp_ns": 5_000_000_001, "segment": "0000.mcap", "grade": 0.25,
+             "slew_to_cue": False, "target_count": 2, "max_target_temp_c": 61.5, "sha256": H[0],
+             "sidecar_sha256": H[1]},
+            {"session_id": "m", "idx": 1, "timestamp_ns": 5_016_666_668, "segment": "0000.mcap", "grade": None,
+             "slew_to_cue": True, "target_count": 0, "max_target_temp_c": None, "sha256": H[2],
+             "sidecar_sha256": None},
+            {"session_id": "n", "idx": 0, "timestamp_ns": 1, "segment": None, "grade": None, "slew_to_cue": False,
+             "target_count": 0, "max_target_temp_c": None, "sha256": H[3], "sidecar_sha256": None}])
+    db.migrate(engine)
+    with engine.connect() as conn:
+        names = inspect(conn).get_table_names()
+        assert "frames" not in names and "frames_legacy" in names
+        stored = conn.execute(text("SELECT sha256 FROM frames_legacy WHERE idx = 1 AND session_id = 'm'")).scalar()
+        assert bytes(stored) == bytes.fromhex(H[2])  # 0008: 32 bytes, not 64 characters
+    store = open_store(root)
+    assert convert_legacy_frames(engine, store) == ["m"]  # "n" was indexed anew: its rows were stale
+    cols = FrameColumnsCache(engine, store).get("m")
+    assert [cols.row(i)["sha256"] for i in range(2)] == [H[0], H[2]]
+    assert cols.row(0)["sidecar_sha256"] == H[1] and cols.row(1)["sidecar_sha256"] is None
+    assert cols.row(0)["timestamp_ns"] == 5_000_000_001 and cols.row(1)["segment"] == "0000.mcap"
+    assert (cols.row(0)["grade"], cols.row(1)["grade"], cols.row(1)["slew_to_cue"]) == (0.25, None, True)
+    with engine.connect() as conn:
+        assert "frames_legacy" not in inspect(conn).get_table_names()
+        seconds = conn.execute(select(db.target_seconds.c.second, db.target_seconds.c.max_target_temp_c)
+                               .where(db.target_seconds.c.session_id == "m")).all()
+    assert [tuple(r) for r in seconds] == [(5, 61.5)]
+    assert convert_legacy_frames(engine, store) == []  # nothing left: a second scan is a no-op
+    db.migrate(engine)
+
+
+def test_legacy_frames_on_sqlite(tmp_path):
+    engine = db.make_engine(f"sqlite:///{tmp_path / 'index.sqlite'}")
+    check_legacy_frames(engine, tmp_path)
