@@ -139,10 +139,12 @@ def on_archived(session_dir: Path, root: Path) -> None:
     from thermcap.api.db import make_engine, migrate
     from thermcap.api.indexing import index_session
     from thermcap.api.settings import Settings
+    from thermcap.api.storage import make_store
 
-    engine = make_engine(Settings(root=Path(root)).db_url)
+    settings = Settings(root=Path(root))
+    engine = make_engine(settings.db_url)
     migrate(engine)
-    index_session(engine, session_dir)
+    index_session(engine, session_dir, store=make_store(settings))  # where `serve` reads the frames files
 
 
 @click.command("api")

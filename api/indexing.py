@@ -32,7 +32,7 @@ from thermcap.api import db
 from thermcap.api.reading.frame_columns import FrameColumns, frames_key
 from thermcap.api.reading.frame_search import target_second_rows
 from thermcap.api.reading.zip_index import ZIPPED_FORMATS, read_zip_file
-from thermcap.archive.blobs import BlobStore, open_store
+from thermcap.archive.blobs import BlobStore
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.quality import graded_contrast
 from thermcap.recorder.icd.rosmsg import json_payload
@@ -178,21 +178,33 @@ def sidecar_summary(sc: dict[str, Any]) -> dict[str, Any]:
             "max_target_temp_c": max((t["max_temp_c"] for t in targets), default=None)}
 
 
+def _settings_store(root: Path) -> BlobStore:
+    """The store the service's settings (``THERMCAP_S3_*``) name for ``root``: where ``serve``
+    looks for the frames files."""
+    from thermcap.api.settings import Settings
+    from thermcap.api.storage import make_store
+
+    return make_store(Settings(root=root))
+
+
 def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                   problems: list[str] | None = None, store: BlobStore | None = None) -> bool:
     """Index one session; returns False when it was already indexed as it is. What could not be
     read (a damaged chunk, a segment cut short) is added to ``problems``: the rest is indexed.
-    The frames file goes to ``store`` (default: the local store at the session's data root)."""
+    The frames file goes to ``store`` (default: the store the service's settings name for the
+    session's data root, as ``serve`` reads it)."""
     problems = [] if problems is None else problems
     session_dir = Path(session_dir)
-    store = store if store is not None else open_store(session_dir.parent.parent)
+    store = store if store is not None else _settings_store(session_dir.parent.parent)
     meta = read_session_meta(session_dir)
     sid = meta.get("session_id") or session_dir.name
     fp = fingerprint(session_dir)
     with engine.connect() as conn:
         old = conn.execute(select(db.sessions.c.fingerprint, db.sessions.c.frames_key)
                            .where(db.sessions.c.id == sid)).first()
-    if old is not None and old[0] == fp and old[1] is not None and not force:
+    # On local disk the frames file is looked at, not assumed: one deleted by hand is rewritten.
+    if old is not None and old[0] == fp and old[1] is not None and not force \
+            and (store.kind != "local" or store.head(old[1]) is not None):
         return False
     manifest = _load_manifest(session_dir)
     # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
@@ -354,7 +366,7 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
     bucket, and the catalog keeps serving it from there. Skips unfinished sessions."""
     report = IndexReport()
-    store = store if store is not None else open_store(Path(root))
+    store = store if store is not None else _settings_store(Path(root))
     convert_legacy_frames(engine, store)
     present = set()
     for d in list_sessions(root):

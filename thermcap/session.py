@@ -170,8 +170,9 @@ class LocalSession(Session):
         self._engine = make_engine(settings.db_url)
         migrate(self._engine)
         self.problems: list[str] = []  # what indexing could not read (damaged chunks), as `thermcap index` says
-        index_session(self._engine, session_dir, problems=self.problems)
-        self._reader = FrameReader(self._engine, make_store(settings), root)
+        store = make_store(settings)
+        index_session(self._engine, session_dir, problems=self.problems, store=store)
+        self._reader = FrameReader(self._engine, store, root)
         with self._engine.connect() as conn:
             row = conn.execute(select(db.sessions.c.width, db.sessions.c.height)
                                .where(db.sessions.c.id == self.id)).first()

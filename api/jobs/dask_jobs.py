@@ -60,6 +60,13 @@ class TaskConfig:
     analyze: bool = False  # the hot-spot analysis of sessions recorded or imported without it
 
 
+
+def _index_store(cfg: Any) -> Any:
+    """Where the index writes the sessions' frames files: the job's bucket, else its root."""
+    from thermcap.archive.blobs import open_store
+
+    return open_store(Path(cfg.root), **cfg.s3) if cfg.s3 else open_store(Path(cfg.root))
+
 def session_task_key(session_dir: Path, formats: tuple[str, ...]) -> str:
     return archive_job_id(session_dir, formats)
 
@@ -118,7 +125,7 @@ def finalize_task(cfg: TaskConfig, session_dir: str, *segments_done: str) -> dic
             upload_archive(store, Path(cfg.root), d)
         if cfg.delete_source:
             archive_session(d, list(cfg.formats), delete_source=True)  # everything verified: only deletes
-        index_session(engine, d)
+        index_session(engine, d, store=_index_store(cfg))
         sid = read_session_meta(d).get("session_id", d.name)
         finish_job(engine, jid, result={"session": sid, "formats": list(cfg.formats), "segments": len(segments_done)})
         return {"session": sid}
@@ -136,7 +143,7 @@ def scrub_task(cfg: TaskConfig, session_dir: str, key: str, repair: bool = True)
         report = ScrubReport()
         scrub_session(d, repair=repair, store=store, root=Path(cfg.root), report=report)
         if report.findings:  # the API stops offering damage at once
-            index_session(engine, d, force=True)
+            index_session(engine, d, force=True, store=_index_store(cfg))
         found = [{"copy": f.copy, "problem": f.problems[0], "repaired": f.repaired} for f in report.findings]
         finish_job(engine, key, result={"findings": found})
         return {"findings": len(found)}
@@ -151,7 +158,7 @@ def analysis_task(cfg: TaskConfig, session_dir: str, key: str, _after: Any = Non
     d = Path(session_dir)
     with _recorded(cfg, key) as engine:
         out = analyze_session(d)
-        index_session(engine, d)
+        index_session(engine, d, store=_index_store(cfg))
         summary = {"frames": out.get("frames"), "detections": out.get("detections")}
         finish_job(engine, key, result=summary)
         return summary

@@ -114,7 +114,7 @@ class Worker:
                 self.log(f"error: scrub {d.name}: {exc}")
                 continue
             if len(report.findings) > before:
-                index_session(self.engine, d, force=True)
+                index_session(self.engine, d, force=True, store=self.store)
         for f in report.findings:
             self.log(f"scrub: {f.session}: {f.copy} damaged ({f.problems[0]}); "
                      + (f"repaired from {f.repaired_from}" if f.repaired else f"not repaired: {f.repair_error}"))

@@ -82,7 +82,7 @@ def test_a_camera_hour_costs_the_database_under_10_mb_with_a_target_in_every_fra
     assert per_second / FRAMES * 3600 * 60 < 10e6
 
 
-def test_a_frame_whose_file_is_gone_answers_503_and_names_the_repair(root):
+def test_a_frames_file_gone_answers_503_names_the_repair_and_the_next_scan_rewrites_it(root):
     from fastapi.testclient import TestClient
 
     from thermcap.api.app import create_app
@@ -92,3 +92,7 @@ def test_a_frame_whose_file_is_gone_answers_503_and_names_the_repair(root):
         (root / _key(c.app.state.engine)).unlink()
         r = c.get("/api/v1/sessions/s/frames")
         assert r.status_code == 503 and "thermcap index --force" in r.text
+        # the next scan looks at the file rather than trusting the row: it is written again
+        assert index_root(c.app.state.engine, root).indexed == ["s"]
+        assert (root / _key(c.app.state.engine)).is_file()
+        assert len(c.get("/api/v1/sessions/s/frames").json()["items"]) == FRAMES
