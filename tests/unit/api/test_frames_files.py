@@ -96,3 +96,26 @@ def test_a_frames_file_gone_answers_503_names_the_repair_and_the_next_scan_rewri
         assert index_root(c.app.state.engine, root).indexed == ["s"]
         assert (root / _key(c.app.state.engine)).is_file()
         assert len(c.get("/api/v1/sessions/s/frames").json()["items"]) == FRAMES
+
+
+def test_the_frames_file_gives_back_every_value_it_was_given():
+    """Whatever mix of missing hashes, grades, targets and segments, Parquet gives back each."""
+    from hypothesis import given, settings
+    from hypothesis import strategies as st
+
+    from thermcap.api.reading.frame_columns import FrameColumns
+
+    digest = st.none() | st.binary(min_size=32, max_size=32).map(bytes.hex)
+    row = st.fixed_dictionaries({
+        "timestamp_ns": st.integers(0, 2**62), "segment": st.none() | st.sampled_from(["0000.mcap", "0001.mcap"]),
+        "sha256": digest, "sidecar_sha256": digest,
+        "grade": st.none() | st.floats(0, 1), "target_count": st.integers(0, 1000),
+        "max_target_temp_c": st.none() | st.floats(-273.15, 5000), "slew_to_cue": st.booleans()})
+
+    @settings(max_examples=60, deadline=None)
+    @given(st.lists(row, max_size=40))
+    def round_trip(rows):
+        back = FrameColumns.from_parquet("p", FrameColumns.from_rows("p", rows).to_parquet())
+        assert [{k: v for k, v in back.row(i).items() if k != "idx"} for i in range(len(back))] == rows
+
+    round_trip()
