@@ -135,9 +135,9 @@ def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url
     assert r.returncode == 0, r.stderr
     keys = next(iter(json.loads(r.stdout).values()))
     assert "sessions/s-archived/archive/png16/0000.zip" in keys
-    engine = make_engine(postgres_url)
-    migrate(engine)
-    index_root(engine, root, force=True)
+    # Indexed as an operator does, with the settings serve runs with: the frames file goes to S3.
+    r = run_cli("index", "--root", str(root), "--force", "--json", env=env)
+    assert r.returncode == 0, r.stderr
     expected = [f.pixels.copy() for f in iter_session_frames(root / "sessions" / "s-archived")]
     whole = (root / "sessions" / "s-archived" / "archive" / "png16" / "0001.zip").read_bytes()
     # Now the node loses its local archive copy: everything must come from S3.
@@ -177,11 +177,11 @@ def test_legacy_frames_on_postgresql(postgres_url, tmp_path):
     with admin.connect() as conn:
         conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
         conn.execute(text("CREATE DATABASE thermcap_migration_0008"))
+    engine = make_engine(postgres_url.rsplit("/", 1)[0] + "/thermcap_migration_0008")
     try:
-        engine = make_engine(postgres_url.rsplit("/", 1)[0] + "/thermcap_migration_0008")
         check_legacy_frames(engine, tmp_path)
-        engine.dispose()
     finally:
+        engine.dispose()  # its pooled connection would keep the database from being dropped
         with admin.connect() as conn:
             conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
         admin.dispose()

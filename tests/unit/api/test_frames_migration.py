@@ -48,8 +48,8 @@ def check_legacy_frames(engine, root: Path) -> None:
         for sid in ("m", "n"):
             conn.execute(text("INSERT INTO sessions (id, path, frames, frames_dropped, has_targets, "
                               "has_slew_to_cue, source_deleted, fingerprint, indexed_at, frames_key) VALUES "
-                              "(:sid, :sid, 2, 0, true, false, false, 'fp', 0, :key)"),
-                         {"sid": sid, "key": None if sid == "m" else "index/frames/n/new.parquet"})
+                              "(:sid, :path, 2, 0, true, false, false, 'fp', 0, :key)"),
+                         {"sid": sid, "path": sid, "key": None if sid == "m" else "index/frames/n/new.parquet"})
         conn.execute(frames.insert(), [
             {"session_id": "m", "idx": 0, "timestamp_ns": 5_000_000_001, "segment": "0000.mcap", "grade": 0.25,
              "slew_to_cue": False, "target_count": 2, "max_target_temp_c": 61.5, "sha256": H[0],
