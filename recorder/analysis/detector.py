@@ -102,6 +102,89 @@ def sliding_extreme(a: np.ndarray, k: int, op: np.ufunc) -> np.ndarray:
     return a
 
 
+@dataclass(frozen=True)
+class _RegionStats:
+    """Per-region facts of a labelled coarse grid, in label order (label k at index k - 1)."""
+
+    y0: np.ndarray
+    y1: np.ndarray  # exclusive
+    x0: np.ndarray
+    x1: np.ndarray
+    top_excess: np.ndarray  # the region's largest (cell max - background)
+    top_cmax: np.ndarray  # the region's warmest cell
+
+    def areas(self) -> list[int]:
+        return ((self.y1 - self.y0) * (self.x1 - self.x0)).tolist()
+
+    def box(self, k: int) -> tuple[int, int, int, int]:
+        i = k - 1
+        return int(self.y0[i]), int(self.y1[i]), int(self.x0[i]), int(self.x1[i])
+
+
+def _region_stats(cells: np.ndarray, regions: np.ndarray, n: int, excess: np.ndarray,
+                  cmax: np.ndarray) -> _RegionStats:
+    """Boxes and maxima of every region at once, from its cells sorted by label: on a noisy
+    frame (a thousand regions) scipy's find_objects and labelled maximum built a thousand
+    Python objects and sorted the grid, and cost more than the detection itself."""
+    ys, xs = np.nonzero(cells)  # the regions' cells (a boolean nonzero is the cheaper one)
+    lab = regions[ys, xs]
+    order = np.argsort(lab, kind="stable")
+    ys, xs, lab = ys[order], xs[order], lab[order]
+    starts = np.flatnonzero(np.r_[True, lab[1:] != lab[:-1]]) if lab.size else np.zeros(0, np.intp)
+    assert starts.size == n  # ndimage.label numbers its regions 1..n, each with a cell
+    red = lambda op, v: op.reduceat(v, starts) if n else np.zeros(0, v.dtype)  # noqa: E731
+    return _RegionStats(y0=red(np.minimum, ys), y1=red(np.maximum, ys) + 1, x0=red(np.minimum, xs),
+                        x1=red(np.maximum, xs) + 1, top_excess=red(np.maximum, excess[ys, xs]),
+                        top_cmax=red(np.maximum, cmax[ys, xs]))
+
+
+_MOSAIC_MAX_ROWS = 64  # windows up to this tall are labelled together, side by side
+
+
+def _components(windows: list[tuple[int, int, np.ndarray]], structure: np.ndarray,
+                min_area: int) -> list[tuple[int, int, int, tuple[slice, slice], np.ndarray]]:
+    """Connected components of at least ``min_area`` pixels in each window's mask: (window y0,
+    x0, area, slice within the window, own mask), window by window and in raster order within
+    each, as labelling each window alone gives them. Small windows are laid side by side, a
+    blank column apart, and labelled in one call: on noise, 32 separate calls of a few
+    microseconds' work each cost more in scipy's per-call overhead than the frame's whole
+    background estimate."""
+    out: list[tuple[int, int, int, int, int, tuple[slice, slice], np.ndarray]] = []  # window, label first
+
+    def add(labels: np.ndarray, n: int, members: list[int], offsets: np.ndarray) -> None:
+        if not n:
+            return
+        areas = np.bincount(labels.ravel(), minlength=n + 1)
+        keep = np.flatnonzero(areas[1:] >= min_area)
+        if not keep.size:
+            return
+        objects = ndimage.find_objects(labels)
+        starts = np.fromiter((objects[i][1].start for i in keep.tolist()), np.intp, keep.size)
+        owners = (np.searchsorted(offsets, starts, side="right") - 1).tolist()
+        for i, j in zip(keep.tolist(), owners, strict=True):
+            sl, off = objects[i], int(offsets[j])
+            y0, x0, _ = windows[members[j]]
+            out.append((members[j], i, y0, x0, int(areas[i + 1]),
+                        (sl[0], slice(sl[1].start - off, sl[1].stop - off)), labels[sl] == i + 1))
+
+    small = [i for i, (_, _, m) in enumerate(windows) if m.shape[0] <= _MOSAIC_MAX_ROWS and m.size]
+    zero = np.zeros(1, np.intp)
+    for i, (_, _, m) in enumerate(windows):
+        if m.size and m.shape[0] > _MOSAIC_MAX_ROWS:
+            labels, n = ndimage.label(m, structure=structure)
+            add(labels, n, [i], zero)
+    if small:
+        offsets = np.cumsum([0] + [windows[i][2].shape[1] + 1 for i in small])
+        canvas = np.zeros((max(windows[i][2].shape[0] for i in small), int(offsets[-1])), bool)
+        for i, off in zip(small, offsets[:-1].tolist(), strict=False):
+            m = windows[i][2]
+            canvas[:m.shape[0], off:off + m.shape[1]] = m
+        labels, n = ndimage.label(canvas, structure=structure)
+        add(labels, n, small, offsets)
+    out.sort(key=lambda c: (c[0], c[1]))
+    return [(y0, x0, area, sl, own) for _, _, y0, x0, area, sl, own in out]
+
+
 @dataclass
 class HotSpotDetector:
     model: RadiometricModel
@@ -132,7 +215,7 @@ class HotSpotDetector:
     _FOUR: Any = field(default_factory=lambda: ndimage.generate_binary_structure(2, 1), repr=False)
 
     def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Quarter-resolution (opened background, local mean, cell maximum) of ``temps``, and
+        """Quarter-resolution (opened background, cell mean, cell maximum) of ``temps``, and
         ``temps`` edge-padded to whole cells (itself where it already is).
 
         The background is a grey opening (min then max filter) wider than any target
@@ -151,8 +234,7 @@ class HotSpotDetector:
         cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
         k = self.max_size // f + 1
         opened = sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
-        local_mean = ndimage.uniform_filter(mean, size=2 * k - 1, mode="nearest")
-        return opened, local_mean, cmax, padded
+        return opened, mean, cmax, padded
 
     def background(self, temps: np.ndarray) -> np.ndarray:
         """The local background (C) at full resolution."""
@@ -181,13 +263,13 @@ class HotSpotDetector:
         temps = self._fix_bad_pixels(_celsius32(self.model, raw))
         f = self._F
         h, w = temps.shape
-        opened, local_mean, cmax, padded = self._coarse(temps)
+        opened, cell_mean, cmax, padded = self._coarse(temps)
         excess_cells = cmax - opened
         cells = excess_cells >= self.threshold_k
         dets: list[Detection] = []
         per_target = []
         capped: dict[str, Any] | None = None
-        share = float(cells.mean())
+        share = int(np.count_nonzero(cells)) / cells.size
         if share > self.max_candidate_fraction:
             capped = {"rule": "candidate_cell_fraction", "value": round(share, 4), "limit": self.max_candidate_fraction,
                       "why": "more of the frame stands above its background than targets can: noise or texture"}
@@ -201,18 +283,19 @@ class HotSpotDetector:
                 full = np.repeat(np.repeat(block, f, axis=0), f, axis=1)
                 return full[y0 - cy0 * f:y1 - cy0 * f, x0 - cx0 * f:x1 - cx0 * f]
 
+            # the mean around each cell, as wide as the opening: only a frame with candidates needs it
+            local_mean = ndimage.uniform_filter(cell_mean, size=2 * (self.max_size // f + 1) - 1, mode="nearest")
             regions, n_regions = ndimage.label(cells, structure=self._EIGHT)
-            objects = ndimage.find_objects(regions)
+            stats = _region_stats(cells, regions, n_regions, excess_cells, cmax)
             examine: list[int] = list(range(1, n_regions + 1))
             budget = self.max_examined_share * cells.size  # in coarse cells
-            boxes = [(o[0].stop - o[0].start) * (o[1].stop - o[1].start) for o in objects]
+            boxes = stats.areas()
             region_limit = max(min(8, self.max_regions), round(self.max_regions * h * w / (640 * 512)))
             if n_regions > region_limit or sum(boxes) > budget:
                 # the most prominent regions first, until the count or the area budget is spent
-                tops = np.asarray(ndimage.maximum(excess_cells, regions, index=np.arange(1, n_regions + 1)))
                 chosen: list[int] = []
                 spent = 0
-                for k in (int(j) + 1 for j in np.argsort(-tops, kind="stable")):
+                for k in (int(j) + 1 for j in np.argsort(-stats.top_excess, kind="stable")):
                     if len(chosen) >= region_limit:
                         break
                     if spent + boxes[k - 1] > budget:  # a region this wide is texture, not a target
@@ -223,33 +306,26 @@ class HotSpotDetector:
                           "limit": region_limit, "area_budget": self.max_examined_share,
                           "why": "only the most prominent candidate regions were examined"}
                 examine = sorted(chosen)
-            found = []
+            windows: list[tuple[int, int, np.ndarray]] = []  # (y0, x0, candidate mask) per region kept
             for k in examine:
-                rsl = objects[k - 1]
+                cy0, cy1, cx0, cx1 = stats.box(k)
                 # Regions whose warmest cell does not stand out from the local mean are texture:
-                # dropped here, at quarter resolution, before any full-resolution work. (The max
-                # over the region's own slice: scipy's labelled maximum sorts the whole grid.)
-                top = cmax[rsl][regions[rsl] == k].max()
-                cy = min((rsl[0].start + rsl[0].stop) // 2, local_mean.shape[0] - 1)
-                cx = min((rsl[1].start + rsl[1].stop) // 2, local_mean.shape[1] - 1)
-                if top - local_mean[cy, cx] < 0.8 * self.threshold_k:
+                # dropped here, at quarter resolution, before any full-resolution work.
+                cy = min((cy0 + cy1) // 2, local_mean.shape[0] - 1)
+                cx = min((cx0 + cx1) // 2, local_mean.shape[1] - 1)
+                if stats.top_cmax[k - 1] - local_mean[cy, cx] < 0.8 * self.threshold_k:
                     continue
-                ry0, ry1 = rsl[0].start * f, min(h, rsl[0].stop * f)
-                rx0, rx1 = rsl[1].start * f, min(w, rsl[1].stop * f)
+                ry0, ry1 = cy0 * f, min(h, cy1 * f)
+                rx0, rx1 = cx0 * f, min(w, cx1 * f)
                 # The region's box is whole cells: its background broadcasts, cell by cell
-                block = opened[rsl]
+                block = opened[cy0:cy1, cx0:cx1]
                 ny, nx = block.shape
                 cells_px = padded[ry0:ry0 + ny * f, rx0:rx0 + nx * f].reshape(ny, f, nx, f)
                 cand = ((cells_px - block[:, None, :, None]) >= self.threshold_k).reshape(ny * f, nx * f)
-                cand = cand[:ry1 - ry0, :rx1 - rx0]
-                labels, n = ndimage.label(cand, structure=self._FOUR)
-                if not n:
-                    continue
-                areas = np.bincount(labels.ravel(), minlength=n + 1)
-                for i, sl in enumerate(ndimage.find_objects(labels), start=1):
-                    if areas[i] >= self.min_area:
-                        found.append((int(areas[i]), sl[0].start + ry0, sl[0].stop + ry0, sl[1].start + rx0,
-                                      sl[1].stop + rx0, labels[sl] == i))
+                windows.append((ry0, rx0, cand[:ry1 - ry0, :rx1 - rx0]))
+            found = []
+            for y0, x0, area, sl, own in _components(windows, self._FOUR, self.min_area):
+                found.append((area, sl[0].start + y0, sl[0].stop + y0, sl[1].start + x0, sl[1].stop + x0, own))
             found.sort(key=lambda c: -c[0])
             if len(found) > 4 * self.max_targets:  # the largest first; the rest not examined
                 capped = capped or {"rule": "max_candidates", "value": len(found), "limit": 4 * self.max_targets,

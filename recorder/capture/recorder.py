@@ -9,7 +9,9 @@ is bounded by the queue length plus the chunks in flight, however long the sessi
 
 Several cameras share one session and one clock: each has its own capture thread, detector,
 sidecar encoder and drop accounting (``CameraFeed``), and writes ``/thermal/<name>/...``; a
-camera that fails or ends is reported and the others go on. The live view (``recorder.live``)
+camera that fails or ends is reported and the others go on. Each camera's detector runs in a
+child process (``analysis.process_runner``), so it never competes with the writer for the
+interpreter. The live view (``recorder.live``)
 is offered each written frame without waiting; it drops its own frames, never ours.
 """
 
@@ -35,6 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 from thermcap.recorder import __version__
 from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector
+from thermcap.recorder.analysis.runner import DetectorRunner, Unanalysable, start_runner
 from thermcap.recorder.capture.counters import LatencyHistogram, RecorderCounters
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
 from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
@@ -50,7 +53,7 @@ from thermcap.recorder.icd.topics import (
     image_message_parts,
     sum_image_topics,
 )
-from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, describe_model
+from thermcap.recorder.radiometry import LinearModel, describe_model
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
@@ -106,6 +109,8 @@ class RecordingResult:
     # complete in .active files but never confirmed by the disk (fsync stalled): not counted as
     # written, since a power cut may still take them; `thermcap recover` keeps them once it answers
     frames_unconfirmed: int = 0
+    # where the detector ran ("process", or "thread" and why), its CPU and any failure
+    analysis_runner: dict[str, Any] | None = None
 
     @property
     def ok(self) -> bool:
@@ -119,7 +124,9 @@ class RecordingResult:
         if any(self.dropped.values()):
             out.append(f"dropped messages per topic: {self.dropped}")
         if self.analysis_skipped:
-            out.append(f"{self.analysis_skipped} frames not analysed (the detector fell behind or failed)")
+            failure = (self.analysis_runner or {}).get("failure")
+            out.append(f"{self.analysis_skipped} frames not analysed ("
+                       f"{failure or 'the detector fell behind or failed'})")
         late = self.timing.get("frames_late") or 0
         if late:
             out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "
@@ -142,7 +149,7 @@ class RecordingResult:
                 "error": self.error, "recovered": self.recovered, "ok": self.ok, "problems": self.problems,
                 "analysis_skipped": self.analysis_skipped, "analysis_unavailable": self.analysis_unavailable,
                 "analysis_unavailable_why": self.analysis_unavailable_why, "events": self.events,
-                "timing": self.timing,
+                "timing": self.timing, "analysis_runner": self.analysis_runner,
                 "frames_paused": self.frames_paused, "evicted_segments": self.evicted_segments,
                 "evicted_bytes": self.evicted_bytes,
                 **({"cameras": self.cameras} if self.cameras else {}),
@@ -160,7 +167,8 @@ class CameraFeed:
     sidecars: SidecarEncoder
     can_wait: bool
     detector: HotSpotDetector | None = None
-    aq: queue.Queue | None = None
+    runner: DetectorRunner | None = None  # started with the recording, closed after its last frame
+    runner_fallback: str | None = None  # why the detector runs in a thread, not a child process
     analysis_period_ns: int = 0
     next_analysis_ns: int = 0
     events: EventBuilder = field(default_factory=EventBuilder)
@@ -228,7 +236,7 @@ class Recorder:
                  policy: SegmentPolicy | None = None, queue_frames: int = 120, stats_interval_s: float = 1.0,
                  writer_delay_s: float = 0.0, recover_leftovers: bool = True, analysis: bool = True,
                  analysis_queue: int = 8, analysis_wait_s: float = 0.25, analysis_max_fps: float | None = None,
-                 wait_when_full: bool = False, ring: RingPolicy | None = None,
+                 analysis_runner: str = "process", wait_when_full: bool = False, ring: RingPolicy | None = None,
                  triggers: TriggerPolicy | None = None, stall_s: float = 5.0,
                  live: LiveBranch | None = None, stop_grace_s: float = 5.0) -> None:
         sources: dict[str | None, FrameSource] = {None: source} if not isinstance(source, Mapping) else \
@@ -257,10 +265,10 @@ class Recorder:
         self._signals = 0
         self._session: SessionWriter | None = None
         self._last_frame_ns: int | None = None
-        # Analysis beside recording: a thread and bounded queue per camera; when it falls behind,
-        # frames go unanalysed (sidecar source "skipped", counted), capture never waits for it. It
-        # runs at most at the source's frame rate so an as-fast-as-possible import does not starve
-        # writing.
+        # Analysis beside recording: a child process (or a thread) and bounded slots per camera;
+        # when it falls behind, a live camera's frames go unanalysed (sidecar source "skipped",
+        # counted), capture never waits for it. It runs at most at the source's frame rate so an
+        # as-fast-as-possible import does not starve writing.
         self.feeds: list[CameraFeed] = []
         for name, src in sources.items():
             can_wait = wait_when_full or bool(getattr(src, "can_wait", False))
@@ -268,11 +276,14 @@ class Recorder:
                               sidecars=SidecarEncoder(src.sensor.to_sidecar(), _radiometric_block(src.model)),
                               triggers=TriggerWatch(triggers) if triggers is not None else None)
             if analysis:
-                feed.aq = queue.Queue(maxsize=max(1, analysis_queue))
                 feed.detector = HotSpotDetector(src.model, bad_pixel_map=src.bad_pixel_map)
                 feed.analysis_period_ns = int(1e9 / (analysis_max_fps or src.sensor.frame_rate_hz or 60.0))
             self.feeds.append(feed)
         self.analysis_wait_s = analysis_wait_s
+        if analysis_runner not in ("process", "thread"):
+            raise RecordingError(f"analysis_runner must be 'process' or 'thread', not {analysis_runner!r}")
+        self.analysis_runner = analysis_runner
+        self.analysis_slots = max(1, analysis_queue)
         # Control while recording (thermcap ctl): requests are queued to the writer thread, which
         # acts on them between two frames, so a split or a mark never loses or repeats a frame.
         self.ring = ring
@@ -437,10 +448,7 @@ class Recorder:
             self._evictor.start()
         t0 = time.monotonic()
         deadline = None if duration_s is None else t0 + duration_s
-        analysts = [threading.Thread(target=self._analysis_loop, args=(f,), name=f"thermcap-analysis-{f.label}",
-                                     daemon=True) for f in self.feeds if f.aq is not None]
-        for a in analysts:
-            a.start()
+        self._start_runners()
         writer = threading.Thread(target=self._writer_loop, name="thermcap-writer", daemon=True)
         captures = [threading.Thread(target=self._capture_loop, args=(f, deadline), name=f"thermcap-capture-{f.label}",
                                      daemon=True) for f in self.feeds]
@@ -462,9 +470,8 @@ class Recorder:
                     stop_asked = time.monotonic()
                 if stop_asked is not None and time.monotonic() - stop_asked > self.stop_grace_s:
                     self._abandon_stalled(captures)
-            for a in analysts:
-                a.join(timeout=self.stop_grace_s)
         finally:
+            self._close_runners()
             self._restore_signals(previous)
             if self._evictor is not None:
                 self._evictor.stop()
@@ -498,6 +505,7 @@ class Recorder:
             evicted_segments=self._evictor.state.evicted_segments if self._evictor else 0,
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
             cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
+            analysis_runner=self._runner_summary(),
             live=self.live.snapshot() if self.live is not None else None, frames_unconfirmed=unconfirmed)
         if lost_on_disk:
             result.error = (f"{result.error}; {lost_on_disk} frames handed to the writer never reached a closed "
@@ -607,7 +615,7 @@ class Recorder:
                     continue
                 if feed.pauses and feed.pauses[-1][1] is None:
                     feed.pauses[-1][1] = frame.timestamp_ns
-                if feed.aq is not None:
+                if feed.runner is not None:
                     self._offer_analysis(feed, frame)
                 try:
                     if feed.can_wait:
@@ -630,41 +638,54 @@ class Recorder:
             if not feed.ended:
                 feed.ended = True
                 self.queue.put((feed, _STOP))  # blocks only until the writer frees a slot
-            if feed.aq is not None:
-                feed.aq.put(_STOP)
+
+    def _start_runners(self) -> None:
+        """Each camera's detector in a child process (a thread where none starts), sized for the
+        camera's frames; started with the recording so nothing is left running if it never is."""
+        for feed in self.feeds:
+            if feed.detector is None:
+                continue
+            sensor = feed.source.sensor
+            frame_bytes = int(sensor.width or 0) * int(sensor.height or 0) * 2
+            feed.runner, feed.runner_fallback = start_runner(
+                feed.detector, self.analysis_slots, frame_bytes, name=f"thermcap-analysis-{feed.label}",
+                prefer=self.analysis_runner)
+            if feed.runner_fallback:
+                print(f"thermcap: the detector runs in a thread ({feed.runner_fallback})", file=sys.stderr, flush=True)
+
+    def _close_runners(self) -> None:
+        for feed in self.feeds:
+            if feed.runner is not None:
+                feed.runner.close(self.stop_grace_s)
+
+    def _runner_summary(self) -> dict[str, Any] | None:
+        runners = [f for f in self.feeds if f.runner is not None]
+        if not runners:
+            return None
+        failures = [getattr(f.runner, "failure", None) for f in runners]
+        failures = [x for x in failures if x and x != "closed"]
+        return {"runner": runners[0].runner.kind if runners[0].runner else None,
+                "fallback": next((f.runner_fallback for f in runners if f.runner_fallback), None),
+                "cpu_s": round(sum(f.runner.cpu_s for f in runners if f.runner), 3),
+                "failure": failures[0] if failures else None}
 
     def _offer_analysis(self, feed: CameraFeed, frame: CapturedFrame) -> None:
         fut: Future = Future()
         frame.analysis = fut
-        assert feed.aq is not None
-        if feed.can_wait:  # not real time: every frame is analysed
-            feed.aq.put((frame.pixels, fut))
+        assert feed.runner is not None
+        if feed.can_wait:  # not real time: every frame is analysed (the source waits for a slot)
+            if not feed.runner.submit(frame.pixels, fut, wait=True):
+                fut.set_result(None)
             return
         now = time.monotonic_ns()
         if now < feed.next_analysis_ns:
             fut.set_result(None)
             return
-        try:
-            feed.aq.put_nowait((frame.pixels, fut))
+        if feed.runner.submit(frame.pixels, fut, wait=False):
             feed.next_analysis_ns = max(feed.next_analysis_ns + feed.analysis_period_ns,
                                         now - feed.analysis_period_ns)
-        except queue.Full:
+        else:
             fut.set_result(None)
-
-    def _analysis_loop(self, feed: CameraFeed) -> None:
-        assert feed.aq is not None and feed.detector is not None
-        feed.thread_ids["analysis"] = threading.get_native_id()
-        while True:
-            item = feed.aq.get()
-            if item is _STOP:
-                return
-            pixels, fut = item
-            try:
-                fut.set_result(feed.detector.detect(pixels))
-            except TemperatureUnavailable as exc:  # nothing to analyse: said as such, not as a failure
-                fut.set_result(_Unanalysable(str(exc)))
-            except Exception:  # a detector failure must not stop recording: the frame says skipped
-                fut.set_result(None)
 
     def _writer_loop(self) -> None:
         session = self._session
@@ -871,7 +892,7 @@ class Recorder:
                 self.counters.analysis_skipped += 1
                 feed.analysis_skipped += 1
                 analysis, targets = _SKIPPED, []
-            elif isinstance(result, _Unanalysable):
+            elif isinstance(result, Unanalysable):
                 self.counters.analysis_unavailable += 1
                 self._unavailable_why = result.why
                 analysis, targets = _NO_ANALYSIS, []
@@ -957,13 +978,6 @@ def _finite(value: Any, path: str, found: dict[str, str]) -> Any:
     if isinstance(value, list | tuple):
         return [_finite(v, f"{path}[{i}]", found) for i, v in enumerate(value)]
     return value
-
-@dataclass(frozen=True)
-class _Unanalysable:
-    """The detector's answer for a frame with no temperature."""
-
-    why: str
-
 
 _NO_ANALYSIS = {"thermal_contrast_grade": 0.0, "max_target_temp_c": None, "min_background_temp_c": None,
                 "delta_t_deg_c": None, "snr_db": None, "detection_confidence": None, "source": "none"}

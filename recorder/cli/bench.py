@@ -66,18 +66,30 @@ def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: s
 @click.option("--samples", type=click.Path(file_okay=False), default=None,
               help="Also run on real files here (e.g. ../shared/samples) and count hot spots per image.")
 @click.option("--overlays", type=click.Path(file_okay=False), default=None, help="Write overlay PNGs of those here.")
+@click.option("--recording-frames", type=Number(minimum=0, maximum=100_000, integer=True), default=400,
+              show_default=True, help="Frames of 640x512 (4x at 320x256) per recording of the worst-case scenes "
+                                      "with analysis on and off; 0 skips that line.")
+@click.option("--rounds", type=Number(minimum=1, maximum=50, integer=True), default=3, show_default=True,
+              help="Alternated on/off pairs per scene (the median is reported).")
 @json_option
-def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, as_json: bool) -> None:
-    """Detector precision/recall/F1 per contrast band vs the simulator's truth, and its speed."""
+def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, recording_frames: int,
+                       rounds: int, as_json: bool) -> None:
+    """Detector precision/recall/F1 per contrast band vs the simulator's truth, its speed, and a
+    file source recorded with analysis on vs off on the worst-case scenes."""
     from thermcap.recorder.bench.analysis import bench_analysis, print_table, sample_report
+    from thermcap.recorder.bench.analysis_recording import print_lines, record_vs_no_analysis
 
     res = bench_analysis(n_frames)
+    if recording_frames:
+        res["record_vs_no_analysis"] = record_vs_no_analysis(recording_frames, rounds)
     if samples:
         res["samples"] = sample_report(samples, overlays)
     if as_json:
         click.echo(json.dumps(res, indent=2))
         return
     click.echo(print_table(res))
+    for line in print_lines(res.get("record_vs_no_analysis", {})):
+        click.echo(line)
     for r in res.get("samples", []):
         click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
                    + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px"

@@ -1,0 +1,155 @@
+"""The detector in a child process: the same answers as in the recording process, in order,
+with bounded slots; a live source is never made to wait; a child that dies or cannot start
+never hangs a recording nor silently loses an answer.
+
+Real child processes throughout. Where a test needs the child busy, it stops it with SIGSTOP
+rather than hoping a frame takes long enough."""
+
+from __future__ import annotations
+
+import os
+import signal
+from concurrent.futures import Future
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from thermcap.recorder.analysis.answers import Unanalysable
+from thermcap.recorder.analysis.detector import HotSpotDetector
+from thermcap.recorder.analysis.process_runner import ProcessRunner
+from thermcap.recorder.analysis.runner import ThreadRunner, start_runner
+from thermcap.recorder.capture.recorder import Recorder
+from thermcap.recorder.capture.sources.raw import RawSource
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.radiometry import DEFAULT_MODEL
+from thermcap.recorder.storage.reader import iter_session_frames
+
+
+def _frames(n: int = 12, w: int = 320, h: int = 256) -> list[np.ndarray]:
+    return [f.pixels.copy() for f in SimSource(width=w, height=h, frames=n, seed=3).frames()]
+
+
+def _answers(runner, frames: list[np.ndarray]) -> list:
+    futs = []
+    for px in frames:
+        fut: Future = Future()
+        assert runner.submit(px, fut, wait=True)
+        futs.append(fut)
+    return [f.result(timeout=60) for f in futs]
+
+
+def _plain(answer):
+    if answer is None or isinstance(answer, Unanalysable):
+        return answer
+    dets, analysis = answer
+    return [d.to_sidecar() for d in dets], analysis
+
+
+def test_the_child_answers_as_the_detector_does_in_process_with_ids_kept_across_frames():
+    frames = _frames()
+    model = SimSource(frames=1).model
+    det = HotSpotDetector(model)
+    expected = [_plain(det.detect(px)) for px in frames]
+    assert any(e[0] for e in expected), "the scene must hold targets for the comparison to mean anything"
+    runner = ProcessRunner(HotSpotDetector(model), slots=3, frame_bytes=frames[0].nbytes)
+    try:
+        got = [_plain(a) for a in _answers(runner, frames)]
+    finally:
+        runner.close(30)
+    assert got == expected
+    assert runner.cpu_s > 0
+    assert runner._proc.poll() is not None  # the child is gone
+
+
+def test_a_frame_larger_than_a_slot_still_reaches_the_detector():
+    frames = _frames(2, 640, 512)
+    model = SimSource(frames=1).model
+    runner = ProcessRunner(HotSpotDetector(model), slots=2, frame_bytes=320 * 256 * 2)
+    try:
+        got = [_plain(a) for a in _answers(runner, frames)]
+    finally:
+        runner.close(30)
+    det = HotSpotDetector(model)
+    assert got == [_plain(det.detect(px)) for px in frames]
+
+
+def test_a_live_source_never_waits_for_a_busy_child():
+    frames = _frames(3)
+    runner = ProcessRunner(HotSpotDetector(SimSource(frames=1).model), slots=1, frame_bytes=frames[0].nbytes)
+    os.kill(runner.pid, signal.SIGSTOP)  # the child holds the only slot and cannot answer
+    try:
+        first: Future = Future()
+        assert runner.submit(frames[0], first, wait=False)
+        second: Future = Future()
+        assert not runner.submit(frames[1], second, wait=False)  # no slot: skipped, not waited for
+        assert not first.done()
+    finally:
+        os.kill(runner.pid, signal.SIGCONT)
+    assert first.result(timeout=60) is not None
+    third: Future = Future()
+    assert runner.submit(frames[2], third, wait=True)  # the slot is free again
+    assert third.result(timeout=60) is not None
+    runner.close(30)
+
+
+def test_a_child_that_dies_answers_none_for_what_it_held_and_everything_after():
+    frames = _frames(4)
+    runner = ProcessRunner(HotSpotDetector(SimSource(frames=1).model), slots=2, frame_bytes=frames[0].nbytes)
+    os.kill(runner.pid, signal.SIGSTOP)
+    held = []
+    for px in frames[:2]:
+        fut: Future = Future()
+        assert runner.submit(px, fut, wait=True)
+        held.append(fut)
+    os.kill(runner.pid, signal.SIGKILL)
+    assert [f.result(timeout=60) for f in held] == [None, None]
+    assert runner.failure is not None and "exit code -9" in runner.failure
+    late: Future = Future()
+    assert not runner.submit(frames[2], late, wait=True)  # never blocks on a dead child
+    runner.close(5)
+
+
+def test_a_detector_that_cannot_reach_a_child_runs_in_a_thread_and_says_why():
+    det = HotSpotDetector(SimSource(frames=1).model)
+    det.model = type("Unpicklable", (), {"to_celsius": lambda self, raw: raw})()  # a local class
+    runner, why = start_runner(det, 2, 1024, name="t")
+    try:
+        assert isinstance(runner, ThreadRunner)
+        assert why is not None and "cannot be sent to a child process" in why
+    finally:
+        runner.close(5)
+
+
+def _raw_file(tmp_path: Path, frames: list[np.ndarray]) -> Path:
+    path = tmp_path / "scene.raw"
+    np.stack(frames).astype("<u2").tofile(path)
+    return path
+
+
+@pytest.mark.parametrize("runner", ["process", "thread"])
+def test_every_frame_of_a_file_is_analysed_and_both_runners_record_the_same_sidecars(tmp_path, runner):
+    frames = _frames(40)
+    path = _raw_file(tmp_path, frames)
+    rec = Recorder(RawSource(str(path), width=320, height=256, model=DEFAULT_MODEL), tmp_path / runner,
+                   recover_leftovers=False, analysis_runner=runner, analysis_queue=2)
+    res = rec.run()
+    assert res.error is None and res.frames_written == 40 and res.analysis_skipped == 0
+    assert res.analysis_runner is not None and res.analysis_runner["runner"] == runner
+    assert res.analysis_runner["failure"] is None
+    analyses = [f.sidecar_dict()["thermal_analysis"] for f in iter_session_frames(res.session_dir)]
+    targets = [f.sidecar_dict()["targets"] for f in iter_session_frames(res.session_dir)]
+    assert all(a["source"] == "detector" for a in analyses)
+    det = HotSpotDetector(DEFAULT_MODEL)
+    expected = [_plain(det.detect(px)) for px in frames]
+    assert targets == [e[0] for e in expected]
+    assert any(targets)
+
+
+def test_the_recording_says_where_the_detector_ran_and_no_child_outlives_it(tmp_path):
+    rec = Recorder(SimSource(width=160, height=128, frames=30, paced=False, seed=1), tmp_path, recover_leftovers=False)
+    res = rec.run()
+    assert res.analysis_runner["runner"] == "process"
+    assert res.to_dict()["analysis_runner"]["fallback"] is None
+    proc = rec.feeds[0].runner._proc  # type: ignore[union-attr]
+    assert proc.poll() is not None
