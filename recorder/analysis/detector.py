@@ -67,6 +67,26 @@ def _celsius32(model: RadiometricModel, raw: np.ndarray) -> np.ndarray:
     return np.asarray(model.to_celsius(raw), dtype=np.float32)
 
 
+def _counts_affine(model: RadiometricModel) -> tuple[np.float32, np.float32] | None:
+    """(scale, offset) in float32 where temperature is an increasing affine map of counts: then
+    the coarse grid's minima and maxima commute with it, and the detector works on counts,
+    converting only the grid and the windows it looks at (a whole-frame conversion was a fifth
+    of a flat frame's cost)."""
+    from thermcap.recorder.radiometry import LinearModel
+
+    if isinstance(model, LinearModel) and model.scale_c_per_count > 0:
+        return np.float32(model.scale_c_per_count), np.float32(model.offset_c)
+    return None
+
+
+def _affine32(a: np.ndarray, scale: np.float32, offset: np.float32) -> np.ndarray:
+    """``_celsius32`` of a linear model, element by element the same float32 operations."""
+    out = a.astype(np.float32)
+    out *= scale
+    out += offset
+    return out
+
+
 def _median(values: np.ndarray) -> float:
     """``float(np.median(values))`` of a 1-D float32 array, by one partition: np.median's own
     bookkeeping cost more than the partition on the detector's rings."""
@@ -228,8 +248,11 @@ class HotSpotDetector:
         # Strided element-wise ops (numpy's reductions over a 4-long inner axis are 10x slower),
         # rows first: those ops run on whole contiguous rows and leave a quarter for the columns.
         rows = [padded[i::f] for i in range(f)]
-        rsum, rmx = rows[0] + rows[1] + rows[2] + rows[3], np.maximum(np.maximum(rows[0], rows[1]),
-                                                                      np.maximum(rows[2], rows[3]))
+        rsum = rows[0].astype(np.float32)  # counts or temperatures: summed in float32 either way
+        rsum += rows[1]
+        rsum += rows[2]
+        rsum += rows[3]
+        rmx = np.maximum(np.maximum(rows[0], rows[1]), np.maximum(rows[2], rows[3]))
         mean = (rsum[:, 0::f] + rsum[:, 1::f] + rsum[:, 2::f] + rsum[:, 3::f]) * np.float32(1.0 / (f * f))
         cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
         k = self.max_size // f + 1
@@ -242,9 +265,13 @@ class HotSpotDetector:
         h, w = temps.shape
         return np.repeat(np.repeat(opened, self._F, axis=0), self._F, axis=1)[:h, :w]
 
+    def _has_bad_pixels(self, shape: tuple[int, ...]) -> bool:
+        return self.bad_pixel_map is not None and self.bad_pixel_map.shape == shape and bool(self.bad_pixel_map.any())
+
     def _fix_bad_pixels(self, temps: np.ndarray) -> np.ndarray:
-        if self.bad_pixel_map is None or self.bad_pixel_map.shape != temps.shape or not self.bad_pixel_map.any():
+        if not self._has_bad_pixels(temps.shape):
             return temps
+        assert self.bad_pixel_map is not None
         if self._bad_coords is None:
             self._bad_coords = np.argwhere(self.bad_pixel_map)
         out = temps.copy()
@@ -260,10 +287,22 @@ class HotSpotDetector:
         Coarse to fine: cells whose maximum stands ``threshold_k`` above the background are found
         at quarter resolution, and only those regions are labelled at full resolution, so a frame
         with few warm spots costs little more than the background estimate."""
-        temps = self._fix_bad_pixels(_celsius32(self.model, raw))
         f = self._F
-        h, w = temps.shape
-        opened, cell_mean, cmax, padded = self._coarse(temps)
+        h, w = raw.shape
+        affine = _counts_affine(self.model) if not self._has_bad_pixels(raw.shape) else None
+        if affine is not None:  # on counts; only the grid and the windows looked at are converted
+            opened, cell_mean, cmax, padded_src = (_affine32(a, *affine) if i < 3 else a
+                                                   for i, a in enumerate(self._coarse(raw)))
+            src = raw
+
+            def celsius(a: np.ndarray) -> np.ndarray:
+                return _affine32(a, *affine)
+        else:
+            src = self._fix_bad_pixels(_celsius32(self.model, raw))
+            opened, cell_mean, cmax, padded_src = self._coarse(src)
+
+            def celsius(a: np.ndarray) -> np.ndarray:
+                return a
         excess_cells = cmax - opened
         cells = excess_cells >= self.threshold_k
         dets: list[Detection] = []
@@ -320,7 +359,7 @@ class HotSpotDetector:
                 # The region's box is whole cells: its background broadcasts, cell by cell
                 block = opened[cy0:cy1, cx0:cx1]
                 ny, nx = block.shape
-                cells_px = padded[ry0:ry0 + ny * f, rx0:rx0 + nx * f].reshape(ny, f, nx, f)
+                cells_px = celsius(padded_src[ry0:ry0 + ny * f, rx0:rx0 + nx * f]).reshape(ny, f, nx, f)
                 cand = ((cells_px - block[:, None, :, None]) >= self.threshold_k).reshape(ny * f, nx * f)
                 windows.append((ry0, rx0, cand[:ry1 - ry0, :rx1 - rx0]))
             found = []
@@ -337,12 +376,12 @@ class HotSpotDetector:
                 # Cheapest test: the peak against the local mean around it (texture bumps fail here).
                 local = local_mean[min((y0 + y1) // (2 * f), local_mean.shape[0] - 1),
                                    min((x0 + x1) // (2 * f), local_mean.shape[1] - 1)]
-                peak = float(temps[y0:y1, x0:x1][own].max())
+                peak = float(celsius(src[y0:y1, x0:x1])[own].max())
                 if peak - local < 0.8 * self.threshold_k:
                     continue
                 r = self.ring_px
                 Y0, Y1, X0, X1 = max(0, y0 - r), min(h, y1 + r), max(0, x0 - r), min(w, x1 + r)
-                crop = temps[Y0:Y1, X0:X1]
+                crop = celsius(src[Y0:Y1, X0:X1])
                 tmask = np.zeros(crop.shape, bool)
                 tmask[y0 - Y0:y1 - Y0, x0 - X0:x1 - X0] = own
                 # Next, the rectangular ring outside the component's box: a target stands above

@@ -1,0 +1,86 @@
+"""The detector's fast paths give what the plain ones give: working on counts for a linear
+model (against the same model seen as a curve), labelling small windows side by side (against
+one scipy call per window), and every region's facts at once (against find_objects)."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy import ndimage
+
+from thermcap.recorder.analysis.detector import HotSpotDetector, _components, _region_stats
+from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.radiometry import LinearModel
+
+
+class _SameLineAsACurve:
+    """A linear model the detector does not recognise as one: it takes the whole-frame path."""
+
+    kind = "curve"
+
+    def __init__(self, model: LinearModel) -> None:
+        self.model = model
+
+    def to_celsius(self, raw: np.ndarray) -> np.ndarray:
+        out = raw.astype(np.float32)
+        out *= np.float32(self.model.scale_c_per_count)
+        out += np.float32(self.model.offset_c)
+        return out
+
+
+def _run(det: HotSpotDetector, frames: list[np.ndarray]) -> list:
+    return [([d.to_sidecar() for d in dets], analysis) for dets, analysis in map(det.detect, frames)]
+
+
+def test_counts_and_temperatures_find_the_same_targets():
+    src = SimSource(width=320, height=256, frames=10, seed=9)
+    frames = [f.pixels.copy() for f in src.frames()]
+    rng = np.random.default_rng(1)
+    frames += [(2000 + rng.normal(0, 45, (256, 320))).astype(np.uint16) for _ in range(3)]
+    on_counts = _run(HotSpotDetector(src.model), frames)
+    on_temps = _run(HotSpotDetector(_SameLineAsACurve(src.model)), frames)  # type: ignore[arg-type]
+    assert any(dets for dets, _ in on_counts)
+    assert on_counts == on_temps
+
+
+def _per_window(windows, min_area):
+    out = []
+    for y0, x0, m in windows:
+        labels, n = ndimage.label(m, structure=ndimage.generate_binary_structure(2, 1))
+        areas = np.bincount(labels.ravel(), minlength=n + 1)
+        for i, sl in enumerate(ndimage.find_objects(labels), start=1):
+            if areas[i] >= min_area:
+                out.append((y0, x0, int(areas[i]), sl, labels[sl] == i))
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(st.integers(1, 80), st.integers(1, 30), st.floats(0.1, 0.7)), min_size=1, max_size=12),
+       st.integers(1, 5), st.integers(0, 2**32 - 1))
+def test_windows_labelled_together_match_one_call_each(shapes, min_area, seed):
+    rng = np.random.default_rng(seed)
+    windows = [(int(rng.integers(0, 500)), int(rng.integers(0, 600)), rng.random((h, w)) < p) for h, w, p in shapes]
+    got = _components(windows, ndimage.generate_binary_structure(2, 1), min_area)
+    want = _per_window(windows, min_area)
+    assert len(got) == len(want)
+    for g, e in zip(got, want, strict=True):
+        assert g[:4] == e[:4]
+        assert np.array_equal(g[4], e[4])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.8), st.integers(0, 2**32 - 1))
+def test_region_facts_match_find_objects_and_labelled_maxima(h, w, p, seed):
+    rng = np.random.default_rng(seed)
+    cells = rng.random((h, w)) < p
+    excess, cmax = rng.random((h, w)).astype(np.float32), rng.random((h, w)).astype(np.float32)
+    regions, n = ndimage.label(cells, structure=np.ones((3, 3), bool))
+    stats = _region_stats(cells, regions, n, excess, cmax)
+    objects = ndimage.find_objects(regions)
+    assert [stats.box(k) for k in range(1, n + 1)] == \
+        [(o[0].start, o[0].stop, o[1].start, o[1].stop) for o in objects]
+    if n:
+        idx = np.arange(1, n + 1)
+        assert np.array_equal(stats.top_excess, np.asarray(ndimage.maximum(excess, regions, idx), np.float32))
+        assert np.array_equal(stats.top_cmax, np.asarray(ndimage.maximum(cmax, regions, idx), np.float32))
