@@ -114,7 +114,9 @@ def record_once(sim: SimSource, rendered: list[CapturedFrame], n_frames: int, co
     if res.error is not None or res.dropped or res.frames_written != n_frames:
         raise RuntimeError(f"bench recording failed: {res.error or res.dropped or res.frames_written}")
     done = process_cpu_split()
-    return res, dt, (done[0] - cpu[0]) / n_frames, (done[1] - cpu[1]) / n_frames
+    runner = res.analysis_runner or {}
+    child = float(runner.get("cpu_s") or 0.0) if runner.get("runner") == "process" else 0.0  # not in ours
+    return res, dt, (done[0] - cpu[0] + child) / n_frames, (done[1] - cpu[1]) / n_frames
 
 
 @dataclass(frozen=True)
