@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy import ndimage
 
+from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
 from thermcap.recorder.icd.quality import contrast_metrics, frame_analysis, graded_contrast
 from thermcap.recorder.radiometry import RadiometricModel
@@ -158,6 +159,17 @@ def _region_stats(cells: np.ndarray, regions: np.ndarray, n: int, excess: np.nda
                         top_cmax=red(np.maximum, cmax[ys, xs]))
 
 
+def _regions(cells: np.ndarray, excess: np.ndarray, cmax: np.ndarray,
+             structure: np.ndarray) -> tuple[int, _RegionStats]:
+    """The candidate cells' 8-connected regions and their facts: one compiled pass where numba
+    is installed, else scipy's labels and ``_region_stats`` (the same answers)."""
+    if detector_kernels.available():
+        n, facts = detector_kernels.region_facts(cells, excess, cmax)
+        return n, _RegionStats(*facts)
+    regions, n = ndimage.label(cells, structure=structure)
+    return n, _region_stats(cells, regions, n, excess, cmax)
+
+
 _MOSAIC_MAX_ROWS = 64  # windows up to this tall are labelled together, side by side
 
 
@@ -247,6 +259,10 @@ class HotSpotDetector:
         padded = temps if (ph, pw) == (h, w) else np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
         # Strided element-wise ops (numpy's reductions over a 4-long inner axis are 10x slower),
         # rows first: those ops run on whole contiguous rows and leave a quarter for the columns.
+        if padded.dtype == np.uint16 and detector_kernels.available():
+            mean, cmax = detector_kernels.cell_mean_max(padded, f)
+            k = self.max_size // f + 1
+            return sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum), mean, cmax, padded
         rows = [padded[i::f] for i in range(f)]
         rsum = rows[0].astype(np.float32)  # counts or temperatures: summed in float32 either way
         rsum += rows[1]
@@ -324,8 +340,7 @@ class HotSpotDetector:
 
             # the mean around each cell, as wide as the opening: only a frame with candidates needs it
             local_mean = ndimage.uniform_filter(cell_mean, size=2 * (self.max_size // f + 1) - 1, mode="nearest")
-            regions, n_regions = ndimage.label(cells, structure=self._EIGHT)
-            stats = _region_stats(cells, regions, n_regions, excess_cells, cmax)
+            n_regions, stats = _regions(cells, excess_cells, cmax, self._EIGHT)
             examine: list[int] = list(range(1, n_regions + 1))
             budget = self.max_examined_share * cells.size  # in coarse cells
             boxes = stats.areas()

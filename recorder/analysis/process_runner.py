@@ -34,6 +34,7 @@ from multiprocessing.connection import Connection
 
 import numpy as np
 
+from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.analysis.answers import analyse_one
 from thermcap.recorder.analysis.detector import HotSpotDetector
 
@@ -253,6 +254,7 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int) -> None:
     """The child: run the detector on each slot it is told of, in order, until told to stop."""
     try:
         detector = pickle.loads(conn.recv_bytes())
+        detector_kernels.warm()
     except Exception as exc:
         with contextlib.suppress(Exception):
             conn.send(("failed", f"the detector process could not start: {type(exc).__name__}: {exc}"))

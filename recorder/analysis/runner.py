@@ -23,6 +23,7 @@ from typing import Protocol
 
 import numpy as np
 
+from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.analysis.answers import Unanalysable, analyse_one
 from thermcap.recorder.analysis.detector import HotSpotDetector
 
@@ -85,6 +86,7 @@ class ThreadRunner:
 
     def _loop(self) -> None:
         self._tid = threading.get_native_id()
+        detector_kernels.warm()  # here, not on capture's thread: frames queue (or skip) meanwhile
         while True:
             item = self._queue.get()
             if item is None:

@@ -5,10 +5,12 @@ one scipy call per window), and every region's facts at once (against find_objec
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
+from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.analysis.detector import HotSpotDetector, _components, _region_stats
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.radiometry import LinearModel
@@ -84,3 +86,48 @@ def test_region_facts_match_find_objects_and_labelled_maxima(h, w, p, seed):
         idx = np.arange(1, n + 1)
         assert np.array_equal(stats.top_excess, np.asarray(ndimage.maximum(excess, regions, idx), np.float32))
         assert np.array_equal(stats.top_cmax, np.asarray(ndimage.maximum(cmax, regions, idx), np.float32))
+
+
+needs_numba = pytest.mark.skipif(not detector_kernels.available(),
+                                 reason="numba is not installed: pip install 'thermcap[archive]'")
+
+
+@needs_numba
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.9), st.integers(0, 2**32 - 1))
+def test_compiled_regions_are_scipys_labels_and_facts(h, w, p, seed):
+    rng = np.random.default_rng(seed)
+    cells = rng.random((h, w)) < p
+    excess, cmax = rng.random((h, w)).astype(np.float32), rng.random((h, w)).astype(np.float32)
+    regions, n = ndimage.label(cells, structure=np.ones((3, 3), bool))
+    want = _region_stats(cells, regions, n, excess, cmax)
+    got_n, got = detector_kernels.region_facts(cells, excess, cmax)
+    assert got_n == n
+    for a, b in zip((want.y0, want.y1, want.x0, want.x1, want.top_excess, want.top_cmax), got, strict=True):
+        assert np.array_equal(a, b)
+
+
+@needs_numba
+@settings(max_examples=40, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.integers(0, 2**32 - 1))
+def test_compiled_cell_grid_is_the_strided_one(ch, cw, seed):
+    counts = np.random.default_rng(seed).integers(0, 2**16, (ch * 4, cw * 4), dtype=np.uint16)
+    mean, cmax = detector_kernels.cell_mean_max(counts, 4)
+    cells = counts.reshape(ch, 4, cw, 4)
+    assert np.array_equal(cmax, cells.max(axis=(1, 3)))
+    assert np.array_equal(mean, (cells.astype(np.float64).sum(axis=(1, 3)) / 16).astype(np.float32))
+
+
+@needs_numba
+def test_detector_finds_the_same_with_and_without_the_compiled_passes(monkeypatch):
+    src = SimSource(width=320, height=250, frames=12, seed=4)  # 250 rows: the last cells padded
+    frames = [f.pixels.copy() for f in src.frames()]
+    rng = np.random.default_rng(2)
+    frames += [(2000 + rng.normal(0, 45, (250, 320))).astype(np.uint16) for _ in range(3)]
+    frames += [rng.integers(0, 16383, (250, 320), dtype=np.uint16)]
+    compiled = _run(HotSpotDetector(src.model), frames)
+    monkeypatch.setattr(detector_kernels, "available", lambda: False)
+    plain = _run(HotSpotDetector(src.model), frames)
+    assert any(dets for dets, _ in compiled)
+    assert any("detection_capped" in a for _, a in compiled)
+    assert compiled == plain

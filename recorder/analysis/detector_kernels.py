@@ -1,0 +1,169 @@
+"""The detector's two whole-grid passes compiled (numba, no GIL), used when numba is installed.
+
+On noise (the worst case a file source can feed the detector) a 640x512 frame cost 1.2 ms, and
+most of it was numpy and scipy walking the same arrays again and again: the coarse grid's mean
+and maximum in twelve strided whole-array operations (0.3 ms), and the candidate regions'
+labels, then their cells sorted by label and reduced for boxes and maxima (0.4 ms, a thousand
+regions). Here each is one pass. The answers are the plain paths' to the bit
+(``tests/unit/recorder/test_detector_fast_paths.py``): the cell sums of uint16 counts are
+integers below 2**24, exact in float32 in any order, and the regions are numbered as
+``scipy.ndimage.label`` numbers them (by the raster position of their first cell).
+
+numba is in the ``archive`` extra, not the base install, so the detector keeps its numpy path
+for a recorder installed without it (``available()`` says which runs).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+__all__ = ["available", "cell_mean_max", "region_facts", "warm"]
+
+try:
+    from numba import njit
+except ImportError:  # the base install: the detector's numpy path runs
+    njit = None  # type: ignore[assignment]
+
+
+def available() -> bool:
+    return njit is not None
+
+
+if njit is not None:
+    @njit(nogil=True, cache=True)
+    def _cell_mean_max(padded, f):  # uint16 [h, w], whole cells -> (float32 mean, uint16 max) [h/f, w/f]
+        h, w = padded.shape
+        ch, cw = h // f, w // f
+        mean = np.empty((ch, cw), np.float32)
+        cmax = np.empty((ch, cw), padded.dtype)
+        col_sum = np.empty(w, np.uint32)  # a cell row's columns first: contiguous, vectorised loops
+        col_max = np.empty(w, padded.dtype)
+        scale = np.float32(1.0 / (f * f))
+        for cy in range(ch):
+            first = padded[cy * f]
+            for x in range(w):
+                col_sum[x] = first[x]
+                col_max[x] = first[x]
+            for dy in range(1, f):
+                row = padded[cy * f + dy]
+                for x in range(w):
+                    v = row[x]
+                    col_sum[x] += v
+                    col_max[x] = max(col_max[x], v)
+            for cx in range(cw):
+                s = np.uint32(0)
+                m = col_max[cx * f]
+                for dx in range(f):
+                    s += col_sum[cx * f + dx]
+                    m = max(m, col_max[cx * f + dx])
+                mean[cy, cx] = np.float32(s) * scale
+                cmax[cy, cx] = m
+        return mean, cmax
+
+    @njit(nogil=True, cache=True)
+    def _find(parent, i):
+        root = i
+        while parent[root] != root:
+            root = parent[root]
+        while parent[i] != root:  # path compression
+            parent[i], i = root, parent[i]
+        return root
+
+    @njit(nogil=True, cache=True)
+    def _region_facts(cells, excess, cmax):
+        h, w = cells.shape
+        prov = np.zeros((h, w), np.int32)  # provisional labels, 0: not a candidate
+        parent = np.zeros(h * w // 2 + 2, np.int32)
+        n_prov = 0
+        for y in range(h):
+            for x in range(w):
+                if not cells[y, x]:
+                    continue
+                lab = 0
+                for dy, dx in ((-1, -1), (-1, 0), (-1, 1), (0, -1)):  # 8-connected, already visited
+                    yy, xx = y + dy, x + dx
+                    if yy < 0 or xx < 0 or xx >= w:
+                        continue
+                    other = prov[yy, xx]
+                    if other == 0:
+                        continue
+                    if lab == 0:
+                        lab = _find(parent, other)
+                    else:
+                        a, b = _find(parent, lab), _find(parent, other)
+                        if a != b:
+                            if a < b:
+                                parent[b] = a
+                                lab = a
+                            else:
+                                parent[a] = b
+                                lab = b
+                if lab == 0:
+                    n_prov += 1
+                    if n_prov >= parent.shape[0]:
+                        grown = np.zeros(parent.shape[0] * 2, np.int32)
+                        grown[:parent.shape[0]] = parent
+                        parent = grown
+                    parent[n_prov] = n_prov
+                    lab = n_prov
+                prov[y, x] = lab
+        final = np.zeros(n_prov + 1, np.int32)  # root -> label, numbered in raster order
+        n = 0
+        y0 = np.empty(n_prov, np.intp)
+        y1 = np.empty(n_prov, np.intp)
+        x0 = np.empty(n_prov, np.intp)
+        x1 = np.empty(n_prov, np.intp)
+        top_excess = np.empty(n_prov, excess.dtype)
+        top_cmax = np.empty(n_prov, cmax.dtype)
+        for y in range(h):
+            for x in range(w):
+                p = prov[y, x]
+                if p == 0:
+                    continue
+                root = _find(parent, p)
+                k = final[root]
+                if k == 0:
+                    n += 1
+                    k = n
+                    final[root] = k
+                    y0[k - 1], y1[k - 1], x0[k - 1], x1[k - 1] = y, y + 1, x, x + 1
+                    top_excess[k - 1], top_cmax[k - 1] = excess[y, x], cmax[y, x]
+                    continue
+                i = k - 1
+                y1[i] = y + 1  # rows only grow in a raster scan
+                if x < x0[i]:
+                    x0[i] = x
+                if x + 1 > x1[i]:
+                    x1[i] = x + 1
+                if excess[y, x] > top_excess[i]:
+                    top_excess[i] = excess[y, x]
+                if cmax[y, x] > top_cmax[i]:
+                    top_cmax[i] = cmax[y, x]
+        return n, y0[:n], y1[:n], x0[:n], x1[:n], top_excess[:n], top_cmax[:n]
+
+
+def cell_mean_max(padded: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
+    """Each f x f cell's mean (float32) and maximum of uint16 counts padded to whole cells."""
+    assert njit is not None and padded.dtype == np.uint16
+    out: tuple[np.ndarray, np.ndarray] = _cell_mean_max(padded, f)
+    return out
+
+
+def region_facts(cells: np.ndarray, excess: np.ndarray, cmax: np.ndarray) -> tuple[int, Any]:
+    """The 8-connected regions of ``cells``: (count, (y0, y1, x0, x1, top excess, top cell
+    maximum) in label order), as ``ndimage.label`` numbers them. ``excess`` and ``cmax`` must
+    hold no NaN (on counts they cannot)."""
+    assert njit is not None
+    n, *facts = _region_facts(np.ascontiguousarray(cells), excess, cmax)
+    return int(n), facts
+
+
+def warm() -> None:
+    """Load (or, on a machine whose cache has not seen them, compile) the kernels now, before
+    a recording's first frame: a first call otherwise costs that frame up to a second or two."""
+    if njit is None:
+        return
+    cell_mean_max(np.zeros((4, 4), np.uint16), 4)
+    region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
