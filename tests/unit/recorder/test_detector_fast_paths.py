@@ -71,13 +71,19 @@ def test_windows_labelled_together_match_one_call_each(shapes, min_area, seed):
         assert np.array_equal(g[4], e[4])
 
 
-@settings(max_examples=60, deadline=None)
-@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.8), st.integers(0, 2**32 - 1))
-def test_region_facts_match_find_objects_and_labelled_maxima(h, w, p, seed):
+def _labelled_grid(h: int, w: int, p: float, seed: int):
+    """A random candidate grid, its cells' excess and maxima, and scipy's 8-connected labels."""
     rng = np.random.default_rng(seed)
     cells = rng.random((h, w)) < p
     excess, cmax = rng.random((h, w)).astype(np.float32), rng.random((h, w)).astype(np.float32)
     regions, n = ndimage.label(cells, structure=np.ones((3, 3), bool))
+    return cells, excess, cmax, regions, n
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.8), st.integers(0, 2**32 - 1))
+def test_region_facts_match_find_objects_and_labelled_maxima(h, w, p, seed):
+    cells, excess, cmax, regions, n = _labelled_grid(h, w, p, seed)
     stats = _region_stats(cells, regions, n, excess, cmax)
     objects = ndimage.find_objects(regions)
     assert [stats.box(k) for k in range(1, n + 1)] == \
@@ -96,10 +102,7 @@ needs_numba = pytest.mark.skipif(not detector_kernels.available(),
 @settings(max_examples=80, deadline=None)
 @given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.9), st.integers(0, 2**32 - 1))
 def test_compiled_regions_are_scipys_labels_and_facts(h, w, p, seed):
-    rng = np.random.default_rng(seed)
-    cells = rng.random((h, w)) < p
-    excess, cmax = rng.random((h, w)).astype(np.float32), rng.random((h, w)).astype(np.float32)
-    regions, n = ndimage.label(cells, structure=np.ones((3, 3), bool))
+    cells, excess, cmax, regions, n = _labelled_grid(h, w, p, seed)
     want = _region_stats(cells, regions, n, excess, cmax)
     got_n, got = detector_kernels.region_facts(cells, excess, cmax)
     assert got_n == n
