@@ -257,20 +257,19 @@ class HotSpotDetector:
         h, w = temps.shape
         ph, pw = -(-h // f) * f, -(-w // f) * f
         padded = temps if (ph, pw) == (h, w) else np.pad(temps, ((0, ph - h), (0, pw - w)), mode="edge")
-        # Strided element-wise ops (numpy's reductions over a 4-long inner axis are 10x slower),
-        # rows first: those ops run on whole contiguous rows and leave a quarter for the columns.
-        if padded.dtype == np.uint16 and detector_kernels.available():
+        if padded.dtype == np.uint16 and detector_kernels.available():  # counts: one compiled pass
             mean, cmax = detector_kernels.cell_mean_max(padded, f)
-            k = self.max_size // f + 1
-            return sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum), mean, cmax, padded
-        rows = [padded[i::f] for i in range(f)]
-        rsum = rows[0].astype(np.float32)  # counts or temperatures: summed in float32 either way
-        rsum += rows[1]
-        rsum += rows[2]
-        rsum += rows[3]
-        rmx = np.maximum(np.maximum(rows[0], rows[1]), np.maximum(rows[2], rows[3]))
-        mean = (rsum[:, 0::f] + rsum[:, 1::f] + rsum[:, 2::f] + rsum[:, 3::f]) * np.float32(1.0 / (f * f))
-        cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
+        else:
+            # Strided element-wise ops (numpy's reductions over a 4-long inner axis are 10x slower),
+            # rows first: those ops run on whole contiguous rows and leave a quarter for the columns.
+            rows = [padded[i::f] for i in range(f)]
+            rsum = rows[0].astype(np.float32)  # counts or temperatures: summed in float32 either way
+            rsum += rows[1]
+            rsum += rows[2]
+            rsum += rows[3]
+            rmx = np.maximum(np.maximum(rows[0], rows[1]), np.maximum(rows[2], rows[3]))
+            mean = (rsum[:, 0::f] + rsum[:, 1::f] + rsum[:, 2::f] + rsum[:, 3::f]) * np.float32(1.0 / (f * f))
+            cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
         k = self.max_size // f + 1
         opened = sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
         return opened, mean, cmax, padded

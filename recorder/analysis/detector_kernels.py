@@ -23,12 +23,19 @@ __all__ = ["available", "cell_mean_max", "region_facts", "warm"]
 
 try:
     from numba import njit
-except ImportError:  # the base install: the detector's numpy path runs
+except Exception:  # the base install (or a numba that cannot load): the detector's numpy path runs
     njit = None  # type: ignore[assignment]
+
+_usable: bool | None = None  # None until the kernels were tried once in this process
 
 
 def available() -> bool:
-    return njit is not None
+    """Whether the compiled passes run here. Tried once, on tiny arrays: a kernel numba cannot
+    compile on this machine means the numpy path, never a detector (or a recording) that fails."""
+    global _usable
+    if _usable is None:
+        _usable = njit is not None and _try_kernels()
+    return _usable
 
 
 if njit is not None:
@@ -75,7 +82,9 @@ if njit is not None:
     def _region_facts(cells, excess, cmax):
         h, w = cells.shape
         prov = np.zeros((h, w), np.int32)  # provisional labels, 0: not a candidate
-        parent = np.zeros(h * w // 2 + 2, np.int32)
+        # a cell takes a new label only when none of its earlier 8-neighbours is a candidate, so
+        # no two new-label cells touch: at most one per 2x2 block
+        parent = np.zeros(((h + 1) // 2) * ((w + 1) // 2) + 1, np.int32)
         n_prov = 0
         for y in range(h):
             for x in range(w):
@@ -102,10 +111,6 @@ if njit is not None:
                                 lab = b
                 if lab == 0:
                     n_prov += 1
-                    if n_prov >= parent.shape[0]:
-                        grown = np.zeros(parent.shape[0] * 2, np.int32)
-                        grown[:parent.shape[0]] = parent
-                        parent = grown
                     parent[n_prov] = n_prov
                     lab = n_prov
                 prov[y, x] = lab
@@ -160,10 +165,16 @@ def region_facts(cells: np.ndarray, excess: np.ndarray, cmax: np.ndarray) -> tup
     return int(n), facts
 
 
+def _try_kernels() -> bool:
+    try:
+        cell_mean_max(np.zeros((4, 4), np.uint16), 4)
+        region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
+    except Exception:
+        return False
+    return True
+
+
 def warm() -> None:
     """Load (or, on a machine whose cache has not seen them, compile) the kernels now, before
     a recording's first frame: a first call otherwise costs that frame up to a second or two."""
-    if njit is None:
-        return
-    cell_mean_max(np.zeros((4, 4), np.uint16), 4)
-    region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
+    available()

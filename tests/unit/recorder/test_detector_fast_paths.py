@@ -134,3 +134,28 @@ def test_detector_finds_the_same_with_and_without_the_compiled_passes(monkeypatc
     assert any(dets for dets, _ in compiled)
     assert any("detection_capped" in a for _, a in compiled)
     assert compiled == plain
+
+
+@needs_numba
+@pytest.mark.parametrize("h, w", [(1, 1), (1, 7), (7, 1), (9, 11), (40, 39)])
+def test_compiled_regions_take_the_most_regions_a_grid_can_hold(h, w):
+    cells = np.zeros((h, w), bool)
+    cells[::2, ::2] = True  # isolated cells, one per 2x2 block: every one a new label
+    excess = np.arange(h * w, dtype=np.float32).reshape(h, w)
+    regions, n = ndimage.label(cells, structure=np.ones((3, 3), bool))
+    want = _region_stats(cells, regions, n, excess, excess)
+    got_n, got = detector_kernels.region_facts(cells, excess, excess)
+    assert got_n == n == ((h + 1) // 2) * ((w + 1) // 2)
+    assert all(np.array_equal(a, b) for a, b in zip((want.y0, want.y1, want.x0, want.x1), got, strict=False))
+
+
+def test_kernels_that_cannot_run_leave_the_numpy_path(monkeypatch):
+    def broken(*_args):
+        raise RuntimeError("no compiler for this machine")
+
+    monkeypatch.setattr(detector_kernels, "cell_mean_max", broken)
+    monkeypatch.setattr(detector_kernels, "_usable", None)
+    assert detector_kernels.available() is False
+    src = SimSource(width=160, height=128, frames=4, seed=4)
+    frames = [f.pixels.copy() for f in src.frames()]
+    assert any(dets for dets, _ in _run(HotSpotDetector(src.model), frames))
