@@ -31,12 +31,14 @@ def test_each_dropped_file_is_taken_once(tmp_path):
     sample = SAMPLES / "flir" / "FLIR_E40.jpg"
     copying = inbox / "still_copying.jpg"
     copying.write_bytes(sample.read_bytes()[:5000] if sample.is_file() else b"x" * 5000)
-    old = time.time() - 60
+    # settled two hours ago; the one being copied was written just now. The settle window is an
+    # hour, so a loaded machine that takes seconds to start the CLI cannot make it look settled
+    old = time.time() - 7200
     for p in inbox.iterdir():
         if p != copying:
-            os.utime(p, (old, old))  # settled long ago; the one being copied was written just now
+            os.utime(p, (old, old))
     root = tmp_path / "root"
-    r = run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "5", "--json", "--no-archive")
+    r = run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "3600", "--json", "--no-archive")
     assert r.returncode == 1, r.stderr  # one file quarantined
     res = json.loads(r.stdout)
     assert len(res["processed"]) == 6
@@ -49,7 +51,7 @@ def test_each_dropped_file_is_taken_once(tmp_path):
     one = res["processed"][0]
     derived = inbox / (one["path"] + ".derived")
     assert list(derived.glob("*.png")) and list(derived.glob("*.celsius.tiff")) and (derived / "summary.json").is_file()
-    again = json.loads(run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "5", "--json",
+    again = json.loads(run_cli("watch", str(inbox), "--root", str(root), "--once", "--settle", "3600", "--json",
                                "--no-archive").stdout)
     assert again["processed"] == [] and again["quarantined"] == {}  # nothing twice
     assert len(list_sessions(root)) == 6
