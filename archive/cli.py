@@ -362,18 +362,26 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
               show_default=True, help="Frames per sequence.")
 @json_option
 def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
-    """tpred (temporal prediction) against JPEG-XL e2, PNG16 and FFV1 on still, sweeping and cued views."""
+    """tpred (temporal prediction) against JPEG-XL e2, JPEG-LS, PNG16 and FFV1 on still, sweeping, cued,
+    shaking and gain-stepping views, and its rate in a fresh process."""
     from thermcap.archive.bench_temporal import bench_temporal
 
     rows = bench_temporal(n_frames)
     if as_json:
         click.echo(json.dumps(rows, indent=2))
         return
-    prev = f"v{rows[0]['previous_bitstream']}" if rows else "prev"
-    click.echo(f"{'sequence':42} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'ffv1':>6} {'png16':>6} "
+    seqs = [r for r in rows if r["kind"] == "sequence"]
+    prev = f"v{seqs[0]['previous_bitstream']}" if seqs else "prev"
+    click.echo(f"{'sequence':42} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'jpegls':>6} {'ffv1':>6} {'png16':>6} "
                f"{'fps 1c':>7} {'fps 2c':>7} {prev + ' x jxl':>8} {prev + ' 2c':>6}")
-    for r in rows:
+    for r in seqs:
         click.echo(f"{r['sequence']:42} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
-                   f"{r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} {r['tpred_fps_1_core']:>7} "
-                   f"{r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
+                   f"{r['jpegls_ratio']:>6} {r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} "
+                   f"{r['tpred_fps_1_core']:>7} {r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
                    f"{r['tpred_previous_fps_2_cores']:>6}")
+    for r in rows:
+        if r["kind"] == "fresh_process":
+            click.echo(f"{r['sequence']} ({r['frames']} frames {r['size']}, two threads, from the codec's import): "
+                       f"{r['fps_2_cores_cached']} fps with the compiled kernels cached "
+                       f"(first frame {r['first_frame_s_cached']} s), {r['fps_2_cores_cold_cache']} fps compiling "
+                       f"them (first frame {r['first_frame_s_cold_cache']} s); goal {r['goal_fps_2_cores']}")

@@ -19,6 +19,14 @@ fixed-pattern noise, both tied to the sensor (they stay put while the scene pans
 ``drift_mk`` a global 1/f drift (eight sinusoids from 0.01 to 1 Hz with amplitudes in 1/sqrt(f)),
 as an uncooled core drifts between flat-field corrections.
 
+What a camera on a vehicle or a mast adds, for the temporal codec's measurements: ``shake_px``
+moves the picture (scene and targets, not the sensor's pattern) by a random sub-pixel offset
+each frame, up to that many pixels on each axis (bilinear, as optics blur a shake), which no
+whole-pixel motion search can follow; ``gain_every_s`` changes the core's gain (AGC) at that
+period to a new value within ``1 +- gain_step``, scaling every count's distance from the
+scene's mean level (the sensor's pattern and the noise with it, as a gain after the detector
+does): a frame-wide step no prediction from earlier frames foresees.
+
 For the ICD section 5 quality report's proof: ``blackbody_c`` fills the view with a uniform
 blackbody at that temperature (no scene, no targets); ``shutter_every_s`` closes the shutter for
 ``shutter_frames`` frames at that period (a uniform field at ``shutter_c``, marked
@@ -197,11 +205,20 @@ class SimSource(FrameSource):
         shutter_frames: int = 4,
         shutter_c: float = 25.0,
         drift_c_per_h: float = 0.0,
+        shake_px: float = 0.0,
+        gain_every_s: float | None = None,
+        gain_step: float = 0.05,
     ) -> None:
         if width < 16 or height < 16:
             raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
         if view not in ("fixed", "turret", "patrol"):
             raise ValueError(f"view must be fixed, turret or patrol, got {view!r}")
+        if not 0.0 <= shake_px <= 8.0:
+            raise ValueError(f"shake_px must be between 0 and 8 pixels, got {shake_px}")
+        if gain_every_s is not None and (gain_every_s <= 0 or not 0.0 <= gain_step < 1.0):
+            raise ValueError(f"gain steps need gain_every_s > 0 and 0 <= gain_step < 1, "
+                             f"got {gain_every_s}, {gain_step}")
+        self.shake_px, self.gain_every_s, self.gain_step = shake_px, gain_every_s, gain_step
         self.view, self.pan_px_per_deg, self.patrol_deg_s = view, pan_px_per_deg, patrol_deg_s
         self.blackbody_c, self.shutter_every_s, self.shutter_frames = blackbody_c, shutter_every_s, shutter_frames
         self.shutter_c, self.drift_c_per_h = shutter_c, drift_c_per_h
@@ -273,7 +290,28 @@ class SimSource(FrameSource):
             out["blackbody_c"] = self.blackbody_c
         if self.shutter_every_s:
             out.update(shutter_every_s=self.shutter_every_s, shutter_c=self.shutter_c)
+        if self.shake_px:
+            out["shake_px"] = self.shake_px
+        if self.gain_every_s:
+            out.update(gain_every_s=self.gain_every_s, gain_step=self.gain_step)
         return out
+
+    def shake(self, index: int) -> tuple[float, float]:
+        """Frame ``index``'s sub-pixel shake (dx, dy) in pixels: a function of the seed and the index."""
+        if not self.shake_px:
+            return 0.0, 0.0
+        dx, dy = np.random.default_rng([self.seed, 5, index]).uniform(-self.shake_px, self.shake_px, 2)
+        return float(dx), float(dy)
+
+    def gain(self, index: int) -> float:
+        """The core's gain at frame ``index``: 1 until the first step, then a new value within
+        ``1 +- gain_step`` at each step, a function of the seed and the step's number."""
+        if not self.gain_every_s:
+            return 1.0
+        step = int(index // max(1, round(self.gain_every_s * self.fps)))
+        if step == 0:
+            return 1.0
+        return 1.0 + float(np.random.default_rng([self.seed, 6, step]).uniform(-self.gain_step, self.gain_step))
 
     def shutter_closed(self, index: int) -> bool:
         if not self.shutter_every_s:
@@ -374,9 +412,21 @@ class SimSource(FrameSource):
             region = counts_f[y:y + th, x:x + tw]
             region[ell] = ((temps - model.offset_c) / model.scale_c_per_count)[ell]
             truths.append({"target": tgt, "box": (x, y, tw, th), "mask": ell, "temp_c": temp})
+        if self.shake_px:  # the picture moves on the sensor; its fixed pattern does not
+            from scipy.ndimage import shift
+
+            dx, dy = self.shake(index)
+            scene = counts_f - self._fpn_counts
+            counts_f = shift(scene, (dy, dx), order=1, mode="nearest", prefilter=False) + self._fpn_counts
         n = self.width * self.height
         off = int(self._rng_noise.integers(0, self._noise_pool.size - n))
         counts_f += self._noise_pool[off:off + n].reshape(self.height, self.width)
+        g = self.gain(index)
+        if g != 1.0:  # AGC: every count's distance from the scene's mean level, scaled
+            pivot = np.float32(self._background_counts.mean())
+            counts_f -= pivot
+            counts_f *= np.float32(g)
+            counts_f += pivot
         np.rint(counts_f, out=counts_f)
         np.clip(counts_f, 0, MAX_COUNT, out=counts_f)
         frame = counts_f.astype(np.uint16)

@@ -87,3 +87,49 @@ def test_slew_to_cue_walks_the_state_machine():
 def test_large_frames_supported():
     f = _frames(frames=1, width=1280, height=1024)[0]
     assert f.pixels.shape == (1024, 1280)
+
+
+def test_shake_moves_the_picture_by_a_fraction_of_a_pixel_and_not_the_sensor_pattern():
+    kw = {"frames": 6, "seed": 3, "width": 160, "height": 128, "netd_mk": 0.0, "bad_pixels": 0, "targets": ()}
+    still = _frames(**kw)
+    shaken = _frames(**kw, shake_px=0.5)
+    again = _frames(**kw, shake_px=0.5)
+    src = SimSource(paced=False, **kw, shake_px=0.5)
+    for i, (a, b, c) in enumerate(zip(still, shaken, again, strict=True)):
+        assert np.array_equal(b.pixels, c.pixels)  # a function of the seed and the index
+        dx, dy = src.shake(i)
+        assert 0 < max(abs(dx), abs(dy)) <= 0.5
+        diff = np.abs(a.pixels.astype(int) - b.pixels.astype(int))
+        assert diff.max() > 0  # it moved
+        # by less than a pixel: each shaken count lies between its neighbours' unshaken ones (a
+        # bilinear blend of them), the pattern (column FPN here) staying with the sensor
+        scene = a.pixels.astype(float) - src._fpn_counts
+        lo = np.minimum.reduce([np.roll(scene, (sy, sx), (0, 1)) for sy in (-1, 0, 1) for sx in (-1, 0, 1)])
+        hi = np.maximum.reduce([np.roll(scene, (sy, sx), (0, 1)) for sy in (-1, 0, 1) for sx in (-1, 0, 1)])
+        got = b.pixels.astype(float) - src._fpn_counts
+        inner = (slice(2, -2), slice(2, -2))
+        assert np.all(got[inner] >= lo[inner] - 1.0) and np.all(got[inner] <= hi[inner] + 1.0)
+
+
+def test_gain_steps_scale_the_frame_about_its_mean_level_at_each_period():
+    kw = {"frames": 130, "seed": 4, "width": 64, "height": 48, "fps": 60.0, "bad_pixels": 0}
+    plain = _frames(**kw)
+    stepped = _frames(**kw, gain_every_s=1.0, gain_step=0.1)
+    src = SimSource(paced=False, **kw, gain_every_s=1.0, gain_step=0.1)
+    assert [src.gain(i) for i in (0, 59)] == [1.0, 1.0]
+    assert src.gain(60) == src.gain(119) != 1.0 and src.gain(120) != src.gain(60)
+    assert all(abs(src.gain(i) - 1) <= 0.1 for i in range(130))
+    assert np.array_equal(plain[10].pixels, stepped[10].pixels)  # before the first step
+    pivot = float(src._background_counts.mean())
+    for i in (60, 125):
+        a, b = plain[i].pixels.astype(float), stepped[i].pixels.astype(float)
+        assert np.allclose(b - pivot, (a - pivot) * src.gain(i), atol=1.1)  # rounding only (before and after the gain)
+
+
+def test_shake_and_gain_refuse_absurd_values():
+    import pytest
+
+    with pytest.raises(ValueError, match="shake_px"):
+        SimSource(frames=1, shake_px=20.0)
+    with pytest.raises(ValueError, match="gain"):
+        SimSource(frames=1, gain_every_s=0.0)
