@@ -68,7 +68,7 @@ class ProcessRunner:
 
     def __init__(self, detector: HotSpotDetector, slots: int, frame_bytes: int,
                  name: str = "thermcap-analysis") -> None:
-        slots = max(1, slots)
+        slots = self.slots = max(1, slots)
         try:
             payload = pickle.dumps(detector)
         except Exception as exc:

@@ -32,6 +32,7 @@ __all__ = ["DetectorRunner", "ThreadRunner", "Unanalysable", "analyse_one", "sta
 
 class DetectorRunner(Protocol):
     kind: str  # "process" or "thread": said in the session's timing block
+    slots: int  # frames it may hold at once
 
     def submit(self, pixels: np.ndarray, fut: Future, *, wait: bool) -> bool:
         """Hand one frame over. ``wait`` (a source that can wait) blocks for room; otherwise a
@@ -56,7 +57,8 @@ class ThreadRunner:
 
     def __init__(self, detector: HotSpotDetector, slots: int, name: str = "thermcap-analysis") -> None:
         self._detector = detector
-        self._queue: queue.Queue = queue.Queue(maxsize=max(1, slots))
+        self.slots = max(1, slots)
+        self._queue: queue.Queue = queue.Queue(maxsize=self.slots)
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._tid: int | None = None
         self._cpu = 0.0
