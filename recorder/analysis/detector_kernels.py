@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["available", "cell_mean_max", "region_facts", "warm"]
+__all__ = ["available", "cell_mean_max", "region_facts", "warm", "window_components"]
 
 try:
     from numba import njit
@@ -149,6 +149,88 @@ if njit is not None:
         return n, y0[:n], y1[:n], x0[:n], x1[:n], top_excess[:n], top_cmax[:n]
 
 
+    @njit(nogil=True, cache=True)
+    def _window_components(src, opened, boxes, f, h, w, scale, offset, thr, min_area):
+        """Each window (a region's box in cells, clipped to the frame): its candidate pixels
+        (``float32(src) * scale + offset - opened >= thr``, float32 throughout, as the detector's
+        numpy path computes them), their 4-connected components numbered as ``ndimage.label``
+        numbers them, and the components of at least ``min_area`` pixels with their boxes."""
+        nw = boxes.shape[0]
+        starts = np.zeros(nw + 1, np.intp)  # each window's labels, flat, one after another
+        for i in range(nw):
+            cy0, cy1, cx0, cx1 = boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3]
+            starts[i + 1] = starts[i] + (min(h, cy1 * f) - cy0 * f) * (min(w, cx1 * f) - cx0 * f)
+        labels = np.zeros(starts[nw], np.int32)
+        cap = starts[nw] // 2 + nw + 1  # one new label at most per pixel pair of a row, plus one
+        parent = np.zeros(cap, np.int32)
+        final = np.zeros(cap, np.int32)
+        out_win = np.empty(cap, np.intp)
+        out_lab = np.empty(cap, np.int32)
+        out_box = np.empty((cap, 4), np.intp)  # window-relative y0, y1, x0, x1
+        out_area = np.empty(cap, np.intp)
+        kept = 0
+        for i in range(nw):
+            cy0, cy1, cx0, cx1 = boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3]
+            y0, x0 = cy0 * f, cx0 * f
+            wh, ww = min(h, cy1 * f) - y0, min(w, cx1 * f) - x0
+            base = starts[i]
+            n_prov = 0
+            for y in range(wh):
+                for x in range(ww):
+                    v = np.float32(src[y0 + y, x0 + x]) * scale + offset
+                    if not (v - opened[cy0 + y // f, cx0 + x // f] >= thr):
+                        continue
+                    up = labels[base + (y - 1) * ww + x] if y > 0 else 0
+                    left = labels[base + y * ww + x - 1] if x > 0 else 0
+                    if up == 0 and left == 0:
+                        n_prov += 1
+                        parent[n_prov] = n_prov
+                        lab = n_prov
+                    elif up == 0 or left == 0:
+                        lab = _find(parent, up + left)
+                    else:
+                        a, b = _find(parent, up), _find(parent, left)
+                        lab = min(a, b)
+                        parent[max(a, b)] = lab
+                    labels[base + y * ww + x] = lab
+            # second pass: final labels in raster order of each component's first pixel
+            for k in range(n_prov + 1):
+                final[k] = 0
+            n = 0
+            first = kept
+            for y in range(wh):
+                for x in range(ww):
+                    p = labels[base + y * ww + x]
+                    if p == 0:
+                        continue
+                    root = _find(parent, p)
+                    k = final[root]
+                    if k == 0:
+                        n += 1
+                        k = n
+                        final[root] = k
+                        j = first + k - 1
+                        out_win[j], out_lab[j], out_area[j] = i, k, 0
+                        out_box[j, 0], out_box[j, 1], out_box[j, 2], out_box[j, 3] = y, y + 1, x, x + 1
+                    j = first + k - 1
+                    labels[base + y * ww + x] = k
+                    out_area[j] += 1
+                    out_box[j, 1] = y + 1
+                    if x < out_box[j, 2]:
+                        out_box[j, 2] = x
+                    if x + 1 > out_box[j, 3]:
+                        out_box[j, 3] = x + 1
+            # keep those of at least min_area, in label order
+            for k in range(n):
+                j = first + k
+                if out_area[j] >= min_area:
+                    out_win[kept], out_lab[kept], out_area[kept] = out_win[j], out_lab[j], out_area[j]
+                    for c in range(4):
+                        out_box[kept, c] = out_box[j, c]
+                    kept += 1
+        return labels, starts, out_win[:kept], out_lab[:kept], out_box[:kept], out_area[:kept]
+
+
 def cell_mean_max(padded: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
     """Each f x f cell's mean (float32) and maximum of uint16 counts padded to whole cells."""
     assert njit is not None and padded.dtype == np.uint16
@@ -165,10 +247,36 @@ def region_facts(cells: np.ndarray, excess: np.ndarray, cmax: np.ndarray) -> tup
     return int(n), facts
 
 
+def window_components(src: np.ndarray, opened: np.ndarray, boxes: np.ndarray, f: int, scale: np.float32,
+                      offset: np.float32, thr: float, min_area: int) -> list[tuple[int, int, int, tuple[slice, slice],
+                                                                                    np.ndarray]]:
+    """``detector._components`` of the candidate windows of ``boxes`` (cells: y0, y1, x0, x1),
+    with each window's candidate mask made on the way: (window y0, x0, area, slice within the
+    window, own mask) in window order, then label order. ``src`` is the frame (uint16 counts
+    with the model's ``scale``/``offset``, or float32 temperatures with 1 and 0), ``opened`` the
+    background grid in temperatures."""
+    assert njit is not None
+    h, w = src.shape
+    labels, starts, win, lab, box, area = _window_components(
+        src, opened, np.ascontiguousarray(boxes, dtype=np.intp), f, h, w, np.float32(scale), np.float32(offset),
+        np.float32(thr), min_area)
+    out = []
+    for i, k, (y0, y1, x0, x1), a in zip(win.tolist(), lab.tolist(), box.tolist(), area.tolist(), strict=True):
+        cy0, _, cx0, cx1 = (int(v) for v in boxes[i])
+        ww = min(w, cx1 * f) - cx0 * f
+        window = labels[starts[i]:starts[i + 1]].reshape(-1, ww)
+        sl = (slice(y0, y1), slice(x0, x1))
+        out.append((cy0 * f, cx0 * f, a, sl, window[sl] == k))
+    return out
+
+
 def _try_kernels() -> bool:
     try:
         cell_mean_max(np.zeros((4, 4), np.uint16), 4)
         region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
+        for src in (np.zeros((8, 8), np.uint16), np.zeros((8, 8), np.float32)):
+            window_components(src, np.zeros((2, 2), np.float32), np.array([[0, 2, 0, 2]]), 4, np.float32(1.0),
+                              np.float32(0.0), 5.0, 4)
     except Exception:
         return False
     return True

@@ -159,3 +159,64 @@ def test_kernels_that_cannot_run_leave_the_numpy_path(monkeypatch):
     src = SimSource(width=160, height=128, frames=4, seed=4)
     frames = [f.pixels.copy() for f in src.frames()]
     assert any(dets for dets, _ in _run(HotSpotDetector(src.model), frames))
+
+
+def _both_window_paths(det: HotSpotDetector, src, opened, boxes, affine):
+    """The detector's window stage through the compiled pass and through numpy and scipy."""
+    from unittest import mock
+
+    from thermcap.recorder.analysis.detector import _affine32
+
+    f = det._F
+    h, w = src.shape
+    ph, pw = -(-h // f) * f, -(-w // f) * f
+    padded = np.pad(src, ((0, ph - h), (0, pw - w)), mode="edge")
+    celsius = (lambda a: _affine32(a, *affine)) if affine is not None else (lambda a: a)
+    compiled = det._window_components(src, padded, opened, boxes, affine, celsius)
+    with mock.patch.object(detector_kernels, "available", lambda: False):
+        plain = det._window_components(src, padded, opened, boxes, affine, celsius)
+    return compiled, plain
+
+
+@needs_numba
+@settings(max_examples=80, deadline=None)
+@given(st.integers(4, 70), st.integers(4, 70), st.lists(st.tuples(st.integers(0, 20), st.integers(1, 8),
+                                                                    st.integers(0, 20), st.integers(1, 8)),
+                                                          min_size=1, max_size=10),
+       st.sampled_from([5.0, 4.1, 0.3]), st.integers(1, 6), st.booleans(), st.integers(0, 2**32 - 1))
+def test_compiled_windows_are_the_numpy_masks_and_scipys_components(h, w, spans, thr, min_area, counts, seed):
+    rng = np.random.default_rng(seed)
+    ch, cw = -(-h // 4), -(-w // 4)
+    boxes = []
+    for y0, dy, x0, dx in spans:  # boxes in cells, inside the grid (the last row and column may be padding)
+        y0, x0 = min(y0, ch - 1), min(x0, cw - 1)
+        boxes.append((y0, min(ch, y0 + dy), x0, min(cw, x0 + dx)))
+    det = HotSpotDetector(LinearModel(), threshold_k=thr, min_area=min_area)
+    if counts:  # uint16 counts through the model's float32 map, against a background in °C
+        src = (2000 + rng.normal(0, 45, (h, w))).astype(np.uint16)
+        affine = (np.float32(0.036), np.float32(-40.0))
+        opened = (32.0 + rng.normal(0, 1, (ch, cw))).astype(np.float32)
+    else:  # temperatures already (a curve, a bad-pixel map)
+        src = (30.0 + rng.normal(0, 2, (h, w))).astype(np.float32)
+        affine = None
+        opened = (30.0 + rng.normal(0, 1, (ch, cw))).astype(np.float32)
+    compiled, plain = _both_window_paths(det, src, opened, boxes, affine)
+    assert len(compiled) == len(plain)
+    for g, e in zip(compiled, plain, strict=True):
+        assert g[:4] == e[:4]
+        assert np.array_equal(g[4], e[4])
+
+
+@needs_numba
+@pytest.mark.parametrize("h, w", [(4, 4), (5, 9), (33, 17), (64, 64)])
+def test_compiled_windows_take_the_most_components_a_box_can_hold(h, w):
+    """A checkerboard: every candidate pixel a component of its own (4-connected), the most labels
+    a window can need; with min_area 1 every one is kept."""
+    src = np.zeros((h, w), np.float32)
+    src[(np.arange(h)[:, None] + np.arange(w)[None, :]) % 2 == 0] = 10.0
+    ch, cw = -(-h // 4), -(-w // 4)
+    det = HotSpotDetector(LinearModel(), threshold_k=5.0, min_area=1)
+    boxes = [(0, ch, 0, cw), (0, 1, 0, 1)]
+    compiled, plain = _both_window_paths(det, src, np.zeros((ch, cw), np.float32), boxes, None)
+    assert len(compiled) == len(plain) == (h * w + 1) // 2 + 8
+    assert all(g[:4] == e[:4] and np.array_equal(g[4], e[4]) for g, e in zip(compiled, plain, strict=True))
