@@ -78,6 +78,18 @@ if njit is not None:
             parent[i], i = root, parent[i]
         return root
 
+    @njit(nogil=True, cache=True, inline="always")
+    def _number(parent, final, p, n):
+        """The final label of provisional label ``p``: its root's, or the next one (``n + 1``)
+        when the root has none yet, which numbers the components in the raster order of their
+        first pixel, as ``ndimage.label`` does. Returns (label, labels so far, whether new)."""
+        root = _find(parent, p)
+        k = final[root]
+        if k != 0:
+            return k, n, False
+        final[root] = n + 1
+        return n + 1, n + 1, True
+
     @njit(nogil=True, cache=True)
     def _region_facts(cells, excess, cmax):
         h, w = cells.shape
@@ -127,12 +139,8 @@ if njit is not None:
                 p = prov[y, x]
                 if p == 0:
                     continue
-                root = _find(parent, p)
-                k = final[root]
-                if k == 0:
-                    n += 1
-                    k = n
-                    final[root] = k
+                k, n, new = _number(parent, final, p, n)
+                if new:
                     y0[k - 1], y1[k - 1], x0[k - 1], x1[k - 1] = y, y + 1, x, x + 1
                     top_excess[k - 1], top_cmax[k - 1] = excess[y, x], cmax[y, x]
                     continue
@@ -203,12 +211,8 @@ if njit is not None:
                     p = labels[base + y * ww + x]
                     if p == 0:
                         continue
-                    root = _find(parent, p)
-                    k = final[root]
-                    if k == 0:
-                        n += 1
-                        k = n
-                        final[root] = k
+                    k, n, new = _number(parent, final, p, n)
+                    if new:
                         j = first + k - 1
                         out_win[j], out_lab[j], out_area[j] = i, k, 0
                         out_box[j, 0], out_box[j, 1], out_box[j, 2], out_box[j, 3] = y, y + 1, x, x + 1
