@@ -92,7 +92,7 @@ Bitstream, version 4 (magic ``b"TPF4"``): version 3 with three changes.
 - Both residual streams are ``archive.rans`` streams (specified there) instead of pcodec
   chunks; the payload type is the residuals' range as before.
 
-Bitstream, version 5 (magic ``b"TPF5"``; what thermcap writes): version 4 and one more record
+Bitstream, version 5 (magic ``b"TPF5"``): version 4 and one more record
 kind, 2 (intra), for the mode decision every video codec makes. An intra record has version 4's
 predicted header (``window``, ``dx``, ``dy`` as a predicted record would have them; payload type
 2) and its payload is the frame coded alone, as a version 4 key frame codes it (``archive.
@@ -105,6 +105,24 @@ the frame coded alone is smaller than its predicted record (it tries once the pr
 reaches ``INTRA_TRY`` of the last frame it coded alone, a key or a trial): a shutter (NUC)
 frame, a gain step, a cut, or temporal noise above the scene's detail, where real uncooled
 cameras made every predicted frame 15-43 % larger than the key frame.
+
+Bitstream, version 6 (magic ``b"TPF6"``; what thermcap writes): version 5, and a predicted
+record's payload starts with three ``int8``: ``sx`` and ``sy``, how far the picture moved since
+the window's frames in sixteenths of a pixel (less than a pixel, ``|s| < 16``: a camera that
+shakes; whole pixels are the header's ``dx``, ``dy``), and ``sl`` (``|sl| <= 16``), the weight
+of the scene mean's Laplacian in sixteenths (the window's mean of shaken frames is blurred, and
+carries 1/16 of the noise). The decoder computes version 4's ``p``, ``m64`` and ``other``; then
+at every pixel not in ``other`` and not on the frame's edge, with ``gx = (m64[r, c+1] -
+m64[r, c-1]) >> 1``, ``gy = (m64[r+1, c] - m64[r-1, c]) >> 1`` and ``lap = (4 m64[r, c] -
+m64[r, c-1] - m64[r, c+1] - m64[r-1, c] - m64[r+1, c]) >> 2`` (all from the uncorrected mean;
+0 on the edge), where all three are below ``SUBPEL_LIMIT`` (64 counts, in 1/64 counts) in
+magnitude: ``m64 += (sx * gx + sy * gy + sl * lap) >> 4`` (floor), and at every pixel not in
+``other``, ``p = (m64 + E + 32) >> 6``. The block modes, the residual streams and the learning
+(against this ``m64``) follow as in version 4. An intra record is version 5's, and learns
+against the uncorrected ``m64``. The encoder fits the three weights by least squares to the
+residual (pixels within ``SUBPEL_LIMIT`` and with residuals within 8 counts), and writes 0, 0, 0
+where the fit does not lower the residual: a sub-pixel shake of 0.5 px had made every predicted
+frame miss by a share of each edge's slope, and half of them coded alone.
 
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference, each difference clipped at 16 counts, on every 8th line;
@@ -135,8 +153,8 @@ import numpy as np
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_gops",
            "decode_records", "encode_gops", "parse_header"]
 
-BITSTREAM_VERSION = 5  # what the encoder writes by default; every earlier version decodes
-MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4", 5: b"TPF5"}
+BITSTREAM_VERSION = 6  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4", 5: b"TPF5", 6: b"TPF6"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
 T = TypeVar("T")
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
@@ -389,6 +407,11 @@ class _SceneWindow4(_SceneWindow3):
 SCALE_BITS = 6
 _HALF = 1 << (SCALE_BITS - 1)
 BLOCK = 16
+#: Version 6: gradients of the scene mean at or beyond this (64 counts a pixel, in 1/64 counts)
+#: are an edge no sub-pixel shift follows linearly (or a defect's neighbour): left as they are.
+SUBPEL_LIMIT = 64 << SCALE_BITS
+_SUBPEL_CLIP = 8 << SCALE_BITS  # residuals the encoder's fit leaves out: something moving on its own
+_SUBPEL = struct.Struct("<bbb")  # sx, sy, sl
 VECTORS = tuple((vx, vy) for vy in range(-2, 3) for vx in range(-2, 3))  # block mode k >= 1 uses VECTORS[k - 1]
 _VECTOR_ARRAY = np.asarray(VECTORS, np.int64)
 _U32 = struct.Struct("<I")
@@ -656,6 +679,32 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     return modes.reshape(hb, wb)
 
 
+def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
+            other: np.ndarray) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray]:
+    """Version 6's encoder side: ``((sx, sy, sl), prediction, scene mean)``, the shift and the
+    Laplacian's weight in sixteenths fitted by least squares to the residual against the scene
+    mean's gradients and Laplacian, and the prediction and mean corrected by them; zeros and
+    the inputs where the fit is degenerate or does not lower the residual's absolute sum (on
+    every other row and column)."""
+    from thermcap.archive import tpred_kernels
+
+    sums = tpred_kernels.subpel_sums(f, m64, est, other, SUBPEL_LIMIT, _SUBPEL_CLIP)
+    a, rhs = sums[:, :3], sums[:, 3]
+    scale = float(np.prod(a.diagonal()))
+    if scale <= 0 or abs(float(np.linalg.det(a))) <= 1e-9 * scale:  # a flat frame, or too few pixels
+        return (0, 0, 0), pred, m64
+    fit = np.linalg.solve(a, rhs) * 16
+    sx, sy = (max(-15, min(15, round(v))) for v in fit[:2])  # less than a pixel: a whole one is dx, dy
+    sl = max(-16, min(16, round(fit[2])))
+    if sx == 0 and sy == 0 and sl == 0:
+        return (0, 0, 0), pred, m64
+    moved, m64c = np.empty_like(pred), np.empty_like(m64)
+    before, after = tpred_kernels.subpel_apply(f, m64, est, other, pred, sx, sy, sl, SUBPEL_LIMIT, True, moved, m64c)
+    if after >= before:
+        return (0, 0, 0), pred, m64
+    return (sx, sy, sl), moved, m64c
+
+
 def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
     ptype, dtype = _payload_type(resid)
     r: np.ndarray = resid.astype(dtype)
@@ -753,6 +802,7 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray
 
 
 def _window_for(version: int) -> _Window | _SceneWindow | _State3:
+    """The state a sequence of ``version`` carries (versions 4 to 6 share version 4's)."""
     return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3() if version == 3 else _State4()
 
 
@@ -837,11 +887,18 @@ class TemporalEncoder:
             pred, m64, other = st.predict(dx, dy)
             assert st.prev is not None
             scene_other = other.copy() if other is not None else None  # what an intra record carries on
+            scene_m64 = m64  # what an intra record learns against
+            shift = b""
+            if self.bitstream >= 6:
+                assert st.pattern is not None and other is not None
+                terms, pred, m64 = _subpel(f, pred, m64, st.pattern.est, other)
+                shift = _SUBPEL.pack(*terms)
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
                 other = st.with_modes(modes, pred, other)
             if isinstance(st, _State4):
                 ptype, payload = _pack_streams4(modes, f, pred, other)
+                payload = shift + payload
             else:
                 ptype, payload = _pack_streams(modes, f - pred, other)
             if self.bitstream >= 5 and HEADER.size + len(payload) >= INTRA_TRY * self._alone:
@@ -850,7 +907,7 @@ class TemporalEncoder:
                 alone = tpred_key.encode_key(f)
                 self._alone = HEADER.size + len(alone)
                 if len(alone) < len(payload):  # the mode decision: coded alone, it is smaller
-                    kind, ptype, payload, other = INTRA, _INT32, alone, scene_other
+                    kind, ptype, payload, other, m64 = INTRA, _INT32, alone, scene_other, scene_m64
                     self.intra_decided += 1
             st.push(f, m64, other)
         else:
@@ -913,6 +970,28 @@ class TemporalDecoder:
         self._state: _Window | _SceneWindow | _State3 = _Window()
         self._version = 0  # of the sequence's key frame; 0 before any
         self._shape: tuple[int, int] | None = None
+        self._terms = (0, 0, 0)  # version 6: the record's sub-pixel shift and Laplacian weight
+
+    def _moved(self, payload: memoryview) -> memoryview:
+        """Version 6: the record's sub-pixel shift, read; the rest of the payload."""
+        if len(payload) < _SUBPEL.size:
+            raise TpredError("a version 6 record ends before its sub-pixel shift")
+        sx, sy, sl = self._terms = _SUBPEL.unpack_from(payload, 0)
+        if not (abs(sx) < 16 and abs(sy) < 16 and abs(sl) <= 16):
+            raise TpredError(f"a sub-pixel shift of ({sx}, {sy}) sixteenths (a pixel or more), or a Laplacian "
+                             f"weight of {sl} sixteenths (beyond 16)")
+        return payload[_SUBPEL.size:]
+
+    def _apply_shift(self, pred: np.ndarray, m64: np.ndarray,
+                     other: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        from thermcap.archive import tpred_kernels
+
+        st = self._state
+        assert isinstance(st, _State4) and st.pattern is not None and other is not None
+        m64c = np.empty_like(m64)
+        tpred_kernels.subpel_apply(pred, m64, st.pattern.est, other, pred, *self._terms, SUBPEL_LIMIT, False,
+                                   pred, m64c)  # the decoder has no frame to measure against: pred stands in
+        return pred, m64c
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
         from thermcap.archive import tpred_key
@@ -952,8 +1031,12 @@ class TemporalDecoder:
                 except tpred_key.KeyFrameError as exc:
                     raise TpredError(str(exc)) from None
             elif isinstance(st, _State3):
+                if hdr.version >= 6:
+                    payload = self._moved(payload)
                 modes, pos = _unpack_modes(payload, shape)
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
+                if hdr.version >= 6 and any(self._terms):
+                    pred, m64 = self._apply_shift(pred, m64, other)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
                 if isinstance(st, _State4):

@@ -10,11 +10,13 @@ float64 divisions whose results are exact on every machine.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numba
 import numpy as np
 
 __all__ = ["apply_modes", "block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs",
-           "split_residuals", "trim"]
+           "split_residuals", "subpel_apply", "subpel_sums", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -51,6 +53,86 @@ def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, es
         c = defects[i] % w
         p[r, c] = prev[r, c]
         other[r, c] = True
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _terms(m64: np.ndarray, r: int, c: int) -> tuple[Any, Any, Any, Any]:  # pragma: no cover
+    """Version 6's terms of the scene mean at a pixel inside the frame's edge: the mean, its
+    central differences halved and its four-neighbour Laplacian quartered (floor each)."""
+    mm = np.int64(m64[r, c])
+    left, right = np.int64(m64[r, c - 1]), np.int64(m64[r, c + 1])
+    up, down = np.int64(m64[r - 1, c]), np.int64(m64[r + 1, c])
+    return mm, (right - left) >> 1, (down - up) >> 1, (4 * mm - left - right - up - down) >> 2
+
+
+@numba.njit(cache=True, nogil=True)
+def subpel_sums(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, limit: int,
+                clip: int) -> np.ndarray:  # pragma: no cover
+    """The encoder's least-squares sums for version 6's correction, on every other row and
+    column (a quarter of the pixels fit three numbers as well as all of them): over the scene's
+    pixels whose three terms stay within ``limit`` and whose residual ``64 f - m64 - est`` within
+    ``clip``, the normal equations' matrix (3x3) and right-hand side (the fourth column). In
+    int64, exact (each product is below 2**26, a frame's sum below 2**48), and branch-free."""
+    h, w = f.shape
+    xx = xy = xl = yy = yl = ll = xr = yr = lr = np.int64(0)
+    for r in range(1, h - 1, 2):
+        for c in range(1, w - 1, 2):
+            mm, gx, gy, lap = _terms(m64, r, c)
+            res = (np.int64(f[r, c]) << _SCALE) - mm - est[r, c]
+            keep = np.int64(not other[r, c] and abs(gx) < limit and abs(gy) < limit and abs(lap) < limit
+                            and abs(res) < clip)
+            gx *= keep
+            gy *= keep
+            lap *= keep
+            xx += gx * gx
+            xy += gx * gy
+            xl += gx * lap
+            yy += gy * gy
+            yl += gy * lap
+            ll += lap * lap
+            xr += gx * res
+            yr += gy * res
+            lr += lap * res
+    out = np.empty((3, 4))
+    out[0, 0], out[0, 1], out[0, 2], out[0, 3] = xx, xy, xl, xr
+    out[1, 0], out[1, 1], out[1, 2], out[1, 3] = xy, yy, yl, yr
+    out[2, 0], out[2, 1], out[2, 2], out[2, 3] = xl, yl, ll, lr
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def subpel_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, pred: np.ndarray, sx: int,
+                 sy: int, sl: int, limit: int, measure: bool, p: np.ndarray,
+                 m64c: np.ndarray) -> tuple[int, int]:  # pragma: no cover
+    """Version 6's corrected scene mean and prediction: at the scene's pixels whose three terms
+    stay within ``limit``, ``m64c = m64 + ((sx gx + sy gy + sl lap) >> 4)`` (``m64`` elsewhere)
+    and ``p = (m64c + est + 32) >> 6``; the other pixels keep ``pred`` (``p`` may be ``pred``).
+    ``measure`` (the encoder): also the sums of ``|f - pred|`` and ``|f - p|`` over the scene's
+    pixels on every other row and column, to keep the correction only where it pays. The
+    frame's edge (no terms) is copied first and the inside is one branch-free pass, which
+    vectorises."""
+    h, w = m64.shape
+    for r in range(h):
+        step = 1 if r == 0 or r == h - 1 else max(1, w - 1)  # the first and last rows whole, else both ends
+        for c in range(0, w, step):
+            m64c[r, c] = m64[r, c]
+            p[r, c] = pred[r, c] if other[r, c] else (np.int64(m64[r, c]) + est[r, c] + _HALF) >> _SCALE
+    for r in range(1, h - 1):
+        for c in range(1, w - 1):
+            mm, gx, gy, lap = _terms(m64, r, c)
+            ok = abs(gx) < limit and abs(gy) < limit and abs(lap) < limit
+            m = mm + (((sx * gx + sy * gy + sl * lap) >> 4) if ok else 0)
+            m64c[r, c] = m
+            p[r, c] = pred[r, c] if other[r, c] else (m + est[r, c] + _HALF) >> _SCALE
+    before = 0
+    after = 0
+    if measure:
+        for r in range(0, h, 2):
+            for c in range(0, w, 2):
+                if not other[r, c]:
+                    before += abs(np.int64(f[r, c]) - pred[r, c])
+                    after += abs(np.int64(f[r, c]) - p[r, c])
+    return before, after
 
 
 @numba.njit(cache=True, nogil=True)

@@ -384,7 +384,7 @@ class HotSpotDetector:
                           "limit": region_limit, "area_budget": self.max_examined_share,
                           "why": "only the most prominent candidate regions were examined"}
                 examine = sorted(chosen)
-            boxes: list[tuple[int, int, int, int]] = []  # in cells, per region kept
+            kept: list[tuple[int, int, int, int]] = []  # boxes in cells, per region kept
             for k in examine:
                 cy0, cy1, cx0, cx1 = stats.box(k)
                 # Regions whose warmest cell does not stand out from the local mean are texture:
@@ -393,9 +393,9 @@ class HotSpotDetector:
                 cx = min((cx0 + cx1) // 2, local_mean.shape[1] - 1)
                 if stats.top_cmax[k - 1] - local_mean[cy, cx] < 0.8 * self.threshold_k:
                     continue
-                boxes.append((cy0, cy1, cx0, cx1))
+                kept.append((cy0, cy1, cx0, cx1))
             found = []
-            for y0, x0, area, sl, own in self._window_components(src, padded_src, opened, boxes, affine, celsius):
+            for y0, x0, area, sl, own in self._window_components(src, padded_src, opened, kept, affine, celsius):
                 found.append((area, sl[0].start + y0, sl[0].stop + y0, sl[1].start + x0, sl[1].stop + x0, own))
             found.sort(key=lambda c: -c[0])
             if len(found) > 4 * self.max_targets:  # the largest first; the rest not examined
