@@ -412,6 +412,9 @@ BLOCK = 16
 SUBPEL_LIMIT = 64 << SCALE_BITS
 _SUBPEL_CLIP = 8 << SCALE_BITS  # residuals the encoder's fit leaves out: something moving on its own
 _SUBPEL = struct.Struct("<bbb")  # sx, sy, sl
+#: The encoder averages ``SHAKE_WINDOW`` frames, not ``window``, while its last ``SHAKE_FRAMES``
+#: fits moved the picture by more than ``SHAKE_RMS`` sixteenths of a pixel (``TemporalEncoder._keep``).
+SHAKE_WINDOW, SHAKE_FRAMES, SHAKE_RMS = 4, 8, 5
 VECTORS = tuple((vx, vy) for vy in range(-2, 3) for vx in range(-2, 3))  # block mode k >= 1 uses VECTORS[k - 1]
 _VECTOR_ARRAY = np.asarray(VECTORS, np.int64)
 _U32 = struct.Struct("<I")
@@ -864,6 +867,7 @@ class TemporalEncoder:
         self._stuck = _StuckPixels() if bitstream >= 4 and defects is None else None
         self._alone = 0  # bytes of the last frame coded alone (a key, or a trial): what it costs here
         self.intra_decided = 0  # frames written as intra records, being smaller coded alone
+        self._shake: deque[int] = deque(maxlen=SHAKE_FRAMES)  # version 6: the last fits' |(sx, sy)|**2
 
     def encode(self, frame: np.ndarray) -> bytes:
         """The frame's record. In version 5 a frame is never written larger than coded alone:
@@ -892,6 +896,7 @@ class TemporalEncoder:
             if self.bitstream >= 6:
                 assert st.pattern is not None and other is not None
                 terms, pred, m64 = _subpel(f, pred, m64, st.pattern.est, other)
+                self._shake.append(terms[0] ** 2 + terms[1] ** 2)
                 shift = _SUBPEL.pack(*terms)
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
@@ -914,10 +919,21 @@ class TemporalEncoder:
             pred, used = st.predict(dx, dy)
             ptype, payload = _pack(f - pred)
             st.push(f)
-        st.trim(self.window)
+        st.trim(self._keep())
         self._prev = f
         self._since_key += 1
         return HEADER.pack(self._magic, kind, used, w, h, dx, dy, ptype, 0, len(payload)) + payload
+
+    def _keep(self) -> int:
+        """How many frames the next prediction averages: ``window``, or ``SHAKE_WINDOW`` while the
+        last ``SHAKE_FRAMES`` fits moved the picture by more than ``SHAKE_RMS`` sixteenths of a
+        pixel (root mean square): a shaking camera's older frames sit elsewhere, and the mean of
+        16 of them blurs what 4 keep sharp. The record says how many it averaged, so a decoder
+        follows whatever the encoder keeps."""
+        shake = self._shake
+        if len(shake) == shake.maxlen and sum(shake) > SHAKE_RMS ** 2 * len(shake):
+            return min(self.window, SHAKE_WINDOW)
+        return self.window
 
     def _intra(self, f: np.ndarray) -> tuple[int, bytes, np.ndarray | None]:
         """(payload type, payload, defects) of ``f`` coded alone, changing no state."""
@@ -934,6 +950,7 @@ class TemporalEncoder:
         """Start the sequence again at ``f``, as a decoder does at a key record."""
         h, w = f.shape
         self._since_key = 0
+        self._shake.clear()  # each GOP on its own, as encode_gops encodes them
         self._state.reset()
         if isinstance(self._state, _State4):
             self._state.key(f, defects)

@@ -431,7 +431,7 @@ def test_version_6_follows_a_sub_pixel_shake():
     by a share of each edge's slope (half of them were coded alone at 0.5 px). Version 6 moves
     the prediction along the scene mean's gradients by a fitted shift: the shaking sequence is
     much smaller than in version 5, and decodes bit-exact, sequentially and a GOP a thread."""
-    from thermcap.archive.temporal import _SUBPEL, PREDICTED
+    from thermcap.archive.temporal import _SUBPEL, PREDICTED, SHAKE_WINDOW, encode_gops
 
     seq = _frames("fixed", 40, shake_px=0.5)
     enc6, enc5 = TemporalEncoder(key_interval=32), TemporalEncoder(key_interval=32, bitstream=5)
@@ -442,6 +442,14 @@ def test_version_6_follows_a_sub_pixel_shake():
     assert all(np.array_equal(a, b) for a, b in zip(seq, decode_records(v6), strict=True))
     par = [f for _, f in decode_gops(v6, lambda r: r)]
     assert all(np.array_equal(a, b) for a, b in zip(seq, par, strict=True))
+    # while it shakes, the encoder averages fewer frames (older ones sit elsewhere), and each GOP
+    # decides on its own: a GOP a thread writes the sequential records byte for byte
+    windows = [parse_header(r).window for r in v6]
+    assert set(windows[12:32]) == {SHAKE_WINDOW} and max(windows) < 16  # frames 12-31: the first GOP, settled
+    assert [r for _, r in encode_gops(range(len(seq)), lambda i: seq[i], key_interval=32)] == v6
+    steady = TemporalEncoder(key_interval=32)
+    still = [parse_header(steady.encode(f)).window for f in _frames("fixed", 24)]
+    assert still[20:] == [16] * 4  # a steady camera keeps the whole window
 
 
 def test_version_6_costs_a_still_view_at_most_its_three_bytes_a_record():
