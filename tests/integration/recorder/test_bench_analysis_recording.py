@@ -1,0 +1,21 @@
+"""``thermcap bench analysis``'s recording line in its short form: every worst-case scene at both
+sizes recorded with analysis on and off, alternated, each round's ratio beside the medians' ratio,
+every frame analysed (a file source waits for the detector)."""
+
+from __future__ import annotations
+
+import statistics
+
+from thermcap.recorder.bench.analysis_recording import SCENES, SIZES, print_lines, record_vs_no_analysis
+
+
+def test_each_scene_is_recorded_with_and_without_analysis_and_each_round_compared(tmp_path):
+    res = record_vs_no_analysis(frames_640=6, rounds=2, workdir=str(tmp_path))
+    assert set(res) == {f"{name}_{w}x{h}" for name in SCENES for w, h in SIZES}
+    for row in res.values():
+        assert row["fps_with_analysis"] > 0 and row["fps_without"] > 0 and row["goal"] == 0.5
+        assert abs(row["ratio"] - row["fps_with_analysis"] / row["fps_without"]) < 0.01
+        assert len(row["ratio_rounds"]) == 2  # rounded to 3 places, as the median is
+        assert abs(row["ratio_rounds_median"] - statistics.median(row["ratio_rounds"])) <= 0.0015
+        assert row["frames_skipped"] == 0 and row["runner"] in ("process", "thread")
+    assert len(print_lines(res)) == len(res) + 1
