@@ -155,21 +155,20 @@ def test_the_recording_says_where_the_detector_ran_and_no_child_outlives_it(tmp_
     assert proc.poll() is not None
 
 
-@pytest.mark.parametrize(("paced", "size", "queue", "slots"), [
-    (False, (160, 128), 8, 32),   # a source that waits: a deep ring
-    (False, (160, 128), 40, 40),  # never fewer than asked for
-    (True, (160, 128), 8, 8),     # a live camera: what analysis_queue says
-    (False, (4096, 4096), 2, 2),  # 32 MB frames: the ring's bytes bound it, never below one slot a frame asked
+@pytest.mark.parametrize(("paced", "frame_bytes", "queue", "slots"), [
+    (False, 160 * 128 * 2, 8, 32),    # a source that waits: a deep ring
+    (False, 160 * 128 * 2, 40, 40),   # never fewer than asked for
+    (True, 160 * 128 * 2, 8, 8),      # a live camera: what analysis_queue says
+    (False, 4096 * 4096 * 2, 2, 2),   # 32 MB frames: the ring's bytes bound it, never below what was asked
 ])
-def test_a_source_that_waits_gets_a_deep_ring_of_slots_within_its_bytes(tmp_path, paced, size, queue, slots):
+def test_a_source_that_waits_gets_a_deep_ring_of_slots_within_its_bytes(tmp_path, paced, frame_bytes, queue, slots):
     from thermcap.recorder.capture.recorder import FILE_ANALYSIS_SLOT_BYTES
 
-    w, h = size
-    src = SimSource(width=w, height=h, frames=2, paced=paced, seed=1, fps=60.0)
+    src = SimSource(width=160, height=128, frames=2, paced=paced, seed=1, fps=60.0)
     rec = Recorder(src, tmp_path, recover_leftovers=False, analysis_queue=queue)
-    assert rec._analysis_slots(rec.feeds[0], w * h * 2) == slots
-    if w * h * 2 * slots > FILE_ANALYSIS_SLOT_BYTES:
+    assert rec._analysis_slots(rec.feeds[0], frame_bytes) == slots
+    if frame_bytes * slots > FILE_ANALYSIS_SLOT_BYTES:
         assert slots == queue
-    if w == 160:  # the recording says how many it had
+    if frame_bytes == 160 * 128 * 2:  # the recording says how many it had
         res = rec.run()
         assert res.error is None and res.analysis_runner["slots"] == [slots]
