@@ -987,28 +987,29 @@ class TemporalDecoder:
         self._state: _Window | _SceneWindow | _State3 = _Window()
         self._version = 0  # of the sequence's key frame; 0 before any
         self._shape: tuple[int, int] | None = None
-        self._terms = (0, 0, 0)  # version 6: the record's sub-pixel shift and Laplacian weight
 
-    def _moved(self, payload: memoryview) -> memoryview:
-        """Version 6: the record's sub-pixel shift, read; the rest of the payload."""
+    @staticmethod
+    def _read_terms(payload: memoryview) -> tuple[tuple[int, int, int], memoryview]:
+        """Version 6: the record's sub-pixel shift and Laplacian weight, and the rest of the payload."""
         if len(payload) < _SUBPEL.size:
             raise TpredError("a version 6 record ends before its sub-pixel shift")
-        sx, sy, sl = self._terms = _SUBPEL.unpack_from(payload, 0)
+        sx, sy, sl = _SUBPEL.unpack_from(payload, 0)
         if not (abs(sx) < 16 and abs(sy) < 16 and abs(sl) <= 16):
             raise TpredError(f"a sub-pixel shift of ({sx}, {sy}) sixteenths (a pixel or more), or a Laplacian "
                              f"weight of {sl} sixteenths (beyond 16)")
-        return payload[_SUBPEL.size:]
+        return (sx, sy, sl), payload[_SUBPEL.size:]
 
-    def _apply_shift(self, pred: np.ndarray, m64: np.ndarray,
-                     other: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    def _apply_terms(self, terms: tuple[int, int, int], pred: np.ndarray, m64: np.ndarray,
+                     other: np.ndarray | None) -> np.ndarray:
+        """Version 6: ``pred`` corrected in place; returns the corrected scene mean."""
         from thermcap.archive import tpred_kernels
 
         st = self._state
         assert isinstance(st, _State4) and st.pattern is not None and other is not None
         m64c = np.empty_like(m64)
-        tpred_kernels.subpel_apply(pred, m64, st.pattern.est, other, pred, *self._terms, SUBPEL_LIMIT, False,
+        tpred_kernels.subpel_apply(pred, m64, st.pattern.est, other, pred, *terms, SUBPEL_LIMIT, False,
                                    pred, m64c)  # the decoder has no frame to measure against: pred stands in
-        return pred, m64c
+        return m64c
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
         from thermcap.archive import tpred_key
@@ -1048,12 +1049,13 @@ class TemporalDecoder:
                 except tpred_key.KeyFrameError as exc:
                     raise TpredError(str(exc)) from None
             elif isinstance(st, _State3):
+                terms = (0, 0, 0)
                 if hdr.version >= 6:
-                    payload = self._moved(payload)
+                    terms, payload = self._read_terms(payload)
                 modes, pos = _unpack_modes(payload, shape)
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
-                if hdr.version >= 6 and any(self._terms):
-                    pred, m64 = self._apply_shift(pred, m64, other)
+                if any(terms):
+                    m64 = self._apply_terms(terms, pred, m64, other)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
                 if isinstance(st, _State4):

@@ -109,14 +109,14 @@ def subpel_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
     and ``p = (m64c + est + 32) >> 6``; the other pixels keep ``pred`` (``p`` may be ``pred``).
     ``measure`` (the encoder): also the sums of ``|f - pred|`` and ``|f - p|`` over the scene's
     pixels on every other row and column, to keep the correction only where it pays. The
-    frame's edge (no terms) is copied first and the inside is one branch-free pass, which
-    vectorises."""
+    frame's edge has no terms, so it keeps ``pred`` and ``m64`` as they are; the inside is one
+    branch-free pass, which vectorises."""
     h, w = m64.shape
     for r in range(h):
         step = 1 if r == 0 or r == h - 1 else max(1, w - 1)  # the first and last rows whole, else both ends
         for c in range(0, w, step):
             m64c[r, c] = m64[r, c]
-            p[r, c] = pred[r, c] if other[r, c] else (np.int64(m64[r, c]) + est[r, c] + _HALF) >> _SCALE
+            p[r, c] = pred[r, c]
     for r in range(1, h - 1):
         for c in range(1, w - 1):
             mm, gx, gy, lap = _terms(m64, r, c)

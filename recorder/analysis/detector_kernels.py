@@ -169,7 +169,7 @@ if njit is not None:
             cy0, cy1, cx0, cx1 = boxes[i, 0], boxes[i, 1], boxes[i, 2], boxes[i, 3]
             starts[i + 1] = starts[i] + (min(h, cy1 * f) - cy0 * f) * (min(w, cx1 * f) - cx0 * f)
         labels = np.zeros(starts[nw], np.int32)
-        cap = starts[nw] // 2 + nw + 1  # one new label at most per pixel pair of a row, plus one
+        cap = starts[nw] // 2 + nw + 1  # a window labels at most half its pixels, rounded up (a checkerboard)
         parent = np.zeros(cap, np.int32)
         final = np.zeros(cap, np.int32)
         out_win = np.empty(cap, np.intp)
