@@ -32,7 +32,9 @@ from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
-SAMPLES = Path(__file__).resolve().parents[2] / "shared" / "samples"
+#: The real camera files the benchmarks measure on: THERMCAP_SAMPLES, as the tests take it, or the
+#: shared/samples folder beside a checkout.
+SAMPLES = Path(os.environ.get("THERMCAP_SAMPLES") or Path(__file__).resolve().parents[2] / "shared" / "samples")
 
 
 def noise_entropy_bound(sigma_counts: float, bits: int = 16) -> float:

@@ -7,8 +7,10 @@ Matroska (what film and video archives trust; through PyAV when installed). Ever
 checked bit-exact on the same frames before its figure counts. ``tpred``'s rate on two cores is
 two sequences encoded at once on two threads (each camera, or each segment, is a sequence). The
 previous bitstream version is measured beside the current one, so the trade between ratio and
-speed shows in one run. The real frames in ``../shared/samples`` (single stills, no real sequence
-exists among them) are rows too, each tpred key frame against JPEG-XL e2.
+speed shows in one run. The real frames in ``../shared/samples`` are rows too: its stills (each
+tpred key frame against JPEG-XL e2), and every multi-frame file in it (FLIR SEQ, CSQ, FFF) or
+given with ``--file`` (anything ``thermcap import`` reads), whose goal is JPEG-XL e2's ratio:
+a user's own sequence is the figure that counts.
 """
 
 from __future__ import annotations
@@ -16,6 +18,8 @@ from __future__ import annotations
 import io
 import threading
 import time
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -60,6 +64,35 @@ def _real_frames() -> dict[str, list[np.ndarray]]:
     from thermcap.archive.bench import real_frames
 
     return {f"{name} (one frame)": [frame] for name, frame in real_frames().items()}
+
+
+SEQUENCE_SUFFIXES = (".seq", ".csq", ".fff")  # FLIR's multi-frame files, by their usual names
+
+
+def real_sequences(files: Sequence[str | Path] = (), limit: int = 240) -> dict[str, list[np.ndarray]]:
+    """Every multi-frame file among the samples (FLIR SEQ, CSQ, FFF) and each of ``files``, read
+    by the importers (content decides the format), its first ``limit`` frames. A named file that
+    does not import raises ``ImportFileError`` naming it; a sample with one frame is a still,
+    measured among the stills."""
+    from thermcap.archive.bench import SAMPLES
+    from thermcap.recorder.importers import iter_file
+
+    found = sorted(p for p in SAMPLES.glob("*/*") if p.suffix.lower() in SEQUENCE_SUFFIXES) if SAMPLES.is_dir() else []
+    out: dict[str, list[np.ndarray]] = {}
+    for path, named in [(p, False) for p in found] + [(Path(f), True) for f in files]:
+        frames: list[np.ndarray] = []
+        reader = iter_file(str(path))
+        try:
+            for frame in reader:
+                frames.append(np.array(frame.pixels, np.uint16))  # a copy: the file's map closes
+                if len(frames) >= limit:
+                    break
+        finally:
+            reader.close()
+        if len(frames) >= 2 or named:
+            h, w = frames[0].shape
+            out[f"real {path.name} {w}x{h}"] = frames
+    return out
 
 
 def _tpred(frames: list[np.ndarray], bitstream: int = BITSTREAM_VERSION) -> tuple[float, float, float]:
@@ -176,9 +209,10 @@ def fresh_process(frames: list[np.ndarray]) -> dict[str, Any]:
     return out
 
 
-def bench_temporal(frames: int = 240) -> list[dict[str, Any]]:
+def bench_temporal(frames: int = 240, files: Sequence[str | Path] = ()) -> list[dict[str, Any]]:
+    """``files``: the user's own multi-frame files, each a row with the samples' sequences."""
     rows = []
-    real = _real_frames()
+    real = {**real_sequences(files, frames), **_real_frames()}
     sequences = {**_sequences(frames), **real}
     # Every codec once, untimed, on a few frames: a process's first tpred call loads (or, on a CPU
     # the on-disk cache has not seen, compiles) the numba kernels, which had made the first row's

@@ -360,13 +360,21 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
 @click.command("temporal")
 @click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=240,
               show_default=True, help="Frames per sequence.")
+@click.option("--file", "files", multiple=True, type=click.Path(exists=True, dir_okay=False),
+              help="A multi-frame file of your own (FLIR SEQ/CSQ, anything `thermcap import` reads): a row "
+                   "with the goal of JPEG-XL e2's ratio. Repeat for more.")
 @json_option
-def bench_temporal_cmd(n_frames: int, as_json: bool) -> None:
+def bench_temporal_cmd(n_frames: int, files: tuple[str, ...], as_json: bool) -> None:
     """tpred (temporal prediction) against JPEG-XL e2, JPEG-LS, PNG16 and FFV1 on still, sweeping, cued,
-    shaking and gain-stepping views, and its rate in a fresh process."""
+    shaking and gain-stepping views, the samples' and your own real sequences, and its rate in a fresh
+    process."""
     from thermcap.archive.bench_temporal import bench_temporal
+    from thermcap.recorder.importers import ImportFileError
 
-    rows = bench_temporal(n_frames)
+    try:
+        rows = bench_temporal(n_frames, files)
+    except ImportFileError as exc:
+        raise click.ClickException(str(exc)) from None
     if as_json:
         click.echo(json.dumps(rows, indent=2))
         return

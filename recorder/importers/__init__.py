@@ -9,7 +9,7 @@ and raw Gray16 with their JSON sidecars.
 from __future__ import annotations
 
 import mmap
-from collections.abc import Iterator
+from collections.abc import Generator, Iterator
 from pathlib import Path
 
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
@@ -79,7 +79,7 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
         raise ImportFileError(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None
 
 
-def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Iterator[ImportedFrame]:
+def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Generator[ImportedFrame, None, None]:
     """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are memory-mapped and decoded
     image by image, so an hours-long SEQ costs one frame of memory, not the file; the other
     formats hold one frame a file anyway. A corrupt image mid-file raises ImportFileError there

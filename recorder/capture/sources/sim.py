@@ -25,7 +25,10 @@ each frame, up to that many pixels on each axis (bilinear, as optics blur a shak
 whole-pixel motion search can follow; ``gain_every_s`` changes the core's gain (AGC) at that
 period to a new value within ``1 +- gain_step``, scaling every count's distance from the
 scene's mean level (the sensor's pattern and the noise with it, as a gain after the detector
-does): a frame-wide step no prediction from earlier frames foresees.
+does): a frame-wide step no prediction from earlier frames foresees; ``row_runs`` makes that share
+of the pixels repeat their left neighbour's value, in runs along the rows that change every
+frame, as a real FLIR CSQ sequence holds them (44-62 % of its pixels; a cause inside the camera
+no document names).
 
 For the ICD section 5 quality report's proof: ``blackbody_c`` fills the view with a uniform
 blackbody at that temperature (no scene, no targets); ``shutter_every_s`` closes the shutter for
@@ -208,6 +211,7 @@ class SimSource(FrameSource):
         shake_px: float = 0.0,
         gain_every_s: float | None = None,
         gain_step: float = 0.05,
+        row_runs: float = 0.0,
     ) -> None:
         if width < 16 or height < 16:
             raise ValueError(f"simulator frames must be at least 16x16, got {width}x{height}")
@@ -218,7 +222,10 @@ class SimSource(FrameSource):
         if gain_every_s is not None and (gain_every_s <= 0 or not 0.0 <= gain_step < 1.0):
             raise ValueError(f"gain steps need gain_every_s > 0 and 0 <= gain_step < 1, "
                              f"got {gain_every_s}, {gain_step}")
+        if not 0.0 <= row_runs < 1.0:
+            raise ValueError(f"row_runs is a share of the pixels, 0 <= row_runs < 1, got {row_runs}")
         self.shake_px, self.gain_every_s, self.gain_step = shake_px, gain_every_s, gain_step
+        self.row_runs = row_runs
         self.view, self.pan_px_per_deg, self.patrol_deg_s = view, pan_px_per_deg, patrol_deg_s
         self.blackbody_c, self.shutter_every_s, self.shutter_frames = blackbody_c, shutter_every_s, shutter_frames
         self.shutter_c, self.drift_c_per_h = shutter_c, drift_c_per_h
@@ -294,6 +301,8 @@ class SimSource(FrameSource):
             out["shake_px"] = self.shake_px
         if self.gain_every_s:
             out.update(gain_every_s=self.gain_every_s, gain_step=self.gain_step)
+        if self.row_runs:
+            out["row_runs"] = self.row_runs
         return out
 
     def shake(self, index: int) -> tuple[float, float]:
@@ -430,6 +439,11 @@ class SimSource(FrameSource):
         np.rint(counts_f, out=counts_f)
         np.clip(counts_f, 0, MAX_COUNT, out=counts_f)
         frame = counts_f.astype(np.uint16)
+        if self.row_runs:  # each repeating pixel takes the value of the last one before it that does not
+            repeat = np.random.default_rng([self.seed, 7, index]).random(frame.shape) < self.row_runs
+            repeat[:, 0] = False
+            cols = np.maximum.accumulate(np.where(repeat, 0, np.arange(self.width)), axis=1)
+            frame = np.take_along_axis(frame, cols, axis=1)
         frame[self._bad_ys, self._bad_xs] = self._bad_values
         gt, analysis = self._truth(frame, truths)
         return frame, gt, analysis, counts_f

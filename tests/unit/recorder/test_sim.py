@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from thermcap.recorder.capture.sources.sim import SimSource
 
@@ -133,3 +134,25 @@ def test_shake_and_gain_refuse_absurd_values():
         SimSource(frames=1, shake_px=20.0)
     with pytest.raises(ValueError, match="gain"):
         SimSource(frames=1, gain_every_s=0.0)
+
+
+def test_row_runs_repeat_the_left_neighbour_in_runs_that_change_every_frame():
+    kw = {"frames": 3, "seed": 6, "width": 160, "height": 128, "bad_pixels": 0}
+    plain = _frames(**kw)
+    runs = _frames(**kw, row_runs=0.6)
+    assert np.array_equal(runs[0].pixels, _frames(**kw, row_runs=0.6)[0].pixels)  # a function of the seed
+    for a, b in zip(plain, runs, strict=True):
+        p, r = a.pixels, b.pixels
+        assert np.array_equal(r[:, 0], p[:, 0])
+        share = float((r[:, 1:] == r[:, :-1]).mean()) - float((p[:, 1:] == p[:, :-1]).mean())
+        assert 0.5 < share < 0.65, share
+        # every value is the frame's own, from its row, at or left of its column
+        cols = np.arange(p.shape[1])
+        for y in (0, 64, 127):
+            src = [int(np.flatnonzero(p[y, :x + 1] == v)[-1]) if (p[y, :x + 1] == v).any() else -1
+                   for x, v in zip(cols, r[y], strict=True)]
+            assert min(src) >= 0
+    masks = [(b.pixels[:, 1:] == b.pixels[:, :-1]) for b in runs]
+    assert not np.array_equal(masks[0], masks[1])
+    with pytest.raises(ValueError, match="row_runs"):
+        SimSource(frames=1, row_runs=1.0)
