@@ -9,7 +9,7 @@ and raw Gray16 with their JSON sidecars.
 from __future__ import annotations
 
 import mmap
-from collections.abc import Generator, Iterator
+from collections.abc import Generator
 from pathlib import Path
 
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
