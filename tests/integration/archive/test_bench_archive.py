@@ -34,6 +34,22 @@ def test_bench_temporal_reports_every_sequence_against_its_anchors():
     assert fresh["first_frame_s_cold_cache"] > fresh["first_frame_s_cached"]
 
 
+def test_bench_temporal_measures_the_users_own_sequence_and_names_a_file_it_cannot_read(samples, tmp_path):
+    """Issue 40: the goal on real sequences is the user's file, so ``--file`` makes it a row (a
+    SEQ here: the FFF sample three times, as a camera writes them back to back)."""
+    one = (samples / "flir" / "frame_000000.fff").read_bytes()
+    seq = tmp_path / "three.seq"
+    seq.write_bytes(one * 3)
+    r = CliRunner().invoke(cli, ["bench", "temporal", "--frames", "4", "--file", str(seq), "--json"])
+    assert r.exit_code == 0, r.output
+    (row,) = [row for row in json.loads(r.output) if row["sequence"].startswith("real three.seq")]
+    assert row["frames"] == 3 and row["goal_x_jxl_e2"] == 1.0 and row["tpred_ratio"] > 1
+    bad = tmp_path / "notes.txt"
+    bad.write_text("not a thermal file")
+    r = CliRunner().invoke(cli, ["bench", "temporal", "--frames", "4", "--file", str(bad)])
+    assert r.exit_code == 1 and "notes.txt" in r.output and "Traceback" not in r.output
+
+
 def test_bench_archive_session_reports_x_real_time_beside_its_floors():
     r = CliRunner().invoke(cli, ["bench", "archive", "--session", "0.5", "--formats", "png16,hdf5", "--repeat", "3",
                                  "--json"])
