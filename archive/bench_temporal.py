@@ -75,7 +75,7 @@ def real_sequences(files: Sequence[str | Path] = (), limit: int = 240) -> dict[s
     does not import raises ``ImportFileError`` naming it; a sample with one frame is a still,
     measured among the stills."""
     from thermcap.archive.bench import SAMPLES
-    from thermcap.recorder.importers import iter_file
+    from thermcap.recorder.importers import ImportFileError, iter_file
 
     found = sorted(p for p in SAMPLES.glob("*/*") if p.suffix.lower() in SEQUENCE_SUFFIXES) if SAMPLES.is_dir() else []
     out: dict[str, list[np.ndarray]] = {}
@@ -89,6 +89,8 @@ def real_sequences(files: Sequence[str | Path] = (), limit: int = 240) -> dict[s
                     break
         finally:
             reader.close()
+        if not frames:
+            raise ImportFileError(f"{path}: no frame in the file")
         if len(frames) >= 2 or named:
             h, w = frames[0].shape
             out[f"real {path.name} {w}x{h}"] = frames
@@ -137,6 +139,8 @@ def _ffv1(frames: list[np.ndarray]) -> tuple[float, float] | None:
     except ImportError:
         return None
     h, w = frames[0].shape
+    if any(f.shape != (h, w) for f in frames):
+        return None  # one stream, one size: a file whose frames change size has no FFV1 figure
     buf = io.BytesIO()
     t = time.perf_counter()
     with av.open(buf, "w", format="matroska") as c:
