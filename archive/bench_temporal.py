@@ -46,6 +46,10 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
         # flat-field correction (a frame-wide step), and temporal noise above the scene's detail
         "shutter (NUC) every 0.5 s": [f.pixels for f in SimSource(**common, **honest,
                                                                     shutter_every_s=0.5).frames()],
+        # each flat-field correction leaves the core a new frame-wide offset (at every 2 s here)
+        "NUC every 2 s, offset steps (+-20 counts)": [f.pixels for f in SimSource(**common, **honest,
+                                                                                    shutter_every_s=2.0,
+                                                                                    nuc_step_counts=20.0).frames()],
         "temporal noise above detail (NETD 400 mK)": [f.pixels for f in SimSource(**common, **honest,
                                                                                     netd_mk=400.0).frames()],
         # a camera on a vehicle or a mast: the picture shakes by a fraction of a pixel every

@@ -33,7 +33,9 @@ no document names).
 For the ICD section 5 quality report's proof: ``blackbody_c`` fills the view with a uniform
 blackbody at that temperature (no scene, no targets); ``shutter_every_s`` closes the shutter for
 ``shutter_frames`` frames at that period (a uniform field at ``shutter_c``, marked
-``capture.shutter_closed`` in the sidecar); ``drift_c_per_h`` adds a linear response drift. With
+``capture.shutter_closed`` in the sidecar), and with ``nuc_step_counts`` the flat-field
+correction each closing makes leaves the picture a new frame-wide offset, within that many
+counts of the first (the step an uncooled core's raw output takes at each NUC); ``drift_c_per_h`` adds a linear response drift. With
 the NETD, the pattern noise and the bad pixels, these are the truths the report must recover.
 
 Determinism: frame ``i`` depends only on the seed and ``i`` (timestamps aside): two runs with
@@ -207,6 +209,7 @@ class SimSource(FrameSource):
         shutter_every_s: float | None = None,
         shutter_frames: int = 4,
         shutter_c: float = 25.0,
+        nuc_step_counts: float = 0.0,
         drift_c_per_h: float = 0.0,
         shake_px: float = 0.0,
         gain_every_s: float | None = None,
@@ -222,10 +225,12 @@ class SimSource(FrameSource):
         if gain_every_s is not None and (gain_every_s <= 0 or not 0.0 <= gain_step < 1.0):
             raise ValueError(f"gain steps need gain_every_s > 0 and 0 <= gain_step < 1, "
                              f"got {gain_every_s}, {gain_step}")
+        if not 0.0 <= nuc_step_counts <= 4096 or (nuc_step_counts and not shutter_every_s):
+            raise ValueError(f"nuc_step_counts is 0..4096 counts and needs shutter_every_s, got {nuc_step_counts}")
         if not 0.0 <= row_runs < 1.0:
             raise ValueError(f"row_runs is a share of the pixels, 0 <= row_runs < 1, got {row_runs}")
         self.shake_px, self.gain_every_s, self.gain_step = shake_px, gain_every_s, gain_step
-        self.row_runs = row_runs
+        self.row_runs, self.nuc_step_counts = row_runs, nuc_step_counts
         self.view, self.pan_px_per_deg, self.patrol_deg_s = view, pan_px_per_deg, patrol_deg_s
         self.blackbody_c, self.shutter_every_s, self.shutter_frames = blackbody_c, shutter_every_s, shutter_frames
         self.shutter_c, self.drift_c_per_h = shutter_c, drift_c_per_h
@@ -297,6 +302,8 @@ class SimSource(FrameSource):
             out["blackbody_c"] = self.blackbody_c
         if self.shutter_every_s:
             out.update(shutter_every_s=self.shutter_every_s, shutter_c=self.shutter_c)
+        if self.nuc_step_counts:
+            out["nuc_step_counts"] = self.nuc_step_counts
         if self.shake_px:
             out["shake_px"] = self.shake_px
         if self.gain_every_s:
@@ -321,6 +328,17 @@ class SimSource(FrameSource):
         if step == 0:
             return 1.0
         return 1.0 + float(np.random.default_rng([self.seed, 6, step]).uniform(-self.gain_step, self.gain_step))
+
+    def nuc_offset(self, index: int) -> float:
+        """The frame-wide offset (counts) the last flat-field correction before frame ``index``
+        left: 0 until the first closing, then a new value within ``nuc_step_counts`` at each,
+        a function of the seed and the closing's number."""
+        if not self.nuc_step_counts or not self.shutter_every_s:
+            return 0.0
+        k = index // max(1, round(self.shutter_every_s * self.fps))
+        if k == 0:
+            return 0.0
+        return float(np.random.default_rng([self.seed, 8, k]).uniform(-self.nuc_step_counts, self.nuc_step_counts))
 
     def shutter_closed(self, index: int) -> bool:
         if not self.shutter_every_s:
@@ -427,6 +445,8 @@ class SimSource(FrameSource):
             dx, dy = self.shake(index)
             scene = counts_f - self._fpn_counts
             counts_f = shift(scene, (dy, dx), order=1, mode="nearest", prefilter=False) + self._fpn_counts
+        if uniform_c is None and (step := self.nuc_offset(index)):
+            counts_f += np.float32(step)
         n = self.width * self.height
         off = int(self._rng_noise.integers(0, self._noise_pool.size - n))
         counts_f += self._noise_pool[off:off + n].reshape(self.height, self.width)

@@ -156,3 +156,20 @@ def test_row_runs_repeat_the_left_neighbour_in_runs_that_change_every_frame():
     assert not np.array_equal(masks[0], masks[1])
     with pytest.raises(ValueError, match="row_runs"):
         SimSource(frames=1, row_runs=1.0)
+
+
+def test_each_flat_field_correction_leaves_a_new_frame_wide_offset():
+    kw = {"frames": 130, "seed": 4, "width": 64, "height": 48, "fps": 60.0, "bad_pixels": 0, "shutter_every_s": 1.0}
+    plain = _frames(**kw)
+    stepped = _frames(**kw, nuc_step_counts=20.0)
+    src = SimSource(paced=False, **kw, nuc_step_counts=20.0)
+    assert src.nuc_offset(59) == 0.0 and src.nuc_offset(60) == src.nuc_offset(119) != src.nuc_offset(120)
+    assert all(abs(src.nuc_offset(i)) <= 20.0 for i in range(130))
+    assert np.array_equal(plain[30].pixels, stepped[30].pixels)  # before the first correction
+    assert np.array_equal(plain[61].pixels, stepped[61].pixels)  # the shutter itself: a uniform field
+    for i in (70, 125):
+        d = stepped[i].pixels.astype(float) - plain[i].pixels.astype(float)
+        # the same picture moved by the offset (each rounded to counts on its own)
+        assert np.abs(d - src.nuc_offset(i)).max() < 1.0 and abs(d.mean() - src.nuc_offset(i)) < 0.1
+    with pytest.raises(ValueError, match="nuc_step_counts"):
+        SimSource(frames=1, nuc_step_counts=5.0)  # no shutter, no correction
