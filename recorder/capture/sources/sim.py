@@ -36,7 +36,8 @@ blackbody at that temperature (no scene, no targets); ``shutter_every_s`` closes
 ``capture.shutter_closed`` in the sidecar), and with ``nuc_step_counts`` the flat-field
 correction each closing makes leaves the picture a new frame-wide offset, within that many
 counts of the first (the step an uncooled core's raw output takes at each NUC);
-``drift_c_per_h`` adds a linear response drift. With the NETD, the pattern noise and the bad pixels, these are the truths the report must recover.
+``drift_c_per_h`` adds a linear response drift. With the NETD, the pattern noise and the bad
+pixels, these are the truths the report must recover.
 
 Determinism: frame ``i`` depends only on the seed and ``i`` (timestamps aside): two runs with
 the same seed give the same pixels, bit for bit.
