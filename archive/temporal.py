@@ -154,6 +154,8 @@ from typing import TypeVar
 import imagecodecs
 import numpy as np
 
+from thermcap.recorder.frame_heap import keep_frame_blocks
+
 # archive.rans, archive.tpred_kernels and archive.tpred_key are compiled by numba, which takes
 # 0.35 s to import: they are imported inside the functions that use them, so every ``thermcap``
 # command does not pay for it at start-up.
@@ -866,6 +868,7 @@ class TemporalEncoder:
             raise ValueError(f"tpred: window 1..255 and key_interval >= 1, got {window}, {key_interval}")
         if bitstream not in MAGICS:
             raise ValueError(f"tpred writes bitstream versions {sorted(MAGICS)}, got {bitstream}")
+        keep_frame_blocks()  # its per-frame temporaries: see recorder.frame_heap
         self.window, self.key_interval, self.max_shift = window, key_interval, max_shift
         self.bitstream, self._magic = bitstream, MAGICS[bitstream]
         self._state = _window_for(bitstream)
@@ -993,6 +996,7 @@ class TemporalEncoder:
 
 class TemporalDecoder:
     def __init__(self) -> None:
+        keep_frame_blocks()
         self._state: _Window | _SceneWindow | _State3 = _Window()
         self._version = 0  # of the sequence's key frame; 0 before any
         self._shape: tuple[int, int] | None = None

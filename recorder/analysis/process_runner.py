@@ -37,6 +37,7 @@ import numpy as np
 from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.analysis.answers import analyse_one
 from thermcap.recorder.analysis.detector import HotSpotDetector
+from thermcap.recorder.frame_heap import FRAME_HEAP_ENV
 
 __all__ = ["ProcessRunner", "RunnerUnavailable"]
 
@@ -48,12 +49,9 @@ def _child_env() -> dict[str, str]:
     """The parent's environment, with its import path: the child must import the same thermcap
     (a checkout on ``sys.path``, not only an installed copy)."""
     env = dict(os.environ)
-    # glibc serves blocks above 128 KB from fresh mmap pages until a large free raises that
-    # bound; a fresh interpreter never makes one, so each of the detector's frame-sized
-    # temporaries was page-faulted and zeroed again on every frame: 1.05 ms a flat 640x512
-    # frame against 0.49 ms once the bound is above the working set (a few frames' worth).
-    env.setdefault("MALLOC_MMAP_THRESHOLD_", str(64 * 1024 * 1024))
-    env.setdefault("MALLOC_TRIM_THRESHOLD_", str(256 * 1024 * 1024))
+    # the detector's frame-sized temporaries stay in the heap (see recorder.frame_heap)
+    for key, value in FRAME_HEAP_ENV.items():
+        env.setdefault(key, value)
     paths = [p for p in sys.path if p]
     env["PYTHONPATH"] = os.pathsep.join(paths + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     return env

@@ -35,6 +35,17 @@ def _frames(view: str, n: int = 48, **kw) -> list[np.ndarray]:
                                         pixel_fpn_mk=15.0, drift_mk=30.0, **kw).frames()]
 
 
+def _bytes_by_version(frames: list[np.ndarray], versions: tuple[int, ...]) -> tuple[dict[int, int], TemporalEncoder]:
+    """Each version's bytes for ``frames``, each checked bit-exact; and the last version's encoder."""
+    sizes = {}
+    for v in versions:
+        enc = TemporalEncoder(bitstream=v)
+        records = [enc.encode(f) for f in frames]
+        assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True)), v
+        sizes[v] = sum(map(len, records))
+    return sizes, enc
+
+
 @pytest.mark.parametrize("view", ["fixed", "patrol", "turret"])
 def test_round_trip_is_bit_exact_and_beats_intra_coding(view):
     frames = _frames(view, patrol_deg_s=5.0)
@@ -182,12 +193,7 @@ def test_version_3_learns_the_sensor_pattern_under_a_pan():
     src = SimSource(width=640, height=512, frames=16, paced=False, seed=5, view="patrol", pixel_fpn_mk=15.0,
                     drift_mk=30.0, patrol_deg_s=10.0)
     frames = [f.pixels for f in src.frames()]
-    sizes = {}
-    for v in (2, 3):
-        enc = TemporalEncoder(bitstream=v)
-        records = [enc.encode(f) for f in frames]
-        assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records), strict=True))
-        sizes[v] = sum(map(len, records))
+    sizes, enc = _bytes_by_version(frames, (2, 3))
     assert sizes[3] < 0.975 * sizes[2], sizes  # 3.7% over these 16 frames, 8% over 240
     state = enc._state
     assert isinstance(state, tp._State3) and state.pattern is not None
@@ -489,12 +495,7 @@ def test_version_7_beats_jpeg_xl_where_rows_hold_runs():
                                        drift_mk=30.0, netd_mk=400.0, row_runs=0.6).frames()]
     jxl = get_codec({"id": "jxl", "effort": 2})
     anchor = sum(len(jxl.encode(f)) for f in seq)
-    sizes = {}
-    for version in (6, 7):
-        enc = TemporalEncoder(bitstream=version)
-        records = [enc.encode(f) for f in seq]
-        assert all(np.array_equal(a, b) for a, b in zip(seq, decode_records(records), strict=True))
-        sizes[version] = sum(map(len, records))
+    sizes, _ = _bytes_by_version(seq, (6, 7))
     assert sizes[6] > anchor > sizes[7]
     assert sizes[7] < 0.85 * sizes[6]
 
