@@ -14,7 +14,7 @@ import pytest
 
 from thermcap.recorder.frame_heap import FRAME_HEAP_ENV
 
-pytestmark = pytest.mark.skipif(platform.system() != "Linux" or not platform.libc_ver()[0] == "glibc",
+pytestmark = pytest.mark.skipif(platform.system() != "Linux" or platform.libc_ver()[0] != "glibc",
                                 reason="the bounds are glibc's; other allocators are left alone")
 
 _PROBE = """
