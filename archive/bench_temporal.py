@@ -18,7 +18,7 @@ from __future__ import annotations
 import io
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Generator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -73,32 +73,47 @@ def _real_frames() -> dict[str, list[np.ndarray]]:
 SEQUENCE_SUFFIXES = (".seq", ".csq", ".fff")  # FLIR's multi-frame files, by their usual names
 
 
-def real_sequences(files: Sequence[str | Path] = (), limit: int = 240) -> dict[str, list[np.ndarray]]:
-    """Every multi-frame file among the samples (FLIR SEQ, CSQ, FFF) and each of ``files``, read
-    by the importers (content decides the format), its first ``limit`` frames. A named file that
-    does not import raises ``ImportFileError`` naming it; a sample with one frame is a still,
-    measured among the stills."""
+def real_sequences(files: Sequence[str | Path] = (), limit: int = 240,
+                   unreadable: dict[str, str] | None = None) -> dict[str, list[np.ndarray]]:
+    """Every multi-frame file among the samples, at any depth (FLIR SEQ, CSQ, FFF), and each of
+    ``files``, read by the importers (content decides the format), its first ``limit`` frames. A
+    named file that does not import raises ``ImportFileError`` naming it; a sample that does not
+    is left out and its reason put in ``unreadable`` (one damaged sample does not stop the
+    bench); a sample with one frame is a still, measured among the stills."""
     from thermcap.archive.bench import SAMPLES
     from thermcap.recorder.importers import ImportFileError, iter_file
 
-    found = sorted(p for p in SAMPLES.glob("*/*") if p.suffix.lower() in SEQUENCE_SUFFIXES) if SAMPLES.is_dir() else []
+    found = sorted(p for p in SAMPLES.rglob("*") if p.suffix.lower() in SEQUENCE_SUFFIXES and p.is_file()) \
+        if SAMPLES.is_dir() else []
     out: dict[str, list[np.ndarray]] = {}
     for path, named in [(p, False) for p in found] + [(Path(f), True) for f in files]:
-        frames: list[np.ndarray] = []
-        reader = iter_file(str(path))
         try:
-            for frame in reader:
-                frames.append(np.array(frame.pixels, np.uint16))  # a copy: the file's map closes
-                if len(frames) >= limit:
-                    break
-        finally:
-            reader.close()
-        if not frames:
-            raise ImportFileError(f"{path}: no frame in the file")
+            frames = _read_frames(path, limit, iter_file)
+            if not frames:
+                raise ImportFileError(f"{path}: no frame in the file")
+        except ImportFileError as exc:
+            if named:
+                raise
+            if unreadable is not None:
+                unreadable[str(path)] = str(exc)
+            continue
         if len(frames) >= 2 or named:
             h, w = frames[0].shape
             out[f"real {path.name} {w}x{h}"] = frames
     return out
+
+
+def _read_frames(path: Path, limit: int, iter_file: Callable[[str], Generator[Any, None, None]]) -> list[np.ndarray]:
+    frames: list[np.ndarray] = []
+    reader = iter_file(str(path))
+    try:
+        for frame in reader:
+            frames.append(np.array(frame.pixels, np.uint16))  # a copy: the file's map closes
+            if len(frames) >= limit:
+                break
+    finally:
+        reader.close()
+    return frames
 
 
 def _tpred(frames: list[np.ndarray], bitstream: int = BITSTREAM_VERSION) -> tuple[float, float, float]:
@@ -219,8 +234,10 @@ def fresh_process(frames: list[np.ndarray]) -> dict[str, Any]:
 
 def bench_temporal(frames: int = 240, files: Sequence[str | Path] = ()) -> list[dict[str, Any]]:
     """``files``: the user's own multi-frame files, each a row with the samples' sequences."""
-    rows = []
-    real = {**real_sequences(files, frames), **_real_frames()}
+    rows: list[dict[str, Any]] = []
+    unreadable: dict[str, str] = {}
+    real = {**real_sequences(files, frames, unreadable), **_real_frames()}
+    rows += [{"sequence": path, "kind": "unreadable", "error": why} for path, why in unreadable.items()]
     sequences = {**_sequences(frames), **real}
     # Every codec once, untimed, on a few frames: a process's first tpred call loads (or, on a CPU
     # the on-disk cache has not seen, compiles) the numba kernels, which had made the first row's

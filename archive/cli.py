@@ -388,6 +388,8 @@ def bench_temporal_cmd(n_frames: int, files: tuple[str, ...], as_json: bool) -> 
                    f"{r['tpred_fps_1_core']:>7} {r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
                    f"{r['tpred_previous_fps_2_cores']:>6}")
     for r in rows:
+        if r["kind"] == "unreadable":
+            click.echo(f"left out, a sample that does not import: {r['error']}", err=True)
         if r["kind"] == "fresh_process":
             click.echo(f"{r['sequence']} ({r['frames']} frames {r['size']}, two threads, from the codec's import): "
                        f"{r['fps_2_cores_cached']} fps with the compiled kernels cached "

@@ -84,3 +84,21 @@ def test_bench_archive_codecs_sets_the_archive_s_lzw_beside_tifffile_s():
         ours, theirs = by["tiff-lzw + predictor (archive.lzw)"], by["tifffile LZW + predictor (baseline)"]
         assert ours["kind"] == "thermcap" and theirs["kind"] == "baseline"
         assert abs(ours["ratio"] / theirs["ratio"] - 1) < 0.002 and ours["encode_fps"] > 0
+
+
+def test_the_samples_sequences_are_found_at_any_depth_and_a_damaged_one_is_left_out_with_its_reason(
+        samples, tmp_path, monkeypatch):
+    import thermcap.archive.bench as bench
+    from thermcap.archive.bench_temporal import real_sequences
+
+    one = (samples / "flir" / "frame_000000.fff").read_bytes()
+    (tmp_path / "flir" / "seq").mkdir(parents=True)
+    (tmp_path / "flir" / "seq" / "two.seq").write_bytes(one * 2)
+    (tmp_path / "flir" / "still.fff").write_bytes(one)  # one frame: a still, not a sequence
+    (tmp_path / "flir" / "cut.csq").write_bytes(b"FFF\x00" + b"\x00" * 60)
+    monkeypatch.setattr(bench, "SAMPLES", tmp_path)
+    unreadable: dict[str, str] = {}
+    found = real_sequences(limit=8, unreadable=unreadable)
+    assert list(found) == ["real two.seq 640x512"] and len(found["real two.seq 640x512"]) == 2
+    cut = str(tmp_path / "flir" / "cut.csq")
+    assert list(unreadable) == [cut] and "cut.csq" in unreadable[cut]
