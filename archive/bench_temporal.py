@@ -18,7 +18,7 @@ from __future__ import annotations
 import io
 import threading
 import time
-from collections.abc import Callable, Generator, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -81,14 +81,14 @@ def real_sequences(files: Sequence[str | Path] = (), limit: int = 240,
     is left out and its reason put in ``unreadable`` (one damaged sample does not stop the
     bench); a sample with one frame is a still, measured among the stills."""
     from thermcap.archive.bench import SAMPLES
-    from thermcap.recorder.importers import ImportFileError, iter_file
+    from thermcap.recorder.importers import ImportFileError
 
     found = sorted(p for p in SAMPLES.rglob("*") if p.suffix.lower() in SEQUENCE_SUFFIXES and p.is_file()) \
         if SAMPLES.is_dir() else []
     out: dict[str, list[np.ndarray]] = {}
     for path, named in [(p, False) for p in found] + [(Path(f), True) for f in files]:
         try:
-            frames = _read_frames(path, limit, iter_file)
+            frames = _read_frames(path, limit)
             if not frames:
                 raise ImportFileError(f"{path}: no frame in the file")
         except ImportFileError as exc:
@@ -103,7 +103,9 @@ def real_sequences(files: Sequence[str | Path] = (), limit: int = 240,
     return out
 
 
-def _read_frames(path: Path, limit: int, iter_file: Callable[[str], Generator[Any, None, None]]) -> list[np.ndarray]:
+def _read_frames(path: Path, limit: int) -> list[np.ndarray]:
+    from thermcap.recorder.importers import iter_file
+
     frames: list[np.ndarray] = []
     reader = iter_file(str(path))
     try:

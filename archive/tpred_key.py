@@ -78,10 +78,16 @@ def _predict(img: np.ndarray, r: int, col: int) -> tuple[Any, int]:  # pragma: n
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
+def _in_run(img: np.ndarray, r: int, col: int) -> bool:  # pragma: no cover
+    """The run rule's test: the pixel's two left neighbours are equal."""
+    return col >= 2 and img[r, col - 1] == img[r, col - 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
 def _predict_rule(img: np.ndarray, r: int, col: int, rule: int) -> tuple[Any, int]:  # pragma: no cover
-    """``_predict``, or under the run rule (``rule`` 1) ``a`` in context ``RUN`` where the two
-    left neighbours are equal."""
-    if rule == 1 and col >= 2 and img[r, col - 1] == img[r, col - 2]:
+    """``_predict``, or under the run rule (``rule`` 1) ``a`` in context ``RUN`` where the pixel
+    is in a run (``_in_run``)."""
+    if rule == 1 and _in_run(img, r, col):
         return np.int64(img[r, col - 1]), RUN
     return _predict(img, r, col)
 
@@ -109,7 +115,7 @@ def _rule_counts(f: np.ndarray, step: int, counts: np.ndarray, extra: np.ndarray
             t, e, _ = rans.token(x - p)
             counts[0, k, t] += 1
             extra[0] += e
-            if col >= 2 and f[r, col - 1] == f[r, col - 2]:
+            if _in_run(f, r, col):
                 t, e, _ = rans.token(x - np.int64(f[r, col - 1]))
                 k = RUN
             counts[1, k, t] += 1

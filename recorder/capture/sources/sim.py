@@ -323,29 +323,31 @@ class SimSource(FrameSource):
     def gain(self, index: int) -> float:
         """The core's gain at frame ``index``: 1 until the first step, then a new value within
         ``1 +- gain_step`` at each step, a function of the seed and the step's number."""
-        if not self.gain_every_s:
-            return 1.0
-        step = int(index // max(1, round(self.gain_every_s * self.fps)))
-        if step == 0:
-            return 1.0
-        return 1.0 + float(np.random.default_rng([self.seed, 6, step]).uniform(-self.gain_step, self.gain_step))
+        return 1.0 + self._held_step(index, self.gain_every_s, self.gain_step, 6)
 
     def nuc_offset(self, index: int) -> float:
         """The frame-wide offset (counts) the last flat-field correction before frame ``index``
         left: 0 until the first closing, then a new value within ``nuc_step_counts`` at each,
         a function of the seed and the closing's number."""
-        if not self.nuc_step_counts or not self.shutter_every_s:
-            return 0.0
-        k = index // max(1, round(self.shutter_every_s * self.fps))
-        if k == 0:
-            return 0.0
-        return float(np.random.default_rng([self.seed, 8, k]).uniform(-self.nuc_step_counts, self.nuc_step_counts))
+        return self._held_step(index, self.shutter_every_s, self.nuc_step_counts, 8)
 
     def shutter_closed(self, index: int) -> bool:
         if not self.shutter_every_s:
             return False
-        period = max(1, round(self.shutter_every_s * self.fps))
-        return index % period < self.shutter_frames
+        return index % self._period(self.shutter_every_s) < self.shutter_frames
+
+    def _period(self, seconds: float) -> int:
+        return max(1, round(seconds * self.fps))
+
+    def _held_step(self, index: int, every_s: float | None, amplitude: float, stream: int) -> float:
+        """A value held for ``every_s`` seconds at a time: 0 in the first period, then a new one
+        within ``+-amplitude`` each period, drawn from the seed's ``stream`` and the period's number."""
+        if not every_s or not amplitude:
+            return 0.0
+        k = index // self._period(every_s)
+        if k == 0:
+            return 0.0
+        return float(np.random.default_rng([self.seed, stream, k]).uniform(-amplitude, amplitude))
 
     # -- scene ------------------------------------------------------------------------------
     def _make_background(self, rng: np.random.Generator, width: int | None = None) -> np.ndarray:

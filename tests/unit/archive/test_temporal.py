@@ -500,7 +500,7 @@ def test_version_7_beats_jpeg_xl_where_rows_hold_runs():
     assert sizes[7] < 0.85 * sizes[6]
 
 
-def test_every_real_multi_frame_sample_beats_jpeg_xl_e2():
+def test_every_real_multi_frame_sample_beats_jpeg_xl_e2(monkeypatch):
     """Goal 1 of issue 40: >= 1.0x JPEG XL effort 2 on every real sequence a user brings. Each
     FLIR SEQ/CSQ/FFF with two frames or more in THERMCAP_SAMPLES, as ``bench temporal`` finds them."""
     from tests.conftest import SAMPLES, SAMPLES_HOW
@@ -511,11 +511,8 @@ def test_every_real_multi_frame_sample_beats_jpeg_xl_e2():
         pytest.skip(SAMPLES_HOW)
     import thermcap.archive.bench as bench
 
-    old, bench.SAMPLES = bench.SAMPLES, SAMPLES
-    try:
-        sequences = real_sequences(limit=32)
-    finally:
-        bench.SAMPLES = old
+    monkeypatch.setattr(bench, "SAMPLES", SAMPLES)
+    sequences = real_sequences(limit=32)
     if not sequences:
         pytest.skip(f"no multi-frame file ({', '.join(SEQUENCE_SUFFIXES)}) among the samples in {SAMPLES}")
     jxl = get_codec({"id": "jxl", "effort": 2})
