@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 from scipy import ndimage
 
 from thermcap.recorder.analysis import detector_kernels
-from thermcap.recorder.analysis.detector import HotSpotDetector, _components, _region_stats
+from thermcap.recorder.analysis.detector import HotSpotDetector, _components, _most_prominent, _region_stats
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.radiometry import LinearModel
 
@@ -119,6 +119,45 @@ def test_compiled_cell_grid_is_the_strided_one(ch, cw, seed):
     cells = counts.reshape(ch, 4, cw, 4)
     assert np.array_equal(cmax, cells.max(axis=(1, 3)))
     assert np.array_equal(mean, (cells.astype(np.float64).sum(axis=(1, 3)) / 16).astype(np.float32))
+
+
+@needs_numba
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 70), st.integers(1, 70), st.integers(1, 41), st.sampled_from([0.01, 1.0, 45.0, 3000.0]),
+       st.booleans(), st.integers(0, 2**32 - 1))
+def test_compiled_local_mean_is_scipys_uniform_filter(h, w, size, spread, celsius, seed):
+    grid = (2000 + np.random.default_rng(seed).normal(0, spread, (h, w))).astype(np.float32)
+    if celsius:
+        grid = grid * np.float32(0.036) - np.float32(40)
+    want = ndimage.uniform_filter(grid, size=size, mode="nearest")
+    assert np.array_equal(detector_kernels.box_mean(grid, size), want)
+
+
+def _prominent_by_full_sort(top_excess, boxes, limit, budget):
+    """The region choice as the detector first wrote it: every region sorted, then taken in turn."""
+    chosen, spent = [], 0
+    for k in (int(j) + 1 for j in np.argsort(-top_excess, kind="stable")):
+        if len(chosen) >= limit:
+            break
+        if spent + boxes[k - 1] > budget:
+            continue
+        chosen.append(k)
+        spent += boxes[k - 1]
+    return chosen
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 400), st.integers(0, 40), st.integers(1, 6), st.floats(0.0, 1.0), st.floats(0.0, 0.2),
+       st.integers(0, 2**32 - 1))
+def test_most_prominent_regions_are_the_full_sorts(n, limit, levels, budget_share, nan_share, seed):
+    """Few distinct values (ties at the partition's edge), boxes that overspend the budget (the
+    head runs out before the limit), and NaN (a temperature model's), against sorting them all."""
+    rng = np.random.default_rng(seed)
+    top = rng.integers(0, levels, n).astype(np.float32)
+    top[rng.random(n) < nan_share] = np.nan
+    boxes = rng.choice([1, 2, 4, 9, 40, 400], n).tolist()  # a few wide boxes the budget passes over
+    budget = budget_share * 25 * max(limit, 1)
+    assert _most_prominent(top, boxes, limit, budget) == _prominent_by_full_sort(top, boxes, limit, budget)
 
 
 @needs_numba
