@@ -179,9 +179,10 @@ def print_table(rows: list[dict[str, Any]]) -> str:
     return "\n".join(lines)
 
 
-def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float]:
-    """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` and to read them
-    back with its reader, alone, in memory: the part of archiving no scheduling can remove."""
+def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> tuple[float, float]:
+    """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` (on ``workers``
+    encoder threads, as the archive gives it) and to read them back with its reader, alone, in
+    memory: the part of archiving no scheduling can remove."""
     from thermcap.archive.formats import ArchiveContext, get_format
     from thermcap.recorder.bench.cpu import process_cpu_s
 
@@ -190,7 +191,8 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path) -> tuple[float, float
     per_segment: dict[str, int] = {}
     for f in frames:
         per_segment[f.segment] = per_segment.get(f.segment, 0) + 1
-    ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment)
+    ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment,
+                         workers=workers)
     c = process_cpu_s()
     records = fmt.write(iter(frames), out, ctx)
     write = process_cpu_s() - c
@@ -216,7 +218,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     the next; the median of a few is what a before/after should compare. Before each run the page
     cache is primed for its output (``recorder.bench.page_cache``): the first run of a process
     had been up to a third slower than the next, faulting in memory the host had taken back."""
-    from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session
+    from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session, encoder_threads, usable_cores
     from thermcap.archive.manifest import archive_dir
     from thermcap.recorder.bench.cpu import process_cpu_s as cpu_s
     from thermcap.recorder.bench.page_cache import prime
@@ -225,7 +227,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
 
     fmts = tuple(formats or DEFAULT_FORMATS)
     n = int(seconds * 60)
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    cores = usable_cores()
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         sessions = []
         for sid, frames, seed in (("warm-up", 60, 4), ("bench", n, 3)):
@@ -272,7 +274,10 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
             format_cpu(f, sample[:4], Path(tmp))  # loads what a format compiles or imports on first use
         # the floor moves by 15% from one measurement to the next on a shared machine, as the
         # archive does: measured as often as the archive is timed (at most 3 times), median taken
-        rounds = [{f: format_cpu(f, sample, Path(tmp)) for f in fmts} for _ in range(min(3, max(1, repeat)))]
+        # each format on the encoder threads it has in the archive: the floor of the same work
+        per_format = encoder_threads(None, len(fmts))
+        rounds = [{f: format_cpu(f, sample, Path(tmp), per_format) for f in fmts}
+                  for _ in range(min(3, max(1, repeat)))]
         codec_ms = {f: {k: round(statistics.median(r[f][i] for r in rounds), 2)
                         for i, k in enumerate(("write", "read"))} for f in fmts}
         # the one read of the source every archive makes (decompress, parse, checks): no archiver

@@ -35,11 +35,11 @@ def _formats(value: str) -> list[str]:
               help="Comma-separated: png16, tiff-lzw, hdf5, jxl, htj2k, jpegls.")
 @click.option("--delete-source", is_flag=True, help="Delete the MCAP segments once every format verified.")
 @click.option("--force", is_flag=True, help="Rewrite formats that are already archived.")
-@click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=2, show_default=True,
-              help="Encoder threads.")
+@click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=None,
+              help="Encoder threads in all, shared among the formats written at once (default: the usable cores).")
 @json_option
 def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
-            workers: int, as_json: bool) -> None:
+            workers: int | None, as_json: bool) -> None:
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
