@@ -215,7 +215,9 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
 
     ``repeat``: the whole archive is timed that many times, each a fresh archive of the session,
     and the median run is reported, each run beside it. On a shared machine one run moves by 15% from
-    the next; the median of a few is what a before/after should compare. Before each run the page
+    the next; the median of a few is what a before/after should compare. Each run is followed by a
+    round of the formats' floor, and each run's ratio to the round after it is listed with their
+    median (``cpu_vs_formats_rounds_median``), the goal's verdict. Before each run the page
     cache is primed for its output (``recorder.bench.page_cache``): the first run of a process
     had been up to a third slower than the next, faulting in memory the host had taken back."""
     from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session, encoder_threads, usable_cores
@@ -247,8 +249,16 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         # what a run writes, from the warm-up's archive (60 frames), for priming the page cache
         warm_bytes = sum(p.stat().st_size for p in archive_dir(warm_up_dir).rglob("*") if p.is_file())
         out_bytes = int(warm_bytes * n / 60 * 1.1)
+        # each format's own writing and reading CPU, on a sample of the session's frames, on the
+        # encoder threads it has in the archive: the floor of the same work
+        sample = [dataclasses.replace(fr, pixels=np.array(fr.pixels))
+                  for _, fr in zip(range(min(n, 120)), iter_session_frames(session_dir), strict=False)]
+        per_format = encoder_threads(None, len(fmts))
+        for f in fmts:
+            format_cpu(f, sample[:4], Path(tmp), per_format)  # loads what a format compiles or imports on first use
         runs: list[tuple[float, float]] = []
         primed: list[float] = []
+        rounds: list[dict[str, tuple[float, float]]] = []
         for k in range(max(1, repeat)):
             # the same work each time: a fresh archive (a forced one would take the manifest's
             # hashes instead of hashing the source again)
@@ -258,7 +268,11 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
             t, c = time.perf_counter(), cpu_s()
             archive_session(session_dir, list(fmts))
             runs.append((time.perf_counter() - t, cpu_s() - c))
+            # the floor right after, in the same minute: the machine's pace moves by 8-15% between
+            # measurements, and a ratio of the two taken apart carries that whole move
+            rounds.append({f: format_cpu(f, sample, Path(tmp), per_format) for f in fmts})
         wall, cpu = sorted(runs)[len(runs) // 2]  # the median run (by wall time), with its CPU
+        paired = [c / n * 1000 / sum(sum(v) for v in r.values()) for (_, c), r in zip(runs, rounds, strict=True)]
         single, floor_s, ratios = {}, 0.0, {}
         for f in fmts:
             t = time.perf_counter()
@@ -267,17 +281,6 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
             rate = float(alone["formats"][f].get("encode_fps") or 0.0)
             floor_s += n / rate if rate > 0 else 0.0
             ratios[f] = alone["formats"][f].get("compression_ratio")
-        # each format's own writing and reading CPU, on a sample of the session's frames
-        sample = [dataclasses.replace(fr, pixels=np.array(fr.pixels))
-                  for _, fr in zip(range(min(n, 120)), iter_session_frames(session_dir), strict=False)]
-        for f in fmts:
-            format_cpu(f, sample[:4], Path(tmp))  # loads what a format compiles or imports on first use
-        # the floor moves by 15% from one measurement to the next on a shared machine, as the
-        # archive does: measured as often as the archive is timed (at most 3 times), median taken
-        # each format on the encoder threads it has in the archive: the floor of the same work
-        per_format = encoder_threads(None, len(fmts))
-        rounds = [{f: format_cpu(f, sample, Path(tmp), per_format) for f in fmts}
-                  for _ in range(min(3, max(1, repeat)))]
         codec_ms = {f: {k: round(statistics.median(r[f][i] for r in rounds), 2)
                         for i, k in enumerate(("write", "read"))} for f in fmts}
         # the one read of the source every archive makes (decompress, parse, checks): no archiver
@@ -301,6 +304,10 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
             "formats_bound_x_real_time": round(1000 / 60 * cores / codecs_ms, 3) if codecs_ms else None,
             # the goal's line: the whole archive's CPU against the formats' own write + read-back
             "cpu_vs_formats": round(cpu / n * 1000 / codecs_ms, 3) if codecs_ms else None,
+            # each run against the floor measured right after it, and their median: the verdict
+            # that holds on a machine whose pace moves between measurements
+            "cpu_vs_formats_rounds": [round(v, 3) for v in paired],
+            "cpu_vs_formats_rounds_median": round(statistics.median(paired), 3),
             "source_read_cpu_ms_per_frame": round(source_read_ms, 2),
             "cpu_vs_formats_and_source_read": round(cpu / n * 1000 / (codecs_ms + source_read_ms), 3)
             if codecs_ms else None}

@@ -69,6 +69,10 @@ def test_bench_archive_session_reports_x_real_time_beside_its_floors():
     assert set(cpu) == {"png16", "hdf5"} and all(v["write"] > 0 and v["read"] > 0 for v in cpu.values())
     total = sum(v["write"] + v["read"] for v in cpu.values())
     assert abs(res["formats_cpu_ms_per_frame"] - total) < 0.05
+    # each run against the floor round measured right after it, and the median of those ratios
+    paired = res["cpu_vs_formats_rounds"]
+    assert len(paired) == 3 and all(v > 0 for v in paired)
+    assert res["cpu_vs_formats_rounds_median"] == sorted(paired)[1]
     assert res["formats_bound_x_real_time"] == round(1000 / 60 * res["cores"] / res["formats_cpu_ms_per_frame"], 3) \
         or abs(res["formats_bound_x_real_time"] - 1000 / 60 * res["cores"] / total) < 0.01
 
