@@ -387,7 +387,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
 
     try:
         if todo:
-            outcomes = fan_out(frames(), [writer_for(fid) for fid in todo], copy=dataclasses.replace)
+            outcomes = fan_out(frames(), [writer_for(fid) for fid in todo], copy=dataclasses.replace,
+                               slots=usable_cores())  # the codecs take turns on the cores (see fan_out)
         else:
             outcomes = []
             if source.extras is not None:

@@ -43,6 +43,7 @@ from thermcap.archive.archiver import (
     format_entry,
     fresh_partial,
     take_name,
+    usable_cores,
     verify_format_dir,
     write_verified,
 )
@@ -190,7 +191,8 @@ def _archive_segment_locked(session_dir: Path, seg: Path, first_index: int, form
         return write
 
     try:
-        outcomes = fan_out(source.frames(), [writer(fid) for fid in formats], copy=dataclasses.replace)
+        outcomes = fan_out(source.frames(), [writer(fid) for fid in formats], copy=dataclasses.replace,
+                           slots=usable_cores())
         damaged = next((o for o in outcomes if isinstance(o, SourceDamagedError)), None)
         if damaged is not None:
             raise damaged

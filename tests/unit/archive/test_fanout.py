@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import contextlib
+
 import pytest
 
 from thermcap.archive.fanout import fan_out
@@ -92,3 +94,99 @@ def test_a_consumer_that_rebinds_a_field_cannot_change_what_the_others_see():
     results = fan_out(iter(items), [tamper, honest], copy=dataclasses.replace)
     assert results[0] == [-1] * 50
     assert results[1] == list(range(50))
+
+
+class _Inside:
+    """How many consumers are working at once, at most, counted at each item and in each tail."""
+
+    def __init__(self) -> None:
+        import threading
+
+        self.lock = threading.Lock()
+        self.now = 0
+        self.most = 0
+
+    def __enter__(self) -> None:
+        with self.lock:
+            self.now += 1
+            self.most = max(self.most, self.now)
+
+    def __exit__(self, *_exc) -> None:
+        with self.lock:
+            self.now -= 1
+
+
+@pytest.mark.parametrize("slots, turn", [(1, 1), (1, 8), (2, 3), (2, 8)])
+def test_consumers_take_turns_in_slots_and_every_one_sees_every_item(slots, turn):
+    """At most ``slots`` consumers work at once, in the stream and in what they do after it (a
+    writer's read-back); each still sees every item once, in order. Three consumers meet at a
+    barrier on their first item: teed without turns all three get there together (the count
+    reaches 3), taking turns only ``slots`` of them can (the barrier gives up, and they go on)."""
+    import threading
+
+    inside = _Inside()
+    barrier = threading.Barrier(3, timeout=1.0)
+
+    def consumer(it):
+        seen = []
+        for item in it:
+            with inside:
+                if item == 0:
+                    with contextlib.suppress(threading.BrokenBarrierError):
+                        barrier.wait()
+                seen.append(item)
+        with inside:  # the tail: a writer reading its files back
+            seen.append("tail")
+        return seen
+
+    results = fan_out(iter(range(300)), [consumer, consumer, consumer], depth=4, slots=slots, turn=turn)
+    assert results == [[*range(300), "tail"]] * 3
+    assert inside.most <= slots
+
+
+def test_without_turns_the_consumers_all_work_at_once():
+    """The control for the test above: the barrier of three is met when nothing takes turns."""
+    import threading
+
+    inside = _Inside()
+    barrier = threading.Barrier(3, timeout=30.0)
+
+    def consumer(it):
+        for item in it:
+            with inside:
+                if item == 0:
+                    barrier.wait()
+        return True
+
+    assert fan_out(iter(range(20)), [consumer] * 3, slots=None) == [True] * 3
+    assert fan_out(iter(range(20)), [consumer] * 3, slots=3) == [True] * 3  # as many slots as consumers
+    assert inside.most == 3
+
+
+@pytest.mark.parametrize("slots", [1, 2])
+def test_a_consumer_that_fails_holding_a_slot_gives_it_back(slots):
+    """A writer that raises mid-stream leaves its iterator suspended in the exception's
+    traceback, still holding its slot: the others must still get every item."""
+    def fails(it):
+        for i in it:
+            if i == 10:
+                raise ValueError("writer broke")
+        return "never"
+
+    import threading
+
+    out: list = []
+    run = threading.Thread(target=lambda: out.append(
+        fan_out(iter(range(500)), [fails, fails, list, list], depth=2, slots=slots, turn=4)), daemon=True)
+    run.start()
+    run.join(timeout=120)  # a slot never given back deadlocks: fail, do not hang the suite
+    assert not run.is_alive(), "fan_out deadlocked: a failed consumer kept its slot"
+    results = out[0]
+    assert isinstance(results[0], ValueError) and isinstance(results[1], ValueError)
+    assert results[2] == results[3] == list(range(500))
+
+
+@pytest.mark.parametrize("kwargs", [{"slots": 0}, {"turn": 0}, {"depth": 0}])
+def test_absurd_turns_are_refused(kwargs):
+    with pytest.raises(ValueError, match="at least 1"):
+        fan_out(iter(range(3)), [list], **kwargs)
