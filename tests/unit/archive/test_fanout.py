@@ -190,3 +190,33 @@ def test_a_consumer_that_fails_holding_a_slot_gives_it_back(slots):
 def test_absurd_turns_are_refused(kwargs):
     with pytest.raises(ValueError, match="at least 1"):
         fan_out(iter(range(3)), [list], **kwargs)
+
+
+def test_the_sources_read_takes_a_slot_too():
+    """Reading and hashing the source is work on a core as the codecs' is: with one slot, the
+    source does not read its next item while a consumer works. A consumer on its first item
+    waits for the source to start reading the next one; the source never can (the wait gives up)."""
+    import threading
+
+    inside = _Inside()
+    reading = threading.Event()
+    caught: list[bool] = []
+
+    def source():
+        for i in range(40):
+            with inside:
+                reading.set()  # reading item i
+            yield i
+
+    def consumer(it):
+        out = []
+        for item in it:
+            with inside:
+                if item == 0 and not caught:
+                    reading.clear()
+                    caught.append(reading.wait(timeout=1.0))  # does the source read meanwhile?
+            out.append(item)
+        return out
+
+    assert fan_out(source(), [consumer, consumer], depth=4, slots=1) == [list(range(40))] * 2
+    assert caught == [False] and inside.most == 1
