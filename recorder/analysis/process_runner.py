@@ -52,6 +52,9 @@ def _child_env() -> dict[str, str]:
     # the detector's frame-sized temporaries stay in the heap (see recorder.frame_heap)
     for key, value in FRAME_HEAP_ENV.items():
         env.setdefault(key, value)
+    # one thread does the child's work: numpy's and scipy's OpenBLAS each started a pool of
+    # workers that spun at import, 0.1-0.3 s of CPU before the first frame, for no BLAS call
+    env.setdefault("OPENBLAS_NUM_THREADS", "1")
     paths = [p for p in sys.path if p]
     env["PYTHONPATH"] = os.pathsep.join(paths + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     return env

@@ -172,3 +172,19 @@ def test_a_source_that_waits_gets_a_deep_ring_of_slots_within_its_bytes(tmp_path
     if frame_bytes == 160 * 128 * 2:  # the recording says how many it had
         res = rec.run()
         assert res.error is None and res.analysis_runner["slots"] == [slots]
+
+
+@pytest.mark.parametrize("users", [None, "3"])
+def test_the_child_runs_one_blas_thread_unless_the_user_said_otherwise(monkeypatch, users):
+    """The detector makes no BLAS call; numpy's and scipy's OpenBLAS pools had spun at import
+    in the child, 0.1-0.3 s of CPU before the first frame. A user's own setting is kept."""
+    if users is None:
+        monkeypatch.delenv("OPENBLAS_NUM_THREADS", raising=False)
+    else:
+        monkeypatch.setenv("OPENBLAS_NUM_THREADS", users)
+    runner = ProcessRunner(HotSpotDetector(DEFAULT_MODEL), 2, 64 * 64 * 2)
+    try:
+        environ = Path(f"/proc/{runner.pid}/environ").read_bytes().split(b"\0")
+        assert f"OPENBLAS_NUM_THREADS={users or 1}".encode() in environ
+    finally:
+        runner.close(10.0)
