@@ -288,13 +288,9 @@ class HotSpotDetector:
     _EIGHT: Any = field(default_factory=lambda: np.ones((3, 3), bool), repr=False)
     _FOUR: Any = field(default_factory=lambda: ndimage.generate_binary_structure(2, 1), repr=False)
 
-    def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Quarter-resolution (opened background, cell mean, cell maximum) of ``temps``, and
-        ``temps`` edge-padded to whole cells (itself where it already is).
-
-        The background is a grey opening (min then max filter) wider than any target
-        (``max_size``): it removes warm objects but keeps edges such as the horizon, where a
-        smoothed or block background would leave a band of false targets."""
+    def _cells(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Quarter-resolution (cell mean, cell maximum) of ``temps``, and ``temps`` edge-padded to
+        whole cells (itself where it already is)."""
         f = self._F
         h, w = temps.shape
         ph, pw = -(-h // f) * f, -(-w // f) * f
@@ -312,9 +308,33 @@ class HotSpotDetector:
             rmx = np.maximum(np.maximum(rows[0], rows[1]), np.maximum(rows[2], rows[3]))
             mean = (rsum[:, 0::f] + rsum[:, 1::f] + rsum[:, 2::f] + rsum[:, 3::f]) * np.float32(1.0 / (f * f))
             cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
-        k = self.max_size // f + 1
-        opened = sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
-        return opened, mean, cmax, padded
+        return mean, cmax, padded
+
+    def _opening(self, mean: np.ndarray) -> np.ndarray:
+        """The background: a grey opening (min then max filter) of the cell means wider than any
+        target (``max_size``). It removes warm objects but keeps edges such as the horizon, where
+        a smoothed or block background would leave a band of false targets."""
+        k = self.max_size // self._F + 1
+        return sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
+
+    def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(opened background, cell mean, cell maximum, padded ``temps``): see ``_cells``."""
+        mean, cmax, padded = self._cells(temps)
+        return self._opening(mean), mean, cmax, padded
+
+    def _too_flat(self, mean: np.ndarray, cmax: np.ndarray, affine: tuple[np.float32, np.float32] | None) -> bool:
+        """Whether no cell can stand ``threshold_k`` above the background, whatever the opening
+        gives: the opening is never below the coarsest mean, nor a cell above the warmest, so a
+        frame whose warmest cell is within ``threshold_k`` of its coldest mean has no candidate.
+        Exact, rounding included: the same float32 operations, each monotonic, on the extremes
+        (``_affine32`` on counts, as the cells get it). A uniform or low-contrast view (a wall,
+        fog, the sea, a lens cap) then costs the cell grid alone: half of a flat 640x512 frame."""
+        if not mean.size:
+            return False
+        lo, hi = np.array([mean.min()]), np.array([cmax.max()])
+        if affine is not None:
+            lo, hi = _affine32(lo, *affine), _affine32(hi, *affine)
+        return bool(((hi - lo) < self.threshold_k)[0])
 
     def background(self, temps: np.ndarray) -> np.ndarray:
         """The local background (C) at full resolution."""
@@ -372,23 +392,23 @@ class HotSpotDetector:
         f = self._F
         h, w = raw.shape
         affine = _counts_affine(self.model) if not self._has_bad_pixels(raw.shape) else None
+        src = raw if affine is not None else self._fix_bad_pixels(_celsius32(self.model, raw))
+        cell_mean, cmax, padded_src = self._cells(src)
+        dets: list[Detection] = []
+        per_target: list[dict[str, Any]] = []
+        if self._too_flat(cell_mean, cmax, affine):
+            return self._answer(dets, per_target, None)
+        opened = self._opening(cell_mean)
         if affine is not None:  # on counts; only the grid and the windows looked at are converted
-            opened, cell_mean, cmax, padded_src = (_affine32(a, *affine) if i < 3 else a
-                                                   for i, a in enumerate(self._coarse(raw)))
-            src = raw
+            opened, cell_mean, cmax = (_affine32(a, *affine) for a in (opened, cell_mean, cmax))
 
             def celsius(a: np.ndarray) -> np.ndarray:
                 return _affine32(a, *affine)
         else:
-            src = self._fix_bad_pixels(_celsius32(self.model, raw))
-            opened, cell_mean, cmax, padded_src = self._coarse(src)
-
             def celsius(a: np.ndarray) -> np.ndarray:
                 return a
         excess_cells = cmax - opened
         cells = excess_cells >= self.threshold_k
-        dets: list[Detection] = []
-        per_target = []
         capped: dict[str, Any] | None = None
         share = int(np.count_nonzero(cells)) / cells.size
         if share > self.max_candidate_fraction:
@@ -472,6 +492,10 @@ class HotSpotDetector:
                     max_temp_c=m["max_target_temp_c"], mean_temp_c=m["mean_target_temp_c"],
                     confidence=float(1.0 - math.exp(-excess / max(self.threshold_k, 1e-6))), metrics=m))
                 per_target.append(m)
+        return self._answer(dets, per_target, capped)
+
+    def _answer(self, dets: list[Detection], per_target: list[dict[str, Any]],
+                capped: dict[str, Any] | None) -> tuple[list[Detection], dict[str, Any]]:
         self._track(dets)
         conf = max((d.confidence for d in dets), default=None)
         analysis = frame_analysis(per_target, source="detector", confidence=round(conf, 3) if conf else None)

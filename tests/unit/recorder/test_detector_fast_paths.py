@@ -259,3 +259,48 @@ def test_compiled_windows_take_the_most_components_a_box_can_hold(h, w):
     compiled, plain = _both_window_paths(det, src, np.zeros((ch, cw), np.float32), boxes, None)
     assert len(compiled) == len(plain) == (h * w + 1) // 2 + 8
     assert all(g[:4] == e[:4] and np.array_equal(g[4], e[4]) for g, e in zip(compiled, plain, strict=True))
+
+
+def _blob_frame(h, w, level, amplitude, y, x, size, noise, seed):
+    rng = np.random.default_rng(seed)
+    frame = np.full((h, w), level, np.float64) + rng.normal(0, noise, (h, w))
+    frame[y:y + size, x:x + size] += amplitude
+    return np.clip(np.rint(frame), 0, 65535).astype(np.uint16)
+
+
+@settings(max_examples=120, deadline=None)
+@given(st.integers(8, 90), st.integers(8, 90), st.integers(500, 9000), st.floats(120.0, 160.0),
+       st.integers(0, 80), st.integers(0, 80), st.integers(1, 12), st.sampled_from([0.0, 0.4, 2.0]),
+       st.booleans(), st.integers(0, 2**32 - 1))
+def test_a_frame_too_flat_for_any_candidate_answers_as_the_full_path(h, w, level, amplitude, y, x, size, noise,
+                                                                     as_curve, seed):
+    """The early answer for a low-contrast frame (its warmest cell within the threshold of its
+    coldest mean) is the full path's, at the threshold's edge: a blob of 120-160 counts (the
+    threshold is 139 counts at 0.036 K a count), on counts and on temperatures."""
+    frame = _blob_frame(h, w, level, amplitude, min(y, h - 1), min(x, w - 1), size, noise, seed)
+    model = LinearModel()
+    early, full = (HotSpotDetector(_SameLineAsACurve(model) if as_curve else model) for _ in range(2))  # type: ignore[arg-type]
+    full._too_flat = lambda *_a: False  # type: ignore[method-assign]
+    assert _run(early, [frame]) == _run(full, [frame])
+
+
+def test_the_early_answer_is_taken_at_the_thresholds_edge_and_not_past_it():
+    model = LinearModel()
+    below, above = (_blob_frame(64, 64, 2000, a, 20, 20, 8, 0.0, 1) for a in (138, 140))
+    det = HotSpotDetector(model)
+    mean, cmax, _ = det._cells(below)
+    assert det._too_flat(mean, cmax, (np.float32(model.scale_c_per_count), np.float32(model.offset_c)))
+    mean, cmax, _ = det._cells(above)
+    assert not det._too_flat(mean, cmax, (np.float32(model.scale_c_per_count), np.float32(model.offset_c)))
+
+
+def test_a_uniform_frame_costs_the_cell_grid_alone(monkeypatch):
+    """A wall, fog, the sea, a lens cap: no opening is computed (it was half of a flat frame)."""
+    det = HotSpotDetector(LinearModel())
+
+    def no_opening(_mean):
+        raise AssertionError("the opening was computed for a frame with no possible candidate")
+
+    monkeypatch.setattr(det, "_opening", no_opening)
+    dets, analysis = det.detect(np.full((512, 640), 2000, np.uint16))
+    assert dets == [] and "detection_capped" not in analysis
