@@ -290,7 +290,8 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
     """Archive one session; returns the manifest. Raises VerificationError if any format fails.
 
     ``workers``: encoder threads in all (None: the usable cores), shared among the formats
-    written at once (``encoder_threads``).
+    written at once (``encoder_threads``); where the formats outnumber them, they take turns
+    (``fan_out``'s slots), so ``workers=1`` never encodes two formats at once.
 
     ``before_delete(session_dir)`` runs once the copies are re-checked and before the source goes
     (the API indexes the archive there, so no reader is left pointing at deleted segments)."""
@@ -373,7 +374,9 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
                 save_manifest(session_dir, manifest)
 
     failures: list[str] = []
-    per_format = encoder_threads(workers, len(todo))
+    # --workers: the encoder threads in all, and as many codecs working at once (fan_out's slots)
+    threads = usable_cores() if workers is None else workers
+    per_format = encoder_threads(threads, len(todo))
 
     # The source is decoded once and teed to every format's writer (each on its own thread), and
     # its other messages go to the extras from the same read; each format is still verified on
@@ -388,7 +391,7 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     try:
         if todo:
             outcomes = fan_out(frames(), [writer_for(fid) for fid in todo], copy=dataclasses.replace,
-                               slots=usable_cores())  # the codecs take turns on the cores (see fan_out)
+                               slots=threads)  # the codecs take turns on the threads (see fan_out)
         else:
             outcomes = []
             if source.extras is not None:

@@ -36,7 +36,8 @@ def _formats(value: str) -> list[str]:
 @click.option("--delete-source", is_flag=True, help="Delete the MCAP segments once every format verified.")
 @click.option("--force", is_flag=True, help="Rewrite formats that are already archived.")
 @click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=None,
-              help="Encoder threads in all, shared among the formats written at once (default: the usable cores).")
+              help="Encoder threads in all: shared among the formats written at once, which take turns "
+                   "when there are more of them (default: the usable cores).")
 @json_option
 def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
             workers: int | None, as_json: bool) -> None:

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import threading
 import zipfile
 from typing import ClassVar
 
@@ -285,6 +287,50 @@ def test_encoder_threads_are_shared_among_the_formats_written_at_once(session, w
         for fid in ids:
             format_registry.pop(fid)
     assert _Counting.seen == [each] * formats
+
+
+class _Overlapping(ZippedFrames):
+    """PNG16 that counts how many of its kind are encoding at once. On its first frame each
+    waits for another to arrive too: where two may work at once they meet there; where one may,
+    the wait gives up and it goes on."""
+
+    lock = threading.Lock()
+    now = 0
+    most = 0
+    meet: ClassVar[threading.Barrier] = threading.Barrier(2, timeout=1.0)
+
+    def __init__(self):
+        super().__init__(Png16(), "overlap-test")
+
+    def write(self, frames, out_dir, ctx):
+        def counted(stream):
+            for f in stream:
+                with _Overlapping.lock:
+                    _Overlapping.now += 1
+                    _Overlapping.most = max(_Overlapping.most, _Overlapping.now)
+                if f.index == 0:
+                    with contextlib.suppress(threading.BrokenBarrierError):
+                        _Overlapping.meet.wait()
+                yield f
+                with _Overlapping.lock:
+                    _Overlapping.now -= 1
+        return super().write(counted(frames), out_dir, ctx)
+
+
+@pytest.mark.parametrize("workers, most", [(1, 1), (2, 2)])
+def test_workers_bound_the_codecs_working_at_once(session, workers, most):
+    """``--workers 1`` is one thread in all: two formats take turns, never encoding together."""
+    ids = ["overlap-test-0", "overlap-test-1"]
+    for fid in ids:
+        register_format(fid, _Overlapping)
+    _Overlapping.now, _Overlapping.most = 0, 0
+    _Overlapping.meet = threading.Barrier(2, timeout=1.0)
+    try:
+        archive_session(session, ids, workers=workers)
+    finally:
+        for fid in ids:
+            format_registry.pop(fid)
+    assert _Overlapping.most == most
 
 
 def test_encoder_threads_default_to_the_usable_cores(monkeypatch):
