@@ -107,6 +107,10 @@ def write_bag_metadata(session_dir: str | os.PathLike) -> Path | None:
             path.unlink(missing_ok=True)
             return None
         tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        tmp.write_text(text)
-        os.replace(tmp, path)
+        try:
+            tmp.write_text(text)
+            os.replace(tmp, path)
+        except BaseException:  # a full disk: the old file stays, and no half-written .tmp beside it
+            tmp.unlink(missing_ok=True)
+            raise
     return path

@@ -46,3 +46,22 @@ def test_a_full_disk_counts_only_what_is_on_disk(small_disk):
     if res.frames_written < res.frames_captured - res.frames_dropped:
         assert "never reached a closed chunk" in res.error
     os.sync()
+
+
+def test_the_bag_metadata_leaves_nothing_half_written_on_a_full_disk(small_disk):
+    """metadata.yaml is derived data written through a temporary file; a full disk raises, and
+    the temporary file (created before the write failed) must not stay beside the session."""
+    from thermcap.recorder.storage.rosbag2 import BAG_METADATA, write_bag_metadata
+
+    res = Recorder(SimSource(width=64, height=48, frames=10, paced=False, seed=3), small_disk, session_id="m",
+                   analysis=False).run()
+    assert res.ok
+    session = small_disk / "sessions" / "m"
+    before = (session / BAG_METADATA).read_bytes()
+    with open(small_disk / "filler", "wb", buffering=0) as f, pytest.raises(OSError):  # the rest of the disk
+        while True:
+            f.write(b"\0" * 65536)
+    with pytest.raises(OSError):
+        write_bag_metadata(session)
+    assert not [p.name for p in session.iterdir() if p.name.endswith(".tmp")]
+    assert (session / BAG_METADATA).read_bytes() == before  # the old file stays whole
