@@ -163,8 +163,8 @@ from thermcap.recorder.frame_heap import keep_frame_blocks
 __all__ = ["BITSTREAM_VERSION", "HEADER", "TemporalDecoder", "TemporalEncoder", "TpredError", "decode_gops",
            "decode_records", "encode_gops", "parse_header"]
 
-BITSTREAM_VERSION = 7  # what the encoder writes by default; every earlier version decodes
-MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4", 5: b"TPF5", 6: b"TPF6", 7: b"TPF7"}
+BITSTREAM_VERSION = 8  # what the encoder writes by default; every earlier version decodes
+MAGICS = {1: b"TPF1", 2: b"TPF2", 3: b"TPF3", 4: b"TPF4", 5: b"TPF5", 6: b"TPF6", 7: b"TPF7", 8: b"TPF8"}
 _VERSION_OF = {m: v for v, m in MAGICS.items()}
 T = TypeVar("T")
 HEADER = struct.Struct("<4sBBHHhhBBI")  # 20 bytes
@@ -422,6 +422,9 @@ BLOCK = 16
 SUBPEL_LIMIT = 64 << SCALE_BITS
 _SUBPEL_CLIP = 8 << SCALE_BITS  # residuals the encoder's fit leaves out: something moving on its own
 _SUBPEL = struct.Struct("<bbb")  # sx, sy, sl
+#: Version 8: a predicted record's filter, after its three terms: this many int8 coefficients
+#: (``archive.tpred_filter.TAPS``, a 5x5 filter without its centre), or none (a 0 byte).
+FILTER_TAPS = 24
 #: The encoder averages ``SHAKE_WINDOW`` frames, not ``window``, while its last ``SHAKE_FRAMES``
 #: fits moved the picture by more than ``SHAKE_RMS`` sixteenths of a pixel (``TemporalEncoder._keep``).
 SHAKE_WINDOW, SHAKE_FRAMES, SHAKE_RMS = 4, 8, 5
@@ -693,29 +696,47 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
 
 
 def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
-            other: np.ndarray) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray]:
-    """Version 6's encoder side: ``((sx, sy, sl), prediction, scene mean)``, the shift and the
-    Laplacian's weight in sixteenths fitted by least squares to the residual against the scene
-    mean's gradients and Laplacian, and the prediction and mean corrected by them; zeros and
-    the inputs where the fit is degenerate or does not lower the residual's absolute sum (on
-    every other row and column)."""
+            other: np.ndarray) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray, int | None]:
+    """Version 6's encoder side: ``((sx, sy, sl), prediction, scene mean, cost)``, the shift and
+    the Laplacian's weight in sixteenths fitted by least squares to the residual against the
+    scene mean's gradients and Laplacian, and the prediction and mean corrected by them; zeros
+    and the inputs where the fit is degenerate or does not lower the residual's absolute sum (on
+    every other row and column). The cost is that sum for what is returned (``None`` where the
+    fit was degenerate and nothing was measured)."""
     from thermcap.archive import tpred_kernels
 
     sums = tpred_kernels.subpel_sums(f, m64, est, other, SUBPEL_LIMIT, _SUBPEL_CLIP)
     a, rhs = sums[:, :3], sums[:, 3]
     scale = float(np.prod(a.diagonal()))
     if scale <= 0 or abs(float(np.linalg.det(a))) <= 1e-9 * scale:  # a flat frame, or too few pixels
-        return (0, 0, 0), pred, m64
+        return (0, 0, 0), pred, m64, None
     fit = np.linalg.solve(a, rhs) * 16
     sx, sy = (max(-15, min(15, round(v))) for v in fit[:2])  # less than a pixel: a whole one is dx, dy
     sl = max(-16, min(16, round(fit[2])))
     if sx == 0 and sy == 0 and sl == 0:
-        return (0, 0, 0), pred, m64
+        return (0, 0, 0), pred, m64, None
     moved, m64c = np.empty_like(pred), np.empty_like(m64)
     before, after = tpred_kernels.subpel_apply(f, m64, est, other, pred, sx, sy, sl, SUBPEL_LIMIT, True, moved, m64c)
     if after >= before:
-        return (0, 0, 0), pred, m64
-    return (sx, sy, sl), moved, m64c
+        return (0, 0, 0), pred, m64, before
+    return (sx, sy, sl), moved, m64c, after
+
+
+def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
+              cost: int | None) -> tuple[bytes, np.ndarray, np.ndarray] | None:
+    """Version 8's encoder side: the record's filter bytes (``FILTER_TAPS`` and the
+    coefficients), the prediction and the scene mean, with the 5x5 filter fitted to ``f`` on the
+    uncorrected ``pred`` and ``m64``; ``None`` where it does not lower the residual's absolute
+    sum below ``cost`` (version 6's terms'; the uncorrected prediction's where that is ``None``)."""
+    from thermcap.archive import tpred_filter
+
+    fitted = tpred_filter.fit(f, pred, m64, est, other)
+    if fitted is None:
+        return None
+    coefs, precision, p, m64c, before, after = fitted
+    if after >= (before if cost is None else cost):
+        return None
+    return bytes([FILTER_TAPS, precision]) + coefs.tobytes(), p, m64c
 
 
 def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
@@ -907,9 +928,17 @@ class TemporalEncoder:
             shift = b""
             if self.bitstream >= 6:
                 assert st.pattern is not None and other is not None
-                terms, pred, m64 = _subpel(f, pred, m64, st.pattern.est, other)
+                plain_pred, plain_m64 = pred, m64
+                terms, pred, m64, cost = _subpel(f, pred, m64, st.pattern.est, other)
                 self._shake.append(terms[0] ** 2 + terms[1] ** 2)
-                shift = _SUBPEL.pack(*terms)
+                filt = b"\0" if self.bitstream >= 8 else b""
+                if self.bitstream >= 8 and (terms[:2] != (0, 0) or self._keep() < self.window):
+                    # it moved by a fraction of a pixel: a filter may follow the move's blur too
+                    filtered = _filtered(f, plain_pred, plain_m64, st.pattern.est, other, cost)
+                    if filtered is not None:
+                        filt, pred, m64 = filtered
+                        terms = (0, 0, 0)
+                shift = _SUBPEL.pack(*terms) + filt
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
                 other = st.with_modes(modes, pred, other)
@@ -1012,6 +1041,37 @@ class TemporalDecoder:
                              f"weight of {sl} sixteenths (beyond 16)")
         return (sx, sy, sl), payload[_SUBPEL.size:]
 
+    @staticmethod
+    def _read_filter(payload: memoryview) -> tuple[tuple[np.ndarray, int] | None, memoryview]:
+        """Version 8: the record's filter, its coefficients and their precision (``None``: no
+        filter), and the rest of the payload."""
+        from thermcap.archive.tpred_filter import PRECISIONS
+
+        if len(payload) < 1:
+            raise TpredError("a version 8 record ends before its filter")
+        taps = payload[0]
+        if taps == 0:
+            return None, payload[1:]
+        if taps != FILTER_TAPS:
+            raise TpredError(f"a filter of {taps} coefficients (version 8 has {FILTER_TAPS} or none)")
+        if len(payload) < 2 + taps:
+            raise TpredError("a version 8 record ends inside its filter")
+        if payload[1] not in PRECISIONS:
+            raise TpredError(f"a filter in units of 2**-{payload[1]} (version 8 has 2**-{PRECISIONS[0]} to "
+                             f"2**-{PRECISIONS[-1]})")
+        return (np.frombuffer(payload[2:2 + taps], np.int8).copy(), payload[1]), payload[2 + taps:]
+
+    def _apply_filter(self, filt: tuple[np.ndarray, int], pred: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> np.ndarray:
+        """Version 8: ``pred`` filtered in place; returns the filtered scene mean."""
+        from thermcap.archive import tpred_filter
+
+        st = self._state
+        assert isinstance(st, _State4) and st.pattern is not None and other is not None
+        m64c = np.empty_like(m64)
+        tpred_filter.filter_apply(pred, m64, st.pattern.est, other, pred, *filt, tpred_filter.FILTER_LIMIT, False,
+                                  pred, m64c)  # nothing to measure against: pred stands in for the frame
+        return m64c
+
     def _apply_terms(self, terms: tuple[int, int, int], pred: np.ndarray, m64: np.ndarray,
                      other: np.ndarray | None) -> np.ndarray:
         """Version 6: ``pred`` corrected in place; returns the corrected scene mean."""
@@ -1062,12 +1122,19 @@ class TemporalDecoder:
                 except tpred_key.KeyFrameError as exc:
                     raise TpredError(str(exc)) from None
             elif isinstance(st, _State3):
-                terms = (0, 0, 0)
+                terms, filt = (0, 0, 0), None
                 if hdr.version >= 6:
                     terms, payload = self._read_terms(payload)
+                if hdr.version >= 8:
+                    filt, payload = self._read_filter(payload)
+                    if filt is not None and any(terms):
+                        raise TpredError("a record with both a sub-pixel shift and a filter (version 8 has one or "
+                                         "the other)")
                 modes, pos = _unpack_modes(payload, shape)
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)
-                if any(terms):
+                if filt is not None:
+                    m64 = self._apply_filter(filt, pred, m64, other)
+                elif any(terms):
                     m64 = self._apply_terms(terms, pred, m64, other)
                 if modes is not None:
                     other = st.with_modes(modes, pred, other)
