@@ -124,13 +124,30 @@ residual (pixels within ``SUBPEL_LIMIT`` and with residuals within 8 counts), an
 where the fit does not lower the residual: a sub-pixel shake of 0.5 px had made every predicted
 frame miss by a share of each edge's slope, and half of them coded alone.
 
-Bitstream, version 7 (magic ``b"TPF7"``; what thermcap writes): version 6, and every frame coded
+Bitstream, version 7 (magic ``b"TPF7"``): version 6, and every frame coded
 alone (a key record's frame after its defect list, an intra record's payload) is
 ``archive.tpred_key``'s version 7 layout: a rule byte, then the streams; rule 1 predicts a pixel
 that continues a run of equal values along its row by the run (specified there). Real FLIR CSQ
 sequences hold such runs in most of their pixels and code every frame alone (their temporal noise
 is above the scene's detail); version 6 lost to JPEG XL effort 2 on them (0.95x), version 7 wins
 (1.22x).
+
+Bitstream, version 8 (magic ``b"TPF8"``; what thermcap writes): version 7, and a predicted
+record's three terms are followed by its filter: one byte ``taps``, 0 (no filter) or 24, and
+when 24, one byte ``q`` (4 <= q <= 9) and 24 ``int8`` coefficients ``k``, in the order of
+``archive.tpred_filter.TAPS`` (the 5x5 neighbours ``(dy, dx)`` row by row, without the
+centre), in units of ``2**-q``. A record with a filter has terms 0, 0, 0. The decoder computes
+version 4's ``p``, ``m64`` and ``other``; then at every pixel not in ``other`` and two or more
+from every edge whose 24 neighbours all differ from it by less than ``FILTER_LIMIT`` (64
+counts, in 1/64 counts) in ``m64`` (uncorrected): ``m64 += (sum(k[i] * (m64[r + dy_i, c + dx_i]
+- m64[r, c])) >> q)`` (floor) and ``p = (m64 + E + 32) >> 6``. The block modes, the streams
+and the learning (against this ``m64``) follow as in version 4. The encoder fits the filter by
+least squares to the residual (pixels within ``FILTER_LIMIT`` and with residuals within 8
+counts, on every other row and every 7th column) when the frame's version 6 fit moved the
+picture, or while the camera shakes, writes the finest ``q`` in which every coefficient fits,
+and keeps the filter where it lowers the residual below the three terms': a bilinear move by a
+fraction of a pixel blurs by that fraction as well, and the window's mean of frames at other
+fractions is blurred differently, which a first-order shift does not follow.
 
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference, each difference clipped at 16 counts, on every 8th line;
@@ -422,9 +439,6 @@ BLOCK = 16
 SUBPEL_LIMIT = 64 << SCALE_BITS
 _SUBPEL_CLIP = 8 << SCALE_BITS  # residuals the encoder's fit leaves out: something moving on its own
 _SUBPEL = struct.Struct("<bbb")  # sx, sy, sl
-#: Version 8: a predicted record's filter, after its three terms: this many int8 coefficients
-#: (``archive.tpred_filter.TAPS``, a 5x5 filter without its centre), or none (a 0 byte).
-FILTER_TAPS = 24
 #: The encoder averages ``SHAKE_WINDOW`` frames, not ``window``, while its last ``SHAKE_FRAMES``
 #: fits moved the picture by more than ``SHAKE_RMS`` sixteenths of a pixel (``TemporalEncoder._keep``).
 SHAKE_WINDOW, SHAKE_FRAMES, SHAKE_RMS = 4, 8, 5
@@ -724,19 +738,19 @@ def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
 
 def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
               cost: int | None) -> tuple[bytes, np.ndarray, np.ndarray] | None:
-    """Version 8's encoder side: the record's filter bytes (``FILTER_TAPS`` and the
-    coefficients), the prediction and the scene mean, with the 5x5 filter fitted to ``f`` on the
-    uncorrected ``pred`` and ``m64``; ``None`` where it does not lower the residual's absolute
-    sum below ``cost`` (version 6's terms'; the uncorrected prediction's where that is ``None``)."""
+    """Version 8's encoder side: the record's filter bytes, the prediction and the scene mean,
+    with the filters fitted to ``f`` on the uncorrected ``pred`` and ``m64``; ``None`` where they
+    do not lower the residual's absolute sum below ``cost`` (version 6's terms'; the uncorrected
+    prediction's where that is ``None``)."""
     from thermcap.archive import tpred_filter
 
     fitted = tpred_filter.fit(f, pred, m64, est, other)
     if fitted is None:
         return None
-    coefs, precision, p, m64c, before, after = fitted
+    coefs, precisions, p, m64c, before, after = fitted
     if after >= (before if cost is None else cost):
         return None
-    return bytes([FILTER_TAPS, precision]) + coefs.tobytes(), p, m64c
+    return bytes([len(coefs)]) + b"".join(bytes([q]) + c.tobytes() for q, c in zip(precisions, coefs)), p, m64c
 
 
 def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:
@@ -1042,34 +1056,39 @@ class TemporalDecoder:
         return (sx, sy, sl), payload[_SUBPEL.size:]
 
     @staticmethod
-    def _read_filter(payload: memoryview) -> tuple[tuple[np.ndarray, int] | None, memoryview]:
-        """Version 8: the record's filter, its coefficients and their precision (``None``: no
+    def _read_filter(payload: memoryview) -> tuple[tuple[np.ndarray, np.ndarray] | None, memoryview]:
+        """Version 8: the record's filters, their coefficients and precisions (``None``: no
         filter), and the rest of the payload."""
-        from thermcap.archive.tpred_filter import PRECISIONS
+        from thermcap.archive.tpred_filter import FILTERS, PRECISIONS, TAPS
 
         if len(payload) < 1:
-            raise TpredError("a version 8 record ends before its filter")
-        taps = payload[0]
-        if taps == 0:
+            raise TpredError("a version 8 record ends before its filters")
+        count = payload[0]
+        if count == 0:
             return None, payload[1:]
-        if taps != FILTER_TAPS:
-            raise TpredError(f"a filter of {taps} coefficients (version 8 has {FILTER_TAPS} or none)")
-        if len(payload) < 2 + taps:
-            raise TpredError("a version 8 record ends inside its filter")
-        if payload[1] not in PRECISIONS:
-            raise TpredError(f"a filter in units of 2**-{payload[1]} (version 8 has 2**-{PRECISIONS[0]} to "
+        if count != FILTERS:
+            raise TpredError(f"a record with {count} filters (version 8 has {FILTERS} or none)")
+        size = 1 + TAPS.shape[0]
+        if len(payload) < 1 + count * size:
+            raise TpredError("a version 8 record ends inside its filters")
+        body = np.frombuffer(payload[1:1 + count * size], np.uint8).reshape(count, size)
+        precisions = body[:, 0].astype(np.int64)
+        bad = [int(q) for q in precisions if int(q) not in PRECISIONS]
+        if bad:
+            raise TpredError(f"a filter in units of 2**-{bad[0]} (version 8 has 2**-{PRECISIONS[0]} to "
                              f"2**-{PRECISIONS[-1]})")
-        return (np.frombuffer(payload[2:2 + taps], np.int8).copy(), payload[1]), payload[2 + taps:]
+        return (body[:, 1:].view(np.int8).copy(), precisions), payload[1 + count * size:]
 
-    def _apply_filter(self, filt: tuple[np.ndarray, int], pred: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> np.ndarray:
+    def _apply_filter(self, filters: tuple[np.ndarray, np.ndarray], pred: np.ndarray, m64: np.ndarray,
+                      other: np.ndarray | None) -> np.ndarray:
         """Version 8: ``pred`` filtered in place; returns the filtered scene mean."""
         from thermcap.archive import tpred_filter
 
         st = self._state
         assert isinstance(st, _State4) and st.pattern is not None and other is not None
         m64c = np.empty_like(m64)
-        tpred_filter.filter_apply(pred, m64, st.pattern.est, other, pred, *filt, tpred_filter.FILTER_LIMIT, False,
-                                  pred, m64c)  # nothing to measure against: pred stands in for the frame
+        tpred_filter.filter_apply(pred, m64, st.pattern.est, other, pred, *filters, tpred_filter.FILTER_SPLIT,
+                                  tpred_filter.FILTER_LIMIT, False, pred, m64c)  # pred stands in for the frame
         return m64c
 
     def _apply_terms(self, terms: tuple[int, int, int], pred: np.ndarray, m64: np.ndarray,
@@ -1128,7 +1147,7 @@ class TemporalDecoder:
                 if hdr.version >= 8:
                     filt, payload = self._read_filter(payload)
                     if filt is not None and any(terms):
-                        raise TpredError("a record with both a sub-pixel shift and a filter (version 8 has one or "
+                        raise TpredError("a record with both a sub-pixel shift and filters (version 8 has one or "
                                          "the other)")
                 modes, pos = _unpack_modes(payload, shape)
                 pred, m64, other = st.predict(hdr.dx, hdr.dy)

@@ -1,17 +1,22 @@
-"""tpred version 8's prediction filter: a 5x5 filter on the scene mean, fitted to each frame.
+"""tpred version 8's prediction filters: two 5x5 filters on the scene mean, fitted to each frame.
 
 A camera that shakes moves each frame by a random fraction of a pixel. Version 6 moves the
 window's mean by a first-order shift and weighs its Laplacian, three numbers; a bilinear move
 also blurs the picture by an amount that depends on the fraction, and the mean of frames at other
 fractions is blurred differently, which no shift and no single Laplacian follow. A 5x5 filter
-fitted by least squares to each frame follows both: its residual's entropy on the simulator's
-0.5 px shake is 2.9 % below version 6's three terms (3x3: 1.9 %, 7x7: 2.7 %; measured on 60
-frames, 2026-12-06).
+fitted by least squares to each frame follows both. Where the scene is flat the best filter
+mostly averages the mean's noise away, and where it has detail it mostly moves it, so there are
+two, one for each (split at ``FILTER_SPLIT``). On 120 frames of the simulator's 0.5 px shake,
+2026-12-06, against version 7's three terms: one filter +2.3 % (still) and +2.7 % (a pan),
+coefficients in 1/256 rather than 1/64 +0.2 %, every pixel to the frame's edge (replicated)
++0.2 %, and the second filter +0.35-0.5 %; 3x3 and 7x7 filters, three classes, and a split at
+4, 6, 11 or 16 counts were each worse.
 
 Specified in ``archive.temporal``'s docstring (version 8). The decoder's step
-(``filter_apply``) is integer arithmetic; the encoder's fit (``fit``) gathers exact integer
-sums in float64 (each product below 2**24, each sum below 2**53, so any order gives the same
-numbers) and solves a 24x24 system, which only decides the coefficients the record carries.
+(``filter_apply``) is integer arithmetic in effect; the encoder's fit (``fit``) gathers exact
+integer sums in float64 (each product below 2**24, each sum below 2**53, so any order gives the
+same numbers) and solves a 24x24 system a filter, which only decides the coefficients the record
+carries.
 """
 
 from __future__ import annotations
@@ -19,30 +24,36 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["FILTER_LIMIT", "PRECISIONS", "TAPS", "filter_apply", "fit"]
+__all__ = ["FILTERS", "FILTER_LIMIT", "FILTER_SPLIT", "PRECISIONS", "TAPS", "filter_apply", "fit"]
 
 #: The 24 neighbours of a 5x5 filter, (dy, dx) in row-major order without the centre: the order
-#: of the coefficients in a record.
+#: of each filter's coefficients in a record.
 TAPS = np.asarray([(dy, dx) for dy in range(-2, 3) for dx in range(-2, 3) if dy or dx], np.int64)
+#: How many filters a record carries: the first for pixels whose 24 neighbours all lie within
+#: ``FILTER_SPLIT`` of them in the scene mean, the second for the rest within ``FILTER_LIMIT``.
+FILTERS = 2
+FILTER_SPLIT = 8 << 6
 #: A pixel whose neighbours differ from it by this much or more in the scene mean (64 counts, in
 #: 1/64 counts) sits on an edge no small move follows linearly, or beside a defect: left as it is.
 FILTER_LIMIT = 64 << 6
 #: The coefficients are int8 in units of ``2**-precision``, the finest of these in which every
-#: one fits: 1/64 had cost 0.2 % on a shaking pan against 1/256 or 1/512.
+#: one of a filter fits.
 PRECISIONS = range(4, 10)
 _CLIP = 8 << 6  # residuals the fit leaves out: something moving on its own
-_ROW_STEP, _COL_STEP = 2, 7  # the fit's pixels: 24 numbers fit on 1/14 of them as well as on 1/4 (0.05 %)
+_ROW_STEP, _COL_STEP = 2, 7  # the fit's pixels: 1/14 of them, within 0.05 % of 1/4's fit
 
 
 @numba.njit(cache=True, nogil=True)
-def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, taps: np.ndarray, limit: int,
-             clip: int, x: np.ndarray) -> int:  # pragma: no cover
-    """The fit's rows into ``x`` (taps + 1 columns, the last the residual ``64 f - m64 - est``)
-    at the sampled scene pixels whose neighbours stay within ``limit`` and residual within
-    ``clip``; returns how many."""
+def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, taps: np.ndarray, split: int,
+             limit: int, clip: int, flat: np.ndarray, detail: np.ndarray) -> tuple[int, int]:  # pragma: no cover
+    """The fit's rows (taps + 1 columns, the last the residual ``64 f - m64 - est``) at the
+    sampled scene pixels inside the frame's 2-pixel edge whose residual is within ``clip``: into
+    ``flat`` where every neighbour lies within ``split``, into ``detail`` where within
+    ``limit``; returns how many of each."""
     h, w = f.shape
     k = taps.shape[0]
-    n = 0
+    row = np.empty(k + 1)
+    nf = nd = 0
     for r in range(2, h - 2, _ROW_STEP):
         for c in range(2, w - 2, _COL_STEP):
             if other[r, c]:
@@ -51,17 +62,19 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
             res = (np.int64(f[r, c]) << 6) - mm - est[r, c]
             if abs(res) >= clip:
                 continue
-            ok = True
+            span = 0
             for t in range(k):
                 d = np.int64(m64[r + taps[t, 0], c + taps[t, 1]]) - mm
-                if abs(d) >= limit:
-                    ok = False
-                    break
-                x[n, t] = d
-            if ok:
-                x[n, k] = res
-                n += 1
-    return n
+                span = max(span, abs(d))
+                row[t] = d
+            row[k] = res
+            if span < split:
+                flat[nf] = row
+                nf += 1
+            elif span < limit:
+                detail[nd] = row
+                nd += 1
+    return nf, nd
 
 
 @numba.njit(cache=True, nogil=True, fastmath=True)
@@ -87,58 +100,74 @@ def _normal_equations(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:  
     return g, b
 
 
+@numba.njit(cache=True, nogil=True)
+def _padded(m64: np.ndarray) -> np.ndarray:  # pragma: no cover
+    """``m64`` in float32 with two rows and columns of edge replication on every side."""
+    h, w = m64.shape
+    out = np.empty((h + 4, w + 4), np.float32)
+    for r in range(h + 4):
+        src = m64[min(max(r - 2, 0), h - 1)]
+        for c in range(w + 4):
+            out[r, c] = src[min(max(c - 2, 0), w - 1)]
+    return out
+
+
 @numba.njit(cache=True, nogil=True, boundscheck=False)
 def filter_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, pred: np.ndarray,
-                 coefs: np.ndarray, precision: int, limit: int, measure: bool, p: np.ndarray,
+                 coefs: np.ndarray, precisions: np.ndarray, split: int, limit: int, measure: bool, p: np.ndarray,
                  m64c: np.ndarray) -> tuple[int, int]:  # pragma: no cover
-    """Version 8's filtered scene mean and prediction: at each pixel two or more from the edge,
-    not in ``other``, whose 24 neighbours in ``m64`` (``TAPS``) all differ from it by less than
-    ``limit``, ``m64c = m64 + (sum(coefs[k] * (m64[r + dy_k, c + dx_k] - m64[r, c])) >> precision)`` and
-    ``p = (m64c + est + 32) >> 6``; every other pixel keeps ``m64`` and ``pred``. ``measure``
-    (the encoder): also the sums of ``|f - pred|`` and ``|f - p|`` over the scene's pixels on
-    every other row and column.
+    """Version 8's filtered scene mean and prediction. At each pixel not in ``other``, with
+    ``d_k = m64[r + dy_k, c + dx_k] - m64[r, c]`` (rows and columns outside the frame replicate
+    its edge) and ``span = max |d_k|``: where ``span < limit``, filter ``i`` (0 where ``span <
+    split``, else 1) gives ``m64c = m64 + (sum(coefs[i, k] * d_k) >> precisions[i])`` and ``p =
+    (m64c + est + 32) >> 6``; every other pixel keeps ``m64`` and ``pred``. ``measure`` (the
+    encoder): also the sums of ``|f - pred|`` and ``|f - p|`` over the scene's pixels on every
+    other row and column.
 
     In float32, which is exact here and vectorises where numba's integers (widened to int64)
     do not: every value is an integer below 2**24 (a count in 1/64 is below 2**22; a term's
     product below 2**12 * 2**7, 24 of them below 2**24), a pixel whose sum could be larger is one
-    the limit leaves as it is, and the scaling by ``2**-precision`` is exact. Each row reads
-    five row views from column 0, so the indices are never negative and the loop has no
-    wraparound branch (4-7 times faster)."""
+    the limit leaves as it is, and the scaling by ``2**-precision`` is exact. Both filters' sums
+    are computed at every pixel and one kept: a choice per pixel would not vectorise. Each row
+    reads five rows of the padded mean from column 0, so the indices are never negative and the
+    loop has no wraparound branch (4-7 times faster)."""
     h, w = m64.shape
     m64c[:, :] = m64
     p[:, :] = pred
-    mf = m64.astype(np.float32)
-    k = coefs.astype(np.float32)
-    lim = np.float32(limit)
-    scale = np.float32(2.0 ** -precision)
+    mf = _padded(m64)
+    a = coefs[0].astype(np.float32)
+    b = coefs[1].astype(np.float32)
+    scale_a = np.float32(2.0 ** -precisions[0])
+    scale_b = np.float32(2.0 ** -precisions[1])
+    lim, cut = np.float32(limit), np.float32(split)
     sixty_fourth = np.float32(1.0 / 64.0)
     half = np.float32(32.0)
-    moved = np.empty(max(w - 4, 0), np.float32)  # a frame under 5x5 has no pixel two from every edge
-    inside = np.empty(max(w - 4, 0), np.bool_)
-    for r in range(2, h - 2):
-        q0, q1, q2, q3, q4 = mf[r - 2], mf[r - 1], mf[r], mf[r + 1], mf[r + 2]
-        for c in range(w - 4):
+    moved = np.empty(w, np.float32)
+    inside = np.empty(w, np.bool_)
+    for r in range(h):
+        q0, q1, q2, q3, q4 = mf[r], mf[r + 1], mf[r + 2], mf[r + 3], mf[r + 4]
+        for c in range(w):
             mc = q2[c + 2]
-            acc = (k[0] * (q0[c] - mc) + k[1] * (q0[c + 1] - mc) + k[2] * (q0[c + 2] - mc)
-                   + k[3] * (q0[c + 3] - mc) + k[4] * (q0[c + 4] - mc)
-                   + k[5] * (q1[c] - mc) + k[6] * (q1[c + 1] - mc) + k[7] * (q1[c + 2] - mc)
-                   + k[8] * (q1[c + 3] - mc) + k[9] * (q1[c + 4] - mc)
-                   + k[10] * (q2[c] - mc) + k[11] * (q2[c + 1] - mc)
-                   + k[12] * (q2[c + 3] - mc) + k[13] * (q2[c + 4] - mc)
-                   + k[14] * (q3[c] - mc) + k[15] * (q3[c + 1] - mc) + k[16] * (q3[c + 2] - mc)
-                   + k[17] * (q3[c + 3] - mc) + k[18] * (q3[c + 4] - mc)
-                   + k[19] * (q4[c] - mc) + k[20] * (q4[c + 1] - mc) + k[21] * (q4[c + 2] - mc)
-                   + k[22] * (q4[c + 3] - mc) + k[23] * (q4[c + 4] - mc))
-            hi = max(q0[c], q0[c + 1], q0[c + 2], q0[c + 3], q0[c + 4], q1[c], q1[c + 1], q1[c + 2], q1[c + 3],
-                     q1[c + 4], q2[c], q2[c + 1], q2[c + 3], q2[c + 4], q3[c], q3[c + 1], q3[c + 2], q3[c + 3],
-                     q3[c + 4], q4[c], q4[c + 1], q4[c + 2], q4[c + 3], q4[c + 4])
-            lo = min(q0[c], q0[c + 1], q0[c + 2], q0[c + 3], q0[c + 4], q1[c], q1[c + 1], q1[c + 2], q1[c + 3],
-                     q1[c + 4], q2[c], q2[c + 1], q2[c + 3], q2[c + 4], q3[c], q3[c + 1], q3[c + 2], q3[c + 3],
-                     q3[c + 4], q4[c], q4[c + 1], q4[c + 2], q4[c + 3], q4[c + 4])
-            moved[c] = mc + np.floor(acc * scale)
-            inside[c] = (hi - mc < lim) & (mc - lo < lim)
-        e, o, mo, po = est[r, 2:w - 2], other[r, 2:w - 2], m64c[r, 2:w - 2], p[r, 2:w - 2]
-        for c in range(w - 4):  # few pixels fail: a branch here costs less than selecting every one
+            d0, d1, d2, d3, d4 = q0[c] - mc, q0[c + 1] - mc, q0[c + 2] - mc, q0[c + 3] - mc, q0[c + 4] - mc
+            d5, d6, d7, d8, d9 = q1[c] - mc, q1[c + 1] - mc, q1[c + 2] - mc, q1[c + 3] - mc, q1[c + 4] - mc
+            d10, d11, d12, d13 = q2[c] - mc, q2[c + 1] - mc, q2[c + 3] - mc, q2[c + 4] - mc
+            d14, d15, d16, d17, d18 = q3[c] - mc, q3[c + 1] - mc, q3[c + 2] - mc, q3[c + 3] - mc, q3[c + 4] - mc
+            d19, d20, d21, d22, d23 = q4[c] - mc, q4[c + 1] - mc, q4[c + 2] - mc, q4[c + 3] - mc, q4[c + 4] - mc
+            sa = (a[0] * d0 + a[1] * d1 + a[2] * d2 + a[3] * d3 + a[4] * d4 + a[5] * d5 + a[6] * d6 + a[7] * d7
+                  + a[8] * d8 + a[9] * d9 + a[10] * d10 + a[11] * d11 + a[12] * d12 + a[13] * d13 + a[14] * d14
+                  + a[15] * d15 + a[16] * d16 + a[17] * d17 + a[18] * d18 + a[19] * d19 + a[20] * d20
+                  + a[21] * d21 + a[22] * d22 + a[23] * d23)
+            sb = (b[0] * d0 + b[1] * d1 + b[2] * d2 + b[3] * d3 + b[4] * d4 + b[5] * d5 + b[6] * d6 + b[7] * d7
+                  + b[8] * d8 + b[9] * d9 + b[10] * d10 + b[11] * d11 + b[12] * d12 + b[13] * d13 + b[14] * d14
+                  + b[15] * d15 + b[16] * d16 + b[17] * d17 + b[18] * d18 + b[19] * d19 + b[20] * d20
+                  + b[21] * d21 + b[22] * d22 + b[23] * d23)
+            span = max(abs(d0), abs(d1), abs(d2), abs(d3), abs(d4), abs(d5), abs(d6), abs(d7), abs(d8), abs(d9),
+                       abs(d10), abs(d11), abs(d12), abs(d13), abs(d14), abs(d15), abs(d16), abs(d17), abs(d18),
+                       abs(d19), abs(d20), abs(d21), abs(d22), abs(d23))
+            moved[c] = mc + (np.floor(sa * scale_a) if span < cut else np.floor(sb * scale_b))
+            inside[c] = span < lim
+        e, o, mo, po = est[r], other[r], m64c[r], p[r]
+        for c in range(w):  # few pixels fail: a branch here costs less than selecting every one
             if inside[c] and not o[c]:
                 m = moved[c]
                 mo[c] = np.int32(m)
@@ -154,18 +183,9 @@ def filter_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
     return before, after
 
 
-def fit(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
-        other: np.ndarray) -> tuple[np.ndarray, int, np.ndarray, np.ndarray, int, int] | None:
-    """The encoder's side: ``(coefficients as int8, their precision, prediction, scene mean, cost
-    before, cost after)`` with the filter fitted to ``f`` by least squares and applied, each cost the sum of
-    ``|f - p|`` on every other row and column (``pred``'s, the filtered one's); ``None`` where the
-    frame is too small or too flat to fit 24 numbers."""
-    h, w = f.shape
-    if h < 5 or w < 5:
-        return None
-    rows = ((h - 4 + _ROW_STEP - 1) // _ROW_STEP) * ((w - 4 + _COL_STEP - 1) // _COL_STEP)
-    x = np.empty((rows, TAPS.shape[0] + 1))
-    n = _samples(f, m64, est, other, TAPS, FILTER_LIMIT, _CLIP, x)
+def _solve(x: np.ndarray, n: int) -> tuple[np.ndarray, int] | None:
+    """One filter's coefficients as int8 and their precision, fitted to ``x``'s first ``n``
+    rows; ``None`` where they are too few or too flat to fit 24 numbers."""
     if n < 4 * TAPS.shape[0]:
         return None
     g, b = _normal_equations(x, n)
@@ -180,9 +200,31 @@ def fit(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
     if not np.all(np.isfinite(c)):
         return None
     precision = next((q for q in reversed(PRECISIONS) if np.abs(np.rint(c * 2.0 ** q)).max() <= 127), PRECISIONS[0])
-    coefs = np.clip(np.rint(c * 2.0 ** precision), -127, 127).astype(np.int8)
+    return np.clip(np.rint(c * 2.0 ** precision), -127, 127).astype(np.int8), precision
+
+
+def fit(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
+        other: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int, int] | None:
+    """The encoder's side: ``(coefficients (2, 24) int8, precisions (2,), prediction, scene
+    mean, cost before, cost after)`` with both filters fitted to ``f`` by least squares and
+    applied, each cost the sum of ``|f - p|`` on every other row and column (``pred``'s, the
+    filtered one's); ``None`` where the frame is too small or too flat to fit either. A filter
+    that cannot be fitted is all zeros (it changes nothing)."""
+    h, w = f.shape
+    if h < 5 or w < 5:
+        return None
+    rows = ((h - 4 + _ROW_STEP - 1) // _ROW_STEP) * ((w - 4 + _COL_STEP - 1) // _COL_STEP)
+    flat, detail = np.empty((rows, TAPS.shape[0] + 1)), np.empty((rows, TAPS.shape[0] + 1))
+    nf, nd = _samples(f, m64, est, other, TAPS, FILTER_SPLIT, FILTER_LIMIT, _CLIP, flat, detail)
+    coefs = np.zeros((FILTERS, TAPS.shape[0]), np.int8)
+    precisions = np.full(FILTERS, PRECISIONS[0], np.int64)
+    for i, (x, n) in enumerate(((flat, nf), (detail, nd))):
+        solved = _solve(x, n)
+        if solved is not None:
+            coefs[i], precisions[i] = solved
     if not coefs.any():
         return None
     p, m64c = np.empty_like(pred), np.empty_like(m64)
-    before, after = filter_apply(f, m64, est, other, pred, coefs, precision, FILTER_LIMIT, True, p, m64c)
-    return coefs, precision, p, m64c, before, after
+    before, after = filter_apply(f, m64, est, other, pred, coefs, precisions, FILTER_SPLIT, FILTER_LIMIT, True, p,
+                                 m64c)
+    return coefs, precisions, p, m64c, before, after

@@ -28,7 +28,7 @@ from types import ModuleType
 __all__ = ["KernelReport", "compile_all", "kernel_modules", "main"]
 
 _MODULES = ("thermcap.archive.rans", "thermcap.archive.tpred_kernels", "thermcap.archive.tpred_key",
-            "thermcap.archive.lzw_kernels", "thermcap.archive.summary_kernels",
+            "thermcap.archive.tpred_filter", "thermcap.archive.lzw_kernels", "thermcap.archive.summary_kernels",
             "thermcap.recorder.analysis.detector_kernels")
 _FORMATS = ["tiff-lzw", "tpred"]  # the formats whose writers and readers run compiled loops
 
@@ -71,9 +71,10 @@ def compile_all() -> KernelReport:
 
     t = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="thermcap-kernels-") as tmp:
-        # a pan (block modes, motion), a shutter (intra records) and defects (the key's list)
+        # a pan (block modes, motion), a shutter (intra records), defects (the key's list) and a
+        # shake (sub-pixel shifts and filters)
         src = SimSource(width=96, height=64, frames=90, fps=60.0, paced=False, seed=1, view="patrol",
-                        shutter_every_s=0.5, pixel_fpn_mk=15.0)
+                        shutter_every_s=0.5, pixel_fpn_mk=15.0, shake_px=0.5)
         rec = Recorder(src, tmp, session_id="kernels", analysis=False, recover_leftovers=False)
         res = rec.run()
         if res.error is not None:

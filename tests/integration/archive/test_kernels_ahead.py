@@ -15,9 +15,11 @@ import numpy as np
 from thermcap.archive.temporal import TemporalEncoder, decode_records
 from thermcap.kernels import _dispatchers
 from thermcap.recorder.capture.sources.sim import SimSource
-frames = [f.pixels for f in SimSource(width=640, height=512, frames=3, paced=False, seed=2, view="patrol").frames()]
+frames = [f.pixels for f in SimSource(width=640, height=512, frames=4, paced=False, seed=2, view="patrol",
+                                      shake_px=0.5).frames()]
 enc = TemporalEncoder()
 records = [enc.encode(f) for f in frames]
+assert any(r[4] == 1 and r[23] for r in records), "no predicted record has a filter (its kernels would not run)"
 assert all(np.array_equal(a, b) for a, b in zip(frames, decode_records(records)))
 misses = sum(sum(d.stats.cache_misses.values()) for d in _dispatchers())
 hits = sum(sum(d.stats.cache_hits.values()) for d in _dispatchers())

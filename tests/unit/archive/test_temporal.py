@@ -42,7 +42,7 @@ def _modes_at(record: bytes) -> int:
     if version >= 6:
         at += 3
     if version >= 8:
-        at += 1 if record[at] == 0 else 2 + record[at]
+        at += 1 + 25 * record[at]
     return at
 
 
