@@ -133,21 +133,23 @@ is above the scene's detail); version 6 lost to JPEG XL effort 2 on them (0.95x)
 (1.22x).
 
 Bitstream, version 8 (magic ``b"TPF8"``; what thermcap writes): version 7, and a predicted
-record's three terms are followed by its filter: one byte ``taps``, 0 (no filter) or 24, and
-when 24, one byte ``q`` (4 <= q <= 9) and 24 ``int8`` coefficients ``k``, in the order of
-``archive.tpred_filter.TAPS`` (the 5x5 neighbours ``(dy, dx)`` row by row, without the
-centre), in units of ``2**-q``. A record with a filter has terms 0, 0, 0. The decoder computes
-version 4's ``p``, ``m64`` and ``other``; then at every pixel not in ``other`` and two or more
-from every edge whose 24 neighbours all differ from it by less than ``FILTER_LIMIT`` (64
-counts, in 1/64 counts) in ``m64`` (uncorrected): ``m64 += (sum(k[i] * (m64[r + dy_i, c + dx_i]
-- m64[r, c])) >> q)`` (floor) and ``p = (m64 + E + 32) >> 6``. The block modes, the streams
-and the learning (against this ``m64``) follow as in version 4. The encoder fits the filter by
-least squares to the residual (pixels within ``FILTER_LIMIT`` and with residuals within 8
-counts, on every other row and every 7th column) when the frame's version 6 fit moved the
-picture, or while the camera shakes, writes the finest ``q`` in which every coefficient fits,
-and keeps the filter where it lowers the residual below the three terms': a bilinear move by a
-fraction of a pixel blurs by that fraction as well, and the window's mean of frames at other
-fractions is blurred differently, which a first-order shift does not follow.
+record's three terms are followed by its filters: one byte ``n``, 0 (none) or 2, and ``n``
+filters, each one byte ``q`` (4 <= q <= 9) and 24 ``int8`` coefficients ``k`` in units of
+``2**-q``, in the order of ``archive.tpred_filter.TAPS`` (the 5x5 neighbours ``(dy, dx)`` row by
+row, without the centre). A record with filters has terms 0, 0, 0. The decoder computes version
+4's ``p``, ``m64`` and ``other``; then at every pixel not in ``other``, with ``d_i = m64[r + dy_i,
+c + dx_i] - m64[r, c]`` (uncorrected; rows and columns outside the frame replicate its edge) and
+``span = max |d_i|``, where ``span < FILTER_LIMIT`` (64 counts, in 1/64 counts): the first filter
+where ``span < FILTER_SPLIT`` (8 counts), else the second, gives ``m64 += (sum(k[i] * d_i) >> q)``
+(floor) and ``p = (m64 + E + 32) >> 6``. The block modes, the streams and the learning (against
+this ``m64``) follow as in version 4. The encoder fits each filter by least squares to the
+residual of its pixels (residuals within 8 counts, on every other row and every 7th column) when
+the frame's version 6 fit moved the picture or while the camera shakes, writes the finest ``q``
+in which each filter's coefficients fit, and keeps the filters where they lower the residual
+below the three terms': a bilinear move by a fraction of a pixel blurs by that fraction as well,
+and the window's mean of frames at other fractions is blurred differently, which a first-order
+shift does not follow; where the scene is flat the best filter mostly averages the mean's noise
+away, where it has detail it mostly moves it.
 
 The encoder alone estimates the motion: the shift of the previous frame that best matches this
 one (least mean absolute difference, each difference clipped at 16 counts, on every 8th line;

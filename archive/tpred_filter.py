@@ -52,19 +52,22 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
     ``limit``; returns how many of each."""
     h, w = f.shape
     k = taps.shape[0]
+    m = m64.ravel()
+    offsets = taps[:, 0] * w + taps[:, 1]
     row = np.empty(k + 1)
     nf = nd = 0
     for r in range(2, h - 2, _ROW_STEP):
         for c in range(2, w - 2, _COL_STEP):
             if other[r, c]:
                 continue
-            mm = np.int64(m64[r, c])
+            at = r * w + c
+            mm = np.int64(m[at])
             res = (np.int64(f[r, c]) << 6) - mm - est[r, c]
             if abs(res) >= clip:
                 continue
             span = 0
             for t in range(k):
-                d = np.int64(m64[r + taps[t, 0], c + taps[t, 1]]) - mm
+                d = np.int64(m[at + offsets[t]]) - mm
                 span = max(span, abs(d))
                 row[t] = d
             row[k] = res
