@@ -752,7 +752,8 @@ def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
     coefs, precisions, p, m64c, before, after = fitted
     if after >= (before if cost is None else cost):
         return None
-    return bytes([len(coefs)]) + b"".join(bytes([q]) + c.tobytes() for q, c in zip(precisions, coefs)), p, m64c
+    body = b"".join(bytes([int(q)]) + c.tobytes() for q, c in zip(precisions, coefs, strict=True))
+    return bytes([len(coefs)]) + body, p, m64c
 
 
 def _pack_streams(modes: np.ndarray | None, resid: np.ndarray, other: np.ndarray | None) -> tuple[int, bytes]:

@@ -7,10 +7,10 @@ fractions is blurred differently, which no shift and no single Laplacian follow.
 fitted by least squares to each frame follows both. Where the scene is flat the best filter
 mostly averages the mean's noise away, and where it has detail it mostly moves it, so there are
 two, one for each (split at ``FILTER_SPLIT``). On 120 frames of the simulator's 0.5 px shake,
-2026-12-06, against version 7's three terms: one filter +2.3 % (still) and +2.7 % (a pan),
-coefficients in 1/256 rather than 1/64 +0.2 %, every pixel to the frame's edge (replicated)
-+0.2 %, and the second filter +0.35-0.5 %; 3x3 and 7x7 filters, three classes, and a split at
-4, 6, 11 or 16 counts were each worse.
+2026-12-06, against version 7's three terms: one filter in 1/64 +2.1 % (a still view) and +2.5 %
+(a pan), its coefficients in 1/256-1/512 +0.2 % more, every pixel to the frame's edge
+(replicated) +0.2 %, and the second filter +0.35-0.5 %; 3x3 and 7x7 filters, three classes, and a
+split at 4, 6, 11 or 16 counts were each worse (``docs/explanation/tpred.md``, v8).
 
 Specified in ``archive.temporal``'s docstring (version 8). The decoder's step
 (``filter_apply``) is integer arithmetic in effect; the encoder's fit (``fit``) gathers exact
@@ -65,10 +65,10 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
             res = (np.int64(f[r, c]) << 6) - mm - est[r, c]
             if abs(res) >= clip:
                 continue
-            span = 0
+            span = np.int64(0)
             for t in range(k):
                 d = np.int64(m[at + offsets[t]]) - mm
-                span = max(span, abs(d))
+                span = max(span, np.int64(abs(d)))
                 row[t] = d
             row[k] = res
             if span < split:
