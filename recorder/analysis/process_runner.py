@@ -2,10 +2,13 @@
 
 The recording process copies each frame into a free slot (a memcpy) and sends the slot's number
 over a socket; the child runs the detector on the slot in place and sends back the small
-result, which frees the slot. There are as many slots as the analysis queue is long, so the
-child is never more than that many frames behind: a file source waits for a free slot (every
-frame is analysed), a live source does not (the frame is counted as skipped). A frame larger
-than a slot (a source that changes size) travels in the socket instead, still holding a slot.
+result, which frees the slot. A child that is behind (more frames wait in its socket) sends its
+results in batches of up to a quarter of the slots, so the recorder's results thread wakes once
+for several frames; an idle child answers each frame at once. There are as many slots as the
+analysis queue is long, so the child is never more than that many frames behind: a file source
+waits for a free slot (every frame is analysed), a live source does not (the frame is counted as
+skipped). A frame larger than a slot (a source that changes size) travels in the socket instead,
+still holding a slot.
 
 The child is a fresh interpreter running this module (``python -m``), not a multiprocessing
 child: those import the parent's ``__main__`` again, which re-runs a user's unguarded script
@@ -68,8 +71,11 @@ class ProcessRunner:
     kind = "process"
 
     def __init__(self, detector: HotSpotDetector, slots: int, frame_bytes: int,
-                 name: str = "thermcap-analysis") -> None:
+                 name: str = "thermcap-analysis", batch: int | None = None) -> None:
+        """``batch``: the most results the child sends in one message while it is behind
+        (default a quarter of the slots; 1 answers every frame in a message of its own)."""
         slots = self.slots = max(1, slots)
+        self.batch = max(1, slots // 4 if batch is None else batch)
         try:
             payload = pickle.dumps(detector)
         except Exception as exc:
@@ -88,7 +94,8 @@ class ProcessRunner:
             ours, theirs = socket.socketpair()
             self._proc = subprocess.Popen(
                 [sys.executable, "-m", "thermcap.recorder.analysis.process_runner", "--socket", str(theirs.fileno()),
-                 "--memfd", str(memfd), "--size", str(size), "--slot-bytes", str(self._slot_bytes)],
+                 "--memfd", str(memfd), "--size", str(size), "--slot-bytes", str(self._slot_bytes),
+                 "--batch", str(self.batch)],
                 pass_fds=(theirs.fileno(), memfd), stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL, start_new_session=True, env=_child_env())
         except (OSError, ValueError, subprocess.SubprocessError) as exc:
@@ -112,9 +119,16 @@ class ProcessRunner:
         self._send_lock = threading.Lock()
         self._seq = 0
         self._cpu = 0.0
+        self._messages = 0
         self._closing = False
         self._reader = threading.Thread(target=self._read_loop, name=f"{name}-results", daemon=True)
         self._reader.start()
+
+    @property
+    def answer_messages(self) -> int:
+        """How many messages of results the child has sent: fewer than the frames it answered
+        when it was behind and batched them."""
+        return self._messages
 
     def _handshake(self, payload: bytes) -> None:
         """Send the detector and wait until the child holds it: a child that cannot start (an
@@ -226,12 +240,13 @@ class ProcessRunner:
                 code = self._proc.returncode
                 reason = f"the detector process ended unexpectedly (exit code {code})"
                 break
-            if msg[0] == "result":
-                _, seq, result = msg
-                with self._lock:
-                    fut, slot = self._pending.pop(seq)
-                self._free.put(slot)
-                fut.set_result(result)
+            if msg[0] == "results":
+                self._messages += 1
+                for seq, result in msg[1]:
+                    with self._lock:
+                        fut, slot = self._pending.pop(seq)
+                    self._free.put(slot)
+                    fut.set_result(result)
             elif msg[0] == "done":
                 self._cpu = float(msg[1])
                 break
@@ -251,8 +266,9 @@ class ProcessRunner:
             fut.set_result(None)
 
 
-def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int) -> None:
-    """The child: run the detector on each slot it is told of, in order, until told to stop."""
+def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int, batch: int = 1) -> None:
+    """The child: run the detector on each slot it is told of, in order, until told to stop.
+    Results wait to be sent while more frames wait in the socket, up to ``batch`` of them."""
     try:
         detector = pickle.loads(conn.recv_bytes())
         detector_kernels.warm()
@@ -262,7 +278,11 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int) -> None:
         return
     conn.send(("ready",))
     cpu0 = time.process_time()
+    held: list[tuple[int, object]] = []
     while True:
+        if held and (len(held) >= batch or not conn.poll(0)):
+            _send_results(conn, held)
+            held = []
         try:
             msg = conn.recv()
         except (EOFError, OSError):
@@ -277,11 +297,21 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int) -> None:
             pixels = np.frombuffer(slots, np.dtype(dtype), count, slot * slot_bytes).reshape(shape)
             result = analyse_one(detector, pixels)
             del pixels  # no view may outlive the slot: the recorder reuses it
-        try:
-            conn.send(("result", seq, result))
-        except (pickle.PicklingError, TypeError, AttributeError):
-            conn.send(("result", seq, None))
+        held.append((seq, result))
+    if held:
+        _send_results(conn, held)
     conn.send(("done", time.process_time() - cpu0))
+
+
+def _send_results(conn: Connection, held: list[tuple[int, object]]) -> None:
+    try:
+        conn.send(("results", held))
+    except (pickle.PicklingError, TypeError, AttributeError):  # one result that cannot travel: None for it alone
+        for seq, result in held:
+            try:
+                conn.send(("results", [(seq, result)]))
+            except (pickle.PicklingError, TypeError, AttributeError):
+                conn.send(("results", [(seq, None)]))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -290,13 +320,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--memfd", type=int, required=True)
     parser.add_argument("--size", type=int, required=True)
     parser.add_argument("--slot-bytes", type=int, required=True)
+    parser.add_argument("--batch", type=int, default=1)
     args = parser.parse_args(argv)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C stops the recorder, which stops us
     conn = Connection(args.socket)
     slots = mmap.mmap(args.memfd, args.size, prot=mmap.PROT_READ)
     os.close(args.memfd)
     try:
-        _child_main(conn, slots, args.slot_bytes)
+        _child_main(conn, slots, args.slot_bytes, max(1, args.batch))
     except (OSError, EOFError):
         return 0  # the recorder went away mid-message: nothing to tell
     finally:

@@ -77,11 +77,13 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
     """Detector precision/recall/F1 per contrast band vs the simulator's truth, its speed, and a
     file source recorded with analysis on vs off on the worst-case scenes."""
     from thermcap.recorder.bench.analysis import bench_analysis, print_table, sample_report
+    from thermcap.recorder.bench.analysis_handoff import handoff_cpu
     from thermcap.recorder.bench.analysis_recording import print_lines, record_vs_no_analysis
 
     res = bench_analysis(n_frames)
     if recording_frames:
         res["record_vs_no_analysis"] = record_vs_no_analysis(recording_frames, rounds)
+        res["handoff"] = handoff_cpu(rounds=rounds)
     if samples:
         res["samples"] = sample_report(samples, overlays)
     if as_json:
@@ -90,6 +92,13 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
     click.echo(print_table(res))
     for line in print_lines(res.get("record_vs_no_analysis", {})):
         click.echo(line)
+    if "handoff" in res:
+        hand = res["handoff"]
+        click.echo(f"hand-off to the detector's process, {hand['size']}: the recording's CPU "
+                   f"{hand['recording_cpu_us_per_frame_batched']} us a frame with answers in batches vs "
+                   f"{hand['recording_cpu_us_per_frame_one_message_a_frame']} one message a frame = "
+                   f"{hand['batched_vs_one_message_a_frame']}x ({hand['answer_messages_batched']} messages "
+                   f"for {hand['frames']} frames)")
     for r in res.get("samples", []):
         click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
                    + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px"

@@ -62,6 +62,33 @@ def test_the_child_answers_as_the_detector_does_in_process_with_ids_kept_across_
     assert runner._proc.poll() is not None  # the child is gone
 
 
+def test_a_child_that_is_behind_answers_in_batches_and_an_idle_one_at_once():
+    """Issue 40: the recorder's results thread woke once a frame, a wake-up and a message each;
+    a child with frames waiting sends up to a quarter of its slots' results in one message."""
+    frames = _frames(10)
+    model = SimSource(frames=1).model
+    det = HotSpotDetector(model)
+    expected = [_plain(det.detect(px)) for px in frames]
+    runner = ProcessRunner(HotSpotDetector(model), slots=8, frame_bytes=frames[0].nbytes)  # batches of 2
+    try:
+        os.kill(runner.pid, signal.SIGSTOP)  # all eight frames wait in its socket when it resumes
+        futs = []
+        for px in frames[:8]:
+            fut: Future = Future()
+            assert runner.submit(px, fut, wait=True)
+            futs.append(fut)
+        os.kill(runner.pid, signal.SIGCONT)
+        got = [_plain(f.result(timeout=60)) for f in futs]
+        assert runner.answer_messages == 4
+        got += [_plain(a) for a in _answers(runner, frames[8:9])]  # idle: answered at once, alone
+        assert runner.answer_messages == 5
+        got += [_plain(a) for a in _answers(runner, frames[9:])]
+        assert runner.answer_messages == 6
+    finally:
+        runner.close(30)
+    assert got == expected
+
+
 def test_a_frame_larger_than_a_slot_still_reaches_the_detector():
     frames = _frames(2, 640, 512)
     model = SimSource(frames=1).model

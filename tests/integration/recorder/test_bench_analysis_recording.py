@@ -19,3 +19,16 @@ def test_each_scene_is_recorded_with_and_without_analysis_and_each_round_compare
         assert abs(row["ratio_rounds_median"] - statistics.median(row["ratio_rounds"])) <= 0.0015
         assert row["frames_skipped"] == 0 and row["runner"] in ("process", "thread")
     assert len(print_lines(res)) == len(res) + 1
+
+
+def test_the_hand_off_line_measures_batched_answers_against_one_message_a_frame():
+    """Its short form: real child processes, the recording's CPU a frame both ways, and the
+    batched child sending fewer messages than frames (it is behind through a burst)."""
+    from thermcap.recorder.bench.analysis_handoff import handoff_cpu
+
+    res = handoff_cpu(frames=200, rounds=1, size=(160, 128))
+    assert res["size"] == "160x128" and res["frames"] == 200 and res["rounds"] == 1
+    assert res["recording_cpu_us_per_frame_batched"] > 0 and res["recording_cpu_us_per_frame_one_message_a_frame"] > 0
+    assert abs(res["batched_vs_one_message_a_frame"] - res["recording_cpu_us_per_frame_batched"]
+               / res["recording_cpu_us_per_frame_one_message_a_frame"]) < 0.01
+    assert 0 < res["answer_messages_batched"] <= 200
