@@ -42,12 +42,13 @@ from thermcap.archive.manifest import (
 from thermcap.archive.manifest_types import FileEntry, FormatEntry, Manifest
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
+from thermcap.recorder.storage.atomic import fsync_dir
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
 from thermcap.recorder.storage.ring import load_windows
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
-from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX
 
 __all__ = ["DEFAULT_FORMATS", "PARTIAL_SUFFIX", "BuiltCopy", "archive_session", "build_format", "encoder_threads",
            "format_entry", "fresh_partial", "take_name", "usable_cores", "verify_format_dir", "write_verified"]

@@ -24,9 +24,9 @@ from pathlib import Path
 
 from thermcap.archive.blobs import BlobStore
 from thermcap.recorder.exceptions import SessionBusyError
+from thermcap.recorder.storage.atomic import fsync_dir
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON
 from thermcap.recorder.storage.lock import holder, lock_session
-from thermcap.recorder.storage.segments import fsync_dir
 from thermcap.recorder.sync.targets import receipt_key
 
 __all__ = ["LandReport", "land_synced"]

@@ -17,9 +17,9 @@ from typing import Any, Literal, cast, overload
 
 from thermcap.archive.exceptions import ManifestError
 from thermcap.archive.manifest_types import Manifest
+from thermcap.recorder.storage.atomic import write_json_atomic
 from thermcap.recorder.storage.digest import file_sha256, frame_sha256
 from thermcap.recorder.storage.layout import MANIFEST_JSON, SessionLayout
-from thermcap.recorder.storage.segments import write_json_atomic
 
 __all__ = [
     "MANIFEST_NAME",

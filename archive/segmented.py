@@ -56,10 +56,11 @@ from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest, n
 from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
+from thermcap.recorder.storage.atomic import fsync_dir
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import SessionFrame, read_session_meta, segment_span, session_segments
-from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX
 
 __all__ = ["PARTS", "SegmentPart", "archive_segment", "finalize_session", "plan_segments"]
 

@@ -19,10 +19,10 @@ from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.radiometry import model_from_dict
 from thermcap.recorder.radiometry.session import read_bad_pixel_map
+from thermcap.recorder.storage.atomic import write_json_atomic
 from thermcap.recorder.storage.layout import ANALYSIS_JSONL, EVENTS_JSON
 from thermcap.recorder.storage.lock import session_locked
 from thermcap.recorder.storage.reader import archived_frame_count, iter_session_frames, read_session_meta
-from thermcap.recorder.storage.segments import write_json_atomic
 
 __all__ = ["ANALYSIS_FILE", "EVENTS_FILE", "analyze_session"]
 

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
-from thermcap.recorder.storage.segments import write_json_atomic
+from thermcap.recorder.storage.atomic import write_json_atomic
 
 if TYPE_CHECKING:
     from thermcap.recorder.capture.recorder import Recorder

@@ -54,10 +54,11 @@ from thermcap.recorder.icd.topics import (
     sum_image_topics,
 )
 from thermcap.recorder.radiometry import LinearModel, describe_model
+from thermcap.recorder.storage.atomic import write_json_atomic
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
-from thermcap.recorder.storage.segments import DiskStalled, SegmentPolicy, SessionWriter, write_json_atomic
+from thermcap.recorder.storage.segments import DiskStalled, SegmentPolicy, SessionWriter
 
 if TYPE_CHECKING:
     from thermcap.recorder.live.branch import LiveBranch

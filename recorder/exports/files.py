@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,6 +31,7 @@ from thermcap.recorder.icd.names import format_name, iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.radiometry import LinearModel, TemperatureUnavailable, model_from_dict
 from thermcap.recorder.radiometry.session import APPROXIMATE_NOTE, SessionTemperatures, approximate_frames
+from thermcap.recorder.storage.atomic import replacing, write_json_atomic
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
 
 __all__ = ["EXPORT_KINDS", "export_session"]
@@ -464,19 +464,17 @@ def _has_temps(model) -> bool:
 
 def _write_summary(out: Path, fmt: str, stats: list[dict[str, Any]], meta: dict[str, Any]) -> None:
     path = out / f"summary.{fmt}"
-    tmp = path.with_name(path.name + ".tmp")
     if fmt == "json":
         doc = {"standard_name": "surface_temperature", "units": "degC",
                "cell_methods": "area: mean area: minimum area: maximum area: percentile",
                "session_id": meta.get("session_id"), "radiometric_model": meta.get("radiometric_model"),
                "frames": stats}
-        tmp.write_text(json.dumps(doc, indent=1))
+        write_json_atomic(path, doc, fsync=False, indent=1)
     elif fmt == "csv":
-        with open(tmp, "w", newline="") as f:
+        with replacing(path, fsync=False, newline="") as f:
             if stats:
                 w = csv.DictWriter(f, fieldnames=list(stats[0]))
                 w.writeheader()
                 w.writerows(stats)
     else:
         raise ThermcapError(f"--summary must be csv or json, got {fmt!r}")
-    os.replace(tmp, path)

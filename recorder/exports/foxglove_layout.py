@@ -10,7 +10,6 @@ with *Layouts* -> *Import from file*.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from thermcap.recorder.icd.topics import camera_topics
+from thermcap.recorder.storage.atomic import write_json_atomic
 
 __all__ = ["FOXGLOVE_LAYOUT", "CountsRange", "layout_for", "write_layout"]
 
@@ -80,9 +80,7 @@ def layout_for(ranges: dict[str | None, tuple[int, int]]) -> dict[str, Any]:
 
 def write_layout(session_dir: Path, ranges: dict[str | None, tuple[int, int]]) -> Path:
     path = Path(session_dir) / FOXGLOVE_LAYOUT
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(layout_for(ranges), indent=1))
-    tmp.replace(path)
+    write_json_atomic(path, layout_for(ranges), fsync=False, indent=1)  # derived from the session
     return path
 
 

@@ -29,11 +29,12 @@ from mcap.stream_reader import breakup_chunk
 
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.topics import is_image_topic
+from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
 from thermcap.recorder.storage.layout import SESSION_JSON, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import count_frames
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
-from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, fsync_dir, write_json_atomic
+from thermcap.recorder.storage.segments import ACTIVE_SUFFIX
 from thermcap.recorder.storage.writer import MCAP_MAGIC, ChunkedWriter, Compression
 
 ORIGINAL_SUFFIX = ".orig"  # a repaired file's original, kept until the result reads back

@@ -25,11 +25,11 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
 from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import segment_span
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
-from thermcap.recorder.storage.segments import fsync_dir, write_json_atomic
 
 __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "disk_usage", "parse_size"]
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from mcap.reader import make_reader
 
+from thermcap.recorder.storage.atomic import write_text_atomic
 from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["BAG_METADATA", "bag_metadata_text", "write_bag_metadata"]
@@ -106,11 +107,5 @@ def write_bag_metadata(session_dir: str | os.PathLike) -> Path | None:
         if text is None:
             path.unlink(missing_ok=True)
             return None
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        try:
-            tmp.write_text(text)
-            os.replace(tmp, path)
-        except BaseException:  # a full disk: the old file stays, and no half-written .tmp beside it
-            tmp.unlink(missing_ok=True)
-            raise
+        write_text_atomic(path, text, fsync=False, unique=True)  # derived: the next change writes it again
     return path

@@ -47,12 +47,12 @@ from thermcap.recorder.icd.topics import (
     CameraTopics,
     camera_topics,
 )
+from thermcap.recorder.storage.atomic import fsync_dir
 from thermcap.recorder.storage.layout import ACTIVE_SUFFIX
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
 from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
-__all__ = ["ACTIVE_SUFFIX", "DiskStalled", "SegmentPolicy", "SessionWriter", "auto_compression", "fsync_dir",
-           "segment_name", "write_json_atomic"]
+__all__ = ["ACTIVE_SUFFIX", "DiskStalled", "SegmentPolicy", "SessionWriter", "auto_compression", "segment_name"]
 
 SEGMENT_STATS_METADATA = "thermcap.segment"
 SESSION_METADATA = "thermcap.session"
@@ -64,35 +64,6 @@ MAX_SETTLING = 32
 
 def segment_name(index: int) -> str:
     return f"{index:04d}.mcap"
-
-
-def fsync_dir(path: Path) -> None:
-    fd = os.open(path, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
-def write_json_atomic(path: Path, data: Any, *, fsync: bool = True) -> None:
-    """Write JSON to a temporary name, fsync, rename: a reader sees the old file or the new one.
-    ``fsync=False`` only where the disk is known not to answer fsync: the rename still makes the
-    new file whole for every reader, only its surviving a power cut is not promised."""
-    tmp = path.with_name(path.name + ".tmp")
-    try:
-        with open(tmp, "w") as f:
-            json.dump(data, f, indent=2, sort_keys=False)
-            f.write("\n")
-            f.flush()
-            if fsync:
-                os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:  # a full disk: the old file stays, and no empty .tmp is left beside it
-        with suppress(OSError):
-            tmp.unlink(missing_ok=True)
-        raise
-    if fsync:
-        fsync_dir(path.parent)
 
 
 def auto_compression(width: int, height: int, fps: float) -> tuple[Compression, int]:

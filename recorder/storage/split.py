@@ -25,6 +25,7 @@ from mcap.reader import make_reader
 
 from thermcap.recorder.exceptions import McapFileError, ThermcapError
 from thermcap.recorder.icd.topics import TOPIC_EVENTS, TOPIC_STATS, camera_topics
+from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import (
@@ -36,7 +37,7 @@ from thermcap.recorder.storage.reader import (
     session_segments,
 )
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
-from thermcap.recorder.storage.segments import SESSION_METADATA, fsync_dir, write_json_atomic
+from thermcap.recorder.storage.segments import SESSION_METADATA
 from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
 __all__ = ["SplitResult", "camera_session_id", "split_cameras"]

@@ -65,3 +65,38 @@ def test_the_bag_metadata_leaves_nothing_half_written_on_a_full_disk(small_disk)
         write_bag_metadata(session)
     assert not [p.name for p in session.iterdir() if p.name.endswith(".tmp")]
     assert (session / BAG_METADATA).read_bytes() == before  # the old file stays whole
+
+
+def _fill(disk) -> None:
+    with open(disk / "filler", "wb", buffering=0) as f, pytest.raises(OSError):  # the rest of the disk
+        while True:
+            f.write(b"\0" * 65536)
+
+
+@pytest.mark.parametrize("what", ["foxglove layout", "summary.json", "summary.csv"])
+def test_the_files_an_export_rewrites_leave_nothing_half_written_on_a_full_disk(small_disk, what):
+    """The export's summary and the session's Foxglove layout were written to a .tmp and renamed,
+    but a write that failed left the .tmp behind (as metadata.yaml's had). Every rewrite in place
+    now goes through one helper (``recorder.storage.atomic``): on a full disk it raises, the old
+    file stays whole, and nothing else is left."""
+    from thermcap.recorder.exports.files import _write_summary
+    from thermcap.recorder.exports.foxglove_layout import FOXGLOVE_LAYOUT, write_layout
+
+    out = small_disk / "out"
+    out.mkdir()
+    stats = [{"frame": i, "mean_c": 20.0 + i, "max_c": 30.0 + i} for i in range(2000)]  # larger than what is left
+
+    def write() -> None:
+        if what == "foxglove layout":
+            write_layout(out, {None: (0, 10_000_000_000)})
+        else:
+            _write_summary(out, what.split(".")[1], stats, {"session_id": "s"})
+
+    write()
+    target = out / (FOXGLOVE_LAYOUT if what == "foxglove layout" else what)
+    before = target.read_bytes()
+    _fill(small_disk)
+    with pytest.raises(OSError):
+        write()
+    assert not [p.name for p in out.iterdir() if p.name.endswith(".tmp")]
+    assert target.read_bytes() == before
