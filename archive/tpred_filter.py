@@ -24,6 +24,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from thermcap.archive.tpred_kernels import residual_costs
+
 __all__ = ["FILTERS", "FILTER_LIMIT", "FILTER_SPLIT", "PRECISIONS", "TAPS", "filter_apply", "fit"]
 
 #: The 24 neighbours of a 5x5 filter, (dy, dx) in row-major order without the centre: the order
@@ -181,15 +183,7 @@ def filter_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
                 m = moved[c]
                 mo[c] = np.int32(m)
                 po[c] = np.int32(np.floor((m + np.float32(e[c]) + half) * sixty_fourth))
-    before = 0
-    after = 0
-    if measure:
-        for r in range(0, h, 2):
-            for c in range(0, w, 2):
-                if not other[r, c]:
-                    before += abs(np.int64(f[r, c]) - pred[r, c])
-                    after += abs(np.int64(f[r, c]) - p[r, c])
-    return before, after
+    return residual_costs(f, pred, p, other) if measure else (0, 0)
 
 
 def _solve(x: np.ndarray, n: int) -> tuple[np.ndarray, int] | None:

@@ -15,8 +15,8 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["apply_modes", "block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict", "shift_costs",
-           "split_residuals", "subpel_apply", "subpel_sums", "trim"]
+__all__ = ["apply_modes", "block_choices", "block_sads", "learn_and_push", "merge_residuals", "predict",
+           "residual_costs", "shift_costs", "split_residuals", "subpel_apply", "subpel_sums", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -124,14 +124,22 @@ def subpel_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
             m = mm + (((sx * gx + sy * gy + sl * lap) >> 4) if ok else 0)
             m64c[r, c] = m
             p[r, c] = pred[r, c] if other[r, c] else (m + est[r, c] + _HALF) >> _SCALE
+    return residual_costs(f, pred, p, other) if measure else (0, 0)
+
+
+@numba.njit(cache=True, nogil=True)
+def residual_costs(f: np.ndarray, pred: np.ndarray, p: np.ndarray,
+                   other: np.ndarray) -> tuple[int, int]:  # pragma: no cover
+    """The encoder's measure of a correction: the sums of ``|f - pred|`` and ``|f - p|`` over the
+    scene's pixels (not in ``other``) on every other row and column."""
+    h, w = f.shape
     before = 0
     after = 0
-    if measure:
-        for r in range(0, h, 2):
-            for c in range(0, w, 2):
-                if not other[r, c]:
-                    before += abs(np.int64(f[r, c]) - pred[r, c])
-                    after += abs(np.int64(f[r, c]) - p[r, c])
+    for r in range(0, h, 2):
+        for c in range(0, w, 2):
+            if not other[r, c]:
+                before += abs(np.int64(f[r, c]) - pred[r, c])
+                after += abs(np.int64(f[r, c]) - p[r, c])
     return before, after
 
 

@@ -30,13 +30,17 @@ def _frames(n: int = 12, w: int = 320, h: int = 256) -> list[np.ndarray]:
     return [f.pixels.copy() for f in SimSource(width=w, height=h, frames=n, seed=3).frames()]
 
 
-def _answers(runner, frames: list[np.ndarray]) -> list:
+def _submitted(runner, frames: list[np.ndarray]) -> list[Future]:
     futs = []
     for px in frames:
         fut: Future = Future()
         assert runner.submit(px, fut, wait=True)
         futs.append(fut)
-    return [f.result(timeout=60) for f in futs]
+    return futs
+
+
+def _answers(runner, frames: list[np.ndarray]) -> list:
+    return [f.result(timeout=60) for f in _submitted(runner, frames)]
 
 
 def _plain(answer):
@@ -72,11 +76,7 @@ def test_a_child_that_is_behind_answers_in_batches_and_an_idle_one_at_once():
     runner = ProcessRunner(HotSpotDetector(model), slots=8, frame_bytes=frames[0].nbytes)  # batches of 2
     try:
         os.kill(runner.pid, signal.SIGSTOP)  # all eight frames wait in its socket when it resumes
-        futs = []
-        for px in frames[:8]:
-            fut: Future = Future()
-            assert runner.submit(px, fut, wait=True)
-            futs.append(fut)
+        futs = _submitted(runner, frames[:8])
         os.kill(runner.pid, signal.SIGCONT)
         got = [_plain(f.result(timeout=60)) for f in futs]
         assert runner.answer_messages == 4
@@ -124,11 +124,7 @@ def test_a_child_that_dies_answers_none_for_what_it_held_and_everything_after():
     frames = _frames(4)
     runner = ProcessRunner(HotSpotDetector(SimSource(frames=1).model), slots=2, frame_bytes=frames[0].nbytes)
     os.kill(runner.pid, signal.SIGSTOP)
-    held = []
-    for px in frames[:2]:
-        fut: Future = Future()
-        assert runner.submit(px, fut, wait=True)
-        held.append(fut)
+    held = _submitted(runner, frames[:2])
     os.kill(runner.pid, signal.SIGKILL)
     assert [f.result(timeout=60) for f in held] == [None, None]
     assert runner.failure is not None and "exit code -9" in runner.failure
