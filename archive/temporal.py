@@ -853,7 +853,7 @@ def _unpack_streams(ptype: int, payload: memoryview, pos: int, other: np.ndarray
 
 
 def _window_for(version: int) -> _Window | _SceneWindow | _State3:
-    """The state a sequence of ``version`` carries (versions 4 to 7 share version 4's)."""
+    """The state a sequence of ``version`` carries (versions 4 to 8 share version 4's)."""
     return _Window() if version == 1 else _SceneWindow() if version == 2 else _State3() if version == 3 else _State4()
 
 
