@@ -283,7 +283,7 @@ class HotSpotDetector:
     _bad_coords: np.ndarray | None = field(default=None, repr=False)
     _next_id: int = field(default=1, repr=False)
 
-    _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _coarse assume 4)
+    _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _cells assume 4)
     # Built once: scipy builds the structure again on every call otherwise, a frame labels ~20 regions
     _EIGHT: Any = field(default_factory=lambda: np.ones((3, 3), bool), repr=False)
     _FOUR: Any = field(default_factory=lambda: ndimage.generate_binary_structure(2, 1), repr=False)
@@ -317,11 +317,6 @@ class HotSpotDetector:
         k = self.max_size // self._F + 1
         return sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
 
-    def _coarse(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(opened background, cell mean, cell maximum, padded ``temps``): see ``_cells``."""
-        mean, cmax, padded = self._cells(temps)
-        return self._opening(mean), mean, cmax, padded
-
     def _too_flat(self, mean: np.ndarray, cmax: np.ndarray, affine: tuple[np.float32, np.float32] | None) -> bool:
         """Whether no cell can stand ``threshold_k`` above the background, whatever the opening
         gives: the opening is never below the coarsest mean, nor a cell above the warmest, so a
@@ -338,7 +333,7 @@ class HotSpotDetector:
 
     def background(self, temps: np.ndarray) -> np.ndarray:
         """The local background (C) at full resolution."""
-        opened = self._coarse(temps)[0]
+        opened = self._opening(self._cells(temps)[0])
         h, w = temps.shape
         return np.repeat(np.repeat(opened, self._F, axis=0), self._F, axis=1)[:h, :w]
 

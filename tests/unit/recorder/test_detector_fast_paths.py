@@ -304,3 +304,15 @@ def test_a_uniform_frame_costs_the_cell_grid_alone(monkeypatch):
     monkeypatch.setattr(det, "_opening", no_opening)
     dets, analysis = det.detect(np.full((512, 640), 2000, np.uint16))
     assert dets == [] and "detection_capped" not in analysis
+
+
+def test_the_background_leaves_a_warm_target_out_and_keeps_the_frames_size():
+    """``background`` (the opening of the cell grid at full resolution) is what the candidates
+    stand above: a 20 K target on a 20 C wall must not raise it, and a frame that is not a whole
+    number of cells keeps its size."""
+    det = HotSpotDetector(SimSource(frames=1).model)
+    temps = np.full((61, 83), 20.0, np.float32)
+    temps[20:28, 30:38] = 40.0
+    bg = det.background(temps)
+    assert bg.shape == temps.shape
+    assert np.allclose(bg, 20.0)
