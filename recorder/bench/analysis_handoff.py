@@ -19,17 +19,16 @@ import numpy as np
 
 from thermcap.recorder.analysis.detector import HotSpotDetector
 from thermcap.recorder.analysis.process_runner import ProcessRunner
+from thermcap.recorder.capture.recorder import FILE_ANALYSIS_SLOTS
 from thermcap.recorder.radiometry import DEFAULT_MODEL
 
 __all__ = ["handoff_cpu"]
 
-_SLOTS = 32  # a file source's ring (recorder.capture.recorder)
-
-
 def _burst(frame: np.ndarray, frames: int, batch: int | None) -> tuple[float, int]:
     """The recording process's CPU microseconds a frame for ``frames`` frames handed to a fresh
     child, and how many messages of answers came back."""
-    runner = ProcessRunner(HotSpotDetector(DEFAULT_MODEL), slots=_SLOTS, frame_bytes=frame.nbytes, batch=batch)
+    runner = ProcessRunner(HotSpotDetector(DEFAULT_MODEL), slots=FILE_ANALYSIS_SLOTS, frame_bytes=frame.nbytes,
+                           batch=batch)
     try:
         futs: list[Future] = [Future() for _ in range(frames)]
         cpu = time.process_time()
