@@ -134,42 +134,48 @@ def test_the_golden_version_8_records_hold_filters_at_several_precisions():
     assert len({q for f in filters if f for q in f}) >= 2
 
 
-def _damaged(edit) -> None:
+def _decode_altered(alter) -> None:
+    """Decode a shaking sequence up to its first record with filters, that record altered."""
     seq = _shaking("fixed", 12, shake_px=0.5)
     enc = TemporalEncoder(bitstream=8)
     records = [enc.encode(f) for f in seq]
     i = next(i for i, r in enumerate(records) if parse_header(r).kind == PREDICTED and _filters_of(r))
-    bad = bytearray(records[i])
-    edit(bad)
     dec = TemporalDecoder()
     for r in records[:i]:
         dec.decode(r)
-    dec.decode(bytes(bad))
+    dec.decode(alter(records[i]))
 
 
-@pytest.mark.parametrize("edit, what", [
-    (lambda b: b.__setitem__(_FILTER_AT, 1), "1 filters"),
-    (lambda b: b.__setitem__(_FILTER_AT, 3), "3 filters"),
-    (lambda b: b.__setitem__(_FILTER_AT + 1, 12), r"2\*\*-12"),
-    (lambda b: b.__setitem__(_FILTER_AT + 26, 3), r"2\*\*-3"),
-    (lambda b: struct.pack_into("<bbb", b, HEADER.size, 3, 0, 0), "both a sub-pixel shift and filters"),
+def _set(at: int, value: int):
+    def alter(record: bytes) -> bytes:
+        bad = bytearray(record)
+        bad[at] = value
+        return bytes(bad)
+    return alter
+
+
+def _terms(record: bytes) -> bytes:
+    bad = bytearray(record)
+    struct.pack_into("<bbb", bad, HEADER.size, 3, 0, 0)
+    return bytes(bad)
+
+
+def _cut_inside_filters(record: bytes) -> bytes:
+    """The record ends 40 bytes into its payload, inside its filters, and its header says so."""
+    hdr = parse_header(record)
+    cut = record[:_FILTER_AT + 40]
+    return HEADER.pack(b"TPF8", hdr.kind, hdr.window, hdr.width, hdr.height, hdr.dx, hdr.dy, hdr.payload_type, 0,
+                       len(cut) - HEADER.size) + cut[HEADER.size:]
+
+
+@pytest.mark.parametrize("alter, what", [
+    (_set(_FILTER_AT, 1), "1 filters"),
+    (_set(_FILTER_AT, 3), "3 filters"),
+    (_set(_FILTER_AT + 1, 12), r"2\*\*-12"),
+    (_set(_FILTER_AT + 26, 3), r"2\*\*-3"),
+    (_terms, "both a sub-pixel shift and filters"),
+    (_cut_inside_filters, "ends inside its filters"),
 ])
-def test_a_damaged_filter_is_refused_with_the_reason(edit, what):
+def test_a_damaged_filter_is_refused_with_the_reason(alter, what):
     with pytest.raises(TpredError, match=what):
-        _damaged(edit)
-
-
-def test_a_record_that_ends_inside_its_filter_is_refused():
-    seq = _shaking("fixed", 12, shake_px=0.5)
-    enc = TemporalEncoder(bitstream=8)
-    records = [enc.encode(f) for f in seq]
-    i = next(i for i, r in enumerate(records) if parse_header(r).kind == PREDICTED and _filters_of(r))
-    hdr = parse_header(records[i])
-    cut = records[i][:_FILTER_AT + 40]
-    short = HEADER.pack(b"TPF8", hdr.kind, hdr.window, hdr.width, hdr.height, hdr.dx, hdr.dy, hdr.payload_type, 0,
-                        len(cut) - HEADER.size) + cut[HEADER.size:]
-    dec = TemporalDecoder()
-    for r in records[:i]:
-        dec.decode(r)
-    with pytest.raises(TpredError, match="ends inside its filters"):
-        dec.decode(short)
+        _decode_altered(alter)
