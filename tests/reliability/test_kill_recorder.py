@@ -42,10 +42,14 @@ def test_kill_9_at_random_moments(tmp_path):
                                 stderr=subprocess.DEVNULL)
         session = root / "sessions" / "s"
         assert wait_for(lambda s=session: any(s.glob("*.mcap.active")))
-        time.sleep(rng.uniform(0.3, 3.5))
+        time.sleep(rng.uniform(0.3, 3.5))  # a random moment, not a wait for anything
+        # The loss is counted from the signal. Reaping can come seconds later: a thread inside an
+        # fsync is uninterruptible, and the process exits only when that returns (a CI run on a
+        # busy disk measured 2.5 s "lost" from the reaping, with the same frames kept as here).
+        killed_at = time.time_ns()
         proc.send_signal(signal.SIGKILL)
         proc.wait()
-        killed_at = time.time_ns()
+        reaped_s = (time.time_ns() - killed_at) / 1e9
         closed_before = {p.name: p.read_bytes() for p in session.glob("*.mcap")}
         for seg in closed_before:  # every closed segment is finished and indexed
             with open(session / seg, "rb") as f:
@@ -77,7 +81,7 @@ def test_kill_9_at_random_moments(tmp_path):
             assert np.array_equal(px, exp.pixels)  # bit-exact, in order, no gaps
         lost_s = (killed_at - got[-1][0]) / 1e9
         report.append({"kill": k, "frames_kept": len(got), "closed_segments": len(closed_before),
-                       "active_files": len(actives),
+                       "active_files": len(actives), "reaped_after_s": round(reaped_s, 3),
                        "seconds_lost": round(lost_s, 3), "frames_lost": round(lost_s * FPS)})
         assert lost_s < 1.0, report[-1]
     out = Path(os.environ.get("THERMCAP_RELIABILITY_OUT", tmp_path)) / "kill_recorder.json"
