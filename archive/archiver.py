@@ -42,6 +42,7 @@ from thermcap.archive.manifest import (
 from thermcap.archive.manifest_types import FileEntry, FormatEntry, Manifest
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
+from thermcap.recorder.frame_heap import keep_frame_blocks
 from thermcap.recorder.storage.atomic import fsync_dir
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
@@ -159,6 +160,7 @@ def write_verified(fmt: ArchiveFormat, fid: str, frames: Iterable[SessionFrame],
     """Write ``frames`` into ``out_dir`` and decode every file back with the format's reader,
     comparing each frame with ``expected()`` (called once the stream has ended: the single read
     of the source gives the hashes only then). A writer or source failure removes ``out_dir``."""
+    keep_frame_blocks()  # the codecs' batch-sized temporaries: see recorder.frame_heap
     t = time.perf_counter()
     try:
         records: list[FileRecord] = fmt.write(frames, out_dir, ctx)

@@ -8,13 +8,22 @@ has ended, and the source agreed with itself, does the pass give the manifest it
 a source that disagrees with itself (a frame without its sidecar, summaries that count other
 frames than the data holds, a damaged channel record) raises ``SourceDamagedError`` at the
 end of the stream. The formats' writers then fail too, and nothing takes a name.
+
+A frame's pixels are a view into its decompressed chunk, at whatever byte the message put them:
+about half of a recording's frames start at an odd address, where uint16 is not aligned. Every
+codec then reads them by its unaligned path (numpy's, for one), three codecs a frame. The pass
+gives those frames a copy in aligned memory (read-only, like the view): one copy of 655 KB costs
+less than what it saves, 16.16 -> 15.93 and 16.53 -> 16.39 ms a 640x512 frame for the whole
+archive with the default formats (medians of 5, alternated in one process, 2026-12-06).
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
+
+import numpy as np
 
 from thermcap.archive.exceptions import SourceDamagedError
 from thermcap.archive.extras import ExtrasWriter
@@ -89,7 +98,7 @@ class SourcePass:
                     problems.append(f"{f.segment}: frame {f.index} has no sidecar on {TOPIC_METADATA}")
                 got.height, got.width = f.pixels.shape
                 index = f.index + 1
-                yield f
+                yield f if f.pixels.flags.aligned else replace(f, pixels=_aligned(f.pixels))
         for name, n in self.per_segment.items():
             if read.get(name, 0) != n:
                 problems.append(f"{name}: its summary counts {n} frames, its data holds {read.get(name, 0)}")
@@ -103,3 +112,10 @@ class SourcePass:
                                  f"(`thermcap info` names the segments; `thermcap recover SEGMENT` repairs one in "
                                  f"place, keeping every intact chunk, and `--keep-original` keeps the damaged file "
                                  f"beside it)", problems)
+
+
+def _aligned(pixels: np.ndarray) -> np.ndarray:
+    """A read-only copy in aligned memory: the consumers share it, as they shared the view."""
+    out = np.array(pixels)
+    out.flags.writeable = False
+    return out
