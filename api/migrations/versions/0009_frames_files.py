@@ -43,7 +43,45 @@ def upgrade() -> None:
         op.rename_table("frames", "frames_legacy")
 
 
+def _frames_indexes() -> None:
+    """The indexes ``frames`` had at 0008 (0001's and 0007's): upgrade dropped them with its name."""
+    op.create_index("ix_frames_time", "frames", ["session_id", "timestamp_ns"])
+    op.create_index("ix_frames_hot", "frames", [sa.text("max_target_temp_c DESC"), "session_id", "idx", "grade"],
+                    sqlite_where=sa.text("max_target_temp_c IS NOT NULL"),
+                    postgresql_where=sa.text("max_target_temp_c IS NOT NULL"))
+    op.create_index("ix_frames_graded", "frames", ["grade"], sqlite_where=sa.text("grade IS NOT NULL"),
+                    postgresql_where=sa.text("grade IS NOT NULL"))
+
+
 def downgrade() -> None:
+    """Back to a row per frame, for the code before 0009.
+
+    The rows an index kept aside and no scan has converted yet come back as they were. No session
+    whose frames went to a file is left with missing or stale rows. The frames in that file were
+    not turned back into rows. Such a session's fingerprint is cleared, so the older code's next
+    scan indexes it again from its folder. A session served from a bucket alone has no folder to
+    scan: it has no frame rows until an upgrade names its file again (``thermcap index``). Its
+    frames file stays in the store."""
+    tables = sa.inspect(op.get_bind()).get_table_names()
+    op.execute(sa.text("UPDATE sessions SET fingerprint = '' WHERE frames_key IS NOT NULL"))
+    if "frames_legacy" in tables:
+        op.rename_table("frames_legacy", "frames")
+    else:
+        op.create_table(
+            "frames",
+            sa.Column("session_id", sa.String(128), sa.ForeignKey("sessions.id", ondelete="CASCADE"),
+                      primary_key=True),
+            sa.Column("idx", sa.Integer(), primary_key=True),
+            sa.Column("timestamp_ns", sa.BigInteger(), nullable=False),
+            sa.Column("segment", sa.String(64)),
+            sa.Column("grade", sa.Float()),
+            sa.Column("slew_to_cue", sa.Boolean(), nullable=False, server_default=sa.false()),
+            sa.Column("target_count", sa.Integer(), nullable=False, server_default="0"),
+            sa.Column("max_target_temp_c", sa.Float()),
+            sa.Column("sha256", sa.LargeBinary()),  # 32 bytes since 0008
+            sa.Column("sidecar_sha256", sa.LargeBinary()),
+        )
+    _frames_indexes()
     op.drop_index("ix_target_seconds_hot", "target_seconds")
     op.drop_table("target_seconds")
     op.drop_column("sessions", "frames_key")

@@ -40,7 +40,9 @@ def _old_frames_table() -> sa.Table:
                     sa.Column("sha256", sa.String(64)), sa.Column("sidecar_sha256", sa.String(64)))
 
 
-def check_legacy_frames(engine, root: Path) -> None:
+def _index_before_0009(engine) -> None:
+    """An index at 0007 with rows for "m" (still current) and "n" (indexed anew since: its
+    ``frames_key`` names a file, its rows are stale), then migrated to the head."""
     with engine.begin() as conn:
         command.upgrade(_alembic(conn), "0007")
         frames = _old_frames_table()
@@ -60,6 +62,10 @@ def check_legacy_frames(engine, root: Path) -> None:
             {"session_id": "n", "idx": 0, "timestamp_ns": 1, "segment": None, "grade": None, "slew_to_cue": False,
              "target_count": 0, "max_target_temp_c": None, "sha256": H[3], "sidecar_sha256": None}])
     db.migrate(engine)
+
+
+def check_legacy_frames(engine, root: Path) -> None:
+    _index_before_0009(engine)
     with engine.connect() as conn:
         names = inspect(conn).get_table_names()
         assert "frames" not in names and "frames_legacy" in names
@@ -84,3 +90,55 @@ def check_legacy_frames(engine, root: Path) -> None:
 def test_legacy_frames_on_sqlite(tmp_path):
     engine = db.make_engine(f"sqlite:///{tmp_path / 'index.sqlite'}")
     check_legacy_frames(engine, tmp_path)
+
+
+def _downgrade(engine, revision: str) -> None:
+    with engine.begin() as conn:
+        command.downgrade(_alembic(conn), revision)
+
+
+def _rows(conn) -> list[tuple]:
+    return [tuple(r) for r in conn.execute(text("SELECT session_id, idx, timestamp_ns, max_target_temp_c, sha256 "
+                                                 "FROM frames ORDER BY session_id, idx"))]
+
+
+def check_downgrade(engine, root: Path) -> None:
+    """0009's downgrade gives the code before it a ``frames`` table with its indexes. The rows
+    kept aside come back as they were. A session whose frames went to a file is scanned again by
+    that code (its fingerprint cleared), whether or not its rows had been converted. The chain
+    goes on down to 0007 and back up."""
+    _index_before_0009(engine)
+    _downgrade(engine, "0008")
+    with engine.connect() as conn:
+        insp = inspect(conn)
+        assert "frames" in insp.get_table_names() and "frames_legacy" not in insp.get_table_names()
+        assert "target_seconds" not in insp.get_table_names()
+        assert "frames_key" not in {c["name"] for c in insp.get_columns("sessions")}
+        assert {"ix_frames_time", "ix_frames_hot", "ix_frames_graded"} <= {i["name"] for i in insp.get_indexes("frames")}
+        rows = _rows(conn)
+        assert [(r[0], r[1], r[2], r[3]) for r in rows] == [("m", 0, 5_000_000_001, 61.5), ("m", 1, 5_016_666_668, None),
+                                                            ("n", 0, 1, None)]
+        assert [bytes(r[4]) for r in rows] == [bytes.fromhex(h) for h in (H[0], H[2], H[3])]  # 0008's bytes
+        prints = dict(conn.execute(text("SELECT id, fingerprint FROM sessions")).all())
+    assert prints == {"m": "fp", "n": ""}  # "n"'s rows are older than its file: scanned again
+    _downgrade(engine, "0007")  # 0008 turns the hashes back to hex, 0007 drops its indexes
+    with engine.connect() as conn:
+        assert [r[4] for r in _rows(conn)] == [H[0], H[2], H[3]]
+    db.migrate(engine)  # and up again: the rows are kept aside once more
+    with engine.connect() as conn:
+        names = inspect(conn).get_table_names()
+        assert "frames" not in names and "frames_legacy" in names
+    store = open_store(root)
+    assert convert_legacy_frames(engine, store) == ["m", "n"]  # no file names "n" now: its rows serve
+    _downgrade(engine, "0008")  # every row converted: an empty table, every session scanned again
+    with engine.connect() as conn:
+        assert _rows(conn) == []
+        assert {"ix_frames_time", "ix_frames_hot", "ix_frames_graded"} <= {
+            i["name"] for i in inspect(conn).get_indexes("frames")}
+        assert dict(conn.execute(text("SELECT id, fingerprint FROM sessions")).all()) == {"m": "", "n": ""}
+    db.migrate(engine)
+
+
+def test_downgrade_on_sqlite(tmp_path):
+    engine = db.make_engine(f"sqlite:///{tmp_path / 'index.sqlite'}")
+    check_downgrade(engine, tmp_path)
