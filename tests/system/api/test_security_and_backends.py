@@ -166,22 +166,35 @@ def test_scale_out_postgresql_and_seaweedfs_through_the_same_routes(postgres_url
     assert "thermcap-test-secret" not in log_text
 
 
-def test_legacy_frames_on_postgresql(postgres_url, tmp_path):
-    """Migrations 0008 (bytea via decode/encode) and 0009, and the frames files written from an
-    older index's rows, on PostgreSQL, on a database of its own."""
+def _on_own_postgres_database(postgres_url: str, name: str, check) -> None:
+    """``check(engine)`` on a database of its own, dropped afterwards."""
     from sqlalchemy import create_engine, text
-
-    from tests.unit.api.test_frames_migration import check_legacy_frames
 
     admin = create_engine(postgres_url, isolation_level="AUTOCOMMIT")
     with admin.connect() as conn:
-        conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
-        conn.execute(text("CREATE DATABASE thermcap_migration_0008"))
-    engine = make_engine(postgres_url.rsplit("/", 1)[0] + "/thermcap_migration_0008")
+        conn.execute(text(f"DROP DATABASE IF EXISTS {name}"))
+        conn.execute(text(f"CREATE DATABASE {name}"))
+    engine = make_engine(postgres_url.rsplit("/", 1)[0] + f"/{name}")
     try:
-        check_legacy_frames(engine, tmp_path)
+        check(engine)
     finally:
         engine.dispose()  # its pooled connection would keep the database from being dropped
         with admin.connect() as conn:
-            conn.execute(text("DROP DATABASE IF EXISTS thermcap_migration_0008"))
+            conn.execute(text(f"DROP DATABASE IF EXISTS {name}"))
         admin.dispose()
+
+
+def test_legacy_frames_on_postgresql(postgres_url, tmp_path):
+    """Migrations 0008 (bytea via decode/encode) and 0009, and the frames files written from an
+    older index's rows, on PostgreSQL, on a database of its own."""
+    from tests.unit.api.test_frames_migration import check_legacy_frames
+
+    _on_own_postgres_database(postgres_url, "thermcap_migration_0008", lambda e: check_legacy_frames(e, tmp_path))
+
+
+def test_downgrade_on_postgresql(postgres_url, tmp_path):
+    """0009's downgrade (rows back, or an empty table with its indexes, partial indexes included)
+    and 0008's (bytea back to hex), on PostgreSQL."""
+    from tests.unit.api.test_frames_migration import check_downgrade
+
+    _on_own_postgres_database(postgres_url, "thermcap_migration_down", lambda e: check_downgrade(e, tmp_path))
