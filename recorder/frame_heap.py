@@ -26,6 +26,7 @@ faulting thread. The archiver with the advice took 0.45-0.87 s of system CPU a 6
 from __future__ import annotations
 
 import ctypes
+import importlib
 import os
 import threading
 
@@ -59,14 +60,16 @@ def keep_frame_blocks() -> bool:
 
 
 def _no_huge_page_advice() -> None:
-    try:  # numpy 2's home for it, then numpy 1's; a numpy without it gives no advice to turn off
-        from numpy._core.multiarray import _set_madvise_hugepage
-    except ImportError:
+    # numpy 2's home for it, then numpy 1's; a numpy without it gives no advice to turn off
+    for name in ("numpy._core.multiarray", "numpy.core.multiarray"):
         try:
-            from numpy.core.multiarray import _set_madvise_hugepage  # type: ignore[no-redef]
+            module = importlib.import_module(name)
         except ImportError:
-            return
-    _set_madvise_hugepage(False)
+            continue
+        set_advice = getattr(module, "_set_madvise_hugepage", None)
+        if set_advice is not None:
+            set_advice(False)
+        return
 
 
 def _mallopt() -> bool:

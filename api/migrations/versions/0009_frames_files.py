@@ -56,12 +56,11 @@ def _frames_indexes() -> None:
 def downgrade() -> None:
     """Back to a row per frame, for the code before 0009.
 
-    The rows an index kept aside and no scan has converted yet come back as they were. No session
-    whose frames went to a file is left with missing or stale rows. The frames in that file were
-    not turned back into rows. Such a session's fingerprint is cleared, so the older code's next
-    scan indexes it again from its folder. A session served from a bucket alone has no folder to
-    scan: it has no frame rows until an upgrade names its file again (``thermcap index``). Its
-    frames file stays in the store."""
+    The rows an index kept aside and no scan has converted yet come back as they were. A session
+    whose frames went to a file has no rows, or only rows older than that file: the file is not
+    turned back into rows. Its fingerprint is cleared instead, so the older code's next scan
+    indexes it again from its folder. A session served from a bucket alone has no folder to scan,
+    so it has no frame rows under the older code. Its frames file stays in the store."""
     tables = sa.inspect(op.get_bind()).get_table_names()
     op.execute(sa.text("UPDATE sessions SET fingerprint = '' WHERE frames_key IS NOT NULL"))
     if "frames_legacy" in tables:
