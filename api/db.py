@@ -26,6 +26,7 @@ from sqlalchemy.engine import Engine
 
 __all__ = [
     "archives",
+    "downgrade",
     "events",
     "jobs",
     "make_engine",
@@ -161,6 +162,16 @@ def make_engine(url: str) -> Engine:
 
 def migrate(engine: Engine) -> None:
     """Bring the schema to the newest Alembic revision (idempotent, safe on every start)."""
+    _run_migrations(engine, "upgrade", "head")
+
+
+def downgrade(engine: Engine, revision: str) -> None:
+    """Take the schema back to ``revision`` (``"0008"``), for an older thermcap: the index has no
+    ``alembic.ini`` of its own, its migrations run on a connection handed to them."""
+    _run_migrations(engine, "downgrade", revision)
+
+
+def _run_migrations(engine: Engine, direction: str, revision: str) -> None:
     from alembic import command
     from alembic.config import Config
     from sqlalchemy import text
@@ -172,4 +183,4 @@ def migrate(engine: Engine) -> None:
             # Workers and API replicas start together: one migrates, the others wait, then see head.
             conn.execute(text("SELECT pg_advisory_xact_lock(7428001)"))
         cfg.attributes["connection"] = conn
-        command.upgrade(cfg, "head")
+        getattr(command, direction)(cfg, revision)

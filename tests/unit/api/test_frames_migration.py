@@ -95,11 +95,6 @@ def test_legacy_frames_on_sqlite(tmp_path):
 _FRAMES_INDEXES = {"ix_frames_time", "ix_frames_hot", "ix_frames_graded"}
 
 
-def _downgrade(engine, revision: str) -> None:
-    with engine.begin() as conn:
-        command.downgrade(_alembic(conn), revision)
-
-
 def _rows(conn) -> list[tuple]:
     return [tuple(r) for r in conn.execute(text("SELECT session_id, idx, timestamp_ns, max_target_temp_c, sha256 "
                                                  "FROM frames ORDER BY session_id, idx"))]
@@ -111,7 +106,7 @@ def check_downgrade(engine, root: Path) -> None:
     that code (its fingerprint cleared), whether or not its rows had been converted. The chain
     goes on down to 0007 and back up."""
     _index_before_0009(engine)
-    _downgrade(engine, "0008")
+    db.downgrade(engine, "0008")
     with engine.connect() as conn:
         insp = inspect(conn)
         assert "frames" in insp.get_table_names() and "frames_legacy" not in insp.get_table_names()
@@ -124,7 +119,7 @@ def check_downgrade(engine, root: Path) -> None:
         assert [bytes(r[4]) for r in rows] == [bytes.fromhex(h) for h in (H[0], H[2], H[3])]  # 0008's bytes
         prints = dict(conn.execute(text("SELECT id, fingerprint FROM sessions")).all())
     assert prints == {"m": "fp", "n": ""}  # "n"'s rows are older than its file: scanned again
-    _downgrade(engine, "0007")  # 0008 turns the hashes back to hex, 0007 drops its indexes
+    db.downgrade(engine, "0007")  # 0008 turns the hashes back to hex, 0007 drops its indexes
     with engine.connect() as conn:
         assert [r[4] for r in _rows(conn)] == [H[0], H[2], H[3]]
     db.migrate(engine)  # and up again: the rows are kept aside once more
@@ -133,7 +128,7 @@ def check_downgrade(engine, root: Path) -> None:
         assert "frames" not in names and "frames_legacy" in names
     store = open_store(root)
     assert convert_legacy_frames(engine, store) == ["m", "n"]  # no file names "n" now: its rows serve
-    _downgrade(engine, "0008")  # every row converted: an empty table, every session scanned again
+    db.downgrade(engine, "0008")  # every row converted: an empty table, every session scanned again
     with engine.connect() as conn:
         assert _rows(conn) == []
         assert {i["name"] for i in inspect(conn).get_indexes("frames")} >= _FRAMES_INDEXES
