@@ -18,6 +18,12 @@ revision = "0009"
 down_revision = "0008"
 
 
+def _session_key() -> sa.Column:
+    """The first half of a per-session table's key: its rows go with their session."""
+    return sa.Column("session_id", sa.String(128), sa.ForeignKey("sessions.id", ondelete="CASCADE"),
+                     primary_key=True)
+
+
 def upgrade() -> None:
     inspector = sa.inspect(op.get_bind())
     tables = inspector.get_table_names()
@@ -26,8 +32,7 @@ def upgrade() -> None:
     if "target_seconds" not in tables:  # 0001 made it already on a fresh database
         op.create_table(
             "target_seconds",
-            sa.Column("session_id", sa.String(128), sa.ForeignKey("sessions.id", ondelete="CASCADE"),
-                      primary_key=True),
+            _session_key(),
             sa.Column("second", sa.BigInteger(), primary_key=True),
             sa.Column("max_target_temp_c", sa.Float(), nullable=False),
             sa.Column("min_target_temp_c", sa.Float(), nullable=False),
@@ -68,8 +73,7 @@ def downgrade() -> None:
     else:
         op.create_table(
             "frames",
-            sa.Column("session_id", sa.String(128), sa.ForeignKey("sessions.id", ondelete="CASCADE"),
-                      primary_key=True),
+            _session_key(),
             sa.Column("idx", sa.Integer(), primary_key=True),
             sa.Column("timestamp_ns", sa.BigInteger(), nullable=False),
             sa.Column("segment", sa.String(64)),
