@@ -19,7 +19,7 @@ numpy, for its part, advises the kernel to back every array of 4 MB or more with
 pages at a time, a batch of frames) that costs more than it saves: each fault in such a region
 zeroes 2 MB, and where free huge pages are short the kernel compacts memory first, on the
 faulting thread. The archiver with the advice took 0.45-0.87 s of system CPU a 600-frame run and
-17.0-18.0 ms a frame in all; without it 0.30-0.36 s and 15.7-16.7 ms (2026-12-06, same sitting).
+16.9-18.0 ms a frame in all; without it 0.30-0.36 s and 15.7-16.7 ms (2026-12-06, same sitting).
 ``keep_frame_blocks`` turns that advice off too, unless ``NUMPY_MADVISE_HUGEPAGE`` is set.
 """
 
@@ -34,10 +34,10 @@ __all__ = ["FRAME_HEAP_ENV", "MMAP_BYTES", "TRIM_BYTES", "keep_frame_blocks"]
 
 MMAP_BYTES = 32 * 1024 * 1024  # blocks below it come from the heap: a 1920x1080 int64 frame is 16.6 MB
 TRIM_BYTES = 128 * 1024 * 1024  # free memory a heap keeps at its top before giving it back
-#: the same bounds for a child interpreter, read by glibc at its start
-FRAME_HEAP_ENV = {"MALLOC_MMAP_THRESHOLD_": str(MMAP_BYTES), "MALLOC_TRIM_THRESHOLD_": str(TRIM_BYTES),
-                  "NUMPY_MADVISE_HUGEPAGE": "0"}
-_GLIBC_ENV = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_")
+_GLIBC_ENV = {"MALLOC_MMAP_THRESHOLD_": str(MMAP_BYTES), "MALLOC_TRIM_THRESHOLD_": str(TRIM_BYTES)}
+_NUMPY_ENV = "NUMPY_MADVISE_HUGEPAGE"
+#: the same for a child interpreter, read by glibc and numpy at its start
+FRAME_HEAP_ENV = {**_GLIBC_ENV, _NUMPY_ENV: "0"}
 
 _M_TRIM_THRESHOLD = -1  # glibc's <malloc.h>
 _M_MMAP_THRESHOLD = -3
@@ -53,7 +53,7 @@ def keep_frame_blocks() -> bool:
     global _done
     with _lock:
         if _done is None:
-            if "NUMPY_MADVISE_HUGEPAGE" not in os.environ:
+            if _NUMPY_ENV not in os.environ:
                 _no_huge_page_advice()
             _done = not any(k in os.environ for k in _GLIBC_ENV) and _mallopt()
         return _done
