@@ -43,7 +43,7 @@ from thermcap.archive.manifest_types import FileEntry, FormatEntry, Manifest
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.frame_heap import keep_frame_blocks
-from thermcap.recorder.storage.atomic import fsync_dir
+from thermcap.recorder.storage.atomic import fsync_dir, fsync_tree
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import SessionFrame, count_frames, read_session_meta, session_segments
@@ -70,17 +70,6 @@ def encoder_threads(total: int | None, formats_at_once: int) -> int:
     from both cores."""
     total = usable_cores() if total is None else total
     return max(1, total // max(1, formats_at_once))
-
-
-def _fsync_tree(path: Path) -> None:
-    for p in path.rglob("*"):
-        if p.is_file():
-            fd = os.open(p, os.O_RDONLY)
-            try:
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-    fsync_dir(path)
 
 
 def _summary_intact(adir: Path, manifest: Manifest) -> bool:
@@ -214,7 +203,7 @@ def take_name(session_dir: Path, fid: str, partial: Path, manifest: Manifest, en
                 save_manifest(session_dir, manifest)
         v = entry["verification"]
         return list(v) if isinstance(v, list) else [str(v)]
-    _fsync_tree(partial)
+    fsync_tree(partial)
     if final.exists():  # replace the old copy (--force, or a damaged one) only now that the new one verified
         old = adir / (fid + ".old")
         if old.exists():

@@ -15,16 +15,29 @@ from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["fsync_dir", "replacing", "write_json_atomic", "write_text_atomic"]
+__all__ = ["fsync_dir", "fsync_tree", "replacing", "write_json_atomic", "write_text_atomic"]
 
 
-def fsync_dir(path: Path) -> None:
-    """Make a rename in ``path`` survive a power cut."""
+def _fsync(path: Path) -> None:
     fd = os.open(path, os.O_RDONLY)
     try:
         os.fsync(fd)
     finally:
         os.close(fd)
+
+
+def fsync_dir(path: Path) -> None:
+    """Make a rename in ``path`` survive a power cut."""
+    _fsync(path)
+
+
+def fsync_tree(path: Path) -> None:
+    """Every file under ``path`` to disk, then ``path`` itself: a folder written whole before it
+    is renamed into place."""
+    for p in path.rglob("*"):
+        if p.is_file():
+            _fsync(p)
+    _fsync(path)
 
 
 @contextmanager
