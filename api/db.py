@@ -5,6 +5,7 @@ when ``THERMCAP_DATABASE_URL`` says so. The schema is created and upgraded by Al
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Literal
 
 from sqlalchemy import (
     BigInteger,
@@ -171,7 +172,7 @@ def downgrade(engine: Engine, revision: str) -> None:
     _run_migrations(engine, "downgrade", revision)
 
 
-def _run_migrations(engine: Engine, direction: str, revision: str) -> None:
+def _run_migrations(engine: Engine, direction: Literal["upgrade", "downgrade"], revision: str) -> None:
     from alembic import command
     from alembic.config import Config
     from sqlalchemy import text
