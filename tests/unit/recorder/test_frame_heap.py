@@ -38,11 +38,16 @@ print(json.dumps({"set": set_by, "faults": resource.getrusage(resource.RUSAGE_SE
 """
 
 
-def _probe(mode: str, **env: str) -> dict:
+def _run(script: str, *args: str, **env: str) -> dict:
+    """``script`` in a fresh interpreter, without the bounds in its environment unless ``env`` sets them."""
     clean = {k: v for k, v in os.environ.items() if k not in FRAME_HEAP_ENV}
-    out = subprocess.run([sys.executable, "-c", _PROBE, mode], capture_output=True, text=True, check=True,
+    out = subprocess.run([sys.executable, "-c", script, *args], capture_output=True, text=True, check=True,
                          env={**clean, **env})
     return json.loads(out.stdout)
+
+
+def _probe(mode: str, **env: str) -> dict:
+    return _run(_PROBE, mode, **env)
 
 
 def test_frame_sized_temporaries_stop_faulting_once_the_bounds_are_set():
@@ -60,7 +65,10 @@ def test_bounds_the_environment_sets_are_left_as_they_are():
 
 _NUMPY_PROBE = """
 import json, sys
-from numpy._core.multiarray import _set_madvise_hugepage
+try:  # numpy 2, then numpy 1 (the project takes numpy >= 1.26)
+    from numpy._core.multiarray import _set_madvise_hugepage
+except ImportError:
+    from numpy.core.multiarray import _set_madvise_hugepage
 if sys.argv[1] == "keep":
     from thermcap.recorder.frame_heap import keep_frame_blocks
     keep_frame_blocks()
@@ -73,10 +81,7 @@ print(json.dumps({"advised": advised}))
 
 
 def _numpy_probe(mode: str, *args: str, **env: str) -> dict:
-    clean = {k: v for k, v in os.environ.items() if k not in FRAME_HEAP_ENV}
-    out = subprocess.run([sys.executable, "-c", _NUMPY_PROBE, mode, *args], capture_output=True, text=True, check=True,
-                         env={**clean, **env})
-    return json.loads(out.stdout)
+    return _run(_NUMPY_PROBE, mode, *args, **env)
 
 
 def test_numpy_huge_page_advice_is_turned_off_for_batch_sized_temporaries(session):
