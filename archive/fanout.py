@@ -2,8 +2,9 @@
 
 Each archive format used to read (decompress and decode) the whole MCAP source again. ``fan_out``
 reads it once and hands every frame to each consumer through its own bounded queue, so memory
-stays at ``depth`` frames per consumer however long the session. A consumer that stops early
-(its writer failed) is detached: the others go on, and the producer never blocks on it.
+stays at ``depth`` frames per consumer, and the batch in the producer's hand, however long the
+session. A consumer that stops early (its writer failed) is detached: the others go on, and the
+producer never blocks on it.
 
 With more consumers than cores, the consumers and the source's read take turns (``slots``): at
 most ``slots`` of them work at once, a consumer for up to ``turn`` items while its queue holds
@@ -15,6 +16,11 @@ frame, median of 5), and 0-2% taking turns two at a time, eight frames a turn, w
 still busy. The whole archive, alternated in one process: 19.32 ms a frame teed, 18.43 with
 the codecs taking turns; then 17.80 against 17.05 with the source's read taking turns too, and
 6.18 against 5.73 s of wall time.
+
+Frames are handed on in batches of ``turn`` (at most ``depth``), one batch a turn: a queue's lock
+and wake-up for every frame and consumer had cost 0.020 ms a frame with three consumers doing
+nothing, 0.011 in batches of 8; the whole archive, alternated in one process, 15.57 against
+15.46 ms a frame (medians of 8, 2026-12-06).
 """
 
 from __future__ import annotations
@@ -60,22 +66,21 @@ class _Branch(Generic[T]):
             self.holding = False
 
     def __iter__(self) -> Iterator[T]:
-        done = 0
         while True:
             try:
-                item = self.q.get_nowait()
+                batch = self.q.get_nowait()
             except queue.Empty:
                 self.end_turn()  # never wait for the producer while holding a slot
-                item = self.q.get()
+                batch = self.q.get()
             self.take_turn()  # the stream's end too: the rest of the consumer's work takes a slot
-            if item is _END:
+            if batch is _END:
                 return
-            if isinstance(item, _Failure):
-                raise item.exc
-            yield item
-            done += 1
-            if self.turns is not None and done % self.turns.turn == 0:
-                self.end_turn()
+            if isinstance(batch, _Failure):
+                raise batch.exc
+            batch.reverse()  # handed on one by one, each let go of as soon as it is
+            while batch:
+                yield batch.pop()
+            self.end_turn()  # a batch is a turn
 
 
 class _Failure:
@@ -97,7 +102,8 @@ def fan_out(source: Iterable[T], consumers: list[Callable[[Iterable[T]], R]], *,
     if depth < 1 or turn < 1 or (slots is not None and slots < 1):
         raise ValueError(f"fan_out needs depth, turn and slots of at least 1, got {depth}, {turn}, {slots}")
     turns = _Turns(slots, turn) if slots is not None and slots < len(consumers) else None
-    branches: list[_Branch[T]] = [_Branch(depth, turns) for _ in consumers]
+    batch = min(turn, depth)
+    branches: list[_Branch[T]] = [_Branch(max(1, depth // batch), turns) for _ in consumers]
     results: list[R | BaseException] = [RuntimeError("consumer did not finish")] * len(consumers)
 
     def run(i: int) -> None:
@@ -130,25 +136,31 @@ def fan_out(source: Iterable[T], consumers: list[Callable[[Iterable[T]], R]], *,
             except queue.Full:
                 continue
 
+    end: object = _END
     try:
         stream = iter(source)
-        while True:
+        ended = False
+        while not ended:
+            items: list[T] = []
             # the source's read takes a slot too (decompressing, hashing), given back before
             # the hand-off, which may wait for a consumer
             if turns is not None:
                 turns.gate.acquire()
             try:
-                item = next(stream)
+                while len(items) < batch:
+                    items.append(next(stream))
             except StopIteration:
-                break
+                ended = True
+            except BaseException as exc:  # what was read before it still reaches the consumers
+                end, ended = _Failure(exc), True
             finally:
                 if turns is not None:
                     turns.gate.release()
             if all(b.detached.is_set() for b in branches):
                 break
-            for b in branches:
-                put(b, copy(item) if copy is not None else item)
-        end: object = _END
+            if items:
+                for b in branches:
+                    put(b, [copy(x) for x in items] if copy is not None else list(items))
     except BaseException as exc:
         end = _Failure(exc)
     for b in branches:

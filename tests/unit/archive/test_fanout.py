@@ -45,8 +45,39 @@ def test_a_source_error_reaches_every_consumer():
     assert all(isinstance(r, OSError) for r in results)
 
 
-def test_memory_is_bounded_by_the_queue_depth():
-    """A slow writer holds the producer back: at most its queue's depth is read ahead."""
+@pytest.mark.parametrize("turn", [1, 3, 8])
+def test_what_was_read_before_a_source_error_still_reaches_every_consumer(turn):
+    """Items are handed on in batches; the items of a batch the error cut short come first."""
+    def source():
+        yield from range(5)
+        raise OSError("segment unreadable")
+
+    def consumer(it):
+        seen = []
+        try:
+            for item in it:
+                seen.append(item)
+        except OSError:
+            return seen
+        return "no error"
+
+    assert fan_out(source(), [consumer, consumer], turn=turn) == [list(range(5))] * 2
+
+
+def test_a_copy_that_fails_ends_every_consumer_instead_of_leaving_it_waiting():
+    def copy(item):
+        if item == 4:
+            raise MemoryError("no room for a copy")
+        return item
+
+    results = fan_out(iter(range(10)), [list, list], copy=copy, turn=2)
+    assert all(isinstance(r, MemoryError) for r in results)
+
+
+@pytest.mark.parametrize("depth, turn", [(3, 8), (8, 8), (8, 2), (1, 1)])
+def test_memory_is_bounded_by_the_queue_depth(depth, turn):
+    """A slow writer holds the producer back: at most its queue's depth is read ahead, and the
+    batch the producer holds while it waits (of ``turn`` items, at most ``depth``)."""
     produced: list[int] = []
     ahead: list[int] = []
 
@@ -62,8 +93,8 @@ def test_memory_is_bounded_by_the_queue_depth():
             produced.append(i)
             yield i
 
-    assert fan_out(source(), [slow], depth=3) == [100]
-    assert ahead[0] <= 3 + 1  # the queue, plus the item waiting to be put
+    assert fan_out(source(), [slow], depth=depth, turn=turn) == [100]
+    assert ahead[0] <= depth + min(turn, depth)  # the queue, plus the batch waiting to be put
 
 
 @pytest.mark.parametrize("n", [0, 1])
