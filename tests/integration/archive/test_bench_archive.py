@@ -77,6 +77,13 @@ def test_bench_archive_session_reports_x_real_time_beside_its_floors():
     paired = res["cpu_vs_formats_rounds"]
     assert len(paired) == 3 and all(v > 0 for v in paired)
     assert res["cpu_vs_formats_rounds_median"] == sorted(paired)[1]
+    # the same against the formats run side by side as the archive runs them, each round after its run
+    together = res["formats_together_cpu_ms_per_frame_rounds"]
+    assert len(together) == 3 and all(v > 0 for v in together)
+    ratios = res["cpu_vs_formats_together_rounds"]
+    assert len(ratios) == 3 and res["cpu_vs_formats_together_rounds_median"] == sorted(ratios)[1]
+    for (cpu_ms, t), ratio in zip(zip(res["cpu_ms_per_frame_runs"], together, strict=True), ratios, strict=True):
+        assert abs(cpu_ms / t - ratio) < 0.01
     assert res["formats_bound_x_real_time"] == round(1000 / 60 * res["cores"] / res["formats_cpu_ms_per_frame"], 3) \
         or abs(res["formats_bound_x_real_time"] - 1000 / 60 * res["cores"] / total) < 0.01
 
@@ -110,3 +117,36 @@ def test_the_samples_sequences_are_found_at_any_depth_and_a_damaged_one_is_left_
     assert list(found) == ["real two.seq 640x512"] and len(found["real two.seq 640x512"]) == 2
     cut = str(tmp_path / "flir" / "cut.csq")
     assert list(unreadable) == [cut] and "cut.csq" in unreadable[cut]
+
+
+def test_the_formats_floor_compares_every_frame_it_reads_back(tmp_path):
+    """The floor is a verifying read, as the archive's is: a format whose reader gives back other
+    pixels or another sidecar than were written fails the benchmark instead of setting its floor."""
+    import dataclasses
+
+    import numpy as np
+    import pytest
+
+    from thermcap.archive.bench import format_cpu, formats_together_cpu, verify_read
+    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.recorder.storage.reader import SessionFrame
+
+    rng = np.random.default_rng(5)
+    frames = [SessionFrame(i, "0000.mcap", 1_000_000_000 + i, rng.integers(0, 1 << 14, (16, 24), np.uint16),
+                           b'{"capture": {}}') for i in range(4)]
+    assert all(v > 0 for v in format_cpu("png16", frames, tmp_path, 1))
+    assert formats_together_cpu(("png16", "hdf5"), frames, tmp_path, 1, 2) > 0
+    fmt = get_format("png16")
+    out = tmp_path / "copy"
+    out.mkdir()
+    files = [r.path for r in fmt.write(iter(frames), out, ArchiveContext(session_id="t", total_frames=4,
+                                                                           frames_per_segment={"0000.mcap": 4}))]
+    verify_read("png16", fmt, out, files, frames)
+    changed = frames[2].pixels.copy()
+    changed[3, 7] ^= 1
+    with pytest.raises(RuntimeError, match="frame 2 read back differs"):
+        verify_read("png16", fmt, out, files, [*frames[:2], dataclasses.replace(frames[2], pixels=changed), frames[3]])
+    with pytest.raises(RuntimeError, match="frame 1 read back differs"):
+        verify_read("png16", fmt, out, files, [frames[0], dataclasses.replace(frames[1], sidecar=b"{}"), *frames[2:]])
+    with pytest.raises(RuntimeError, match="4 frames read back of 5"):
+        verify_read("png16", fmt, out, files, [*frames, frames[0]])
