@@ -34,7 +34,7 @@ def strip(src, out, pos, table, used):
         ent = np.uint64(src[0])
         for i in range(1, n):
             c = np.uint64(src[i])
-            idx = (ent << np.uint64(8)) | c
+            idx = (c << np.uint64(12)) | ent  # by byte first: see archive.lzw
             nxt = table[idx]
             if nxt != 0:
                 ent = np.uint64(nxt)
