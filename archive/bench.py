@@ -226,8 +226,9 @@ def formats_together_cpu(fids: tuple[str, ...], frames: list[Any], workdir: Path
     (``fan_out``), each on ``workers`` encoder threads, each frame read back compared as in
     ``format_cpu``; no source read, no hash. What separates the archive from this floor is its own
     work alone, not the two cores sharing one cache and memory, which the formats one at a time
-    never do: the compiled LZW encoder, whose string table is 2 MB, took 12-13% more samples in
-    the archive than alone (perf, 2026-12-06), where the other codecs took 1-2% more."""
+    never do. That sharing is how the compiled LZW encoder was found taking 12-13% more samples
+    in the archive than alone (perf, 2026-12-06; its table is now laid out to stay in L1, see
+    ``archive.lzw``); this floor still runs 1-3% above the formats one at a time."""
     from thermcap.archive.fanout import fan_out
     from thermcap.archive.formats import ArchiveContext, get_format
     from thermcap.recorder.bench.cpu import process_cpu_s
