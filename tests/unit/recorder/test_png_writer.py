@@ -37,3 +37,21 @@ def test_libpng_and_pillow_read_every_sample(pixels, level):
 def test_what_it_cannot_write_is_refused(bad):
     with pytest.raises(ValueError):
         encode_png(bad)
+
+
+def test_every_chunk_carries_the_crc_of_its_type_and_data():
+    """Each chunk's CRC-32 is PNG's (zlib's, over the type and the data), ancillary text chunks and
+    the empty IEND included: readers that skip a bad ancillary chunk would not say so."""
+    import struct
+    import zlib
+
+    png = encode_png(RNG.integers(0, 65536, (40, 30), dtype=np.uint16), 4, {"thermcap:units": "degC"})
+    pos, kinds = 8, []
+    while pos < len(png):
+        (length,) = struct.unpack(">I", png[pos:pos + 4])
+        kind, data = png[pos + 4:pos + 8], png[pos + 8:pos + 8 + length]
+        (crc,) = struct.unpack(">I", png[pos + 8 + length:pos + 12 + length])
+        assert crc == zlib.crc32(kind + data), kind
+        kinds.append(kind)
+        pos += 12 + length
+    assert kinds == [b"IHDR", b"tEXt", b"IDAT", b"IEND"]
