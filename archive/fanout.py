@@ -3,8 +3,8 @@
 Each archive format used to read (decompress and decode) the whole MCAP source again. ``fan_out``
 reads it once and hands every frame to each consumer through its own bounded queue, so memory
 stays at ``depth`` frames per consumer, the batch in the producer's hand and what is left of the
-batch each consumer is working through, however long the session. A consumer that stops early (its writer failed) is detached: the others go on, and the
-producer never blocks on it.
+batch each consumer is working through, however long the session. A consumer that stops early
+(its writer failed) is detached: the others go on, and the producer never blocks on it.
 
 With more consumers than cores, the consumers and the source's read take turns (``slots``): at
 most ``slots`` of them work at once, a consumer for up to ``turn`` items while its queue holds
