@@ -180,8 +180,8 @@ def print_table(rows: list[dict[str, Any]]) -> str:
 
 
 def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> tuple[float, float]:
-    """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` (on ``workers``
-    encoder threads, as the archive gives it) and to read them back with its reader and compare
+    """CPU ms a frame (every thread's) to write ``frames`` with format ``fid`` and to read them
+    back, both on ``workers`` threads as the archive gives them, with its reader and compare
     each with the frame written (``verify_read``), alone, in memory: the part of archiving no
     scheduling can remove."""
     from thermcap.archive.formats import ArchiveContext, get_format
@@ -195,7 +195,7 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> 
     records = fmt.write(iter(frames), out, ctx)
     write = process_cpu_s() - c
     c = process_cpu_s()
-    verify_read(fid, fmt, out, [r.path for r in records], frames)
+    verify_read(fid, fmt, out, [r.path for r in records], frames, workers)
     read = process_cpu_s() - c
     return write / len(frames) * 1e3, read / len(frames) * 1e3
 
@@ -207,12 +207,12 @@ def _per_segment(frames: list[Any]) -> dict[str, int]:
     return per_segment
 
 
-def verify_read(fid: str, fmt: Any, out: Path, files: list[str], frames: list[Any]) -> None:
+def verify_read(fid: str, fmt: Any, out: Path, files: list[str], frames: list[Any], workers: int = 2) -> None:
     """The least a verifying read does: every frame decoded by the format's reader, and its
     pixels and sidecar compared with what was written (a memory compare, cheaper than any
     digest). Raises where a frame differs or is missing, so the floor is never a broken format's."""
     n = 0
-    for n, (got, want) in enumerate(zip(fmt.read(out, files), frames, strict=False), start=1):
+    for n, (got, want) in enumerate(zip(fmt.read(out, files, workers), frames, strict=False), start=1):
         if not np.array_equal(got.pixels, want.pixels) or bytes(got.sidecar) != bytes(want.sidecar):
             raise RuntimeError(f"{fid}: frame {n - 1} read back differs from the frame written")
     if n != len(frames):
@@ -242,7 +242,7 @@ def formats_together_cpu(fids: tuple[str, ...], frames: list[Any], workdir: Path
             ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment,
                                  workers=workers)
             records = fmt.write(items, out, ctx)
-            verify_read(fid, fmt, out, [r.path for r in records], frames)
+            verify_read(fid, fmt, out, [r.path for r in records], frames, workers)
         return run
 
     c = process_cpu_s()

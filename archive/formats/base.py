@@ -112,9 +112,11 @@ class ArchiveFormat(ABC):
     def write(self, frames: Iterable[SessionFrame], out_dir: Path, ctx: ArchiveContext) -> list[FileRecord]: ...
 
     @abstractmethod
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+    def read(self, out_dir: Path, files: list[str], workers: int = 2) -> Iterator[DecodedFrame]:
         """Frames in session order, with their sidecars and times, decoded by the format's
-        ordinary reader."""
+        ordinary reader on up to ``workers`` threads: two where a format is read alone (verify,
+        scrub), its share of the cores where the archive reads several back at once
+        (``ArchiveContext.workers``), since more threads than cores cost CPU in switching."""
 
     def read_frame(self, open_file: Callable[[str], Any], files: list[dict[str, Any]], index: int) -> DecodedFrame:
         """Frame ``index`` of the session (pixels, sidecar, time) with as little reading as the

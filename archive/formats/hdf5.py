@@ -153,7 +153,7 @@ class Hdf5(ArchiveFormat):
                 raise ArchiveError(f"expected {total} frames from the parts, got {n}")
         return [FileRecord(rel, n)]
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+    def read(self, out_dir: Path, files: list[str], workers: int = 2) -> Iterator[DecodedFrame]:
         """Every frame through HDF5's own filter pipeline, ``READ_BYTES`` of frames a call.
 
         Why blocks: each h5py call lets go of the GIL and takes it back several times, and
@@ -174,7 +174,7 @@ class Hdf5(ArchiveFormat):
                     step = max(1, READ_BYTES // max(1, int(np.prod(d.shape[1:], dtype=np.int64)) * d.dtype.itemsize))
                     blocks = [(d, meta, i, step) for i in range(0, n, step)]
                     # the next block is read while the caller checks this one (two in flight)
-                    for i, pixels, sidecars in ordered_map(_read_block, blocks, 2, window=2):
+                    for i, pixels, sidecars in ordered_map(_read_block, blocks, workers, window=2):
                         for k in range(pixels.shape[0]):
                             s = sidecars[k]
                             yield DecodedFrame(pixels[k], s.encode("utf-8") if isinstance(s, str) else bytes(s),

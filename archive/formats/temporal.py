@@ -51,13 +51,13 @@ class TemporalFrames(ArchiveFormat):
 
         return write_zip_segments(frames, out_dir, ctx, EXT, sequence)
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
-        """Every frame, a GOP on each of two threads (verification decodes every frame)."""
+    def read(self, out_dir: Path, files: list[str], workers: int = 2) -> Iterator[DecodedFrame]:
+        """Every frame, a GOP on each of ``workers`` threads (verification decodes every frame)."""
         for rel in files:
             path = out_dir / rel
             try:
                 with zipfile.ZipFile(path) as zf:
-                    yield from _decode_run(zf, 0, None, workers=2)
+                    yield from _decode_run(zf, 0, None, workers=workers)
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
 

@@ -50,16 +50,16 @@ class ZippedFrames(ArchiveFormat):
         return write_zip_segments(frames, out_dir, ctx, codec.extension,
                                   lambda run: ordered_map(encode, run, ctx.workers))
 
-    def read(self, out_dir: Path, files: list[str]) -> Iterator[DecodedFrame]:
+    def read(self, out_dir: Path, files: list[str], workers: int = 2) -> Iterator[DecodedFrame]:
         ext, codec = self.codec.extension, self.codec
         for rel in files:
             path = out_dir / rel
             try:
                 with zipfile.ZipFile(path) as zf:
-                    # the ZIP is read here, in order; the images decode on two threads (the
-                    # codecs release the GIL), so verifying a copy takes half the wall time
+                    # the ZIP is read here, in order; the images decode on ``workers`` threads
+                    # (the codecs release the GIL): alone on two cores, verifying takes half the time
                     for pixels, sidecar, base in ordered_map(lambda e: (codec.decode(e[0]), e[1], e[2]),
-                                                             _members(zf, ext), 2):
+                                                             _members(zf, ext), workers):
                         yield DecodedFrame(pixels, sidecar, _time_from_name(base))
             except (zipfile.BadZipFile, OSError) as exc:
                 raise ArchiveError(f"{path}: not a readable ZIP ({exc})") from exc
