@@ -161,9 +161,11 @@ class Hdf5(ArchiveFormat):
         (and a call each for its time and its sidecar: four a frame) left the HDF5 reader, the
         one verification on a single thread, with about a third of a core beside the others, so
         it ran alone for the last 0.65-0.85 s of a 10 s archive; with 16 frames a call that
-        tail is 0.6 s and the verification phase 5-10% shorter. The next block is read on a
-        thread while the caller hashes this one, so HDF5's one lock is not left idle for a hash:
-        the tail 0.68-1.07 -> 0.46-0.66 s (three runs each, alternated)."""
+        tail is 0.6 s and the verification phase 5-10% shorter. With two ``workers`` the next
+        block is read on a thread while the caller hashes this one, so HDF5's one lock is not
+        left idle for a hash: the tail 0.68-1.07 -> 0.46-0.66 s (three runs each, alternated).
+        With one (the archive's share for three formats on two cores), blocks are read in turn,
+        while the other formats' read-backs keep the cores busy."""
         for rel in files:
             path = out_dir / rel
             try:
