@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import mmap
+import os
 from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -90,11 +91,11 @@ class TiffLzw(ArchiveFormat):
             path = out_dir / rel
             try:
                 with open(path, "rb") as fh, tifffile.TiffFile(fh) as tif:
-                    view = mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ)
+                    image = _FileImage(fh.fileno(), os.fstat(fh.fileno()).st_size)
                     try:
-                        yield from _libtiff_pages(view, tif, workers)
+                        yield from _libtiff_pages(image, tif, workers)
                     finally:
-                        view.close()
+                        image.close()
             except (tifffile.TiffFileError, imagecodecs.TiffError, OSError, ValueError) as exc:
                 raise ArchiveError(f"{path}: not a readable TIFF ({exc})") from exc
 
@@ -184,8 +185,69 @@ PAGES_PER_CALL = 32
 BYTES_PER_CALL = 16 << 20
 
 
-def _libtiff_pages(view: mmap.mmap, tif: tifffile.TiffFile, workers: int = 2) -> Iterator[DecodedFrame]:
-    """The pages of one open file, pixels decoded by libtiff (imagecodecs' ``tiff_decode``).
+class _FileImage:
+    """A file's bytes at their own offsets, in anonymous memory that reads fill as the pages come,
+    for libtiff to decode from as from the file.
+
+    Why not a mapping of the file: libtiff then reads the strips straight from the page cache,
+    and a page the disk cannot give back (a bad sector, which ``scrub`` is there to find) or that
+    another process cut off meanwhile ends the whole process with SIGBUS, where a read raises
+    OSError and the copy is reported damaged. Zero pages cost nothing until written, and each
+    batch's strips are given back once decoded (``release``); the IFDs stay, since libtiff walks
+    the chain from the first to the page it decodes."""
+
+    def __init__(self, fd: int, size: int) -> None:
+        self.fd = fd
+        self.size = size
+        self.buf = mmap.mmap(-1, max(1, size))
+        self.filled = 0
+
+    def fill_to(self, end: int) -> None:
+        end = min(end, self.size)
+        view = memoryview(self.buf)
+        try:
+            while self.filled < end:
+                if hasattr(os, "preadv"):  # straight into place: no bytes object between
+                    n = os.preadv(self.fd, [view[self.filled:end]], self.filled)
+                else:
+                    chunk = os.pread(self.fd, min(end - self.filled, 8 << 20), self.filled)
+                    n = len(chunk)
+                    view[self.filled:self.filled + n] = chunk
+                if n <= 0:
+                    raise OSError(f"the file ends at byte {self.filled}, its pages reach byte {end}")
+                self.filled += n
+        finally:
+            view.release()
+
+    def release(self, start: int, end: int) -> None:
+        """Give back the whole memory pages inside ``start..end`` (a page's strips, never its IFD)."""
+        lo = -(-start // mmap.PAGESIZE) * mmap.PAGESIZE
+        hi = min(end, self.filled) // mmap.PAGESIZE * mmap.PAGESIZE
+        if hi > lo and hasattr(mmap, "MADV_DONTNEED"):
+            self.buf.madvise(mmap.MADV_DONTNEED, lo, hi - lo)
+
+    def close(self) -> None:
+        self.buf.close()
+
+
+def _page_end(page: Any) -> int:
+    """Where the last byte libtiff reads for ``page`` ends: its IFD, its tags' values, its strips."""
+    fmt = page.parent.tiff  # classic TIFF or BigTIFF: the sizes of an IFD's parts
+    ends = [int(page.offset) + fmt.tagnosize + fmt.tagsize * len(page.tags) + fmt.offsetsize]
+    ends += [int(t.valueoffset) + int(t.valuebytecount) for t in page.tags.values()
+             if t.valuebytecount > fmt.tagoffsetthreshold]
+    ends += [int(o) + int(n) for o, n in zip(page.dataoffsets, page.databytecounts, strict=True)]
+    return max(ends)
+
+
+def _strip_span(page: Any) -> tuple[int, int]:
+    return (int(min(page.dataoffsets, default=0)),
+            int(max((o + n for o, n in zip(page.dataoffsets, page.databytecounts, strict=True)), default=0)))
+
+
+def _libtiff_pages(image: _FileImage, tif: tifffile.TiffFile, workers: int = 2) -> Iterator[DecodedFrame]:
+    """The pages of one open file, pixels decoded by libtiff (imagecodecs' ``tiff_decode``) from
+    the file's bytes as reads bring them (``_FileImage``).
 
     Why libtiff: it is the reference TIFF reader, independent of the LZW encoder that wrote the
     strips, and its LZW decoder is faster than the one tifffile calls: verifying a 640x512 page
@@ -207,18 +269,20 @@ def _libtiff_pages(view: mmap.mmap, tif: tifffile.TiffFile, workers: int = 2) ->
             batch = [(p, _page_tags(p)) for _, p in zip(range(per_call), rest, strict=False)]
             if not batch:
                 return
+            image.fill_to(max(_page_end(p) for p, _ in batch))  # a read that fails raises here
             yield start, batch
             start += len(batch)
 
-    def decode(item: tuple[int, list[tuple[Any, tuple[bytes, int | None]]]]) -> list[DecodedFrame]:
+    def decode(item: tuple[int, list[tuple[Any, tuple[bytes, int | None]]]]) \
+            -> tuple[list[tuple[int, int]], list[DecodedFrame]]:
         start, batch = item
         first = batch[0][0]
         stack: Any = None
         if len({(p.shape, p.dtype) for p, _ in batch}) == 1:
-            stack = imagecodecs.tiff_decode(view, index=slice(start, start + len(batch)))
+            stack = imagecodecs.tiff_decode(image.buf, index=slice(start, start + len(batch)))
             stack = stack.reshape((len(batch), *first.shape)) if stack.size == len(batch) * first.size else None
         if stack is None:
-            stack = [imagecodecs.tiff_decode(view, index=start + k) for k in range(len(batch))]
+            stack = [imagecodecs.tiff_decode(image.buf, index=start + k) for k in range(len(batch))]
         out = []
         for k, (page, tags) in enumerate(batch):
             pixels = np.asarray(stack[k])
@@ -226,10 +290,12 @@ def _libtiff_pages(view: mmap.mmap, tif: tifffile.TiffFile, workers: int = 2) ->
                 raise ValueError(f"page {start + k}: libtiff decoded {pixels.dtype} {pixels.shape}, "
                                  f"its tags say {page.dtype} {page.shape}")
             out.append(DecodedFrame(pixels, *tags))
-        return out
+        return [_strip_span(p) for p, _ in batch], out
 
-    for decoded in ordered_map(decode, batches(), workers, window=3):
+    for spans, decoded in ordered_map(decode, batches(), workers, window=3):
         yield from decoded
+        for lo, hi in spans:  # decoded into arrays of their own: the strips' memory goes back
+            image.release(lo, hi)
 
 
 def _page_tags(page: Any) -> tuple[bytes, int | None]:

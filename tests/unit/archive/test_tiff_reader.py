@@ -99,3 +99,56 @@ def test_big_pages_are_decoded_fewer_a_call(tmp_path, monkeypatch):
     got = list(TiffLzw().read(tmp_path, ["0000.tif"]))
     assert seen == [3, 3, 3, 1]
     assert all(np.array_equal(g.pixels, f) for g, f in zip(got, frames, strict=True))
+
+
+_CUT_WHILE_READING = """
+import os, sys
+from pathlib import Path
+import numpy as np
+import imagecodecs
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats import tiff_lzw
+from thermcap.archive.formats.tiff_lzw import TiffLzw
+
+folder, cut = Path(sys.argv[1]), int(sys.argv[2])
+path = folder / "0000.tif"
+decode = imagecodecs.tiff_decode
+calls = []
+
+class CutAfterTags:
+    # the file is cut inside the second batch's strips once tifffile has read that batch's
+    # tags, before libtiff decodes it: as a bad sector or another process would cut it
+    def __getattr__(self, name):
+        return getattr(imagecodecs, name)
+
+    def tiff_decode(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 2:
+            os.truncate(path, cut)
+        return decode(*args, **kwargs)
+
+tiff_lzw.imagecodecs = CutAfterTags()
+tiff_lzw.PAGES_PER_CALL = 4
+try:
+    n = sum(1 for _ in TiffLzw().read(folder, ["0000.tif"], workers=1))
+    print("read", n)
+except ArchiveError as exc:
+    print("ArchiveError", exc)
+"""
+
+
+def test_a_file_cut_while_it_is_read_fails_naming_it_and_never_kills_the_process(tmp_path):
+    """libtiff decodes from the file's bytes as reads brought them, never from a mapping of the
+    file: a mapped page the disk cannot give back (a bad sector, which scrub is there to find) or
+    that is cut off meanwhile raises SIGBUS, and the whole process dies instead of reporting a
+    damaged copy."""
+    import subprocess
+    import sys
+
+    _write(tmp_path / "0000.tif", _frames(24, [(256, 320)]))
+    with tifffile.TiffFile(tmp_path / "0000.tif") as tif:
+        cut = tif.pages[5].dataoffsets[0]  # page 5: inside the second batch of four
+    run = subprocess.run([sys.executable, "-c", _CUT_WHILE_READING, str(tmp_path), str(cut)], capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, f"the reader died (signal {-run.returncode}): {run.stderr[-2000:]}"
+    assert run.stdout.startswith("ArchiveError") and "0000.tif" in run.stdout, run.stdout
