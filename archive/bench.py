@@ -21,7 +21,7 @@ import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import h5py
 import numpy as np
@@ -29,6 +29,9 @@ import tifffile
 
 from thermcap.archive.codecs import get_codec
 from thermcap.recorder.capture.sources.sim import SimSource
+
+if TYPE_CHECKING:
+    from thermcap.archive.formats import ArchiveContext
 
 __all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
@@ -184,13 +187,12 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> 
     back, both on ``workers`` threads as the archive gives them, with its reader and compare
     each with the frame written (``verify_read``), alone, in memory: the part of archiving no
     scheduling can remove."""
-    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.archive.formats import get_format
     from thermcap.recorder.bench.cpu import process_cpu_s
 
     fmt = get_format(fid)
     out = Path(tempfile.mkdtemp(prefix=f"floor-{fid}-", dir=workdir))
-    ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=_per_segment(frames),
-                         workers=workers)
+    ctx = _floor_context(frames, workers)
     c = process_cpu_s()
     records = fmt.write(iter(frames), out, ctx)
     write = process_cpu_s() - c
@@ -200,11 +202,15 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> 
     return write / len(frames) * 1e3, read / len(frames) * 1e3
 
 
-def _per_segment(frames: list[Any]) -> dict[str, int]:
+def _floor_context(frames: list[Any], workers: int) -> ArchiveContext:
+    """What a format writing ``frames`` for a floor is told: their segments, the threads it gets."""
+    from thermcap.archive.formats import ArchiveContext
+
     per_segment: dict[str, int] = {}
     for f in frames:
         per_segment[f.segment] = per_segment.get(f.segment, 0) + 1
-    return per_segment
+    return ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment,
+                          workers=workers)
 
 
 def verify_read(fid: str, fmt: Any, out: Path, files: list[str], frames: list[Any], workers: int = 2) -> None:
@@ -230,18 +236,16 @@ def formats_together_cpu(fids: tuple[str, ...], frames: list[Any], workdir: Path
     in the archive than alone (perf, 2026-12-06; its table is now laid out to stay in L1, see
     ``archive.lzw``); this floor still runs 1-3% above the formats one at a time."""
     from thermcap.archive.fanout import fan_out
-    from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.archive.formats import get_format
     from thermcap.recorder.bench.cpu import process_cpu_s
 
-    per_segment = _per_segment(frames)
+    contexts = {fid: _floor_context(frames, workers) for fid in fids}  # made before the clock starts
 
     def consumer(fid: str) -> Callable[[Any], None]:
         def run(items: Any) -> None:
             fmt = get_format(fid)
             out = Path(tempfile.mkdtemp(prefix=f"together-{fid}-", dir=workdir))
-            ctx = ArchiveContext(session_id="floor", total_frames=len(frames), frames_per_segment=per_segment,
-                                 workers=workers)
-            records = fmt.write(items, out, ctx)
+            records = fmt.write(items, out, contexts[fid])
             verify_read(fid, fmt, out, [r.path for r in records], frames, workers)
         return run
 

@@ -236,11 +236,11 @@ def _page_end(page: Any) -> int:
     ends = [int(page.offset) + fmt.tagnosize + fmt.tagsize * len(page.tags) + fmt.offsetsize]
     ends += [int(t.valueoffset) + int(t.valuebytecount) for t in page.tags.values()
              if t.valuebytecount > fmt.tagoffsetthreshold]
-    ends += [int(o) + int(n) for o, n in zip(page.dataoffsets, page.databytecounts, strict=True)]
-    return max(ends)
+    return max(*ends, _strip_span(page)[1])
 
 
 def _strip_span(page: Any) -> tuple[int, int]:
+    """(first, end) byte of the page's strips; (0, 0) for a page without any."""
     return (int(min(page.dataoffsets, default=0)),
             int(max((o + n for o, n in zip(page.dataoffsets, page.databytecounts, strict=True)), default=0)))
 
