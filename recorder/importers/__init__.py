@@ -8,12 +8,12 @@ and raw Gray16 with their JSON sidecars.
 
 from __future__ import annotations
 
-import mmap
 from collections.abc import Generator
 from pathlib import Path
 
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError
 from thermcap.recorder.importers.dji import is_dji, read_dji
+from thermcap.recorder.importers.file_view import FileView
 from thermcap.recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from thermcap.recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
 from thermcap.recorder.importers.jpeg import app_segments
@@ -80,8 +80,8 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
 
 
 def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Generator[ImportedFrame, None, None]:
-    """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are memory-mapped and decoded
-    image by image, so an hours-long SEQ costs one frame of memory, not the file; the other
+    """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are read image by image
+    (``FileView``) and decoded so, so an hours-long SEQ costs one frame of memory, not the file; the other
     formats hold one frame a file anyway. A corrupt image mid-file raises ImportFileError there
     (the frames before it were already yielded: callers that must not half-import keep track)."""
     path = str(path)
@@ -92,12 +92,11 @@ def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Genera
                 fh.close()
                 yield from read_file(path, terraref_variant=terraref_variant)
                 return
-            with mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as data:
-                try:
-                    yield from iter_fff_file(path, data)
-                except ImportFileError:
-                    raise
-                except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
-                    raise ImportFileError(f"{path}: corrupt flir-fff file ({type(exc).__name__}: {exc})") from None
+            try:  # read by offset, never mapped: see FileView
+                yield from iter_fff_file(path, FileView(path, fh.fileno()))
+            except ImportFileError:
+                raise
+            except Exception as exc:  # a corrupt file may trip any parser: still a clean, named error
+                raise ImportFileError(f"{path}: corrupt flir-fff file ({type(exc).__name__}: {exc})") from None
     except OSError as exc:
         raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None

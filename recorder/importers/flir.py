@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import mmap
 import struct
 from collections.abc import Iterator
 from typing import Any
@@ -11,6 +10,7 @@ import imagecodecs
 import numpy as np
 
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, TruncatedImageError, read_exact
+from thermcap.recorder.importers.file_view import FileView
 from thermcap.recorder.importers.jpeg import app_segments
 from thermcap.recorder.radiometry import FlirPlanckModel
 
@@ -253,11 +253,11 @@ def _short_trailer(path: str, image: bytes, order: str, dir_off: int, count: int
     return bytes(buf), note
 
 
-def iter_fff_records(path: str, data: bytes | mmap.mmap,
+def iter_fff_records(path: str, data: bytes | FileView,
                      notes: dict[int, tuple[str, int, int, int]] | None = None) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
-    image's own bytes are ever copied (``data`` may be an mmap of a multi-GB file).
+    image's own bytes are ever read (``data`` may be a ``FileView`` of a multi-GB file).
 
     The last image may end a few bytes short of what its directory promises (a trailer cut, or
     padding a writer never wrote) while its image stream is whole: it is kept, and ``notes``
@@ -265,12 +265,7 @@ def iter_fff_records(path: str, data: bytes | mmap.mmap,
     an image whose pixels are cut is truncated."""
     pos, n = 0, len(data)
     index = 0
-    done = 0  # bytes of an mmap already handed back to the kernel
     while pos + 0x40 <= n:
-        if isinstance(data, mmap.mmap) and pos - done >= 64 << 20:  # keep RSS to the image at hand
-            upto = pos // mmap.PAGESIZE * mmap.PAGESIZE
-            data.madvise(mmap.MADV_DONTNEED, done, upto - done)
-            done = upto
         order = _byteorder(path, data[pos:pos + 0x40])
         dir_off, count = struct.unpack(order + "II", data[pos + 0x18:pos + 0x20])
         end = dir_off + 32 * count
@@ -301,8 +296,8 @@ def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:
     return list(iter_fff_file(path, data))
 
 
-def iter_fff_file(path: str, data: bytes | mmap.mmap) -> Iterator[ImportedFrame]:
-    """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be an mmap): a long SEQ never
+def iter_fff_file(path: str, data: bytes | FileView) -> Iterator[ImportedFrame]:
+    """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be a ``FileView``): a long SEQ never
     sits decoded in memory. A file with a second image is a SEQ (CSQ when JPEG-LS coded)."""
     notes: dict[int, tuple[str, int, int, int]] = {}
     records = iter_fff_records(path, data, notes)

@@ -1,0 +1,72 @@
+"""A file read by offset, for the SEQ/CSQ walker: bytes come from ``os.pread``, never from a
+mapping of the file.
+
+Why not ``mmap``: a mapped page the kernel cannot fill (the file cut by another process, a copy
+overwritten in the inbox, an SD card pulled, a network share's read error) is not an error but
+the signal SIGBUS, which ends the whole process: ``thermcap import`` or the inbox's watcher
+died without naming the file, and without reporting the frames it had already written. Here a
+short or failed read raises ``ImportFileError`` naming the file, the offset and what the file
+holds now. Memory stays what it was with the mapping: one image at a time (a walker asks for
+an image's extent in one read), and no pages of the file are held after it.
+"""
+
+from __future__ import annotations
+
+import os
+
+from thermcap.recorder.importers.base import ImportFileError
+
+__all__ = ["FileView"]
+
+#: How far ``find`` reads at once while it scans for the next header.
+_SCAN = 1 << 20
+
+
+class FileView:
+    """The slices, ``len`` and ``find`` of ``bytes`` over an open file's first ``size`` bytes
+    (its size when opened: a file that shrinks after that fails a read, by name)."""
+
+    def __init__(self, path: str, fd: int) -> None:
+        self.path = path
+        self._fd = fd
+        self._size = os.fstat(fd).st_size
+
+    def __len__(self) -> int:
+        return self._size
+
+    def __getitem__(self, key: slice) -> bytes:
+        if not isinstance(key, slice) or key.step not in (None, 1):
+            raise TypeError("FileView takes contiguous slices only")
+        start, stop, _ = key.indices(self._size)
+        return self._read(start, max(0, stop - start))
+
+    def find(self, sub: bytes, start: int = 0) -> int:
+        """Where ``sub`` first occurs at or after ``start``, or -1; reads ``_SCAN`` bytes at a time."""
+        pos = max(0, start)
+        while pos < self._size:
+            block = self._read(pos, min(_SCAN + len(sub) - 1, self._size - pos))
+            hit = block.find(sub)
+            if hit >= 0:
+                return pos + hit
+            pos += _SCAN
+        return -1
+
+    def _read(self, offset: int, length: int) -> bytes:
+        try:
+            data = os.pread(self._fd, length, offset)
+        except OSError as exc:
+            raise ImportFileError(f"{self.path}: cannot read {length} bytes at byte {offset} "
+                                  f"({exc.strerror or exc})") from None
+        if len(data) != length:
+            now = _size_now(self._fd)
+            raise ImportFileError(f"{self.path}: the file changed while it was read: {length} bytes at byte {offset} "
+                                  f"gave {len(data)}; it was {self._size} bytes when opened"
+                                  + (f" and is {now} now" if now is not None else ""))
+        return data
+
+
+def _size_now(fd: int) -> int | None:
+    try:
+        return os.fstat(fd).st_size
+    except OSError:
+        return None

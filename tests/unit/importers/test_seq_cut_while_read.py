@@ -1,0 +1,51 @@
+"""A SEQ/CSQ cut (or unreadable) while it is imported fails naming the file; it never kills the
+process. The importer once mapped the file: a mapped page past the new end (a copy overwritten
+in the inbox, an SD card pulled, a network share's read error) raised SIGBUS, and ``thermcap
+import`` or the inbox's watcher died with no word of which file, where the frames already
+written could not be reported."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+
+_CUT_WHILE_READING = """
+import os, sys
+from thermcap.recorder.importers import ImportFileError, iter_file
+path, cut = sys.argv[1], int(sys.argv[2])
+got = 0
+try:
+    for frame in iter_file(path):
+        got += 1
+        if got == 1:
+            os.truncate(path, cut)  # another process cuts the file under the importer
+except ImportFileError as exc:
+    print(f"ImportFileError after {got} frames: {exc}")
+else:
+    print(f"no error after {got} frames")
+"""
+
+
+def test_a_seq_cut_while_it_is_imported_fails_naming_it(samples, tmp_path):
+    fff = (samples / "flir" / "frame_000000.fff").read_bytes()
+    seq = tmp_path / "flight.seq"
+    seq.write_bytes(fff * 12)  # a 12-image SEQ, several MB: most of it beyond the cut
+    cut = len(fff) * 2 + len(fff) // 2  # inside the third image
+    run = subprocess.run([sys.executable, "-c", _CUT_WHILE_READING, str(seq), str(cut)], capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, f"the importer died (signal {-run.returncode}): {run.stderr[-2000:]}"
+    assert run.stdout.startswith("ImportFileError after 2 frames") and "flight.seq" in run.stdout, run.stdout
+
+
+def test_a_whole_seq_reads_every_image_from_the_file(samples, tmp_path):
+    from thermcap.recorder.importers import iter_file, read_file
+
+    fff = (samples / "flir" / "frame_000000.fff").read_bytes()
+    seq = tmp_path / "flight.seq"
+    seq.write_bytes(fff + b"\x00" * 3000 + fff * 2)  # padding between images is skipped to the next header
+    streamed = list(iter_file(seq))
+    whole = read_file(seq)
+    assert len(streamed) == len(whole) == 3
+    assert all(np.array_equal(a.pixels, b.pixels) for a, b in zip(streamed, whole, strict=True))
