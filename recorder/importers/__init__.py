@@ -80,8 +80,8 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
 
 
 def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Generator[ImportedFrame, None, None]:
-    """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are read image by image
-    (``FileView``) and decoded so, so an hours-long SEQ costs one frame of memory, not the file; the other
+    """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are read and decoded image by
+    image (``FileView``), so an hours-long SEQ costs one frame of memory, not the file; the other
     formats hold one frame a file anyway. A corrupt image mid-file raises ImportFileError there
     (the frames before it were already yielded: callers that must not half-import keep track)."""
     path = str(path)

@@ -52,11 +52,20 @@ class FileView:
         return -1
 
     def _read(self, offset: int, length: int) -> bytes:
-        try:
-            data = os.pread(self._fd, length, offset)
-        except OSError as exc:
-            raise ImportFileError(f"{self.path}: cannot read {length} bytes at byte {offset} "
-                                  f"({exc.strerror or exc})") from None
+        """``length`` bytes at ``offset``, read until they are all there (a network file system may
+        return fewer than asked) or the file ends."""
+        parts, got = [], 0
+        while got < length:
+            try:
+                part = os.pread(self._fd, length - got, offset + got)
+            except OSError as exc:
+                raise ImportFileError(f"{self.path}: cannot read {length} bytes at byte {offset} "
+                                      f"({exc.strerror or exc})") from None
+            if not part:
+                break
+            parts.append(part)
+            got += len(part)
+        data = parts[0] if len(parts) == 1 else b"".join(parts)
         if len(data) != length:
             now = _size_now(self._fd)
             raise ImportFileError(f"{self.path}: the file changed while it was read: {length} bytes at byte {offset} "

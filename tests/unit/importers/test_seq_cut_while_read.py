@@ -49,3 +49,17 @@ def test_a_whole_seq_reads_every_image_from_the_file(samples, tmp_path):
     whole = read_file(seq)
     assert len(streamed) == len(whole) == 3
     assert all(np.array_equal(a.pixels, b.pixels) for a, b in zip(streamed, whole, strict=True))
+
+
+def test_find_sees_a_header_that_straddles_two_reads(tmp_path, monkeypatch):
+    from thermcap.recorder.importers import file_view
+    from thermcap.recorder.importers.file_view import FileView
+
+    monkeypatch.setattr(file_view, "_SCAN", 16)
+    data = bytes(30) + b"FFF\x00" + bytes(5)  # the header spans bytes 30-33: across the second read's end
+    path = tmp_path / "f.bin"
+    path.write_bytes(data)
+    with open(path, "rb") as fh:
+        view = FileView(str(path), fh.fileno())
+        assert [view.find(b"FFF\x00", s) for s in (0, 17, 30, 31)] == [30, 30, 30, -1]
+        assert view[28:36] == data[28:36] and len(view) == len(data) and view[40:50] == b""
