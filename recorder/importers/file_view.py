@@ -18,12 +18,9 @@ from thermcap.recorder.importers.base import ImportFileError
 
 __all__ = ["FileView"]
 
-#: How far ``find`` reads at once while it scans for the next header.
-_SCAN = 1 << 20
-
 
 class FileView:
-    """The slices, ``len`` and ``find`` of ``bytes`` over an open file's first ``size`` bytes
+    """The slices and ``len`` of ``bytes`` over an open file's first ``size`` bytes
     (its size when opened: a file that shrinks after that fails a read, by name)."""
 
     def __init__(self, path: str, fd: int) -> None:
@@ -39,17 +36,6 @@ class FileView:
             raise TypeError("FileView takes contiguous slices only")
         start, stop, _ = key.indices(self._size)
         return self._read(start, max(0, stop - start))
-
-    def find(self, sub: bytes, start: int = 0) -> int:
-        """Where ``sub`` first occurs at or after ``start``, or -1; reads ``_SCAN`` bytes at a time."""
-        pos = max(0, start)
-        while pos < self._size:
-            block = self._read(pos, min(_SCAN + len(sub) - 1, self._size - pos))
-            hit = block.find(sub)
-            if hit >= 0:
-                return pos + hit
-            pos += _SCAN
-        return -1
 
     def _read(self, offset: int, length: int) -> bytes:
         """``length`` bytes at ``offset``, read until they are all there (a network file system may

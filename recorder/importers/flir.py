@@ -17,6 +17,10 @@ from thermcap.recorder.radiometry import FlirPlanckModel
 __all__ = ["flir_jpeg_payload", "iter_fff_records", "parse_fff", "read_fff_file", "read_flir_jpeg"]
 
 RAW, CAMERA_INFO, GPS_INFO = 0x01, 0x20, 0x2B
+#: What starts an FFF image: both magics occur in FLIR files.
+_HEADERS = (b"FFF\x00", b"AFF\x00")
+#: How much padding between two images is read at once, looking for the next header.
+_GAP_WINDOW = 1 << 20
 
 
 def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
@@ -38,7 +42,7 @@ def flir_jpeg_payload(path: str, data: bytes) -> bytes | None:
 
 
 def _byteorder(path: str, fff: bytes) -> str:
-    if fff[:4] not in (b"FFF\x00", b"AFF\x00"):
+    if fff[:4] not in _HEADERS:
         raise ImportFileError(f"{path}: not a FLIR FFF record (magic {fff[:4]!r})")
     for order in (">", "<"):
         (version,) = struct.unpack(order + "I", read_exact(path, fff, 0x14, 4, "FFF header"))
@@ -286,10 +290,21 @@ def iter_fff_records(path: str, data: bytes | FileView,
         yield bytes(data[pos:pos + end])
         index += 1
         pos += end
-        while pos < n and data[pos:pos + 4] not in (b"FFF\x00", b"AFF\x00"):
-            # padding between images; stop at the next real header
-            nxt = data.find(b"FFF\x00", pos)
-            pos = n if nxt < 0 else nxt
+        if pos < n and data[pos:pos + 4] not in _HEADERS:  # padding between images
+            pos = _next_header(data, pos, n)
+
+
+def _next_header(data: bytes | FileView, pos: int, n: int) -> int:
+    """Where the nearest header of either kind starts at or after ``pos`` (``n`` if none). The
+    padding is scanned a window at a time, so a gap costs what it holds, not the rest of the
+    file (searching a multi-GB SEQ to its end for the rarer magic at every gap would)."""
+    while pos < n:
+        window = data[pos:min(n, pos + _GAP_WINDOW + 3)]  # 3: a header across two windows
+        found = [at for at in (window.find(h) for h in _HEADERS) if at >= 0]
+        if found:
+            return pos + min(found)
+        pos += _GAP_WINDOW
+    return n
 
 
 def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:

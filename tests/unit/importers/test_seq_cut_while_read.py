@@ -51,15 +51,21 @@ def test_a_whole_seq_reads_every_image_from_the_file(samples, tmp_path):
     assert all(np.array_equal(a.pixels, b.pixels) for a, b in zip(streamed, whole, strict=True))
 
 
-def test_find_sees_a_header_that_straddles_two_reads(tmp_path, monkeypatch):
-    from thermcap.recorder.importers import file_view
-    from thermcap.recorder.importers.file_view import FileView
+def test_a_header_across_two_windows_of_padding_is_found(monkeypatch):
+    from thermcap.recorder.importers import flir
 
-    monkeypatch.setattr(file_view, "_SCAN", 16)
-    data = bytes(30) + b"FFF\x00" + bytes(5)  # the header spans bytes 30-33: across the second read's end
-    path = tmp_path / "f.bin"
-    path.write_bytes(data)
-    with open(path, "rb") as fh:
-        view = FileView(str(path), fh.fileno())
-        assert [view.find(b"FFF\x00", s) for s in (0, 17, 30, 31)] == [30, 30, 30, -1]
-        assert view[28:36] == data[28:36] and len(view) == len(data) and view[40:50] == b""
+    monkeypatch.setattr(flir, "_GAP_WINDOW", 16)
+    data = bytes(30) + b"AFF\x00" + bytes(5) + b"FFF\x00"  # the first header spans bytes 30-33: two windows
+    assert [flir._next_header(data, s, len(data)) for s in (0, 17, 30, 31, 40)] == [30, 30, 30, 39, 43]
+    assert flir._next_header(bytes(50), 0, 50) == 50
+
+
+def test_padding_before_an_aff_header_does_not_hide_the_images_after_it(samples, tmp_path):
+    """The walker accepts 'AFF\\0' as a header as well as 'FFF\\0'; skipping padding, it looked for
+    'FFF\\0' alone, so every image of an AFF sequence after a padded gap was silently dropped."""
+    from thermcap.recorder.importers import iter_file, read_file
+
+    aff = b"AFF\x00" + (samples / "flir" / "frame_000000.fff").read_bytes()[4:]
+    seq = tmp_path / "aff.seq"
+    seq.write_bytes(aff + bytes(3000) + aff + aff)
+    assert len(read_file(seq)) == len(list(iter_file(seq))) == 3
