@@ -258,7 +258,8 @@ def _short_trailer(path: str, image: bytes, order: str, dir_off: int, count: int
 
 
 def iter_fff_records(path: str, data: bytes | FileView,
-                     notes: dict[int, tuple[str, int, int, int]] | None = None) -> Iterator[bytes]:
+                     notes: dict[int, tuple[str, int, int, int]] | None = None,
+                     skipped: dict[int, dict[str, Any]] | None = None) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
     image's own bytes are ever read (``data`` may be a ``FileView`` of a multi-GB file).
@@ -266,7 +267,11 @@ def iter_fff_records(path: str, data: bytes | FileView,
     The last image may end a few bytes short of what its directory promises (a trailer cut, or
     padding a writer never wrote) while its image stream is whole: it is kept, and ``notes``
     says so by image index (with where it starts, the bytes there and the bytes promised); only
-    an image whose pixels are cut is truncated."""
+    an image whose pixels are cut is truncated.
+
+    Bytes between two images that start no header are skipped to the next header, and
+    ``skipped`` says so by the index of the image after them (where they start, how many, and
+    whether they are all zero: bytes that are not may be an image whose header is damaged)."""
     pos, n = 0, len(data)
     index = 0
     while pos + 0x40 <= n:
@@ -291,7 +296,13 @@ def iter_fff_records(path: str, data: bytes | FileView,
         index += 1
         pos += end
         if pos < n and data[pos:pos + 4] not in _HEADERS:  # padding between images
-            pos = _next_header(data, pos, n)
+            gap, pos = pos, _next_header(data, pos, n)
+            if skipped is not None and pos < n:
+                skipped[index] = {"byte": gap, "bytes": pos - gap, "all_zero": _all_zero(data, gap, pos)}
+
+
+def _all_zero(data: bytes | FileView, start: int, stop: int) -> bool:
+    return all(not any(data[at:min(stop, at + _GAP_WINDOW)]) for at in range(start, stop, _GAP_WINDOW))
 
 
 def _next_header(data: bytes | FileView, pos: int, n: int) -> int:
@@ -315,7 +326,8 @@ def iter_fff_file(path: str, data: bytes | FileView) -> Iterator[ImportedFrame]:
     """An FFF, SEQ or CSQ file's frames one at a time (``data`` may be a ``FileView``): a long SEQ never
     sits decoded in memory. A file with a second image is a SEQ (CSQ when JPEG-LS coded)."""
     notes: dict[int, tuple[str, int, int, int]] = {}
-    records = iter_fff_records(path, data, notes)
+    skipped: dict[int, dict[str, Any]] = {}
+    records = iter_fff_records(path, data, notes, skipped)
     first = next(records, None)
     if first is None:
         raise ImportFileError(f"{path}: no FFF image in the file")
@@ -333,6 +345,8 @@ def iter_fff_file(path: str, data: bytes | FileView) -> Iterator[ImportedFrame]:
             frame.format = "flir-seq" if frame.layout != "jpeg-ls" else "flir-csq"
         if i in notes:
             frame.vendor_metadata["short_trailer"] = notes[i][0]
+        if i in skipped:  # what the walk left out before this image, kept with it (never silently)
+            frame.vendor_metadata["skipped_before"] = skipped[i]
         return frame
 
     yield named(first, 0)

@@ -69,3 +69,18 @@ def test_padding_before_an_aff_header_does_not_hide_the_images_after_it(samples,
     seq = tmp_path / "aff.seq"
     seq.write_bytes(aff + bytes(3000) + aff + aff)
     assert len(read_file(seq)) == len(list(iter_file(seq))) == 3
+
+
+def test_bytes_skipped_between_images_are_kept_with_the_next_image(samples, tmp_path):
+    """Padding is skipped to the next header; what was skipped, and whether it was all zero (it
+    may be an image whose header is damaged), is recorded with the image after it."""
+    from thermcap.recorder.importers import iter_file
+
+    fff = (samples / "flir" / "frame_000000.fff").read_bytes()
+    seq = tmp_path / "gaps.seq"
+    seq.write_bytes(fff + bytes(512) + fff + b"\x07" * 3000 + fff + fff)
+    frames = list(iter_file(seq))
+    assert len(frames) == 4
+    assert [f.vendor_metadata.get("skipped_before") for f in frames] == [
+        None, {"byte": len(fff), "bytes": 512, "all_zero": True},
+        {"byte": 2 * len(fff) + 512, "bytes": 3000, "all_zero": False}, None]
