@@ -15,7 +15,7 @@ from thermcap.recorder.importers.base import ImportedFrame, ImportFileError, Tru
 from thermcap.recorder.importers.dji import is_dji, read_dji
 from thermcap.recorder.importers.file_view import FileView
 from thermcap.recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
-from thermcap.recorder.importers.icd_files import read_icd_raw, read_icd_tiff, sidecar_for
+from thermcap.recorder.importers.icd_files import iter_icd_tiff, read_icd_raw, read_icd_tiff, sidecar_for
 from thermcap.recorder.importers.jpeg import app_segments
 from thermcap.recorder.importers.terraref import metadata_for, read_terraref
 
@@ -23,6 +23,7 @@ __all__ = ["MAX_FILE_BYTES", "ImportFileError", "ImportedFrame", "TruncatedImage
            "read_file"]
 
 MAX_FILE_BYTES = 4 * 1024**3
+_TIFF_MAGIC = (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+")  # classic and BigTIFF, either byte order
 
 
 def detect(path: str, data: bytes) -> str:
@@ -35,7 +36,7 @@ def detect(path: str, data: bytes) -> str:
         raise ImportFileError(f"{path}: a JPEG with no thermal data (neither FLIR nor DJI radiometric)")
     if data[:4] in (b"FFF\x00", b"AFF\x00"):
         return "flir-fff"
-    if data[:4] in (b"II*\x00", b"MM\x00*", b"II+\x00", b"MM\x00+"):
+    if data[:4] in _TIFF_MAGIC:
         return "tiff"
     if metadata_for(path) is not None:
         return "terraref-bin"
@@ -51,15 +52,7 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
     """``terraref_variant``: which TERRA-REF Planck form uncalibrated gantry files get (see
     :class:`~recorder.radiometry.TerraRefPlanckModel`)."""
     path = str(path)
-    try:
-        size = Path(path).stat().st_size
-        if size > MAX_FILE_BYTES:
-            raise ImportFileError(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} an importer reads")
-        data = Path(path).read_bytes()
-    except OSError as exc:
-        raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    if not data:
-        raise ImportFileError(f"{path}: empty file")
+    data = _file_bytes(path)
     kind = detect(path, data)
     try:
         if kind == "flir-rjpeg":
@@ -79,15 +72,34 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
         raise ImportFileError(f"{path}: corrupt {kind} file ({type(exc).__name__}: {exc})") from None
 
 
+def _file_bytes(path: str) -> bytes:
+    """The whole file, for the formats parsed from memory (up to ``MAX_FILE_BYTES``)."""
+    try:
+        size = Path(path).stat().st_size
+        if size > MAX_FILE_BYTES:
+            raise ImportFileError(f"{path}: {size} bytes is larger than the {MAX_FILE_BYTES} an importer reads")
+        data = Path(path).read_bytes()
+    except OSError as exc:
+        raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    if not data:
+        raise ImportFileError(f"{path}: empty file")
+    return data
+
+
 def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Generator[ImportedFrame, None, None]:
     """Like ``read_file``, one frame at a time. FFF/SEQ/CSQ files are read and decoded image by
-    image (``FileView``), so an hours-long SEQ costs one frame of memory, not the file; the other
-    formats hold one frame a file anyway. A corrupt image mid-file raises ImportFileError there
+    image (``FileView``), so an hours-long SEQ costs one frame of memory, not the file; a TIFF
+    stack is decoded page by page (from its bytes, read whole); the other formats hold one frame
+    a file anyway. A corrupt image mid-file raises ImportFileError there
     (the frames before it were already yielded: callers that must not half-import keep track)."""
     path = str(path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(4)
+            if head in _TIFF_MAGIC:  # a stack of pages: decoded one page at a time
+                fh.close()
+                yield from iter_icd_tiff(path, _file_bytes(path))
+                return
             if head not in (b"FFF\x00", b"AFF\x00"):
                 fh.close()
                 yield from read_file(path, terraref_variant=terraref_variant)

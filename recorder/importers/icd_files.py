@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import io
 import json
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import tifffile
@@ -15,7 +17,7 @@ from thermcap.recorder.icd.sidecar import validate_sidecar
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError
 from thermcap.recorder.radiometry import LinearModel, ScaledKelvinModel, model_from_dict
 
-__all__ = ["read_icd_raw", "read_icd_tiff", "sidecar_for"]
+__all__ = ["iter_icd_tiff", "read_icd_raw", "read_icd_tiff", "sidecar_for"]
 
 
 def sidecar_for(path: str) -> Path | None:
@@ -66,22 +68,15 @@ def _timestamp(path: str, doc: dict | None) -> int | None:
 
 
 def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
-    try:
-        with tifffile.TiffFile(io.BytesIO(data)) as tif:
-            page = tif.pages[0]
-            assert isinstance(page, tifffile.TiffPage)  # the first page is always a full page
-            if page.dtype != np.uint16 or page.samplesperpixel != 1:
-                raise ImportFileError(f"{path}: not a single-channel 16-bit TIFF "
-                                   f"({page.dtype}, {page.samplesperpixel} samples)")
-            pixels = page.asarray()
-            software = (page.software or "")
-            if pixels.ndim != 2 or pixels.shape != (page.imagelength, page.imagewidth) or pixels.size == 0:
-                raise ImportFileError(f"{path}: TIFF image data is damaged (decoded {pixels.shape}, "
-                                   f"header says {page.imagewidth}x{page.imagelength})")
-    except ImportFileError:
-        raise
-    except Exception as exc:
-        raise ImportFileError(f"{path}: unreadable TIFF ({type(exc).__name__}: {exc})") from None
+    return list(iter_icd_tiff(path, data))
+
+
+def iter_icd_tiff(path: str, data: bytes) -> Iterator[ImportedFrame]:
+    """Every frame of a 16-bit radiometric TIFF, one page at a time: a single image or a stack (a
+    sequence as ResearchIR, flirpy or tifffile save one). The frames are the single-channel uint16
+    full-resolution pages of the first such page's size; any other page (a reduced-resolution
+    preview, the visual camera's colour page, a page of another size) is left out by name, in
+    the first frame's ``vendor_metadata["pages_left_out"]``, never without a word."""
     doc = _sidecar(path, required=False)
     model = _model(doc)
     note = None
@@ -91,10 +86,58 @@ def read_icd_tiff(path: str, data: bytes) -> list[ImportedFrame]:
         model = ScaledKelvinModel(counts_per_kelvin=25.0)
         note = "no ICD sidecar: FLIR radiometric TIFF convention 0.04 K/count assumed"
     sensor = (doc or {}).get("sensor", {})
-    return [ImportedFrame(path=path, format="icd-tiff" if doc else "radiometric-tiff", layout=None,
-                          pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model,
-                          timestamp_ns=_timestamp(path, doc), sensor_model=sensor.get("model", software or "TIFF"),
-                          sensor_id=_sensor_id(path, sensor), vendor_metadata={"sidecar": doc, "note": note})]
+    try:
+        with tifffile.TiffFile(io.BytesIO(data)) as tif:
+            pages = [p for p in tif.pages if isinstance(p, tifffile.TiffPage)]  # the tags only, so far
+            gray = [p for p in pages if not _not_gray16(p)]
+            if not gray:
+                page = pages[0]
+                raise ImportFileError(f"{path}: not a single-channel 16-bit TIFF "
+                                      f"({page.dtype}, {page.samplesperpixel} samples)")
+            shape = (gray[0].imagelength, gray[0].imagewidth)
+            left_out = [{"page": i, "why": why} for i, p in enumerate(pages) if (why := _not_a_frame(p, shape))]
+            frames = [(i, p) for i, p in enumerate(pages) if not _not_a_frame(p, shape)]
+            for k, (i, page) in enumerate(frames):
+                try:
+                    pixels = page.asarray()
+                except Exception as exc:
+                    raise ImportFileError(f"{path}: page {i} of the TIFF is damaged ({type(exc).__name__}: {exc})") \
+                        from None
+                if pixels.ndim != 2 or pixels.shape != shape or pixels.size == 0:
+                    raise ImportFileError(f"{path}: TIFF image data of page {i} is damaged (decoded {pixels.shape}, "
+                                          f"header says {page.imagewidth}x{page.imagelength})")
+                vendor: dict[str, Any] = {"sidecar": doc, "note": note}
+                if len(frames) > 1:
+                    vendor["page"] = i
+                if k == 0 and left_out:
+                    vendor["pages_left_out"] = left_out
+                yield ImportedFrame(path=path, format="icd-tiff" if doc else "radiometric-tiff", layout=None,
+                                    pixels=np.ascontiguousarray(pixels, dtype=np.uint16), model=model,
+                                    timestamp_ns=_timestamp(path, doc),
+                                    sensor_model=sensor.get("model", page.software or "TIFF"),
+                                    sensor_id=_sensor_id(path, sensor), vendor_metadata=vendor, frame_index=k)
+    except ImportFileError:
+        raise
+    except Exception as exc:
+        raise ImportFileError(f"{path}: unreadable TIFF ({type(exc).__name__}: {exc})") from None
+
+
+def _not_gray16(page: tifffile.TiffPage) -> str | None:
+    """Why ``page`` cannot be a thermal frame at all, or None."""
+    if page.is_reduced:
+        return "a reduced-resolution preview"
+    if page.dtype != np.uint16 or page.samplesperpixel != 1:
+        return f"{page.samplesperpixel} sample(s) of {page.dtype} a pixel, not Gray16"
+    return None
+
+
+def _not_a_frame(page: tifffile.TiffPage, shape: tuple[int, int]) -> str | None:
+    """Why ``page`` is not a frame of a stack of ``shape`` (rows, columns), or None."""
+    if (why := _not_gray16(page)) is not None:
+        return why
+    if (page.imagelength, page.imagewidth) != shape:
+        return f"{page.imagewidth}x{page.imagelength}, the frames {shape[1]}x{shape[0]}"
+    return None
 
 
 def read_icd_raw(path: str, data: bytes) -> list[ImportedFrame]:
