@@ -88,7 +88,8 @@ def iter_icd_tiff(path: str, data: bytes) -> Iterator[ImportedFrame]:
     sensor = (doc or {}).get("sensor", {})
     try:
         with tifffile.TiffFile(io.BytesIO(data)) as tif:
-            pages = [p for p in tif.pages if isinstance(p, tifffile.TiffPage)]  # the tags only, so far
+            # every page, by its index in the file (a light TiffFrame, where tifffile gives one, as a page)
+            pages = [p if isinstance(p, tifffile.TiffPage) else p.aspage() for p in tif.pages]
             gray = [p for p in pages if not _not_gray16(p)]
             if not gray:
                 page = pages[0]
