@@ -58,6 +58,8 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
                     if c else f"no temperature: {f.get('dji_sdk_error') or f.get('celsius_unavailable')}")
             click.echo(f"{f['path']}: {f['format']} {f['layout'] or ''} {f['width']}x{f['height']} {temp} "
                        f"-> {f.get('session_id')}")
+            for key, what in (f.get("notes") or {}).items():
+                click.echo(f"  note: {key.replace('_', ' ')}: {json.dumps(what)}")
         for r in report.sessions:
             click.echo(f"session {r.session_id}: {r.frames_written} frames")
         for f in report.failed:

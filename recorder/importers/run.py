@@ -79,6 +79,10 @@ def celsius_stats(model: Any, pixels: np.ndarray) -> dict[str, float]:
             "mean": float(np.dot(temps[ok], w) / w.sum())}
 
 
+#: The readers' words on what they left out or found short (``vendor_metadata``), in the report too.
+IMPORT_NOTES = ("pages_left_out", "skipped_before", "short_trailer")
+
+
 def _summary(f: ImportedFrame) -> dict[str, Any]:
     celsius: dict[str, Any] | None
     try:
@@ -92,6 +96,9 @@ def _summary(f: ImportedFrame) -> dict[str, Any]:
            "width": int(f.pixels.shape[1]), "height": int(f.pixels.shape[0]),
            "raw_sha256": frame_sha256(f.pixels),
            "celsius": celsius, "model": describe_model(f.model)}
+    notes = {k: f.vendor_metadata[k] for k in IMPORT_NOTES if k in f.vendor_metadata}
+    if notes:  # what the reader left out of the file or found short, in the report as in the recording
+        out["notes"] = _jsonable(notes)
     if celsius is None:
         out["celsius_unavailable"] = reason
         out["missing"] = {"temperature": reason}  # imported, counts bit-exact: only the °C is absent

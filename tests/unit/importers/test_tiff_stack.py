@@ -56,3 +56,20 @@ def test_a_damaged_later_page_fails_the_file_naming_the_page(tmp_path):
     path.write_bytes(bytes(raw))
     with pytest.raises(ImportFileError, match="page 2"):
         read_file(path)
+
+
+def test_the_import_report_names_the_pages_left_out(tmp_path):
+    from thermcap.recorder.importers.run import import_paths
+
+    frames = _stack(2)
+    path = tmp_path / "mixed.tif"
+    with tifffile.TiffWriter(path) as w:
+        w.write(frames[0])
+        w.write(np.zeros((48, 64, 3), np.uint8), photometric="rgb")
+        w.write(frames[1])
+    report = import_paths([str(path)], str(tmp_path / "root"), session="s", analysis=False)
+    assert [f["frame_index"] for f in report.files] == [0, 1]
+    why = "3 sample(s) of uint8 a pixel, not Gray16"
+    assert report.files[0]["notes"]["pages_left_out"] == [{"page": 1, "why": why}]
+    assert "notes" not in report.files[1]
+    assert report.sessions[0].frames_written == 2
