@@ -262,7 +262,7 @@ def iter_fff_records(path: str, data: bytes | FileView,
                      skipped: dict[int, dict[str, Any]] | None = None) -> Iterator[bytes]:
     """SEQ/CSQ: FFF images back to back. Walk header to header by each image's extent (the
     largest record end); 'FFF\\0' inside pixel data is never mistaken for a header. Only each
-    image's own bytes are ever read (``data`` may be a ``FileView`` of a multi-GB file).
+    image's bytes (and a gap's) are ever read (``data`` may be a ``FileView`` of a multi-GB file).
 
     The last image may end a few bytes short of what its directory promises (a trailer cut, or
     padding a writer never wrote) while its image stream is whole: it is kept, and ``notes``
