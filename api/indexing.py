@@ -199,9 +199,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
     meta = read_session_meta(session_dir)
     sid = meta.get("session_id") or session_dir.name
     fp = fingerprint(session_dir)
-    with engine.connect() as conn:
-        old = conn.execute(select(db.sessions.c.fingerprint, db.sessions.c.frames_key)
-                           .where(db.sessions.c.id == sid)).first()
+    old = _row_state(engine, sid)
     # On local disk the frames file is looked at, not assumed: one deleted by hand is rewritten.
     if old is not None and old[0] == fp and old[1] is not None and not force \
             and (store.kind != "local" or store.head(old[1]) is not None):
@@ -298,12 +296,37 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                 for i in range(0, len(rows), 5000):
                     conn.execute(insert(table), rows[i:i + 5000])
     except Exception:
-        if key != old_key:
-            _forget(store, key)
+        # Another indexer of the same session (a second API worker at start-up, a fleet worker)
+        # may have committed meanwhile: what the database names now decides, never this attempt.
+        now = _row_now(engine, sid)
+        if now == (row["fingerprint"], key):
+            return False  # that other indexer committed this very state: indexed as it is
+        if key != old_key and now is not _UNREADABLE and (now is None or now[1] != key):
+            _forget(store, key)  # named by no row: this attempt's alone
         raise
     if old_key and old_key != key:
         _forget(store, old_key)  # readers holding it keep their cached copy; a new read takes the new key
     return True
+
+
+#: ``_row_now`` could not read the index: nothing is deleted on its word.
+_UNREADABLE = ("", "")
+
+
+def _row_state(engine: Engine, sid: str) -> tuple[str, str | None] | None:
+    """The session's (fingerprint, frames key) as committed, or None where it has no row."""
+    with engine.connect() as conn:
+        row = conn.execute(select(db.sessions.c.fingerprint, db.sessions.c.frames_key)
+                           .where(db.sessions.c.id == sid)).first()
+    return None if row is None else (row[0], row[1])
+
+
+def _row_now(engine: Engine, sid: str) -> tuple[str, str | None] | None:
+    """``_row_state``, or ``_UNREADABLE`` where the index cannot be read."""
+    try:
+        return _row_state(engine, sid)
+    except Exception:
+        return _UNREADABLE
 
 
 def _forget(store: BlobStore, key: str) -> None:
