@@ -271,7 +271,8 @@ def iter_fff_records(path: str, data: bytes | FileView,
 
     Bytes between two images that start no header are skipped to the next header, and
     ``skipped`` says so by the index of the image after them (where they start, how many, and
-    whether they are all zero: bytes that are not may be an image whose header is damaged)."""
+    whether they are all zero: bytes that are not may be an image whose header is damaged);
+    bytes after the last image, by the index one past it."""
     pos, n = 0, len(data)
     index = 0
     while pos + 0x40 <= n:
@@ -295,10 +296,13 @@ def iter_fff_records(path: str, data: bytes | FileView,
         yield bytes(data[pos:pos + end])
         index += 1
         pos += end
-        if pos < n and data[pos:pos + 4] not in _HEADERS:  # padding between images
+        if pos < n and data[pos:pos + 4] not in _HEADERS:  # padding between images, or after the last
             gap, pos = pos, _next_header(data, pos, n)
-            if skipped is not None and pos < n:
+            if skipped is not None:
                 skipped[index] = {"byte": gap, "bytes": pos - gap, "all_zero": _all_zero(data, gap, pos)}
+    if skipped is not None and pos < n:  # a tail too short for a header: after the last image too
+        start = skipped[index]["byte"] if index in skipped else pos
+        skipped[index] = {"byte": start, "bytes": n - start, "all_zero": _all_zero(data, start, n)}
 
 
 def _all_zero(data: bytes | FileView, start: int, stop: int) -> bool:
@@ -331,10 +335,8 @@ def iter_fff_file(path: str, data: bytes | FileView) -> Iterator[ImportedFrame]:
     first = next(records, None)
     if first is None:
         raise ImportFileError(f"{path}: no FFF image in the file")
-    second = next(records, None)
-    multi = second is not None
 
-    def named(rec: bytes, i: int) -> ImportedFrame:
+    def named(rec: bytes, i: int, multi: bool) -> ImportedFrame:
         try:
             frame = frame_from_fff(path, rec, "flir-fff", i)
         except ImportFileError as exc:
@@ -349,8 +351,23 @@ def iter_fff_file(path: str, data: bytes | FileView) -> Iterator[ImportedFrame]:
             frame.vendor_metadata["skipped_before"] = skipped[i]
         return frame
 
-    yield named(first, 0)
-    if second is not None:
-        yield named(second, 1)
-        for i, rec in enumerate(records, start=2):
-            yield named(rec, i)
+    # Each image is handed on once the walk has looked past it: whether the file is a sequence,
+    # and what follows the last image, are known then. A complete image is handed on before the
+    # error of the one after it (a second image cut short had taken the first with it).
+    held: tuple[bytes, int] = (first, 0)
+    multi: bool | None = None
+    while True:
+        try:
+            rec = next(records, None)
+        except Exception:
+            yield named(*held, multi=True)  # a second image began, cut or damaged: a sequence
+            raise
+        multi = (rec is not None) if multi is None else multi
+        if rec is None:
+            break
+        yield named(*held, multi=multi)
+        held = (rec, held[1] + 1)
+    last = named(*held, multi=bool(multi))
+    if held[1] + 1 in skipped:  # bytes after the last image
+        last.vendor_metadata["skipped_after"] = skipped[held[1] + 1]
+    yield last

@@ -80,7 +80,7 @@ def celsius_stats(model: Any, pixels: np.ndarray) -> dict[str, float]:
 
 
 #: The readers' words on what they left out or found short (``vendor_metadata``), in the report too.
-IMPORT_NOTES = ("pages_left_out", "skipped_before", "short_trailer")
+IMPORT_NOTES = ("pages_left_out", "skipped_before", "skipped_after", "short_trailer")
 
 
 def _summary(f: ImportedFrame) -> dict[str, Any]:

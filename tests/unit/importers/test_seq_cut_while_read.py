@@ -10,6 +10,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 
 _CUT_WHILE_READING = """
 import os, sys
@@ -84,3 +85,37 @@ def test_bytes_skipped_between_images_are_kept_with_the_next_image(samples, tmp_
     assert [f.vendor_metadata.get("skipped_before") for f in frames] == [
         None, {"byte": len(fff), "bytes": 512, "all_zero": True},
         {"byte": 2 * len(fff) + 512, "bytes": 3000, "all_zero": False}, None]
+
+
+def test_bytes_after_the_last_image_are_kept_with_it(samples, tmp_path):
+    from thermcap.recorder.importers import iter_file
+
+    fff = (samples / "flir" / "frame_000000.fff").read_bytes()
+    for tail, all_zero in ((b"\x05" * 100, False), (bytes(10), True), (b"FFF\x00" + bytes(8), False)):
+        seq = tmp_path / "tail.seq"
+        seq.write_bytes(fff * 2 + tail)
+        frames = list(iter_file(seq))
+        assert len(frames) == 2 and "skipped_after" not in frames[0].vendor_metadata
+        assert frames[1].vendor_metadata["skipped_after"] == {"byte": 2 * len(fff), "bytes": len(tail),
+                                                              "all_zero": all_zero}
+    seq.write_bytes(fff * 2)
+    assert all("skipped_after" not in f.vendor_metadata for f in iter_file(seq))
+
+
+def test_a_complete_first_image_is_kept_when_the_second_is_cut(samples, tmp_path):
+    """The walker looked at the second image before handing on the first: a two-image SEQ whose
+    second image was cut reported one image kept and recorded none."""
+    from thermcap.recorder.importers import TruncatedImageError, iter_file
+    from thermcap.recorder.importers.run import import_paths
+
+    fff = (samples / "flir" / "frame_000000.fff").read_bytes()
+    seq = tmp_path / "cut.seq"
+    seq.write_bytes(fff + fff[:-3000])
+    got = []
+    with pytest.raises(TruncatedImageError):
+        for f in iter_file(seq):
+            got.append(f)
+    assert len(got) == 1 and got[0].format == "flir-seq"
+    report = import_paths([str(seq)], str(tmp_path / "root"), session="s", analysis=False)
+    assert report.truncated[0]["kept_images"] == 1
+    assert report.sessions[0].frames_written == 1
