@@ -297,29 +297,32 @@ def iter_fff_records(path: str, data: bytes | FileView,
         index += 1
         pos += end
         if pos < n and data[pos:pos + 4] not in _HEADERS:  # padding between images, or after the last
-            gap, pos = pos, _next_header(data, pos, n)
+            gap = pos
+            pos, all_zero = _next_header(data, pos, n)
             if skipped is not None:
-                skipped[index] = {"byte": gap, "bytes": pos - gap, "all_zero": _all_zero(data, gap, pos)}
-    if skipped is not None and pos < n:  # a tail too short for a header: after the last image too
+                skipped[index] = {"byte": gap, "bytes": pos - gap, "all_zero": all_zero}
+    if skipped is not None and pos < n:
+        # A header's magic too close to the end for a whole header: after the last image too, and
+        # never all zero, since the magic is in it.
         start = skipped[index]["byte"] if index in skipped else pos
-        skipped[index] = {"byte": start, "bytes": n - start, "all_zero": _all_zero(data, start, n)}
+        skipped[index] = {"byte": start, "bytes": n - start, "all_zero": False}
 
 
-def _all_zero(data: bytes | FileView, start: int, stop: int) -> bool:
-    return all(not any(data[at:min(stop, at + _GAP_WINDOW)]) for at in range(start, stop, _GAP_WINDOW))
-
-
-def _next_header(data: bytes | FileView, pos: int, n: int) -> int:
-    """Where the nearest header of either kind starts at or after ``pos`` (``n`` if none). The
-    padding is scanned a window at a time, so a gap costs what it holds, not the rest of the
-    file (searching a multi-GB SEQ to its end for the rarer magic at every gap would)."""
+def _next_header(data: bytes | FileView, pos: int, n: int) -> tuple[int, bool]:
+    """Where the nearest header of either kind starts at or after ``pos`` (``n`` if none), and
+    whether the bytes before it are all zero, in one read of them. The padding is scanned a
+    window at a time, so a gap costs what it holds, not the rest of the file (searching a
+    multi-GB SEQ to its end for the rarer magic at every gap would)."""
+    all_zero = True
     while pos < n:
         window = data[pos:min(n, pos + _GAP_WINDOW + 3)]  # 3: a header across two windows
         found = [at for at in (window.find(h) for h in _HEADERS) if at >= 0]
+        gap = min(found) if found else min(len(window), _GAP_WINDOW)
+        all_zero = all_zero and window.count(0, 0, gap) == gap
         if found:
-            return pos + min(found)
+            return pos + gap, all_zero
         pos += _GAP_WINDOW
-    return n
+    return n, all_zero
 
 
 def read_fff_file(path: str, data: bytes) -> list[ImportedFrame]:

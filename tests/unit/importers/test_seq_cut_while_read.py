@@ -57,8 +57,14 @@ def test_a_header_across_two_windows_of_padding_is_found(monkeypatch):
 
     monkeypatch.setattr(flir, "_GAP_WINDOW", 16)
     data = bytes(30) + b"AFF\x00" + bytes(5) + b"FFF\x00"  # the first header spans bytes 30-33: two windows
-    assert [flir._next_header(data, s, len(data)) for s in (0, 17, 30, 31, 40)] == [30, 30, 30, 39, 43]
-    assert flir._next_header(bytes(50), 0, 50) == 50
+    assert [flir._next_header(data, s, len(data))[0] for s in (0, 17, 30, 31, 40)] == [30, 30, 30, 39, 43]
+    assert flir._next_header(bytes(50), 0, 50) == (50, True)
+    # whether the bytes skipped are all zero, taken on the same windows
+    assert [flir._next_header(data, s, len(data))[1] for s in (0, 17, 30, 31, 40)] == [True, True, True, False,
+                                                                                        False]
+    odd = b"\x01" + bytes(40) + b"FFF\x00"  # a non-zero byte in the first window, the header in the third
+    assert flir._next_header(odd, 0, len(odd)) == (41, False)
+    assert flir._next_header(odd, 1, len(odd)) == (41, True)
 
 
 def test_padding_before_an_aff_header_does_not_hide_the_images_after_it(samples, tmp_path):
