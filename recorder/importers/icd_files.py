@@ -90,14 +90,15 @@ def iter_icd_tiff(path: str, data: bytes) -> Iterator[ImportedFrame]:
         with tifffile.TiffFile(io.BytesIO(data)) as tif:
             # every page, by its index in the file (a light TiffFrame, where tifffile gives one, as a page)
             pages = [p if isinstance(p, tifffile.TiffPage) else p.aspage() for p in tif.pages]
-            gray = [p for p in pages if not _not_gray16(p)]
-            if not gray:
+            gray = next((p for p in pages if not _not_gray16(p)), None)
+            if gray is None:
                 page = pages[0]
                 raise ImportFileError(f"{path}: not a single-channel 16-bit TIFF "
                                       f"({page.dtype}, {page.samplesperpixel} samples)")
-            shape = (gray[0].imagelength, gray[0].imagewidth)
-            left_out = [{"page": i, "why": why} for i, p in enumerate(pages) if (why := _not_a_frame(p, shape))]
-            frames = [(i, p) for i, p in enumerate(pages) if not _not_a_frame(p, shape)]
+            shape = (gray.imagelength, gray.imagewidth)
+            verdicts = [(i, p, _not_a_frame(p, shape)) for i, p in enumerate(pages)]
+            left_out = [{"page": i, "why": why} for i, _, why in verdicts if why]
+            frames = [(i, p) for i, p, why in verdicts if not why]
             for k, (i, page) in enumerate(frames):
                 try:
                     pixels = page.asarray()
