@@ -62,7 +62,7 @@ sessions = Table(
     Column("coverage", Text),
     Column("source_deleted", Boolean, nullable=False, default=False),
     Column("fingerprint", Text, nullable=False),
-    Column("summary", Text),  # the archive's frame summary (path, bytes, sha256, band rows) as JSON
+    Column("summary", Text),  # the archive's frame summary (path, bytes, digest, band rows) as JSON
     Column("frames_key", Text),  # the session's frames file in the blob store (api.reading.frame_columns)
     Column("indexed_at", BigInteger, nullable=False),
 )

@@ -16,13 +16,14 @@ two plain requests, ``format=png16`` (or none) and ``format=raw``, in front of a
   libpng and 2.4 ms for the tiff-lzw strips on two threads). A PNG another writer made falls
   to the tiff-lzw strips, then to libpng. Whichever gives them, the counts are checked
   against the archive's frame summary (a CRC-32 for each 64-row band, taken from the source
-  and bound to the manifest by its sha256), or against the frame's sha256 where the archive
-  has no summary. The frame's sha256 is their ETag either way. A TIFF file's strip offsets are read
+  and bound to the manifest by its digest), or against the frame's digest where the archive
+  has no summary. Their ETag is the body's BLAKE3 either way (``body_etag``): where the manifest
+  took BLAKE3, that is the frame's own digest, hashed once. A TIFF file's strip offsets are read
   from its IFDs once, the first time it is asked for.
 
 Raw counts of a session not archived yet (no png16 copy) come from its MCAP segment through the
 application's own ``McapFrames`` (one index and chunk cache for both paths), checked against the
-frame's sha256 where the index has one. A frame whose chunk is kept is read in the event loop (a
+frame's digest where the index has one. A frame whose chunk is kept is read in the event loop (a
 header walk); one that needs a chunk read and decompressed goes to a thread, so the loop never
 waits on zstd.
 
@@ -36,7 +37,6 @@ from __future__ import annotations
 
 import asyncio
 import functools
-import hashlib
 import json
 import os
 import re
@@ -56,7 +56,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
-from thermcap.api.http_conventions import etag_matches
+from thermcap.api.http_conventions import body_etag, etag_matches
 from thermcap.api.reading.frame_columns import FrameColumns, FrameColumnsCache
 from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
@@ -66,6 +66,7 @@ from thermcap.archive.formats.base import locate
 from thermcap.archive.formats.tiff_lzw import decode_strip
 from thermcap.archive.frame_summary import FrameSummary
 from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.digest import new_hasher
 
 __all__ = ["FrameFastPath"]
 
@@ -137,7 +138,7 @@ class FrameFastPath:
         #: the fast one), the tiff-lzw strips, or libpng (a PNG another writer made)
         self.raw_from: Counter[str] = Counter()
         #: how raw answers were proved: ``crc32`` against the frame summary's band checksums,
-        #: or ``sha256`` against the frame's hash (no summary, or one for another shape)
+        #: or ``blake3``/``sha256`` against the frame's digest (no summary, or one for another shape)
         self.raw_checked: Counter[str] = Counter()
 
     async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
@@ -204,15 +205,15 @@ class FrameFastPath:
             path, log_time = self.root / "sessions" / sid / segment, int(s.columns.timestamp_ns[n])
             if not path.is_file():  # e.g. deleted once archived
                 return None
-            read = functools.partial(self._from_segment, mcap, path, log_time, s.columns.sha256_raw(n))
+            read = functools.partial(self._from_segment, mcap, path, log_time, s.columns.digest,
+                                     s.columns.pixel_digest_raw(n))
             return read() if mcap.is_kept(path, log_time) else read
         data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
         if data is None or imagecodecs.deflate_crc32(data) != blob["crc32"]:
             return None  # missing or damaged: the full path reports it and serves another copy
         if fmt == "png16":
-            etag = b'"' + hashlib.sha256(data).hexdigest()[:40].encode() + b'"'
-            return data, etag, [(b"content-type", b"image/png")]
-        want = s.columns.sha256_raw(n)
+            return data, body_etag(data).encode(), [(b"content-type", b"image/png")]
+        want, name = s.columns.pixel_digest_raw(n), s.columns.digest
         if want is None:
             return None
         summary = self._summary(sid, s, n)
@@ -225,21 +226,25 @@ class FrameFastPath:
             if summary is not None and pixels.shape == (summary.height, summary.width):
                 ok, proof = summary.rows_intact(n, 0, pixels), "crc32"
             else:
-                ok, proof = hashlib.sha256(pixels.data.cast("B")).digest() == want, "sha256"
+                h = new_hasher(name)
+                h.update(pixels.data.cast("B"))
+                ok, proof = h.digest() == want, name
             if ok:
                 self.raw_from[source] += 1
                 self.raw_checked[proof] += 1
                 break
         else:
             return None  # no copy here proves itself: the full path reports and tries the others
-        return pixels.tobytes(), b'"' + want.hex()[:40].encode() + b'"', _raw_headers(pixels)
+        body = pixels.tobytes()
+        etag = f'"{want.hex()[:40]}"' if name == "blake3" else body_etag(body)  # the same: see body_etag
+        return body, etag.encode(), _raw_headers(pixels)
 
-    def _from_segment(self, mcap: McapFrames, path: Path, log_time: int,
+    def _from_segment(self, mcap: McapFrames, path: Path, log_time: int, name: str,
                       want: bytes | None) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
-        """A frame's raw counts from its MCAP segment, as the route answers them (its ETag is the
-        body's sha256, which is the frame's own hash). Damage, a segment gone, a frame not there
-        or counts that differ from the index's hash (``want``): None, and the full application
-        says what happened or serves another copy."""
+        """A frame's raw counts from its MCAP segment, as the route answers them. Damage, a
+        segment gone, a frame not there or counts that differ from the index's digest (``want``,
+        by hash ``name``): None, and the full application says what happened or serves another
+        copy."""
         try:
             pixels, _ = mcap.frame(path, log_time)
         except (McapFileError, OSError):
@@ -247,17 +252,19 @@ class FrameFastPath:
         if pixels is None:
             return None
         body = np.ascontiguousarray(pixels, dtype="<u2").tobytes()
-        digest = hashlib.sha256(body).digest()
-        if want is not None and digest != want:
+        h = new_hasher(name)
+        h.update(body)
+        if want is not None and h.digest() != want:
             return None
         with self._lock:  # this may run on a thread of the segment pool
             self.raw_from["mcap"] += 1
-        return body, b'"' + digest.hex()[:40].encode() + b'"', _raw_headers(pixels)
+        etag = f'"{h.hexdigest()[:40]}"' if name == "blake3" else body_etag(body)
+        return body, etag.encode(), _raw_headers(pixels)
 
     def _summary(self, sid: str, s: _Session, n: int) -> FrameSummary | None:
         """The archive's frame summary where it covers frame ``n``: its band CRC-32s were taken
         from the source on the archive's one read, and it is itself checked against the
-        manifest's sha256 before it is trusted (``RegionReader``), so decoded counts that match
+        manifest's digest before it is trusted (``RegionReader``), so decoded counts that match
         it are the source's. 8 CRC-32s of a 640x512 frame cost 0.16 ms where its sha256 costs
         0.38 ms."""
         regions = getattr(self._state, "regions", None)
@@ -274,7 +281,7 @@ class FrameFastPath:
             return None
         try:
             return self._strips(key, pages, k)
-        except Exception:  # a damaged strip: the PNG, then the sha256, decide
+        except Exception:  # a damaged strip: the PNG, then the digest, decide
             return None
 
     def _strips(self, key: str, pages: _Pages, k: int) -> np.ndarray | None:

@@ -13,6 +13,8 @@ import gzip
 import hashlib
 from typing import Any
 
+import blake3
+
 __all__ = ["GZIP_MIN_BYTES", "HeadAsGet", "JsonConventions", "etag_matches"]
 
 #: JSON below this is sent as it is: gzip's header and a round trip of CPU cost more than it saves.
@@ -22,6 +24,13 @@ GZIP_MIN_BYTES = 1024
 def _opaque(tag: str) -> str:
     tag = tag.strip()
     return tag[2:] if tag.startswith("W/") else tag
+
+
+def body_etag(body: bytes | memoryview) -> str:
+    """A strong ETag for a frame's body, quoted: its BLAKE3 (any change of bytes changes it), the
+    same whichever path answers. BLAKE3 because a raw frame's ETag is then its manifest digest where
+    the archive took BLAKE3 (recorder.storage.digest): the fast path hashes nothing more."""
+    return f'"{blake3.blake3(body).hexdigest()[:40]}"'
 
 
 def etag_matches(if_none_match: str | bytes | None, etag: str | bytes) -> bool:

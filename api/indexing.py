@@ -37,6 +37,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.quality import graded_contrast
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_METADATA
+from thermcap.recorder.storage.digest import frame_proof
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
@@ -237,13 +238,13 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
         sidecars = [{**sc, **{k: by_index[i][k] for k in ("thermal_analysis", "targets")}} if i in by_index else sc
                     for i, sc in enumerate(sidecars)]
     frame_rows: list[dict[str, Any]] = []
-    hashes = (manifest or {}).get("frames", {}).get("sha256") or []
-    sidecar_hashes = (manifest or {}).get("frames", {}).get("sidecar_sha256") or []
+    proof = frame_proof((manifest or {}).get("frames"))
+    hashes, sidecar_hashes = proof.pixels, proof.sidecars
     for i, (sc, t) in enumerate(zip(sidecars, times, strict=True)):
         frame_rows.append({"session_id": sid, "idx": i, "timestamp_ns": int(t or 0),
                            "segment": segs[i] if i < len(segs) else None,
-                           "sha256": hashes[i] if i < len(hashes) else None,
-                           "sidecar_sha256": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
+                           "pixel_digest": hashes[i] if i < len(hashes) else None,
+                           "sidecar_digest": sidecar_hashes[i] if i < len(sidecar_hashes) else None,
                            **sidecar_summary(sc)})
     grades = [r["grade"] for r in frame_rows if r["grade"] is not None]
     sensor = meta.get("sensor") or (manifest or {}).get("session", {}).get("sensor") or {}
@@ -273,7 +274,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
                   "objects": e["objects"], "ratio": e.get("compression_ratio"),
                   "verified": bool(e.get("verified")) and not e.get("damaged")}
                  for f, e in (manifest or {}).get("formats", {}).items()]
-    columns = FrameColumns.from_rows(sid, frame_rows)
+    columns = FrameColumns.from_rows(sid, frame_rows, proof.name)
     row["frames_key"] = key = frames_key(sid, row["fingerprint"])
     store.put_bytes(key, columns.to_parquet())  # before the row names it: a reader never finds it missing
     target_rows = target_second_rows(columns)
@@ -362,10 +363,10 @@ def convert_legacy_frames(engine: Engine, store: BlobStore) -> list[str]:
         if session is not None and session[1] is None:
             rows: list[dict[str, Any]] = [{}] * (max(r["idx"] for r in legacy) + 1)
             for r in legacy:
-                hashes = {k: (bytes(r[k]).hex() if isinstance(r[k], bytes | memoryview) else r[k])
-                          for k in ("sha256", "sidecar_sha256")}
+                hashes = {to: (bytes(r[k]).hex() if isinstance(r[k], bytes | memoryview) else r[k])
+                          for k, to in (("sha256", "pixel_digest"), ("sidecar_sha256", "sidecar_digest"))}
                 rows[r["idx"]] = {**r, **hashes}
-            columns = FrameColumns.from_rows(sid, rows)
+            columns = FrameColumns.from_rows(sid, rows, "sha256")  # the rows' columns were sha256 alone
             key = frames_key(sid, f"legacy:{session[0]}")
             store.put_bytes(key, columns.to_parquet())
             with engine.begin() as conn:

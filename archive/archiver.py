@@ -1,7 +1,7 @@
 """``thermcap archive``: repack a recorded session losslessly, prove it, and record the proof.
 
 For each requested format: write into ``archive/<format>.partial/``, decode every frame back
-with the format's ordinary reader and compare its sha256 with the MCAP source's, fsync, and only
+with the format's ordinary reader and compare its digest with the MCAP source's, fsync, and only
 then rename the folder to ``archive/<format>/`` and add it to the manifest. A crash leaves at
 most a ``.partial`` folder, which no reader treats as an archive and the next run replaces;
 formats already verified are skipped, so re-running finishes the job. The MCAP source is deleted
@@ -18,7 +18,7 @@ import threading
 import time
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -30,16 +30,20 @@ from thermcap.archive.fanout import fan_out
 from thermcap.archive.formats import ArchiveContext, ArchiveFormat, FileRecord, get_format
 from thermcap.archive.frame_summary import SUMMARY_NAME, SummaryBuilder
 from thermcap.archive.manifest import (
+    DEFAULT_DIGEST,
+    DIGESTS,
+    FrameProof,
     archive_dir,
-    file_sha256,
-    frame_sha256,
+    file_digest,
+    file_matches,
+    frame_proof,
     iso_now,
     load_manifest,
     new_manifest,
+    record_digest,
     save_manifest,
-    sidecar_sha256,
 )
-from thermcap.archive.manifest_types import FileEntry, FormatEntry, Manifest
+from thermcap.archive.manifest_types import FileEntry, FormatEntry, FramesBlock, Manifest, SummaryEntry
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.frame_heap import keep_frame_blocks
@@ -74,22 +78,22 @@ def encoder_threads(total: int | None, formats_at_once: int) -> int:
 
 def _summary_intact(adir: Path, manifest: Manifest) -> bool:
     entry = manifest.get("summary") or {}
-    path = adir / entry.get("path", SUMMARY_NAME)
-    return bool(entry.get("sha256")) and path.is_file() and file_sha256(path) == entry["sha256"]
+    return file_matches(adir / entry.get("path", SUMMARY_NAME), entry)
 
 
 def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping[str, Any]],
-                      expected: Sequence[str | bytes], *, where: str, sidecars: list[str] | None = None,
-                      times: list[int] | None = None, hash_files: bool = True,
-                      digest: tuple[str, Callable[[np.ndarray], str | bytes]] = ("sha256", frame_sha256),
+                      proof: FrameProof, *, where: str, times: list[int] | None = None, hash_files: bool = True,
+                      digest: tuple[str, Callable[[np.ndarray], str | bytes], Sequence[str | bytes]] | None = None,
                       workers: int = 2) -> tuple[list[str], float]:
     """Decode every file with the format's reader and compare each frame's pixels, sidecar and
-    time with the source's hashes; return (problems, decode seconds). ``sidecars`` and ``times``
-    are absent only in manifests written before they were recorded. ``hash_files=False`` where
-    the caller has just hashed the files to make their entries (the writer's own check), which
-    may also compare pixels by another ``digest`` of the same source read (see ``read_back``).
-    ``workers``: the reader's threads (``ArchiveFormat.read``)."""
-    digest_name, pixel_digest = digest
+    time with the source's digests (``proof``); return (problems, decode seconds). Its sidecars and
+    ``times`` are absent only in manifests written before they were recorded. ``hash_files=False``
+    where the caller has just hashed the files to make their entries (the writer's own check),
+    which may also compare pixels by another ``digest`` (name, function, each frame's) of the same
+    source read (see ``read_back``). ``workers``: the reader's threads (``ArchiveFormat.read``)."""
+    digest_name, pixel_digest, expected = digest if digest is not None else (proof.name, proof.of_pixels,
+                                                                              proof.pixels)
+    sidecars = proof.sidecars
     problems: list[str] = []
     index = 0
     decode_s = 0.0
@@ -99,8 +103,9 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping
             problems.append(f"{where}/{rec['path']}: missing")
             index += rec["frames"]
             continue
-        if hash_files and rec.get("sha256") and file_sha256(path) != rec["sha256"]:
-            problems.append(f"{where}/{rec['path']}: file sha256 differs from the manifest")
+        named = record_digest(rec) if hash_files else None
+        if named is not None and file_digest(path, named[0]) != named[1]:
+            problems.append(f"{where}/{rec['path']}: file {named[0]} differs from the manifest")
         got = 0
         t = time.perf_counter()
         try:
@@ -111,7 +116,7 @@ def verify_format_dir(fmt: ArchiveFormat, out_dir: Path, files: Sequence[Mapping
                     break
                 if pixel_digest(frame.pixels) != expected[i]:
                     problems.append(f"frame {i} ({where}/{rec['path']}): {digest_name} differs")
-                if sidecars and sidecar_sha256(frame.sidecar) != sidecars[i]:
+                if sidecars and proof.of_sidecar(frame.sidecar) != sidecars[i]:
                     problems.append(f"frame {i} ({where}/{rec['path']}): sidecar differs from the source's")
                 if times and frame.log_time is not None and frame.log_time != times[i]:
                     problems.append(f"frame {i} ({where}/{rec['path']}): time {frame.log_time} differs from "
@@ -161,23 +166,23 @@ def write_verified(fmt: ArchiveFormat, fid: str, frames: Iterable[SessionFrame],
     for rec in records:
         p = out_dir / rec.path
         rec.bytes = p.stat().st_size
-        rec.sha256 = file_sha256(p)
-    files: list[FileEntry] = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, "sha256": r.sha256}
-                              for r in records]
+        rec.digest = file_digest(p, ctx.digest)
+    files = [cast(FileEntry, {"path": r.path, "frames": r.frames, "bytes": r.bytes, ctx.digest: r.digest})
+             for r in records]
     back = expected()
-    want = back.frames
+    proof = back.proof
     name, digest, pixels = back.pixel_digest
     # read back on the format's share of the cores, as it was written: three formats verifying
     # at once on two cores with two reader threads each cost 16.12 against 15.65 CPU ms a frame
     # for the whole archive, and no wall time (1.81 against 1.86x real time; medians of 8, 2026-12-06)
-    problems, decode_s = verify_format_dir(fmt, out_dir, files, pixels, where=fid,
-                                           sidecars=want.get("sidecar_sha256"), times=want.get("timestamps_ns"),
-                                           hash_files=False, digest=(name, digest), workers=ctx.workers)
-    how = ("the pixels by xxh3-128 taken on the same read as the manifest's sha256" if name == "xxh3-128"
-           else "the pixels by the manifest's sha256")
+    problems, decode_s = verify_format_dir(fmt, out_dir, files, proof, where=fid,
+                                           times=back.frames.get("timestamps_ns"), hash_files=False,
+                                           digest=(name, digest, pixels), workers=ctx.workers)
+    how = (f"the pixels by xxh3-128 taken on the same read as the manifest's {proof.name}" if name == "xxh3-128"
+           else f"the pixels by the manifest's {proof.name}")
     return BuiltCopy(files, problems, encode_s, decode_s,
-                     f"bit-exact: {len(want['sha256'])} frames decoded with the format's reader match the MCAP "
-                     f"source's pixels, sidecars and times ({how}; sidecars by sha256)")
+                     f"bit-exact: {len(proof.pixels)} frames decoded with the format's reader match the MCAP "
+                     f"source's pixels, sidecars and times ({how}; sidecars by {proof.name})")
 
 
 def format_entry(fmt: ArchiveFormat, built: BuiltCopy, frames: int, raw_bytes: int) -> FormatEntry:
@@ -248,12 +253,14 @@ def fresh_partial(session_dir: Path, fid: str) -> Path:
 def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterable[SessionFrame],
                  manifest: Manifest, meta: dict[str, Any], per_segment: dict[str, int], *, workers: int = 2,
                  on_progress: Callable[[str, int, int], None] | None = None,
-                 read_back_xxh3: Callable[[], list[bytes] | None] | None = None) -> list[str]:
+                 read_back_xxh3: Callable[[], list[bytes] | None] | None = None,
+                 digest: str = DEFAULT_DIGEST) -> list[str]:
     """Write ``frames`` as format ``fid`` into ``<fid>.partial``, verify every frame against the
     manifest's hashes, and only then take the final name (replacing an older copy only now) and
     record it in the manifest. Returns the problems; a failed copy never takes the final name.
     The archiver feeds it the MCAP source (and ``read_back_xxh3``, the digests its read took,
-    when it took the manifest's hashes on that read); ``scrub --repair`` any verified copy."""
+    when it took the manifest's hashes on that read); ``scrub --repair`` any verified copy.
+    ``digest``: the hash its files are recorded by."""
     session_id = manifest.get("session_id", session_dir.name)
     total = sum(per_segment.values())
     partial = fresh_partial(session_dir, fid)
@@ -265,7 +272,7 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
             on_progress(f"writing {fid}", done[0], total)
 
     ctx = ArchiveContext(session_id=session_id, session_meta=meta, total_frames=total,
-                         frames_per_segment=per_segment, workers=workers, on_frame=tick)
+                         frames_per_segment=per_segment, workers=workers, on_frame=tick, digest=digest)
 
     def expected() -> ReadBack:
         # read only now: the archiver's single read of the source gives the manifest its hashes
@@ -275,15 +282,19 @@ def build_format(session_dir: Path, fid: str, fmt: ArchiveFormat, frames: Iterab
         return ReadBack(manifest["frames"], read_back_xxh3() if read_back_xxh3 is not None else None)
 
     built = write_verified(fmt, fid, frames, partial, ctx, expected)
-    entry = format_entry(fmt, built, len(manifest["frames"]["sha256"]), manifest["source"]["raw_bytes"])
+    entry = format_entry(fmt, built, len(frame_proof(manifest["frames"]).pixels), manifest["source"]["raw_bytes"])
     return take_name(session_dir, fid, partial, manifest, entry)
 
 
 def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...] = DEFAULT_FORMATS, *,
                     delete_source: bool = False, workers: int | None = None, force: bool = False,
                     on_progress: Callable[[str, int, int], None] | None = None,
-                    before_delete: Callable[[Path], None] | None = None) -> Manifest:
+                    before_delete: Callable[[Path], None] | None = None, digest: str = DEFAULT_DIGEST) -> Manifest:
     """Archive one session; returns the manifest. Raises VerificationError if any format fails.
+
+    ``digest``: the hash of the manifest's proofs it takes now (each frame's pixels and sidecar,
+    each file written); digests an earlier run recorded stay what copies are compared with, under
+    the hash they name (``recorder.storage.digest``).
 
     ``workers``: encoder threads in all (None: the usable cores), shared among the formats
     written at once (``encoder_threads``); where the formats outnumber them, they take turns
@@ -292,6 +303,8 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
     ``before_delete(session_dir)`` runs once the copies are re-checked and before the source goes
     (the API indexes the archive there, so no reader is left pointing at deleted segments)."""
     session_dir = Path(session_dir)
+    if digest not in DIGESTS:
+        raise ArchiveError(f"--digest {digest}: thermcap archives by {' or '.join(DIGESTS)}")
     if not session_dir.is_dir():
         raise ArchiveError(f"{session_dir}: no such session folder")
     if list(session_dir.glob(f"*{ACTIVE_SUFFIX}")):
@@ -301,7 +314,7 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
         raise ArchiveError(f"{session_dir}: {holder(session_dir) or 'another process'} holds this session")
     try:
         return _archive_locked(session_dir, list(formats), delete_source, workers, force, on_progress,
-                               before_delete)
+                               before_delete, digest)
     except OSError as exc:  # a read-only or full disk: name the file; the source is untouched
         raise ArchiveError(f"{exc.filename or session_dir}: {exc.strerror or exc}; nothing was deleted") from None
     finally:
@@ -310,7 +323,7 @@ def archive_session(session_dir: str | Path, formats: list[str] | tuple[str, ...
 
 def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, workers: int | None, force: bool,
                     on_progress: Callable[[str, int, int], None] | None,
-                    before_delete: Callable[[Path], None] | None = None) -> Manifest:
+                    before_delete: Callable[[Path], None] | None = None, digest: str = DEFAULT_DIGEST) -> Manifest:
     meta = read_session_meta(session_dir)
     if isinstance(meta.get("cameras"), dict):  # read as one camera it would archive no frame at all
         split = meta.get("split_into")
@@ -345,13 +358,13 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         force or bool(todo) or bool(extras_problems(layout, manifest.get("extras"))))
     per_segment = count_frames(session_dir) if todo or need_extras else {}
     total = sum(per_segment.values())
-    known = manifest["frames"].get("sha256")
+    known = frame_proof(manifest["frames"])
     # hashes already in the manifest stay what every copy is compared with (a source that rotted
     # since then fails verification instead of being hashed again as good)
-    source = SourcePass(session_dir, per_segment,
-                        hash_frames=bool(todo) and (not known or len(known) != total
-                                                    or "sidecar_sha256" not in manifest["frames"]),
-                        extras=ExtrasWriter(adir) if need_extras else None,
+    source = SourcePass(session_dir, per_segment, digest=digest,
+                        hash_frames=bool(todo) and (not known.pixels or len(known.pixels) != total
+                                                    or known.sidecar_key not in manifest["frames"]),
+                        extras=ExtrasWriter(adir, digest) if need_extras else None,
                         # taken only with formats to write: they verify the very frames it summarises
                         summary=SummaryBuilder(total) if todo and (force or not _summary_intact(adir, manifest))
                         else None)
@@ -361,8 +374,8 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
         hashes = source.hashes  # the stream ended and the source agreed with itself
         if hashes is not None:
             with _MANIFEST_LOCK:
-                manifest["frames"] = {"sha256": hashes.sha256, "sidecar_sha256": hashes.sidecar_sha256,
-                                      "timestamps_ns": hashes.timestamps_ns, "segments": hashes.segments}
+                manifest["frames"] = cast(FramesBlock, {**hashes.proof.block(), "timestamps_ns": hashes.timestamps_ns,
+                                                        "segments": hashes.segments})
                 manifest["source"] = {"segments": [{"name": s.name, "frames": per_segment[s.name],
                                                     "bytes": s.stat().st_size} for s in segments],
                                       "frames": total, "width": hashes.width, "height": hashes.height,
@@ -380,7 +393,7 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
     def writer_for(fid: str) -> Callable[[Iterable[SessionFrame]], list[str]]:
         def write(frames: Iterable[SessionFrame]) -> list[str]:
             return build_format(session_dir, fid, fmts[fid], frames, manifest, meta, per_segment,
-                                workers=per_format, on_progress=on_progress,
+                                workers=per_format, on_progress=on_progress, digest=digest,
                                 read_back_xxh3=lambda: source.hashes.xxh3 if source.hashes is not None else None)
         return write
 
@@ -417,11 +430,12 @@ def _archive_locked(session_dir: Path, formats: list[str], delete_source: bool, 
             failures.append(f"extras: {manifest['extras']['verification']}")
     if failures:
         raise VerificationError(f"{session_dir}: archive verification failed; the source was kept", failures)
-    if source.summary is not None and source.summary.n == len(manifest["frames"]["sha256"]):
+    if source.summary is not None and source.summary.n == len(frame_proof(manifest["frames"]).pixels):
         path = adir / SUMMARY_NAME
         source.summary.finish().save(path)
-        manifest["summary"] = {"path": SUMMARY_NAME, "bytes": path.stat().st_size, "sha256": file_sha256(path),
-                               "band_rows": source.summary.band_rows, "frames": source.summary.n}
+        manifest["summary"] = cast(SummaryEntry, {"path": SUMMARY_NAME, "bytes": path.stat().st_size,
+                                                  digest: file_digest(path, digest),
+                                                  "band_rows": source.summary.band_rows, "frames": source.summary.n})
         save_manifest(session_dir, manifest)
     if delete_source:
         # the last copy goes only on evidence checked now: every file hashed against the manifest

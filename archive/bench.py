@@ -29,6 +29,7 @@ import tifffile
 
 from thermcap.archive.codecs import get_codec
 from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.storage.digest import DEFAULT_DIGEST
 
 if TYPE_CHECKING:
     from thermcap.archive.formats import ArchiveContext
@@ -259,7 +260,7 @@ def formats_together_cpu(fids: tuple[str, ...], frames: list[Any], workdir: Path
 
 
 def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
-                  workdir: str | None = None, repeat: int = 1) -> dict[str, Any]:
+                  workdir: str | None = None, repeat: int = 1, digest: str = DEFAULT_DIGEST) -> dict[str, Any]:
     """A whole session archived end to end (hash, every format, verification, extras) against the
     time it covers, beside each format archived alone and three floors: the formats' encoders
     alone (their encode time per frame, measured when each was archived alone), one after
@@ -273,7 +274,10 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     round of the formats' floor, and each run's ratio to the round after it is listed with their
     median (``cpu_vs_formats_rounds_median``), the goal's verdict. Before each run the page
     cache is primed for its output (``recorder.bench.page_cache``): the first run of a process
-    had been up to a third slower than the next, faulting in memory the host had taken back."""
+    had been up to a third slower than the next, faulting in memory the host had taken back.
+
+    ``digest``: the hash of the manifest's proofs the archive takes (``thermcap archive --digest``),
+    so the archive's cost with sha256 can be measured beside BLAKE3's in the same sitting."""
     from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session, encoder_threads, usable_cores
     from thermcap.archive.manifest import archive_dir
     from thermcap.recorder.bench.cpu import process_cpu_s as cpu_s
@@ -298,7 +302,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         # 10 s session would count as 8% of its work and an hour's as nothing. Reported apart.
         t = time.perf_counter()
         warm_up_dir, session_dir = sessions
-        archive_session(warm_up_dir, list(fmts))
+        archive_session(warm_up_dir, list(fmts), digest=digest)
         warm_up = time.perf_counter() - t
         # what a run writes, from the warm-up's archive (60 frames), for priming the page cache
         warm_bytes = sum(p.stat().st_size for p in archive_dir(warm_up_dir).rglob("*") if p.is_file())
@@ -321,7 +325,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
                 shutil.rmtree(archive_dir(session_dir))
             primed.append(prime(tmp, out_bytes))  # see recorder.bench.page_cache
             t, c = time.perf_counter(), cpu_s()
-            archive_session(session_dir, list(fmts))
+            archive_session(session_dir, list(fmts), digest=digest)
             runs.append((time.perf_counter() - t, cpu_s() - c))
             # the floor right after, in the same minute: the machine's pace moves by 8-15% between
             # measurements, and a ratio of the two taken apart carries that whole move
@@ -333,7 +337,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         single, floor_s, ratios = {}, 0.0, {}
         for f in fmts:
             t = time.perf_counter()
-            alone = archive_session(session_dir, [f], force=True)
+            alone = archive_session(session_dir, [f], force=True, digest=digest)
             single[f] = round(seconds / (time.perf_counter() - t), 3)
             rate = float(alone["formats"][f].get("encode_fps") or 0.0)
             floor_s += n / rate if rate > 0 else 0.0
@@ -346,7 +350,7 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
         read_n = sum(1 for _ in iter_session_frames(session_dir))
         source_read_ms = (cpu_s() - c) / max(1, read_n) * 1000
     codecs_ms = sum(v["write"] + v["read"] for v in codec_ms.values())
-    return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts), "cores": cores,
+    return {"seconds_of_recording": seconds, "frames": n, "formats": list(fmts), "cores": cores, "digest": digest,
             "first_archive_of_1_s_wall_s": round(warm_up, 2),
             "archive_wall_s": round(wall, 2), "x_real_time": round(seconds / wall, 3),
             "x_real_time_runs": [round(seconds / w, 3) for w, _ in runs],

@@ -15,7 +15,7 @@ from obstore.store import LocalStore, S3Store
 
 from thermcap.recorder.storage.layout import SessionLayout
 
-__all__ = ["BlobStore", "open_store", "stored_sha256", "upload_archive"]
+__all__ = ["BlobStore", "open_store", "stored_digest", "upload_archive"]
 
 
 class BlobStore:
@@ -83,11 +83,11 @@ class BlobStore:
         return obstore.sign(self.store, "GET", self._key(key), timedelta(seconds=expires_s))
 
 
-def stored_sha256(store: BlobStore, key: str) -> str | None:
-    """sha256 of an object as the store gives it back now; None when it is not there."""
-    import hashlib
+def stored_digest(store: BlobStore, key: str, name: str) -> str | None:
+    """The ``name`` digest of an object as the store gives it back now; None when it is not there."""
+    from thermcap.recorder.storage.digest import new_hasher
 
-    h = hashlib.sha256()
+    h = new_hasher(name)
     try:
         for piece in store.iter_bytes(key):
             h.update(piece)
@@ -126,7 +126,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 
     from thermcap.archive.manifest import archived_files, iso_now, load_manifest, save_manifest
     from thermcap.recorder.exceptions import ThermcapError
-    from thermcap.recorder.storage.digest import file_sha256
+    from thermcap.recorder.storage.digest import file_digest
 
     manifest = load_manifest(session_dir)
     keys = []
@@ -136,7 +136,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         key = path.resolve().relative_to(root.resolve()).as_posix()
         # what gc later lets the bucket stand for must be the verified bytes: the local file is
         # hashed before it goes, and the object read back and hashed after
-        if not path.is_file() or file_sha256(path) != rec.sha256:
+        if not path.is_file() or file_digest(path, rec.digest) != rec.hex:
             raise ThermcapError(f"{path}: missing or differs from the manifest; not uploading a damaged copy "
                                 f"(`thermcap scrub --repair` rebuilds it)")
         head = store.head(key)
@@ -151,7 +151,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
             raise ThermcapError(f"{key} already exists in the store with different content "
                                 f"({head['size'] if head else 'no'} bytes, expected {rec.bytes}); "
                                 f"refusing to overwrite")
-        if stored_sha256(store, key) != rec.sha256:
+        if stored_digest(store, key, rec.digest) != rec.hex:
             raise ThermcapError(f"{key}: the store holds other bytes than the verified archive file; "
                                 f"refusing to overwrite (delete the object, then upload again)")
         keys.append(key)

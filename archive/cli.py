@@ -12,6 +12,7 @@ import click
 from thermcap.archive.defaults import DEFAULT_FORMATS
 from thermcap.recorder.cli.options import Number, fail, json_option, root_option
 from thermcap.recorder.exceptions import SessionBusyError, ThermcapError
+from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
 from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
@@ -38,9 +39,12 @@ def _formats(value: str) -> list[str]:
 @click.option("--workers", type=Number(minimum=1, maximum=64, integer=True), default=None,
               help="Encoder threads in all: shared among the formats written at once, which take turns "
                    "when there are more of them (default: the usable cores).")
+@click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
+              help="The hash of the manifest's proofs (every frame, every file). sha256 where a rule asks for "
+                   "it (FIPS 180-4, a repository's ingest); blake3 is as strong and 5x faster.")
 @json_option
 def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: str, delete_source: bool, force: bool,
-            workers: int | None, as_json: bool) -> None:
+            workers: int | None, digest: str, as_json: bool) -> None:
     """Repack sessions losslessly, verify every frame bit-exact, write archive/manifest.json."""
     from rich.progress import BarColumn, MofNCompleteColumn, TextColumn, TimeRemainingColumn
 
@@ -73,7 +77,8 @@ def archive(sessions: tuple[str, ...], root: str, all_sessions: bool, formats: s
             try:
                 # the index learns of the archive before the source goes: no frame 503s in between
                 m = archive_session(d, fmts, delete_source=delete_source, force=force, workers=workers,
-                                    on_progress=on_progress, before_delete=lambda sd: _run_hooks(sd, root))
+                                    on_progress=on_progress, before_delete=lambda sd: _run_hooks(sd, root),
+                                    digest=digest)
                 results.append({"session": str(d), "ok": True, "formats": {
                     k: {x: v[x] for x in ("verified", "bytes", "objects", "compression_ratio", "encode_fps",
                                           "decode_fps")} for k, v in m["formats"].items() if k in fmts},
@@ -286,14 +291,17 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
               help="--session: the formats to archive (default: the archiver's defaults).")
 @click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
               help="--session: time the whole archive this many times and report the median run (each run listed).")
+@click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
+              help="--session: the hash of the manifest's proofs, as `thermcap archive --digest`.")
 @json_option
-def bench_archive(n_frames: int, session_s: float | None, formats: str | None, repeat: int, as_json: bool) -> None:
+def bench_archive(n_frames: int, session_s: float | None, formats: str | None, repeat: int, digest: str,
+                  as_json: bool) -> None:
     """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
     from thermcap.archive.bench import bench_archive as run
     from thermcap.archive.bench import bench_session, print_table
 
     if session_s:
-        res = bench_session(session_s, tuple(formats.split(",")) if formats else None, repeat=repeat)
+        res = bench_session(session_s, tuple(formats.split(",")) if formats else None, repeat=repeat, digest=digest)
         click.echo(json.dumps(res, indent=2) if as_json else
                    f"{res['seconds_of_recording']} s of 640x512@60 ({res['frames']} frames), formats "
                    f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "

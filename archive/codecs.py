@@ -111,7 +111,7 @@ def decode_up_png(buf: bytes) -> np.ndarray | None:
     filter is undone as a prefix sum down the columns, blocked so numpy does it in a few dozen
     calls: about 2.5x faster than libpng, which is why raw frames are served from it. It checks
     the chunk layout and each row's filter byte but not the chunks' CRCs: a caller serving its
-    output proves it first (against the frame summary's band CRC-32s or the frame's sha256);
+    output proves it first (against the frame summary's band CRC-32s or the frame's digest);
     verification keeps using libpng."""
     view = memoryview(buf)
     if len(buf) < 45 or bytes(view[:16]) != b"\x89PNG\r\n\x1a\n\x00\x00\x00\x0dIHDR":

@@ -13,7 +13,7 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 
-from thermcap.archive.manifest import file_sha256
+from thermcap.archive.manifest import file_problem
 from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, Manifest
 from thermcap.recorder.storage.layout import SessionLayout
 
@@ -33,11 +33,9 @@ def copy_problems(layout: SessionLayout, fid: str, entry: FormatEntry | None) ->
         return [f"{fid}: the manifest lists no files"]
     problems = []
     for rec in files:
-        path = layout.format_dir(fid) / rec["path"]
-        if not path.is_file():
-            problems.append(f"{fid}/{rec['path']}: missing")
-        elif file_sha256(path) != rec.get("sha256"):
-            problems.append(f"{fid}/{rec['path']}: sha256 differs from the manifest")
+        problem = file_problem(layout.format_dir(fid) / rec["path"], rec)
+        if problem is not None:
+            problems.append(f"{fid}/{rec['path']}: {problem}")
     return problems
 
 
@@ -47,11 +45,8 @@ def extras_problems(layout: SessionLayout, entry: ExtrasEntry | None) -> list[st
         return ["extras.mcap: not verified"]
     if entry.get("damaged"):
         return ["extras.mcap: marked damaged by scrub"]
-    if not layout.extras.is_file():
-        return ["extras.mcap: missing"]
-    if file_sha256(layout.extras) != entry.get("sha256"):
-        return ["extras.mcap: sha256 differs from the manifest"]
-    return []
+    problem = file_problem(layout.extras, entry)
+    return [] if problem is None else [f"extras.mcap: {problem}"]
 
 
 @dataclass(frozen=True)

@@ -14,13 +14,14 @@ import hashlib
 import os
 from collections.abc import Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from thermcap.archive.manifest_types import ExtrasEntry
 from thermcap.recorder.icd.topics import TOPIC_IMAGE
+from thermcap.recorder.storage.digest import DEFAULT_DIGEST, bytes_digest
 from thermcap.recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
 from thermcap.recorder.storage.reader import session_segments
 
@@ -88,7 +89,8 @@ class ExtrasWriter:
     attachments and metadata records (from the summaries), re-reads the file and compares it
     with what it was given before it takes its name (``.partial`` until then)."""
 
-    def __init__(self, archive_folder: Path) -> None:
+    def __init__(self, archive_folder: Path, digest: str = DEFAULT_DIGEST) -> None:
+        self.digest = digest  # the file's, as the manifest records it (recorder.storage.digest)
         self.final = archive_folder / EXTRAS_NAME
         self.partial = archive_folder / (EXTRAS_NAME + PARTIAL_SUFFIX)
         self.expected = _Summary()
@@ -150,24 +152,25 @@ class ExtrasWriter:
                     "verification": "extras.mcap did not re-read identical to the source; the source was kept"}
         os.replace(self.partial, self.final)
         data = self.final.read_bytes()
-        return {"path": EXTRAS_NAME, "bytes": len(data), "sha256": hashlib.sha256(data).hexdigest(),
-                "verified": True, "topics": got["topics"], "attachments": got["attachments"],
-                "verification": "every non-image message, attachment and metadata record re-read identical to "
-                                "the source"}
+        return cast(ExtrasEntry, {
+            "path": EXTRAS_NAME, "bytes": len(data), self.digest: bytes_digest(data, self.digest), "verified": True,
+            "topics": got["topics"], "attachments": got["attachments"],
+            "verification": "every non-image message, attachment and metadata record re-read identical to the source"})
 
 
-def write_extras(session_dir: Path, archive_folder: Path) -> ExtrasEntry:
-    """``extras.mcap`` from a read of its own (``scrub --repair``; the archiver feeds an
-    ``ExtrasWriter`` from the read that feeds the formats)."""
+def write_extras(session_dir: Path, archive_folder: Path, digest: str = DEFAULT_DIGEST) -> ExtrasEntry:
+    """``extras.mcap`` from a read of its own (``scrub --repair``, recorded by the hash of the
+    entry it replaces; the archiver feeds an ``ExtrasWriter`` from the read that feeds the formats)."""
     segments = session_segments(session_dir)
-    return extras_from(archive_folder, segments, segments)
+    return extras_from(archive_folder, segments, segments, digest)
 
 
-def extras_from(archive_folder: Path, message_files: list[Path], segments: list[Path]) -> ExtrasEntry:
+def extras_from(archive_folder: Path, message_files: list[Path], segments: list[Path],
+                digest: str = DEFAULT_DIGEST) -> ExtrasEntry:
     """``extras.mcap`` with the non-image messages of ``message_files`` (the segments, or the
     per-segment extras a cluster's tasks made from them) and the attachments and metadata of
     ``segments``, compared with both before it takes its name."""
-    extras = ExtrasWriter(archive_folder)
+    extras = ExtrasWriter(archive_folder, digest)
     try:
         for path in message_files:
             for kind, rec in _extra_records(path):

@@ -9,7 +9,7 @@ Why it exists: a region's time series over an hour (216,000 frames) must not dec
 - A box decodes only the TIFF strips its rows fall in. Each strip's rows are checked against
   their band's CRC-32 here before they are used, so a partial read is checked as a whole
   frame is. The ZIP directory's CRC-32 plays the same part for served PNGs. This file is in
-  turn bound to the manifest by its sha256.
+  turn bound to the manifest by its digest.
 """
 
 from __future__ import annotations
@@ -33,7 +33,7 @@ BAND_ROWS = 64
 
 def band_crc32(pixels: np.ndarray, band_rows: int = BAND_ROWS) -> np.ndarray:
     """CRC-32 of each band of ``band_rows`` rows (the last may be shorter), over the uint16 LE
-    bytes, the same bytes the frame's sha256 covers. libdeflate's CRC-32 (the same value as
+    bytes, the same bytes the frame's digest covers. libdeflate's CRC-32 (the same value as
     zlib's) runs at about 28 GB/s where zlib's runs at 5: 0.03 ms a 640x512 frame, not 0.12."""
     arr = np.ascontiguousarray(pixels, dtype="<u2")
     crc = imagecodecs.deflate_crc32

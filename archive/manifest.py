@@ -1,16 +1,18 @@
 """``sessions/<id>/archive/manifest.json``: what was archived, and the hashes that prove it.
 
-The frame hashes (sha256 of each raw frame as uint16 little-endian, row-major) come from the
-MCAP source; every format is checked against them, and ``thermcap verify`` re-checks archives
-against them later, when the MCAP may be gone. Files are listed with their own sha256 too, so a
-flipped byte is caught before any decoding.
+The frame digests (of each raw frame as uint16 little-endian, row-major, and of its sidecar's
+bytes) come from the MCAP source; every format is checked against them, and ``thermcap verify``
+re-checks archives against them later, when the MCAP may be gone. Files are listed with their own
+digest too, so a flipped byte is caught before any decoding. Each record names its hash by its
+key (``blake3`` since 2026-12, ``sha256`` before and with ``--digest sha256``): see
+``recorder.storage.digest``.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal, cast, overload
@@ -18,19 +20,41 @@ from typing import Any, Literal, cast, overload
 from thermcap.archive.exceptions import ManifestError
 from thermcap.archive.manifest_types import Manifest
 from thermcap.recorder.storage.atomic import write_json_atomic
-from thermcap.recorder.storage.digest import file_sha256, frame_sha256
+from thermcap.recorder.storage.digest import (
+    DEFAULT_DIGEST,
+    DIGESTS,
+    FrameProof,
+    bytes_digest,
+    file_digest,
+    file_sha256,
+    frame_digest,
+    frame_proof,
+    frame_sha256,
+    new_hasher,
+    record_digest,
+)
 from thermcap.recorder.storage.layout import MANIFEST_JSON, SessionLayout
 
 __all__ = [
+    "DEFAULT_DIGEST",
+    "DIGESTS",
     "MANIFEST_NAME",
+    "FrameProof",
+    "bytes_digest",
+    "file_digest",
+    "file_matches",
+    "file_problem",
     "file_sha256",
+    "frame_digest",
+    "frame_proof",
     "frame_sha256",
     "iso_now",
     "load_manifest",
     "manifest_path",
+    "new_hasher",
     "new_manifest",
+    "record_digest",
     "save_manifest",
-    "sidecar_sha256",
 ]
 
 MANIFEST_NAME = MANIFEST_JSON
@@ -49,11 +73,19 @@ def manifest_path(session_dir: Path) -> Path:
     return archive_dir(session_dir) / MANIFEST_NAME
 
 
-def sidecar_sha256(sidecar: bytes) -> str:
-    """The sidecar's hash: sha256 of its JSON bytes exactly as recorded."""
-    return hashlib.sha256(sidecar).hexdigest()
+def file_problem(path: Path, rec: Mapping[str, Any]) -> str | None:
+    """Why the file at ``path`` is not the one ``rec`` names ("missing", "<hash> differs from the
+    manifest"); None when it is: its digest, by the hash the record names."""
+    named = record_digest(rec)
+    if named is None:
+        return "the manifest names no digest for it"
+    if not path.is_file():
+        return "missing"
+    return None if file_digest(path, named[0]) == named[1] else f"{named[0]} differs from the manifest"
 
 
+def file_matches(path: Path, rec: Mapping[str, Any]) -> bool:
+    return file_problem(path, rec) is None
 
 
 def new_manifest(session_id: str, session_meta: dict[str, Any]) -> Manifest:
@@ -84,25 +116,32 @@ def load_manifest(session_dir: Path, *, required: bool = True) -> Manifest | Non
 
 @dataclass(frozen=True)
 class ArchivedFile:
-    """One verified file of the archive: its path under ``archive/``, size and sha256."""
+    """One verified file of the archive: its path under ``archive/``, size and digest."""
 
     rel: str  # "png16/0000.zip", "extras.mcap"
     bytes: int
-    sha256: str
+    digest: str  #: the hash's name (``blake3``, ``sha256``)
+    hex: str
 
 
 def archived_files(manifest: Manifest) -> list[ArchivedFile]:
     """Every file of every verified format, extras.mcap and the frame summary: what is uploaded, and what the
     bucket must hold for gc and scrub. One list, so the three never disagree."""
-    out = [ArchivedFile(f"{fid}/{rec['path']}", rec["bytes"], rec["sha256"])
+    def named(rel: str, rec: Mapping[str, Any]) -> ArchivedFile:
+        digest = record_digest(rec)
+        if digest is None:
+            raise ManifestError(f"archive/{rel}: the manifest names no digest for it")
+        return ArchivedFile(rel, int(rec["bytes"]), *digest)
+
+    out = [named(f"{fid}/{rec['path']}", rec)
            for fid, entry in manifest.get("formats", {}).items() if entry.get("verified")
            for rec in entry.get("files", [])]
     extras = manifest.get("extras") or {}
     if extras.get("verified"):  # attachments and vendor metadata travel with the frames
-        out.append(ArchivedFile(extras["path"], extras["bytes"], extras["sha256"]))
+        out.append(named(extras["path"], extras))
     summary = manifest.get("summary") or {}
-    if summary.get("sha256"):  # what region series read instead of decoding every frame
-        out.append(ArchivedFile(summary["path"], summary["bytes"], summary["sha256"]))
+    if summary.get("path") and record_digest(summary):  # what region series read instead of decoding every frame
+        out.append(named(summary["path"], summary))
     return out
 
 

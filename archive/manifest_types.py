@@ -16,6 +16,7 @@ class FileEntry(TypedDict, total=False):
     path: str
     frames: int
     bytes: int
+    blake3: str  # the file's digest, under its hash's name (recorder.storage.digest)
     sha256: str
 
 
@@ -43,6 +44,9 @@ class FormatEntry(TypedDict, total=False):
 
 
 class FramesBlock(TypedDict, total=False):
+    # the per-frame digests under their hash's name: blake3 since 2026-12, sha256 before (frame_proof)
+    blake3: list[str]
+    sidecar_blake3: list[str]
     sha256: list[str]
     sidecar_sha256: list[str]
     timestamps_ns: list[int]
@@ -64,6 +68,7 @@ class SourceBlock(TypedDict, total=False):
 class ExtrasEntry(TypedDict, total=False):
     path: str
     bytes: int
+    blake3: str
     sha256: str
     verified: bool
     verification: str
@@ -75,6 +80,7 @@ class ExtrasEntry(TypedDict, total=False):
 class SummaryEntry(TypedDict, total=False):
     path: str
     bytes: int
+    blake3: str
     sha256: str
     band_rows: int
     frames: int

@@ -13,7 +13,7 @@ from pathlib import Path
 
 from thermcap.archive.exceptions import ManifestError, VerificationError
 from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import frame_sha256, load_manifest, sidecar_sha256
+from thermcap.archive.manifest import frame_proof, load_manifest
 from thermcap.archive.manifest_types import Manifest
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.reader import SessionFrame
@@ -58,11 +58,11 @@ def frames_from_format(manifest: Manifest, layout: SessionLayout, fid: str) -> I
     frames = manifest.get("frames", {})
     segments = frames.get("segments") or []
     times = frames.get("timestamps_ns") or []
-    hashes = frames.get("sha256") or []
-    sidecar_hashes = frames.get("sidecar_sha256") or []
+    proof = frame_proof(frames)
+    hashes, sidecar_hashes = proof.pixels, proof.sidecars
     for i, decoded in enumerate(fmt.read(layout.format_dir(fid), [r["path"] for r in entry["files"]])):
-        if (i < len(hashes) and frame_sha256(decoded.pixels) != hashes[i]) or \
-                (i < len(sidecar_hashes) and sidecar_sha256(decoded.sidecar) != sidecar_hashes[i]):
+        if (i < len(hashes) and proof.of_pixels(decoded.pixels) != hashes[i]) or \
+                (i < len(sidecar_hashes) and proof.of_sidecar(decoded.sidecar) != sidecar_hashes[i]):
             raise VerificationError(f"{layout.format_dir(fid)}: frame {i} differs from the manifest; "
                                     f"run `thermcap scrub {layout.dir.parents[1]} --repair`")
         log_time = decoded.log_time if decoded.log_time is not None else (times[i] if i < len(times) else 0)

@@ -18,7 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.archive.blobs import BlobStore
-from thermcap.archive.manifest import file_sha256, frame_sha256, iso_now, sidecar_sha256
+from thermcap.archive.manifest import file_sha256, frame_sha256, iso_now
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.storage.reader import iter_segment_frames, segment_span
 from thermcap.recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
@@ -41,7 +41,7 @@ def check_segment(path: Path) -> dict[str, Any]:
     try:
         _, _, counted = segment_span(path)
         for fr in iter_segment_frames(path):
-            frames.update((frame_sha256(fr.pixels) + sidecar_sha256(fr.sidecar)).encode()
+            frames.update((frame_sha256(fr.pixels) + hashlib.sha256(fr.sidecar).hexdigest()).encode()
                           + fr.log_time.to_bytes(8, "little"))
             n += 1
     except McapFileError as exc:

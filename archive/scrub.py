@@ -22,11 +22,19 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.archive.archiver import build_format
-from thermcap.archive.blobs import BlobStore, stored_sha256
+from thermcap.archive.blobs import BlobStore, stored_digest
 from thermcap.archive.exceptions import ArchiveError
 from thermcap.archive.extras import write_extras
 from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import archived_files, file_sha256, iso_now, load_manifest, save_manifest
+from thermcap.archive.manifest import (
+    DEFAULT_DIGEST,
+    archived_files,
+    file_digest,
+    iso_now,
+    load_manifest,
+    record_digest,
+    save_manifest,
+)
 from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock, Manifest
 from thermcap.archive.reading import frames_from_format, verified_formats
 from thermcap.archive.verify import verify_extras, verify_format
@@ -152,22 +160,24 @@ def _mark(entry: FormatEntry | ExtrasEntry, problems: list[str]) -> None:
         entry.pop("damaged", None)
 
 
-def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, str]:
-    """Object key -> the sha256 the manifest recorded for that file."""
+def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, tuple[str, str]]:
+    """Object key -> (hash, digest) the manifest recorded for that file."""
     rel = d.resolve().relative_to(root.resolve()).as_posix()
-    out = {f"{rel}/archive/{f.rel}": f.sha256 for f in archived_files(m)}
+    out = {f"{rel}/archive/{f.rel}": (f.digest, f.hex) for f in archived_files(m)}
     uploaded = set((m.get("upload") or {}).get("keys", []))
     return {k: v for k, v in out.items() if k in uploaded}
 
 
-def _check_object(store: BlobStore, key: str, sha256: str) -> str | None:
+def _check_object(store: BlobStore, key: str, named: tuple[str, str] | None) -> str | None:
+    if named is None:
+        return "the manifest names no digest for it"
     try:
-        got = stored_sha256(store, key)
+        got = stored_digest(store, key, named[0])
     except Exception as exc:  # a network or store error is reported, not taken for damage-free
         return f"cannot be read ({type(exc).__name__}: {exc})"
     if got is None:
         return "missing from the store"
-    return None if got == sha256 else "sha256 differs from the manifest"
+    return None if got == named[1] else f"{named[0]} differs from the manifest"
 
 
 def _repair(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFinding, store: BlobStore | None,
@@ -209,13 +219,14 @@ def _repair_extras(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
                    root: Path) -> None:
     extras = m["extras"]
     if session_segments(d):
-        entry = write_extras(d, layout.archive)
-        if entry.get("verified") and entry.get("sha256") == extras.get("sha256"):
+        named = record_digest(extras)
+        entry = write_extras(d, layout.archive, named[0] if named else DEFAULT_DIGEST)
+        if entry.get("verified") and record_digest(entry) == record_digest(extras):
             m["extras"] = entry
             finding.repaired, finding.repaired_from = True, "mcap source"
             return
     key = f"{d.resolve().relative_to(root.resolve()).as_posix()}/archive/{extras['path']}"
-    if store is not None and store.kind == "s3" and _check_object(store, key, extras["sha256"]) is None:
+    if store is not None and store.kind == "s3" and _check_object(store, key, record_digest(extras)) is None:
         with tempfile.NamedTemporaryFile(dir=layout.archive, delete=False, suffix=".partial") as tmp:
             for piece in store.iter_bytes(key):
                 tmp.write(piece)
@@ -236,7 +247,7 @@ def _repair_object(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
     rel = key.split("/archive/", 1)[1]
     local = layout.archive / rel
     want = _uploaded_hashes(m, d, root)[key]
-    if not local.is_file() or file_sha256(local) != want:
+    if not local.is_file() or file_digest(local, want[0]) != want[1]:
         finding.repair_error = f"no verified local copy of {rel} to upload again"
         return
     store.put_file(key, local, overwrite=True)  # the object is known bad: replacing it is the repair

@@ -14,7 +14,7 @@ the unit of work here:
 - ``finalize_session`` (one task per session, after its segments) holds the session lock. It
   writes the manifest from the parts and gives each format its final folder. Files that are
   one per segment (png16, tiff-lzw, ...) are linked as they are: the same bytes the segment
-  task verified, checked again by sha256. ``hdf5``'s one file per session is assembled by
+  task verified, checked again by their digest. ``hdf5``'s one file per session is assembled by
   copying the segments' compressed chunks (``read_direct_chunk`` / ``write_direct_chunk``),
   never encoded again, and is then decoded in full by HDF5 and compared with every frame's hash.
   The extras and the summary are joined, and the parts are removed once the manifest holds
@@ -32,7 +32,7 @@ import shutil
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -52,8 +52,18 @@ from thermcap.archive.extras import EXTRAS_NAME, ExtrasWriter, extras_from
 from thermcap.archive.fanout import fan_out
 from thermcap.archive.formats import ArchiveContext, get_format
 from thermcap.archive.frame_summary import SUMMARY_NAME, FrameSummary, SummaryBuilder, load_summary
-from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest, new_manifest, save_manifest
-from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest
+from thermcap.archive.manifest import (
+    DEFAULT_DIGEST,
+    FrameProof,
+    archive_dir,
+    file_digest,
+    file_problem,
+    frame_proof,
+    load_manifest,
+    new_manifest,
+    save_manifest,
+)
+from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest, SummaryEntry
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.storage.atomic import fsync_dir
@@ -82,7 +92,7 @@ class SegmentPart:
 
     @property
     def count(self) -> int:
-        return len(self.frames["sha256"])
+        return len(frame_proof(self.frames).pixels)
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -112,6 +122,8 @@ def _done_part(session_dir: Path, segment: Path, formats: list[str]) -> SegmentP
     except (OSError, ValueError, TypeError):
         return None
     if part.segment_bytes != segment.stat().st_size or not set(formats) <= set(part.formats):
+        return None
+    if frame_proof(part.frames).name != DEFAULT_DIGEST:  # made before an upgrade: parts join under one hash
         return None
     return part
 
@@ -181,8 +193,8 @@ def _archive_segment_locked(session_dir: Path, seg: Path, first_index: int, form
     def expected() -> ReadBack:
         h = source.hashes
         assert h is not None  # the stream ended and the segment agreed with itself
-        return ReadBack({"sha256": h.sha256, "sidecar_sha256": h.sidecar_sha256, "timestamps_ns": h.timestamps_ns,
-                         "segments": h.segments}, h.xxh3)
+        return ReadBack(cast(FramesBlock, {**h.proof.block(), "timestamps_ns": h.timestamps_ns,
+                                           "segments": h.segments}), h.xxh3)
 
     def writer(fid: str) -> Callable[[Iterable[SessionFrame]], BuiltCopy]:
         def write(frames: Iterable[SessionFrame]) -> BuiltCopy:
@@ -264,14 +276,18 @@ def _finalize_locked(session_dir: Path, formats: list[str]) -> Manifest:
     session_id = meta.get("session_id", session_dir.name)
     manifest = load_manifest(session_dir, required=False) or new_manifest(session_id, meta)
     manifest["requested_formats"] = sorted(set(manifest.get("requested_formats", [])) | set(formats))
-    frames: FramesBlock = {"sha256": [], "sidecar_sha256": [], "timestamps_ns": [], "segments": []}
+    # every part's digests are by DEFAULT_DIGEST (``_done_part``)
+    frames = cast(FramesBlock, {**FrameProof(DEFAULT_DIGEST, [], []).block(), "timestamps_ns": [], "segments": []})
     for p in parts:
         for k in frames:
             frames[k] += p.frames[k]  # type: ignore[literal-required]
-    known = manifest.get("frames", {}).get("sha256")
-    if known and known != frames["sha256"]:  # a rotted source must not replace the hashes it is checked against
-        raise VerificationError(f"{session_dir}: the segments' frames differ from the manifest's hashes", [])
-    total = len(frames["sha256"])
+    proof = frame_proof(frames)
+    known = frame_proof(manifest.get("frames"))
+    if known.pixels and (known.name != proof.name or known.pixels != proof.pixels):
+        # a rotted source must not replace the hashes it is checked against
+        raise VerificationError(f"{session_dir}: the segments' frames differ from the manifest's hashes "
+                                f"({known.name})", [])
+    total = len(proof.pixels)
     sized = [p for p in parts if p.count]
     w, h = (sized[0].width, sized[0].height) if sized else (0, 0)
     manifest["frames"] = frames
@@ -306,8 +322,9 @@ def _finalize_locked(session_dir: Path, formats: list[str]) -> Manifest:
         summary = _join_summaries([load_summary((pdir / p.segment / SUMMARY_NAME).read_bytes()) for p in parts])
         path = archive_dir(session_dir) / SUMMARY_NAME
         summary.save(path)
-        manifest["summary"] = {"path": SUMMARY_NAME, "bytes": path.stat().st_size, "sha256": file_sha256(path),
-                               "band_rows": summary.band_rows, "frames": summary.frames}
+        manifest["summary"] = cast(SummaryEntry, {"path": SUMMARY_NAME, "bytes": path.stat().st_size,
+                                                  ctx.digest: file_digest(path, ctx.digest),
+                                                  "band_rows": summary.band_rows, "frames": summary.frames})
         save_manifest(session_dir, manifest)
     shutil.rmtree(pdir)  # everything they held is in the archive and its manifest now
     return manifest
@@ -316,6 +333,7 @@ def _finalize_locked(session_dir: Path, formats: list[str]) -> Manifest:
 def _assemble(fmt: Any, fid: str, parts: list[tuple[Path, dict[str, Any]]], out: Path, ctx: ArchiveContext,
               frames: FramesBlock) -> BuiltCopy:
     """One format's final folder from its verified parts."""
+    proof = frame_proof(frames)
     assembled = fmt.assemble([(d, info["files"]) for d, info in parts], out, ctx)
     encode_s = sum(float(info["encode_s"]) for _, info in parts)
     if assembled is None:  # one file per segment: the verified bytes themselves
@@ -330,26 +348,26 @@ def _assemble(fmt: Any, fid: str, parts: list[tuple[Path, dict[str, Any]]], out:
                     os.link(src, dst)
                 except OSError:
                     shutil.copy2(src, dst)
-                if file_sha256(dst) != rec["sha256"]:  # changed since its task verified it: that part is void
-                    problems.append(f"{fid}/{rec['path']}: file sha256 differs from what its segment task verified; "
+                problem = file_problem(dst, rec)
+                if problem is not None:  # changed since its task verified it: that part is void
+                    problems.append(f"{fid}/{rec['path']}: {problem} (as its segment task verified it); "
                                     f"the part was removed and its segment's task runs again")
                     shutil.rmtree(d.parent, ignore_errors=True)
                 files.append(dict(rec))
         return BuiltCopy(files, problems, encode_s, sum(float(i["decode_s"]) for _, i in parts),  # type: ignore[arg-type]
                          f"bit-exact: every segment's files decoded with the format's reader match the MCAP "
-                         f"source's pixels, sidecars and times (sha256) in their segment's task, and are "
-                         f"kept byte for byte ({len(frames['sha256'])} frames)")
+                         f"source's pixels, sidecars and times ({proof.name}) in their segment's task, and are "
+                         f"kept byte for byte ({len(proof.pixels)} frames)")
     files = assembled
     for rec in files:
         p = out / rec.path
-        rec.bytes, rec.sha256 = p.stat().st_size, file_sha256(p)
-    entries = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, "sha256": r.sha256} for r in files]
-    problems, decode_s = verify_format_dir(fmt, out, entries, frames["sha256"], where=fid,
-                                           sidecars=frames["sidecar_sha256"], times=frames["timestamps_ns"])
+        rec.bytes, rec.digest = p.stat().st_size, file_digest(p, ctx.digest)
+    entries = [{"path": r.path, "frames": r.frames, "bytes": r.bytes, ctx.digest: r.digest} for r in files]
+    problems, decode_s = verify_format_dir(fmt, out, entries, proof, where=fid, times=frames["timestamps_ns"])
     return BuiltCopy(entries, problems, encode_s, decode_s,  # type: ignore[arg-type]
-                     f"bit-exact: assembled from the segments' compressed chunks, then {len(frames['sha256'])} "
+                     f"bit-exact: assembled from the segments' compressed chunks, then {len(proof.pixels)} "
                      f"frames decoded with the format's reader match the MCAP source's pixels, sidecars and times "
-                     f"(sha256)")
+                     f"({proof.name})")
 
 
 def _join_extras(session_dir: Path, part_dirs: list[Path], segments: list[Path]) -> ExtrasEntry:

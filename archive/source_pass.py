@@ -29,7 +29,7 @@ import numpy as np
 from thermcap.archive.exceptions import SourceDamagedError
 from thermcap.archive.extras import ExtrasWriter
 from thermcap.archive.frame_summary import SummaryBuilder
-from thermcap.archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.archive.manifest import DEFAULT_DIGEST, FrameProof, bytes_digest, frame_digest
 from thermcap.archive.read_back import frame_xxh3
 from thermcap.archive.source_checks import channel_problems
 from thermcap.recorder.icd.topics import TOPIC_METADATA
@@ -42,14 +42,19 @@ __all__ = ["SourceHashes", "SourcePass"]
 class SourceHashes:
     """What verification compares every copy with: one entry per frame, in session order."""
 
-    sha256: list[str] = field(default_factory=list)
-    sidecar_sha256: list[str] = field(default_factory=list)
+    digest: str = DEFAULT_DIGEST  #: the hash of ``pixels`` and ``sidecars`` (recorder.storage.digest)
+    pixels: list[str] = field(default_factory=list)
+    sidecars: list[str] = field(default_factory=list)
     timestamps_ns: list[int] = field(default_factory=list)
     segments: list[str] = field(default_factory=list)
     #: xxh3-128 of the same pixels, for this run's read-back alone (``read_back``); not kept
     xxh3: list[bytes] = field(default_factory=list)
     width: int = 0
     height: int = 0
+
+    @property
+    def proof(self) -> FrameProof:
+        return FrameProof(self.digest, self.pixels, self.sidecars)
 
 
 class SourcePass:
@@ -59,7 +64,7 @@ class SourcePass:
 
     def __init__(self, session_dir: Path, per_segment: dict[str, int], *, hash_frames: bool = True,
                  extras: ExtrasWriter | None = None, summary: SummaryBuilder | None = None,
-                 segments: list[Path] | None = None, first_index: int = 0) -> None:
+                 segments: list[Path] | None = None, first_index: int = 0, digest: str = DEFAULT_DIGEST) -> None:
         self.session_dir = session_dir
         self.segments = segments  # a part of the session (one segment's task); None: all of it
         self.first_index = first_index
@@ -68,13 +73,15 @@ class SourcePass:
         self.extras = extras
         self.summary = summary
         self.hashes: SourceHashes | None = None
+        self.digest = digest
 
     def frames(self) -> Iterator[SessionFrame]:
         segments = self.segments if self.segments is not None else session_segments(self.session_dir)
         problems = [f"{seg.name}: {p}" for seg in segments for p in channel_problems(seg)]
         if problems:  # before anything is written
             self._refuse(problems)
-        got = SourceHashes()
+        got = SourceHashes(self.digest)
+        name = self.digest
         read: dict[str, int] = {}
         others = self.extras.add_message if self.extras is not None else None
         index = self.first_index
@@ -83,9 +90,9 @@ class SourcePass:
                 if not f.pixels.flags.aligned:  # before the hashes and the summary read it too
                     f = replace(f, pixels=_aligned(f.pixels))
                 if self.hash_frames:
-                    got.sha256.append(frame_sha256(f.pixels))
+                    got.pixels.append(frame_digest(f.pixels, name))
                     got.xxh3.append(frame_xxh3(f.pixels))
-                    got.sidecar_sha256.append(sidecar_sha256(f.sidecar))
+                    got.sidecars.append(bytes_digest(f.sidecar, name))
                     got.timestamps_ns.append(f.log_time)
                     got.segments.append(f.segment)
                 if got.width and f.pixels.shape != (got.height, got.width):

@@ -8,7 +8,7 @@ from typing import Any
 
 from thermcap.archive.archiver import verify_format_dir
 from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import archive_dir, file_sha256, load_manifest
+from thermcap.archive.manifest import archive_dir, file_problem, frame_proof, load_manifest
 from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, FramesBlock
 
 __all__ = ["CopyCheck", "verify_extras", "verify_format", "verify_session"]
@@ -34,7 +34,7 @@ def verify_session(session_dir: str | Path, formats: list[str] | None = None) ->
     manifest is a problem, not a skip, so a script cannot read silence as success."""
     session_dir = Path(session_dir)
     manifest = load_manifest(session_dir)
-    expected = manifest["frames"].get("sha256", [])
+    expected = frame_proof(manifest["frames"]).pixels
     adir = archive_dir(session_dir)
     report: dict[str, CopyCheck] = {}
     for fid, entry in manifest["formats"].items():
@@ -59,13 +59,12 @@ def verify_format(session_dir: Path, fid: str, entry: FormatEntry, frames: Frame
     pixel and sidecar hashes and times; the problems, or [] (thermcap verify and scrub)."""
     fmt = get_format(entry.get("config") or fid)
     problems, _ = verify_format_dir(fmt, archive_dir(session_dir) / fid, entry.get("files", []),
-                                    frames.get("sha256", []), where=fid, sidecars=frames.get("sidecar_sha256"),
-                                    times=frames.get("timestamps_ns"))
+                                    frame_proof(frames), where=fid, times=frames.get("timestamps_ns"))
     return problems
 
 
 def verify_extras(adir: Path, entry: ExtrasEntry) -> CopyCheck:
-    """extras.mcap: its sha256, and every topic digest and attachment hash the manifest recorded."""
+    """extras.mcap: its digest, and every topic digest and attachment hash the manifest recorded."""
     from thermcap.archive.extras import summarize_mcap
 
     path = adir / entry["path"]
@@ -74,8 +73,9 @@ def verify_extras(adir: Path, entry: ExtrasEntry) -> CopyCheck:
     if not path.is_file():
         return CopyCheck(0, [f"extras: {path} is missing"])
     problems = []
-    if file_sha256(path) != entry["sha256"]:
-        problems.append(f"extras: {path} sha256 differs from the manifest")
+    problem = file_problem(path, entry)
+    if problem is not None:
+        problems.append(f"extras: {path} {problem}")
     else:
         got = summarize_mcap([path])
         if got["topics"] != entry["topics"] or got["attachments"] != entry["attachments"]:

@@ -1,10 +1,10 @@
 """A session read straight from the bucket ``thermcap upload`` wrote, with no server.
 
 The bucket holds what ``upload`` sends: each verified archive file, the manifest (every frame's
-time and sha256, which formats hold it), ``extras.mcap`` (the sidecars, the bad-pixel map) and
+time and digest, which formats hold it), ``extras.mcap`` (the sidecars, the bad-pixel map) and
 the session's own small documents (``session.json``, ``events.json``, ``radiometry.json``, as of
 the last upload). A frame is read from the first archive copy that has it, by ranged reads, and
-checked against the manifest's sha256 before it is returned: a damaged object is skipped for the
+checked against the manifest's digest before it is returned: a damaged object is skipped for the
 next copy, never returned.
 """
 
@@ -67,9 +67,9 @@ class BucketSession(Session):
         self.meta = {**(manifest.get("session") or {}), **recorded, "session_id": session_id}
         source = manifest.get("source") or {}
         self.width, self.height = int(source.get("width") or 0), int(source.get("height") or 0)
-        frames = manifest.get("frames") or {}
-        self._sha256: list[str] = list(frames.get("sha256") or [])
-        self._sidecar_sha256: list[str] = list(frames.get("sidecar_sha256") or [])
+        from thermcap.recorder.storage.digest import frame_proof
+
+        self._proof = frame_proof(manifest.get("frames"))  # the per-frame digests, under the hash they name
         offered = {f: e for f, e in (manifest.get("formats") or {}).items()
                    if e.get("verified") and not e.get("damaged") and e.get("files")}
         self._copies = [(f, offered[f]) for f in sorted(offered, key=lambda f: (*_ORDER, f).index(f))]
@@ -133,12 +133,11 @@ class BucketSession(Session):
     def _verified(self, index: int, part: str) -> Any:
         from thermcap.api.exceptions import FrameUnavailable
         from thermcap.archive.formats import get_format
-        from thermcap.archive.manifest import frame_sha256, sidecar_sha256
-
-        n = len(self._sha256)
+        proof = self._proof
+        n = len(proof.pixels)
         if not 0 <= index < n:
             raise IndexError(f"frame {index}: session {self.id!r} has {n} frames")
-        hashes = self._sha256 if part == "pixels" else self._sidecar_sha256
+        hashes = proof.pixels if part == "pixels" else proof.sidecars
         want = hashes[index] if index < len(hashes) else None
         problems = []
         for fmt, entry in self._copies:
@@ -151,9 +150,9 @@ class BucketSession(Session):
                 problems.append(f"{fmt}: {type(exc).__name__}: {exc}")
                 continue
             value: Any = frame.pixels if part == "pixels" else frame.sidecar
-            got = frame_sha256(value) if part == "pixels" else sidecar_sha256(value)
+            got = proof.of_pixels(value) if part == "pixels" else proof.of_sidecar(value)
             if want and got != want:
-                problems.append(f"{fmt}: {part} sha256 differs from the manifest")
+                problems.append(f"{fmt}: {part} {proof.name} differs from the manifest")
                 continue
             return value
         raise FrameUnavailable(f"frame {index} of {self.url}: no copy in the bucket matches the manifest"

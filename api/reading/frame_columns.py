@@ -1,13 +1,15 @@
 """A session's per-frame facts as one columnar file, beside the archives in the blob store.
 
 A row per frame in the database cost 157 bytes (34 MB a camera-hour at 60 fps, 9.9 TB a year
-for 100 cameras at 8 hours a day), most of it two sha256 digests and the row and index
+for 100 cameras at 8 hours a day), most of it two 32-byte digests and the row and index
 overhead that a database pays for every row. None of it is searched across sessions: a frame's
 hashes, time and segment are read for the one session being served. So the indexer writes them
 as a Parquet file (``index/frames/<session>/<state>.parquet``, in the same store as the
 archives, local or S3), and the database keeps the session's row, its per-second target
 summaries (``frame_search``) and the file's key. The file is read whole, once per indexed state
 of the session, and kept in a bounded cache; anyone can read it with pyarrow, DuckDB or pandas.
+Its two digest columns are named by the manifest's hash: ``blake3`` and ``sidecar_blake3``, or
+``sha256`` and ``sidecar_sha256`` for a session archived before BLAKE3 (or with ``--digest sha256``).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from thermcap.api import db
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
 from thermcap.archive.blobs import BlobStore
+from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
 
 __all__ = ["FrameColumns", "FrameColumnsCache", "frames_key"]
 
@@ -59,10 +62,11 @@ class FrameColumns:
     timestamp_ns: np.ndarray  # int64
     segment_code: np.ndarray  # int16: index into ``segment_names``, -1 for none
     segment_names: tuple[str, ...]
-    sha256: np.ndarray  # uint8 [frames, 32]; a frame without one has ``has_sha256`` False
-    has_sha256: np.ndarray
-    sidecar_sha256: np.ndarray
-    has_sidecar_sha256: np.ndarray
+    digest: str  # the hash of the two digest columns (recorder.storage.digest)
+    pixel_digest: np.ndarray  # uint8 [frames, 32]; a frame without one has ``has_pixel_digest`` False
+    has_pixel_digest: np.ndarray
+    sidecar_digest: np.ndarray
+    has_sidecar_digest: np.ndarray
     grade: np.ndarray  # float64, NaN: not graded
     target_count: np.ndarray  # int32
     max_target_temp_c: np.ndarray  # float64, NaN: no target
@@ -73,24 +77,25 @@ class FrameColumns:
 
     @property
     def nbytes(self) -> int:
-        return sum(a.nbytes for a in (self.timestamp_ns, self.segment_code, self.sha256, self.has_sha256,
-                                      self.sidecar_sha256, self.has_sidecar_sha256, self.grade, self.target_count,
+        return sum(a.nbytes for a in (self.timestamp_ns, self.segment_code, self.pixel_digest, self.has_pixel_digest,
+                                      self.sidecar_digest, self.has_sidecar_digest, self.grade, self.target_count,
                                       self.max_target_temp_c, self.slew_to_cue))
 
     @classmethod
-    def from_rows(cls, session_id: str, rows: list[dict[str, Any]]) -> FrameColumns:
-        """From the indexer's per-frame dicts (frame ``i`` at position ``i``)."""
+    def from_rows(cls, session_id: str, rows: list[dict[str, Any]], digest: str = DEFAULT_DIGEST) -> FrameColumns:
+        """From the indexer's per-frame dicts (frame ``i`` at position ``i``; the digests, by
+        ``digest``'s hash, under ``pixel_digest`` and ``sidecar_digest``)."""
         n = len(rows)
         names: dict[str, int] = {}
         codes = np.array([-1 if not r.get("segment") else names.setdefault(r["segment"], len(names))
                           for r in rows], np.int16)
-        sha, has_sha = _digests([r.get("sha256") for r in rows], n)
-        side, has_side = _digests([r.get("sidecar_sha256") for r in rows], n)
+        sha, has_sha = _digests([r.get("pixel_digest") for r in rows], n)
+        side, has_side = _digests([r.get("sidecar_digest") for r in rows], n)
 
         def floats(key: str) -> np.ndarray:
             return np.array([np.nan if r.get(key) is None else r[key] for r in rows], np.float64)
         return cls(session_id, np.array([int(r.get("timestamp_ns") or 0) for r in rows], np.int64), codes,
-                   tuple(names), sha, has_sha, side, has_side, floats("grade"),
+                   tuple(names), digest, sha, has_sha, side, has_side, floats("grade"),
                    np.array([int(r.get("target_count") or 0) for r in rows], np.int32), floats("max_target_temp_c"),
                    np.array([bool(r.get("slew_to_cue")) for r in rows], bool))
 
@@ -98,16 +103,17 @@ class FrameColumns:
         code = int(self.segment_code[i])
         return self.segment_names[code] if code >= 0 else None
 
-    def sha256_raw(self, i: int) -> bytes | None:
-        return self.sha256[i].tobytes() if self.has_sha256[i] else None
+    def pixel_digest_raw(self, i: int) -> bytes | None:
+        return self.pixel_digest[i].tobytes() if self.has_pixel_digest[i] else None
 
     def row(self, i: int) -> dict[str, Any]:
-        """Frame ``i`` as the frame reader asks for it (hashes in hex, as the manifests have them)."""
+        """Frame ``i`` as the frame reader asks for it (digests in hex, as the manifests have
+        them, and the hash that took them under ``digest``)."""
         if not 0 <= i < len(self):
             raise FrameNotFound(f"session {self.session_id} has no frame {i}")
-        return {"idx": i, "timestamp_ns": int(self.timestamp_ns[i]), "segment": self.segment(i),
-                "sha256": self.sha256[i].tobytes().hex() if self.has_sha256[i] else None,
-                "sidecar_sha256": self.sidecar_sha256[i].tobytes().hex() if self.has_sidecar_sha256[i] else None,
+        return {"idx": i, "timestamp_ns": int(self.timestamp_ns[i]), "segment": self.segment(i), "digest": self.digest,
+                "pixel_digest": self.pixel_digest[i].tobytes().hex() if self.has_pixel_digest[i] else None,
+                "sidecar_digest": self.sidecar_digest[i].tobytes().hex() if self.has_sidecar_digest[i] else None,
                 "grade": None if np.isnan(self.grade[i]) else float(self.grade[i]),
                 "target_count": int(self.target_count[i]),
                 "max_target_temp_c": None if np.isnan(self.max_target_temp_c[i]) else float(self.max_target_temp_c[i]),
@@ -135,8 +141,8 @@ class FrameColumns:
         segment = pa.DictionaryArray.from_arrays(pa.array(self.segment_code, pa.int16(), mask=self.segment_code < 0),
                                                  pa.array(list(self.segment_names), pa.string()))
         table = pa.table({"timestamp_ns": self.timestamp_ns, "segment": segment,
-                          "sha256": digests(self.sha256, self.has_sha256),
-                          "sidecar_sha256": digests(self.sidecar_sha256, self.has_sidecar_sha256),
+                          self.digest: digests(self.pixel_digest, self.has_pixel_digest),
+                          f"sidecar_{self.digest}": digests(self.sidecar_digest, self.has_sidecar_digest),
                           "grade": nullable(self.grade), "target_count": self.target_count,
                           "max_target_temp_c": nullable(self.max_target_temp_c), "slew_to_cue": self.slew_to_cue},
                          metadata={"thermcap.session_id": self.session_id,
@@ -178,10 +184,11 @@ class FrameColumns:
             lookup: dict[str, int] = {}
             codes = np.array([-1 if v is None else lookup.setdefault(v, len(lookup)) for v in values], np.int16)
             names = tuple(lookup)
-        sha, has_sha = digests("sha256")
-        side, has_side = digests("sidecar_sha256")
-        return cls(session_id, column("timestamp_ns").to_numpy().astype(np.int64), codes, names, sha, has_sha, side,
-                   has_side, floats("grade"), column("target_count").to_numpy().astype(np.int32),
+        name = next((d for d in DIGESTS if d in table.column_names), DEFAULT_DIGEST)
+        sha, has_sha = digests(name)
+        side, has_side = digests(f"sidecar_{name}")
+        return cls(session_id, column("timestamp_ns").to_numpy().astype(np.int64), codes, names, name, sha, has_sha,
+                   side, has_side, floats("grade"), column("target_count").to_numpy().astype(np.int32),
                    floats("max_target_temp_c"), column("slew_to_cue").to_numpy(zero_copy_only=False).astype(bool))
 
 

@@ -37,7 +37,7 @@ from thermcap.api.storage import BlobStore
 from thermcap.archive.codecs import get_codec
 from thermcap.archive.formats import get_format
 from thermcap.archive.formats.base import locate
-from thermcap.archive.manifest import frame_sha256, sidecar_sha256
+from thermcap.archive.manifest import bytes_digest, frame_digest
 
 __all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 
@@ -115,7 +115,7 @@ class FrameReader:
     """A frame's counts and sidecar, from the first copy that proves itself.
 
     Copies are tried in order (stored-ZIP archives, the MCAP source, the other archive formats),
-    and each is checked against the manifest's sha256 (pixels, sidecar) before it is returned:
+    and each is checked against the manifest's digests (pixels, sidecar) before it is returned:
     a damaged copy is reported and the next one used, never served."""
 
     def __init__(self, engine: Engine, store: BlobStore, root: Path, cache_frames: int = 32) -> None:
@@ -184,7 +184,7 @@ class FrameReader:
         if row["segment"]:
             yield f"mcap:{row['segment']}", lambda: self._from_mcap(session_id, row)[0 if pixels else 1]
         others = self._other_formats(session_id, {b["format"] for b in blobs})
-        if row.get("sha256" if pixels else "sidecar_sha256"):
+        if row.get("pixel_digest" if pixels else "sidecar_digest"):
             # Last, the copies not offered whole (scrub marked a file of theirs damaged, or they
             # never verified): a damaged part hides only itself, and this frame is checked
             # against the manifest's hash like any other, so an intact file of theirs still serves.
@@ -198,7 +198,8 @@ class FrameReader:
     def _verified(self, session_id: str, idx: int, part: str) -> Any:
         """The first copy whose ``part`` ("pixels" or "sidecar") matches the manifest's hash."""
         row = self._frame_row(session_id, idx)
-        want = row.get("sha256") if part == "pixels" else row.get("sidecar_sha256")
+        want = row.get("pixel_digest") if part == "pixels" else row.get("sidecar_digest")
+        hash_name = row.get("digest") or "sha256"
         missing = []
         for name, read in self._copies(session_id, idx, row, part):
             try:
@@ -210,9 +211,9 @@ class FrameReader:
                 self.damage.report(Damage(session_id, idx, name, f"unreadable ({type(exc).__name__}: {exc})"))
                 continue
             if want:
-                got = frame_sha256(value) if part == "pixels" else sidecar_sha256(value)
+                got = frame_digest(value, hash_name) if part == "pixels" else bytes_digest(value, hash_name)
                 if got != want:
-                    self.damage.report(Damage(session_id, idx, name, f"{part} sha256 differs from the manifest"))
+                    self.damage.report(Damage(session_id, idx, name, f"{part} {hash_name} differs from the manifest"))
                     continue
             return value
         raise FrameUnavailable(f"frame {idx} of {session_id}: no verified copy could be read"

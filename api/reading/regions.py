@@ -7,17 +7,16 @@ Three ways, the cheapest first, each giving the numbers decoding every frame wou
 2. ``strips``: only the TIFF strips that hold the tool's rows. Each strip is checked against the
    summary's band CRC-32 first. A strip that fails is reported as damage, and that frame is
    read whole, through the frame reader's verified copies.
-3. ``frames``: every frame through the frame reader (each copy checked against its sha256), on
+3. ``frames``: every frame through the frame reader (each copy checked against its digest), on
    a few threads. This serves sessions archived before the summary existed, or without
    tiff-lzw.
 
-The summary is trusted only once its bytes match the sha256 that the manifest (and so the
+The summary is trusted only once its bytes match the digest that the manifest (and so the
 index) gives for it.
 """
 
 from __future__ import annotations
 
-import hashlib
 import io
 import json
 import threading
@@ -38,6 +37,7 @@ from thermcap.api.storage import BlobStore
 from thermcap.archive.formats import get_format
 from thermcap.archive.formats.base import RowBlock, locate, positions_in
 from thermcap.archive.frame_summary import FrameSummary, load_summary
+from thermcap.archive.manifest import bytes_digest, record_digest
 from thermcap.recorder.thermography.measure import Box, Tool, bounds, shifted
 from thermcap.recorder.thermography.series import STATS, series_point
 
@@ -75,7 +75,7 @@ class RegionReader:
     # -- the summary --------------------------------------------------------------------------
 
     def summary(self, session_id: str, entry_json: str | None) -> FrameSummary | None:
-        """The session's frame summary once it matches its sha256; None without one (or with a
+        """The session's frame summary once it matches its digest; None without one (or with a
         damaged one, which is reported)."""
         cache_key = f"{session_id}:{entry_json}"
         with self._lock:
@@ -98,9 +98,10 @@ class RegionReader:
             data = self.store.get_range(key, 0, int(entry["bytes"]))
         except FileNotFoundError:
             return None
-        if hashlib.sha256(data).hexdigest() != entry["sha256"]:
+        named = record_digest(entry)
+        if named is None or bytes_digest(data, named[0]) != named[1]:
             self.frames.damage.report(Damage(session_id, -1, f"summary:{entry['path']}",
-                                             "sha256 differs from the manifest"))
+                                             f"{named[0] if named else 'digest'} differs from the manifest"))
             return None
         try:
             return load_summary(data, name=key)

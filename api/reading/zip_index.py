@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from thermcap.archive.formats.base import locate
+from thermcap.archive.manifest import record_digest
 
 __all__ = ["ZIPPED_FORMATS", "ArchiveLocations", "ZipEntries", "ZipIndexCache", "read_zip_entries", "read_zip_file"]
 
@@ -152,7 +153,7 @@ def read_zip_file(path: Path) -> ZipEntries:
 
 
 class ZipIndexCache:
-    """Entries per archive file, bounded. Keyed by the file's key, size and sha256 (from the
+    """Entries per archive file, bounded. Keyed by the file's key, size and digest (from the
     manifest): a copy that ``scrub --repair`` rewrote is another entry, even at the same size."""
 
     def __init__(self, keep: int = 256) -> None:
@@ -160,8 +161,8 @@ class ZipIndexCache:
         self._keep = keep
         self._lock = threading.Lock()
 
-    def get(self, key: str, size: int, read: ReadRange, sha256: str = "") -> ZipEntries:
-        ident = (key, size, sha256)
+    def get(self, key: str, size: int, read: ReadRange, digest: str = "") -> ZipEntries:
+        ident = (key, size, digest)
         with self._lock:
             got = self._entries.get(ident)
             if got is not None:
@@ -186,7 +187,7 @@ class _SessionZips:
     indexed_at: int
     checked: float
     files: dict[str, list[dict[str, Any]]]  # format -> the manifest's file list ({path, frames}), session order
-    sizes: dict[tuple[str, str], tuple[int, str]]  # (format, file) -> (bytes, sha256), as the manifest says
+    sizes: dict[tuple[str, str], tuple[int, str]]  # (format, file) -> (bytes, digest), as the manifest says
 
 
 class ArchiveLocations:
@@ -226,7 +227,7 @@ class ArchiveLocations:
                 db.archives.c.session_id == session_id, db.archives.c.verified.is_(True),
                 db.archives.c.format.in_(ZIPPED_FORMATS))).all()
         files = {fmt: json.loads(text) for fmt, text in rows}
-        sizes = {(fmt, str(r["path"])): (int(r.get("bytes") or 0), str(r.get("sha256") or ""))
+        sizes = {(fmt, str(r["path"])): (int(r.get("bytes") or 0), str((record_digest(r) or ("", ""))[1]))
                  for fmt, recs in files.items() for r in recs}
         s = _SessionZips(int(indexed_at), now, files, sizes)
         with self._lock:

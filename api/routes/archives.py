@@ -15,6 +15,7 @@ from thermcap.api.reading.frames import Damage
 from thermcap.api.routes.common import session_row
 from thermcap.api.security import check_file_name, require
 from thermcap.api.verified_files import verified_stream
+from thermcap.archive.manifest import record_digest
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
@@ -76,7 +77,10 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
         raise HTTPException(404, f"{fmt} archive of {session_id} has no file {name!r}")
     store = request.app.state.store
     key = f"sessions/{session_id}/archive/{fmt}/{name}"
-    etag = f'"{entry["sha256"]}"'
+    named = record_digest(entry)
+    if named is None:  # not one the archiver wrote: it never verified
+        raise HTTPException(404, f"{fmt} archive of {session_id} names no digest for {name!r}")
+    etag = f'"{named[1]}"'
     if redirect:
         url = store.sign(key)
         if url:
@@ -88,7 +92,7 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
         return Response(status_code=304, headers=base)
     if store.head(key) is None:
         raise HTTPException(404, f"{key} is listed in the manifest but missing from the store")
-    problem = request.app.state.files.problem(key, entry["sha256"], size)
+    problem = request.app.state.files.problem(key, named, size)
     if problem is not None:  # never send damaged bytes under the manifest's ETag
         request.app.state.frames.damage.report(Damage(session_id, -1, f"{fmt}:{name}", problem))
         raise HTTPException(503, f"{fmt}/{name} of {session_id} is damaged ({problem}); another format may serve "
@@ -111,5 +115,5 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
             request.app.state.files.forget(key)
             request.app.state.frames.damage.report(Damage(session_id, -1, f"{fmt}:{name}", why))
 
-        body = verified_stream(body, entry["sha256"], damaged)
+        body = verified_stream(body, named, damaged)
     return StreamingResponse(body, status_code=status, headers=headers, media_type="application/octet-stream")

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import hashlib
 from typing import Any, Literal
 from urllib.parse import quote
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
-from thermcap.api.http_conventions import etag_matches
+from thermcap.api.http_conventions import body_etag, etag_matches
 from thermcap.api.routes.common import CelsiusQuery, FrameModel, kept, session_row
 from thermcap.api.security import require
 from thermcap.archive.codecs import get_codec
@@ -27,9 +26,9 @@ _CACHE = {"Cache-Control": "public, max-age=31536000, immutable"}  # a recorded 
 
 
 def _send(request: Request, body: bytes, media_type: str, headers: dict[str, str]) -> Response:
-    """The body with a strong ETag (its own sha256, so any change of bytes changes it), a 304 when
-    the client holds it already, and only the headers for HEAD."""
-    etag = f'"{hashlib.sha256(body).hexdigest()[:40]}"'
+    """The body with a strong ETag (``body_etag``), a 304 when the client holds it already, and
+    only the headers for HEAD."""
+    etag = body_etag(body)
     headers = {**headers, "ETag": etag}
     if etag_matches(request.headers.get("if-none-match"), etag):
         return Response(status_code=304, headers=headers)

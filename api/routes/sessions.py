@@ -14,6 +14,7 @@ from thermcap.api import db
 from thermcap.api.reading.frame_search import search_targets
 from thermcap.api.routes.common import decode_cursor, encode_cursor, iso, page_size, parse_time, session_row
 from thermcap.api.security import require
+from thermcap.archive.manifest import record_digest
 from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
@@ -98,7 +99,8 @@ def get_session(request: Request, session_id: str) -> dict:
         **_session_summary(row, full_model=True),
         "archives": [{"format": a["format"], "bytes": a["bytes"], "objects": a["objects"], "ratio": a["ratio"],
                       "verified": a["verified"],
-                      "files": [{"path": f["path"], "frames": f["frames"], "bytes": f["bytes"], "sha256": f["sha256"],
+                      "files": [{"path": f["path"], "frames": f["frames"], "bytes": f["bytes"],
+                                 **dict([record_digest(f) or ("sha256", None)]),  # under its hash's name
                                  "url": f"/api/v1/sessions/{session_id}/archives/{a['format']}/{f['path']}"}
                                 for f in json.loads(a["files"])]} for a in archives],
         "segments": [{"name": s["name"], "frames": s["frames"], "bytes": s["bytes"]} for s in segments],

@@ -24,6 +24,7 @@ from thermcap.archive.exceptions import UnknownCodecError
 from thermcap.recorder.icd.names import format_name
 from thermcap.recorder.radiometry import LinearModel, model_from_dict
 from thermcap.recorder.registry import Registry
+from thermcap.recorder.storage.digest import DEFAULT_DIGEST
 from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = [
@@ -50,7 +51,7 @@ class FileRecord:
     path: str  # relative to the format's folder
     frames: int
     bytes: int = 0
-    sha256: str = ""
+    digest: str = ""  #: the file's, by ``ArchiveContext.digest``'s hash
 
 
 @dataclass
@@ -82,6 +83,7 @@ class ArchiveContext:
     frames_per_segment: dict[str, int] = field(default_factory=dict)
     workers: int = 2
     on_frame: Callable[[], None] | None = None
+    digest: str = DEFAULT_DIGEST  #: the hash each file written is recorded by (recorder.storage.digest)
 
     @property
     def sensor_id(self) -> str:

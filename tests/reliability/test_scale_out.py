@@ -10,6 +10,7 @@ import sys
 
 import httpx
 import numpy as np
+from blake3 import blake3
 
 from tests.conftest import ApiServer, run_cli
 from thermcap.recorder.storage.reader import iter_session_frames
@@ -60,7 +61,7 @@ def test_recorder_worker_api_over_postgresql_and_seaweedfs(postgres_url, seaweed
             f = c.get("/api/v1/sessions/s1").json()["archives"]
             png = next(a for a in f if a["format"] == "png16")["files"][0]
             body = c.get(png["url"]).content
-            assert hashlib.sha256(body).hexdigest() == png["sha256"]
+            assert blake3(body).hexdigest() == png["blake3"]
     finally:
         server.stop()
 

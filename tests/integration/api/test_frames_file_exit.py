@@ -34,8 +34,8 @@ print(json.dumps({"before": before, "after": threads(), "frames": len(cols)}))
 
 @pytest.mark.skipif(not Path("/proc/self/task").is_dir(), reason="counts threads through /proc (Linux)")
 def test_reading_a_frames_file_starts_no_thread_that_could_abort_the_exit(tmp_path):
-    rows = [{"idx": i, "timestamp_ns": 1_000_000 * i, "segment": f"seg-{i // 500}", "sha256": f"{i:064x}",
-             "sidecar_sha256": None, "grade": 0.5, "target_count": i % 3, "max_target_temp_c": None,
+    rows = [{"idx": i, "timestamp_ns": 1_000_000 * i, "segment": f"seg-{i // 500}", "pixel_digest": f"{i:064x}",
+             "sidecar_digest": None, "grade": 0.5, "target_count": i % 3, "max_target_temp_c": None,
              "slew_to_cue": False} for i in range(2000)]
     path = tmp_path / "frames.parquet"
     path.write_bytes(FrameColumns.from_rows("s", rows).to_parquet())

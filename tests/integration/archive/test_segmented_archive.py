@@ -52,8 +52,8 @@ def test_the_same_archive_as_the_single_pass(both):
     m1, m2 = load_manifest(one), load_manifest(two)
     assert m1["frames"] == m2["frames"] and m1["source"]["frames"] == m2["source"]["frames"] == 75
     for fid in ("png16", "tiff-lzw"):
-        assert [(f["path"], f["sha256"]) for f in m1["formats"][fid]["files"]] == \
-            [(f["path"], f["sha256"]) for f in m2["formats"][fid]["files"]]
+        assert [(f["path"], f["blake3"]) for f in m1["formats"][fid]["files"]] == \
+            [(f["path"], f["blake3"]) for f in m2["formats"][fid]["files"]]
     with h5py.File(one / "archive/hdf5/s.h5") as a, h5py.File(two / "archive/hdf5/s.h5") as b:
         assert a["frames"].shape == b["frames"].shape
         for k in range(a["frames"].shape[0]):

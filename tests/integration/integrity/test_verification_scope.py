@@ -11,7 +11,7 @@ import pytest
 from tests.conftest import run_cli
 from thermcap.archive.archiver import archive_session, verify_format_dir
 from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import load_manifest, sidecar_sha256
+from thermcap.archive.manifest import FrameProof, bytes_digest, frame_proof, load_manifest
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 
@@ -43,9 +43,9 @@ def test_manifest_holds_a_sidecar_hash_and_time_for_every_frame(tmp_path):
     session = _session(tmp_path, 30)
     archive_session(session, ["png16", "tiff-lzw", "hdf5"])
     m = load_manifest(session)
-    assert len(m["frames"]["sidecar_sha256"]) == 30
+    assert len(m["frames"]["sidecar_blake3"]) == 30
     assert len(m["frames"]["timestamps_ns"]) == 30
-    assert all(len(h) == 64 for h in m["frames"]["sidecar_sha256"])
+    assert all(len(h) == 64 for h in m["frames"]["sidecar_blake3"])
     for fid in ("png16", "tiff-lzw", "hdf5"):
         assert "sidecars and times" in m["formats"][fid]["verification"]
 
@@ -58,18 +58,17 @@ def test_round_trip_compares_sidecars_and_times(tmp_path):
     files = m["formats"]["png16"]["files"]
     fmt = get_format(m["formats"]["png16"]["config"])
     adir = session / "archive" / "png16"
-    problems, _ = verify_format_dir(fmt, adir, files, m["frames"]["sha256"], where="png16",
-                                    sidecars=m["frames"]["sidecar_sha256"], times=m["frames"]["timestamps_ns"])
+    proof = frame_proof(m["frames"])
+    problems, _ = verify_format_dir(fmt, adir, files, proof, where="png16", times=m["frames"]["timestamps_ns"])
     assert problems == []
-    bad_sidecars = list(m["frames"]["sidecar_sha256"])
-    bad_sidecars[3] = sidecar_sha256(b"{}")
-    problems, _ = verify_format_dir(fmt, adir, files, m["frames"]["sha256"], where="png16", sidecars=bad_sidecars,
-                                    times=m["frames"]["timestamps_ns"])
+    bad_sidecars = list(proof.sidecars)
+    bad_sidecars[3] = bytes_digest(b"{}", proof.name)
+    problems, _ = verify_format_dir(fmt, adir, files, FrameProof(proof.name, proof.pixels, bad_sidecars),
+                                    where="png16", times=m["frames"]["timestamps_ns"])
     assert any("frame 3" in p and "sidecar" in p for p in problems)
     bad_times = list(m["frames"]["timestamps_ns"])
     bad_times[5] += 1
-    problems, _ = verify_format_dir(fmt, adir, files, m["frames"]["sha256"], where="png16",
-                                    sidecars=m["frames"]["sidecar_sha256"], times=bad_times)
+    problems, _ = verify_format_dir(fmt, adir, files, proof, where="png16", times=bad_times)
     assert any("frame 5" in p and "time" in p for p in problems)
 
 

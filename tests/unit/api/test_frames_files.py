@@ -52,7 +52,7 @@ def test_the_frames_file_holds_the_manifests_facts_and_is_replaced_whole(root):
     manifest = json.loads(SessionLayout.of(root / "sessions" / "s").manifest.read_text())
     table = pq.read_table(root / first)  # anyone's Parquet reader opens it
     assert table.num_rows == FRAMES
-    assert [h.hex() for h in table.column("sha256").to_pylist()] == manifest["frames"]["sha256"]
+    assert [h.hex() for h in table.column("blake3").to_pylist()] == manifest["frames"]["blake3"]
     assert table.column("timestamp_ns").to_pylist() == manifest["frames"]["timestamps_ns"]
 
     _target_in_every_frame(root / "sessions" / "s")  # `thermcap analyze` ran: a new indexed state
@@ -60,7 +60,7 @@ def test_the_frames_file_holds_the_manifests_facts_and_is_replaced_whole(root):
     second = _key(engine)
     assert second != first and not (root / first).exists() and (root / second).is_file()
     cols = FrameColumnsCache(engine, open_store(root)).get("s")
-    assert cols.row(7)["max_target_temp_c"] == 37.0 and cols.row(7)["sha256"] == manifest["frames"]["sha256"][7]
+    assert cols.row(7)["max_target_temp_c"] == 37.0 and cols.row(7)["pixel_digest"] == manifest["frames"]["blake3"][7]
 
     shutil.rmtree(root / "sessions" / "s")
     assert index_root(engine, root).removed == ["s"]
@@ -108,14 +108,17 @@ def test_the_frames_file_gives_back_every_value_it_was_given():
     digest = st.none() | st.binary(min_size=32, max_size=32).map(bytes.hex)
     row = st.fixed_dictionaries({
         "timestamp_ns": st.integers(0, 2**62), "segment": st.none() | st.sampled_from(["0000.mcap", "0001.mcap"]),
-        "sha256": digest, "sidecar_sha256": digest,
+        "digest": st.sampled_from(["blake3", "sha256"]), "pixel_digest": digest, "sidecar_digest": digest,
         "grade": st.none() | st.floats(0, 1), "target_count": st.integers(0, 1000),
         "max_target_temp_c": st.none() | st.floats(-273.15, 5000), "slew_to_cue": st.booleans()})
 
     @settings(max_examples=60, deadline=None)
     @given(st.lists(row, max_size=40))
     def round_trip(rows):
-        back = FrameColumns.from_parquet("p", FrameColumns.from_rows("p", rows).to_parquet())
+        name = rows[0]["digest"] if rows else "blake3"  # one hash a session
+        rows = [{**r, "digest": name} for r in rows]
+        back = FrameColumns.from_parquet("p", FrameColumns.from_rows("p", rows, name).to_parquet())
+        assert back.digest == name
         assert [{k: v for k, v in back.row(i).items() if k != "idx"} for i in range(len(back))] == rows
 
     round_trip()

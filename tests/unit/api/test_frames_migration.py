@@ -74,8 +74,8 @@ def check_legacy_frames(engine, root: Path) -> None:
     store = open_store(root)
     assert convert_legacy_frames(engine, store) == ["m"]  # "n" was indexed anew: its rows were stale
     cols = FrameColumnsCache(engine, store).get("m")
-    assert [cols.row(i)["sha256"] for i in range(2)] == [H[0], H[2]]
-    assert cols.row(0)["sidecar_sha256"] == H[1] and cols.row(1)["sidecar_sha256"] is None
+    assert [cols.row(i)["pixel_digest"] for i in range(2)] == [H[0], H[2]] and cols.digest == "sha256"
+    assert cols.row(0)["sidecar_digest"] == H[1] and cols.row(1)["sidecar_digest"] is None
     assert cols.row(0)["timestamp_ns"] == 5_000_000_001 and cols.row(1)["segment"] == "0000.mcap"
     assert (cols.row(0)["grade"], cols.row(1)["grade"], cols.row(1)["slew_to_cue"]) == (0.25, None, True)
     with engine.connect() as conn:

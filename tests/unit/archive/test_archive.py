@@ -20,7 +20,7 @@ from thermcap.archive.codecs import Png16
 from thermcap.archive.exceptions import ArchiveError, VerificationError
 from thermcap.archive.formats import format_registry, register_format
 from thermcap.archive.formats.zipped import ZippedFrames
-from thermcap.archive.manifest import frame_sha256, load_manifest
+from thermcap.archive.manifest import frame_digest, load_manifest
 from thermcap.archive.verify import verify_session
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
@@ -34,7 +34,7 @@ def _source_frames(d):
 def test_manifest_records_every_format_verified(archived):
     m = load_manifest(archived)
     frames = _source_frames(archived)
-    assert m["frames"]["sha256"] == [frame_sha256(f) for f in frames]
+    assert m["frames"]["blake3"] == [frame_digest(f, "blake3") for f in frames]
     for fid in ALL:
         e = m["formats"][fid]
         assert e["verified"] is True
@@ -174,8 +174,8 @@ def test_delete_source_refused_when_verification_fails(session):
 
 def test_read_back_compares_by_the_digest_its_source_read_took(session):
     """The first archive compares each read-back frame by xxh3-128 taken on the same source read
-    as the manifest's sha256; a format added later, whose source may have rotted since, by the
-    manifest's sha256. A one-count change is caught either way."""
+    as the manifest's digests; a format added later, whose source may have rotted since, by the
+    manifest's (BLAKE3). A one-count change is caught either way."""
     register_format("broken-test", _Broken)
     try:
         with pytest.raises(VerificationError, match="frame 7") as first:
@@ -184,9 +184,9 @@ def test_read_back_compares_by_the_digest_its_source_read_took(session):
         assert "xxh3-128 taken on the same read" in load_manifest(session)["formats"]["png16"]["verification"]
         with pytest.raises(VerificationError, match="frame 7") as later:
             archive_session(session, ["broken-test"])
-        assert "sha256 differs" in str(later.value.problems)
+        assert "blake3 differs" in str(later.value.problems)
         archive_session(session, ["tiff-lzw"])
-        assert "by the manifest's sha256" in load_manifest(session)["formats"]["tiff-lzw"]["verification"]
+        assert "by the manifest's blake3" in load_manifest(session)["formats"]["tiff-lzw"]["verification"]
     finally:
         format_registry.pop("broken-test")
 
@@ -222,7 +222,7 @@ def test_real_sample_frames_archive_bit_exact_in_every_format(samples, tmp_path)
     assert not report.failed
     assert len(report.sessions) == 4
     for res in report.sessions:
-        m = archive_session(res.session_dir, ALL)
+        m = archive_session(res.session_dir, ALL, digest="sha256")  # the importer's report names frames by sha256
         assert all(m["formats"][f]["verified"] for f in ALL), res.session_id
         ref = {f["raw_sha256"] for f in report.files if f.get("session_id") == res.session_id}
         assert set(m["frames"]["sha256"]) == ref
@@ -257,7 +257,7 @@ def test_extras_keep_attachments_metadata_and_other_topics_past_delete_source(se
     extras.write_bytes(bytes(data))
     r = verify_session(session)["extras"]
     assert not r.ok
-    assert "sha256 differs" in r.problems[0]
+    assert "blake3 differs" in r.problems[0]
 
 
 class _Counting(ZippedFrames):

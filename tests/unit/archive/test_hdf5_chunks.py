@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from thermcap.archive.formats.hdf5 import _szip_encoder_available, szip_chunk
+from thermcap.archive.manifest import FrameProof
 
 pytestmark = pytest.mark.skipif(not _szip_encoder_available(), reason="this h5py build has no SZIP encoder")
 
@@ -84,7 +85,7 @@ def test_a_damaged_chunk_is_found_by_verification_and_a_reader_may_stop_early(tm
     data = bytearray(path.read_bytes())
     data[info.byte_offset + info.size // 2] ^= 0x40
     path.write_bytes(bytes(data))
-    want = [hashlib.sha256(f.pixels.tobytes()).hexdigest() for f in frames]
+    want = FrameProof("sha256", [hashlib.sha256(f.pixels.tobytes()).hexdigest() for f in frames], [])
     problems, _ = verify_format_dir(fmt, tmp_path, [{"path": records[0].path, "frames": n}], want, where="hdf5",
                                     times=[f.log_time for f in frames])
     assert problems and all("frame 11 " in p or "cannot decode after 11" in p for p in problems), problems

@@ -13,7 +13,7 @@ import pytest
 
 from thermcap.archive.exceptions import ArchiveError
 from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import frame_sha256
+from thermcap.archive.manifest import frame_digest, frame_sha256
 from thermcap.archive.temporal import (
     BITSTREAM_VERSION,
     HEADER,
@@ -151,7 +151,7 @@ def test_the_archive_format_reads_any_frame_from_its_key(tmp_path):
 
     for i in (0, 31, 32, 45, 69):
         got = fmt.read_frame(open_file, entry["files"], i)
-        assert frame_sha256(got.pixels) == m["frames"]["sha256"][i]
+        assert frame_digest(got.pixels) == m["frames"]["blake3"][i]
         assert got.log_time == m["frames"]["timestamps_ns"][i] and got.sidecar
     (folder / entry["files"][0]["path"]).write_bytes(b"not a zip")
     with pytest.raises(ArchiveError, match="cannot read frame"):

@@ -82,7 +82,7 @@ def test_a_damaged_copy_with_no_source_refuses_and_says_which(session):
     # the damaged copy is marked, so no reader or gc relies on it, and hdf5 still serves every frame
     m = load_manifest(session)
     assert m["formats"]["png16"].get("damaged")
-    assert len(list(iter_session_frames(session))) == len(m["frames"]["sha256"])
+    assert len(list(iter_session_frames(session))) == len(m["frames"]["blake3"])
 
 
 def test_extras_rechecked_before_delete(session):
@@ -100,7 +100,7 @@ def test_manifest_edited_to_verified_is_not_evidence(session):
     an older thermcap) is not taken at its word."""
     archive_session(session, ["png16"])
     m = load_manifest(session)
-    m["formats"]["png16"]["files"][0]["sha256"] = "0" * 64
+    m["formats"]["png16"]["files"][0]["blake3"] = "0" * 64
     save_manifest(session, m)
     archive_session(session, ["png16"], delete_source=True)
     assert all(c.ok for c in verify_session(session).values())
