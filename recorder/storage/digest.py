@@ -20,14 +20,13 @@ Every frame digest covers the same bytes: the pixels as uint16 little-endian, ro
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
-import blake3
-import numpy as np
+if TYPE_CHECKING:  # numpy is imported where a frame is hashed: `thermcap --help` names the hashes only
+    import numpy as np
 
 __all__ = ["DEFAULT_DIGEST", "DIGESTS", "FrameProof", "bytes_digest", "file_digest", "file_sha256", "frame_bytes",
            "frame_digest", "frame_proof", "frame_sha256", "new_hasher", "record_digest"]
@@ -40,16 +39,26 @@ class Hasher(Protocol):
 
 
 #: The archive's hashes by the name its records carry, the default first.
-DIGESTS: dict[str, Callable[[], Hasher]] = {"blake3": blake3.blake3, "sha256": hashlib.sha256}
+DIGESTS = ("blake3", "sha256")
 DEFAULT_DIGEST = "blake3"
+
+
+def _constructor(name: str) -> Callable[[], Hasher]:
+    """Imported on first use: ``thermcap --help`` names the hashes and loads neither library."""
+    if name == "blake3":
+        from blake3 import blake3
+
+        return blake3
+    if name == "sha256":
+        import hashlib
+
+        return hashlib.sha256
+    raise ValueError(f"digest {name!r}: thermcap knows {', '.join(DIGESTS)}")
 
 
 def new_hasher(name: str) -> Hasher:
     """A fresh hasher of ``name``, for data that arrives in pieces."""
-    try:
-        return DIGESTS[name]()
-    except KeyError:
-        raise ValueError(f"digest {name!r}: thermcap knows {', '.join(DIGESTS)}") from None
+    return _constructor(name)()
 
 
 def bytes_digest(data: bytes | memoryview, name: str = DEFAULT_DIGEST) -> str:
@@ -63,9 +72,11 @@ def file_digest(path: str | Path, name: str = DEFAULT_DIGEST) -> str:
     stays in cache, where 1 MB reads made a new bytes object each (0.58 against 0.62-0.86 CPU ms
     a MB here, with sha256). Read, not mapped: a file cut while it is hashed raises an error here,
     where a mapping would kill the process (SIGBUS)."""
-    new_hasher(name)  # the name's error before the file's
+    import hashlib
+
+    constructor = _constructor(name)  # the name's error before the file's
     with open(path, "rb") as f:
-        return hashlib.file_digest(f, DIGESTS[name]).hexdigest()  # type: ignore[arg-type]
+        return hashlib.file_digest(f, constructor).hexdigest()  # type: ignore[arg-type]
 
 
 def file_sha256(path: str | Path) -> str:
@@ -75,6 +86,8 @@ def file_sha256(path: str | Path) -> str:
 def frame_bytes(pixels: np.ndarray) -> memoryview:
     """The bytes every frame digest covers: uint16 LE, row-major (a copy only where the array is
     not already laid out so)."""
+    import numpy as np
+
     return np.ascontiguousarray(pixels, dtype="<u2").data.cast("B")
 
 
@@ -85,7 +98,7 @@ def frame_digest(pixels: np.ndarray, name: str = DEFAULT_DIGEST) -> str:
 def frame_sha256(pixels: np.ndarray) -> str:
     """sha256 of the uint16 LE row-major bytes: what an importer's report and the inspection
     report name a frame by."""
-    return hashlib.sha256(frame_bytes(pixels)).hexdigest()
+    return bytes_digest(frame_bytes(pixels), "sha256")
 
 
 def record_digest(rec: Mapping[str, Any]) -> tuple[str, str] | None:
