@@ -71,9 +71,12 @@ def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: s
                                       "with analysis on and off; 0 skips that line.")
 @click.option("--rounds", type=Number(minimum=1, maximum=50, integer=True), default=3, show_default=True,
               help="Alternated on/off pairs per scene (the median is reported).")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False, exists=True), default=None,
+              help="Where the on/off recordings write (default: a temp folder). On a disk whose write-back "
+                   "stalls come and go, a RAM folder (/dev/shm) leaves the detector's share alone.")
 @json_option
 def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None, recording_frames: int,
-                       rounds: int, as_json: bool) -> None:
+                       rounds: int, workdir: str | None, as_json: bool) -> None:
     """Detector precision/recall/F1 per contrast band vs the simulator's truth, its speed, and a
     file source recorded with analysis on vs off on the worst-case scenes."""
     from thermcap.recorder.bench.analysis import bench_analysis, print_table, sample_report
@@ -82,7 +85,7 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
 
     res = bench_analysis(n_frames)
     if recording_frames:
-        res["record_vs_no_analysis"] = record_vs_no_analysis(recording_frames, rounds)
+        res["record_vs_no_analysis"] = record_vs_no_analysis(recording_frames, rounds, workdir)
         res["handoff"] = handoff_cpu(rounds=rounds)
     if samples:
         res["samples"] = sample_report(samples, overlays)

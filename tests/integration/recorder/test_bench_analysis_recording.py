@@ -32,3 +32,26 @@ def test_the_hand_off_line_measures_batched_answers_against_one_message_a_frame(
     assert abs(res["batched_vs_one_message_a_frame"] - res["recording_cpu_us_per_frame_batched"]
                / res["recording_cpu_us_per_frame_one_message_a_frame"]) < 0.01
     assert 0 < res["answer_messages_batched"] <= 200
+
+
+def test_the_recordings_go_where_dir_says_and_a_missing_dir_is_named(tmp_path, monkeypatch):
+    import tempfile
+
+    from click.testing import CliRunner
+
+    from thermcap.cli import cli
+
+    used: list[str | None] = []
+    real = tempfile.TemporaryDirectory
+
+    def spy(*args, **kwargs):
+        used.append(kwargs.get("dir"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(tempfile, "TemporaryDirectory", spy)
+    ok = CliRunner().invoke(cli, ["bench", "analysis", "--frames", "2", "--recording-frames", "2", "--rounds", "1",
+                                  "--dir", str(tmp_path), "--json"])
+    assert ok.exit_code == 0, ok.output
+    assert str(tmp_path) in used and not list(tmp_path.iterdir())  # written there, and cleaned up
+    bad = CliRunner().invoke(cli, ["bench", "analysis", "--dir", str(tmp_path / "missing")])
+    assert bad.exit_code == 2 and "--dir" in bad.output
