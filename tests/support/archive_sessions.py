@@ -38,3 +38,15 @@ def archived(recorded, tmp_path_factory) -> Path:
     shutil.copytree(recorded, d)
     archive_session(d, ALL)
     return d
+
+
+def flip_in_image_entry(path: Path) -> None:
+    """Flip one bit inside the first PNG entry of a png16 ZIP: the ZIP stays readable, the frame
+    does not decode to its counts (damage verification must find)."""
+    import zipfile
+
+    with zipfile.ZipFile(path) as zf:
+        info = next(i for i in zf.infolist() if i.filename.endswith(".png"))
+    data = bytearray(path.read_bytes())
+    data[info.header_offset + 30 + len(info.filename) + 40] ^= 0x20
+    path.write_bytes(bytes(data))

@@ -6,13 +6,13 @@ because the default changed."""
 from __future__ import annotations
 
 import hashlib
-import zipfile
 
 import pytest
 from blake3 import blake3
 from click.testing import CliRunner
 from fastapi.testclient import TestClient
 
+from tests.support.archive_sessions import flip_in_image_entry
 from thermcap.api.app import create_app
 from thermcap.api.settings import Settings
 from thermcap.archive.archiver import archive_session
@@ -22,14 +22,6 @@ from thermcap.archive.scrub import scrub_session
 from thermcap.archive.verify import verify_session
 from thermcap.recorder.storage.digest import frame_bytes
 from thermcap.recorder.storage.reader import iter_session_frames, read_session_meta
-
-
-def _flip_in_image_entry(path) -> None:
-    with zipfile.ZipFile(path) as zf:
-        info = next(i for i in zf.infolist() if i.filename.endswith(".png"))
-    data = bytearray(path.read_bytes())
-    data[info.header_offset + 30 + len(info.filename) + 40] ^= 0x20
-    path.write_bytes(bytes(data))
 
 
 def _file_records(m):
@@ -67,7 +59,7 @@ def test_an_archive_made_with_sha256_is_checked_repaired_and_grown_by_sha256(ses
     assert all(c.ok for c in verify_session(session).values())
 
     # damage png16: found by its own hash, repaired from tiff-lzw, then whole again
-    _flip_in_image_entry(next((session / "archive" / "png16").glob("*.zip")))
+    flip_in_image_entry(next((session / "archive" / "png16").glob("*.zip")))
     bad = verify_session(session)["png16"]
     assert not bad.ok and any("sha256 differs" in p for p in bad.problems), bad.problems
     report = scrub_session(session, repair=True)
@@ -95,7 +87,7 @@ def test_a_sha256_archive_is_served_as_it_was(session, tmp_path):
     proof = frame_proof(m["frames"])
     assert proof.name == "sha256"
     # the png16 copy rots: every frame must come from tiff-lzw, proved by the manifest's sha256
-    _flip_in_image_entry(next((d / "archive" / "png16").glob("*.zip")))
+    flip_in_image_entry(next((d / "archive" / "png16").glob("*.zip")))
     with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
         for n in (0, 3):
             r = c.get(f"/api/v1/sessions/{sid}/frames/{n}", params={"format": "raw", "palette": "gray"})

@@ -7,10 +7,10 @@ exit 0 and "png16 verified", after which ``verify`` failed and nothing could reb
 from __future__ import annotations
 
 import json
-import zipfile
 
 import pytest
 
+from tests.support.archive_sessions import flip_in_image_entry
 from thermcap.archive.archiver import archive_session
 from thermcap.archive.manifest import load_manifest, save_manifest
 from thermcap.archive.scrub import scrub_session
@@ -18,16 +18,8 @@ from thermcap.archive.verify import verify_session
 from thermcap.recorder.storage.reader import iter_session_frames, session_segments
 
 
-def _flip_in_image_entry(path) -> None:
-    with zipfile.ZipFile(path) as zf:
-        info = next(i for i in zf.infolist() if i.filename.endswith(".png"))
-    data = bytearray(path.read_bytes())
-    data[info.header_offset + 30 + len(info.filename) + 40] ^= 0x20
-    path.write_bytes(bytes(data))
-
-
 def _flip(session):
-    _flip_in_image_entry(next((session / "archive" / "png16").glob("*.zip")))
+    flip_in_image_entry(next((session / "archive" / "png16").glob("*.zip")))
 
 
 def _remove(session):
