@@ -235,9 +235,8 @@ class FrameFastPath:
                 break
         else:
             return None  # no copy here proves itself: the full path reports and tries the others
-        body = pixels.tobytes()
-        etag = f'"{want.hex()[:40]}"' if name == "blake3" else body_etag(body)  # the same: see body_etag
-        return body, etag.encode(), _raw_headers(pixels)
+        body = pixels.tobytes()  # proved equal to the frame ``want`` names (by its hash, or the band CRCs)
+        return body, body_etag(body, (name, want.hex())).encode(), _raw_headers(pixels)
 
     def _from_segment(self, mcap: McapFrames, path: Path, log_time: int, name: str,
                       want: bytes | None) -> tuple[bytes, bytes, list[tuple[bytes, bytes]]] | None:
@@ -258,8 +257,7 @@ class FrameFastPath:
             return None
         with self._lock:  # this may run on a thread of the segment pool
             self.raw_from["mcap"] += 1
-        etag = f'"{h.hexdigest()[:40]}"' if name == "blake3" else body_etag(body)
-        return body, etag.encode(), _raw_headers(pixels)
+        return body, body_etag(body, (name, h.hexdigest())).encode(), _raw_headers(pixels)
 
     def _summary(self, sid: str, s: _Session, n: int) -> FrameSummary | None:
         """The archive's frame summary where it covers frame ``n``: its band CRC-32s were taken

@@ -13,7 +13,7 @@ import gzip
 import hashlib
 from typing import Any
 
-import blake3
+from thermcap.recorder.storage.digest import new_hasher
 
 __all__ = ["GZIP_MIN_BYTES", "HeadAsGet", "JsonConventions", "etag_matches"]
 
@@ -26,11 +26,20 @@ def _opaque(tag: str) -> str:
     return tag[2:] if tag.startswith("W/") else tag
 
 
-def body_etag(body: bytes | memoryview) -> str:
-    """A strong ETag for a frame's body, quoted: its BLAKE3 (any change of bytes changes it), the
-    same whichever path answers. BLAKE3 because a raw frame's ETag is then its manifest digest where
-    the archive took BLAKE3 (recorder.storage.digest): the fast path hashes nothing more."""
-    return f'"{blake3.blake3(body).hexdigest()[:40]}"'
+#: The hash of a frame body's ETag: the archive's default (recorder.storage.digest), so a raw
+#: frame's ETag is its manifest digest where the archive took it, and nothing is hashed again.
+ETAG_HASH = "blake3"
+
+
+def body_etag(body: bytes | memoryview, known: tuple[str, str] | None = None) -> str:
+    """A strong ETag for a frame's body, quoted: its ``ETAG_HASH`` (any change of bytes changes
+    it), the same whichever path answers. ``known``: (hash, hex) of these very bytes already
+    taken, used as it is when it is that hash."""
+    if known is not None and known[0] == ETAG_HASH:
+        return f'"{known[1][:40]}"'
+    h = new_hasher(ETAG_HASH)
+    h.update(body)
+    return f'"{h.hexdigest()[:40]}"'
 
 
 def etag_matches(if_none_match: str | bytes | None, etag: str | bytes) -> bool:

@@ -124,9 +124,8 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
     """
     from obstore.exceptions import AlreadyExistsError
 
-    from thermcap.archive.manifest import archived_files, iso_now, load_manifest, save_manifest
+    from thermcap.archive.manifest import archived_files, digest_problem, iso_now, load_manifest, save_manifest
     from thermcap.recorder.exceptions import ThermcapError
-    from thermcap.recorder.storage.digest import file_digest
 
     manifest = load_manifest(session_dir)
     keys = []
@@ -136,7 +135,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
         key = path.resolve().relative_to(root.resolve()).as_posix()
         # what gc later lets the bucket stand for must be the verified bytes: the local file is
         # hashed before it goes, and the object read back and hashed after
-        if not path.is_file() or file_digest(path, rec.digest) != rec.hex:
+        if digest_problem(path, rec.named) is not None:
             raise ThermcapError(f"{path}: missing or differs from the manifest; not uploading a damaged copy "
                                 f"(`thermcap scrub --repair` rebuilds it)")
         head = store.head(key)

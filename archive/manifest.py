@@ -41,6 +41,7 @@ __all__ = [
     "MANIFEST_NAME",
     "FrameProof",
     "bytes_digest",
+    "digest_problem",
     "file_digest",
     "file_matches",
     "file_problem",
@@ -76,7 +77,11 @@ def manifest_path(session_dir: Path) -> Path:
 def file_problem(path: Path, rec: Mapping[str, Any]) -> str | None:
     """Why the file at ``path`` is not the one ``rec`` names ("missing", "<hash> differs from the
     manifest"); None when it is: its digest, by the hash the record names."""
-    named = record_digest(rec)
+    return digest_problem(path, record_digest(rec))
+
+
+def digest_problem(path: Path, named: tuple[str, str] | None) -> str | None:
+    """``file_problem`` for a (hash, hex) already taken from its record."""
     if named is None:
         return "the manifest names no digest for it"
     if not path.is_file():
@@ -122,6 +127,10 @@ class ArchivedFile:
     bytes: int
     digest: str  #: the hash's name (``blake3``, ``sha256``)
     hex: str
+
+    @property
+    def named(self) -> tuple[str, str]:
+        return self.digest, self.hex
 
 
 def archived_files(manifest: Manifest) -> list[ArchivedFile]:

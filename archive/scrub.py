@@ -29,7 +29,7 @@ from thermcap.archive.formats import get_format
 from thermcap.archive.manifest import (
     DEFAULT_DIGEST,
     archived_files,
-    file_digest,
+    digest_problem,
     iso_now,
     load_manifest,
     record_digest,
@@ -163,7 +163,7 @@ def _mark(entry: FormatEntry | ExtrasEntry, problems: list[str]) -> None:
 def _uploaded_hashes(m: Manifest, d: Path, root: Path) -> dict[str, tuple[str, str]]:
     """Object key -> (hash, digest) the manifest recorded for that file."""
     rel = d.resolve().relative_to(root.resolve()).as_posix()
-    out = {f"{rel}/archive/{f.rel}": (f.digest, f.hex) for f in archived_files(m)}
+    out = {f"{rel}/archive/{f.rel}": f.named for f in archived_files(m)}
     uploaded = set((m.get("upload") or {}).get("keys", []))
     return {k: v for k, v in out.items() if k in uploaded}
 
@@ -247,7 +247,7 @@ def _repair_object(d: Path, layout: SessionLayout, m: Manifest, finding: ScrubFi
     rel = key.split("/archive/", 1)[1]
     local = layout.archive / rel
     want = _uploaded_hashes(m, d, root)[key]
-    if not local.is_file() or file_digest(local, want[0]) != want[1]:
+    if digest_problem(local, want) is not None:
         finding.repair_error = f"no verified local copy of {rel} to upload again"
         return
     store.put_file(key, local, overwrite=True)  # the object is known bad: replacing it is the repair

@@ -29,7 +29,7 @@ import numpy as np
 from thermcap.archive.exceptions import SourceDamagedError
 from thermcap.archive.extras import ExtrasWriter
 from thermcap.archive.frame_summary import SummaryBuilder
-from thermcap.archive.manifest import DEFAULT_DIGEST, FrameProof, bytes_digest, frame_digest
+from thermcap.archive.manifest import DEFAULT_DIGEST, FrameProof
 from thermcap.archive.read_back import frame_xxh3
 from thermcap.archive.source_checks import channel_problems
 from thermcap.recorder.icd.topics import TOPIC_METADATA
@@ -42,19 +42,13 @@ __all__ = ["SourceHashes", "SourcePass"]
 class SourceHashes:
     """What verification compares every copy with: one entry per frame, in session order."""
 
-    digest: str = DEFAULT_DIGEST  #: the hash of ``pixels`` and ``sidecars`` (recorder.storage.digest)
-    pixels: list[str] = field(default_factory=list)
-    sidecars: list[str] = field(default_factory=list)
+    proof: FrameProof = field(default_factory=lambda: FrameProof(DEFAULT_DIGEST, [], []))
     timestamps_ns: list[int] = field(default_factory=list)
     segments: list[str] = field(default_factory=list)
     #: xxh3-128 of the same pixels, for this run's read-back alone (``read_back``); not kept
     xxh3: list[bytes] = field(default_factory=list)
     width: int = 0
     height: int = 0
-
-    @property
-    def proof(self) -> FrameProof:
-        return FrameProof(self.digest, self.pixels, self.sidecars)
 
 
 class SourcePass:
@@ -80,8 +74,8 @@ class SourcePass:
         problems = [f"{seg.name}: {p}" for seg in segments for p in channel_problems(seg)]
         if problems:  # before anything is written
             self._refuse(problems)
-        got = SourceHashes(self.digest)
-        name = self.digest
+        got = SourceHashes(FrameProof(self.digest, [], []))
+        proof = got.proof
         read: dict[str, int] = {}
         others = self.extras.add_message if self.extras is not None else None
         index = self.first_index
@@ -90,9 +84,9 @@ class SourcePass:
                 if not f.pixels.flags.aligned:  # before the hashes and the summary read it too
                     f = replace(f, pixels=_aligned(f.pixels))
                 if self.hash_frames:
-                    got.pixels.append(frame_digest(f.pixels, name))
+                    proof.pixels.append(proof.of_pixels(f.pixels))
                     got.xxh3.append(frame_xxh3(f.pixels))
-                    got.sidecars.append(bytes_digest(f.sidecar, name))
+                    proof.sidecars.append(proof.of_sidecar(f.sidecar))
                     got.timestamps_ns.append(f.log_time)
                     got.segments.append(f.segment)
                 if got.width and f.pixels.shape != (got.height, got.width):

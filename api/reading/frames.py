@@ -199,7 +199,7 @@ class FrameReader:
         """The first copy whose ``part`` ("pixels" or "sidecar") matches the manifest's hash."""
         row = self._frame_row(session_id, idx)
         want = row.get("pixel_digest") if part == "pixels" else row.get("sidecar_digest")
-        hash_name = row.get("digest") or "sha256"
+        hash_name = row["digest"]
         missing = []
         for name, read in self._copies(session_id, idx, row, part):
             try:
