@@ -47,38 +47,62 @@ _BLOCK = 2048  # samples a block of the normal equations: 25 taps of them, 400 K
 
 
 @numba.njit(cache=True, nogil=True)
-def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, taps: np.ndarray, split: int,
-             limit: int, clip: int, flat: np.ndarray, detail: np.ndarray) -> tuple[int, int]:  # pragma: no cover
-    """The fit's samples (a column each: the taps' differences, then the residual ``64 f - m64
-    - est``) at the sampled scene pixels inside the frame's 2-pixel edge whose residual is within
-    ``clip``: into ``flat`` where every neighbour lies within ``split``, into ``detail`` where
-    within ``limit``; returns how many of each."""
+def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, split: int, limit: int, clip: int,
+             flat: np.ndarray, detail: np.ndarray) -> tuple[int, int]:  # pragma: no cover
+    """The fit's samples (a column each: the differences at ``TAPS``, in their order, then the
+    residual ``64 f - m64 - est``) at the sampled scene pixels inside the frame's 2-pixel edge
+    whose residual is within ``clip``: into ``flat`` where every neighbour lies within ``split``,
+    into ``detail`` where within ``limit``; returns how many of each.
+
+    The five rows of the mean are read through their own names and the taps' columns as
+    constants, and each sample is written straight into ``flat``'s next column (moved to
+    ``detail``'s where it belongs there): 0.93 -> 0.60 ms a 640x512 frame against a loop over
+    ``TAPS``' flat offsets through a scratch row (2026-12-07)."""
     h, w = f.shape
-    k = taps.shape[0]
-    m = m64.ravel()
-    offsets = taps[:, 0] * w + taps[:, 1]
-    row = np.empty(k + 1)
+    k = TAPS.shape[0]
     nf = nd = 0
     for r in range(2, h - 2, _ROW_STEP):
+        q0, q1, q2, q3, q4 = m64[r - 2], m64[r - 1], m64[r], m64[r + 1], m64[r + 2]
+        fr, er, orow = f[r], est[r], other[r]
         for c in range(2, w - 2, _COL_STEP):
-            if other[r, c]:
+            if orow[c]:
                 continue
-            at = r * w + c
-            mm = np.int64(m[at])
-            res = (np.int64(f[r, c]) << 6) - mm - est[r, c]
+            mm = np.int64(q2[c])
+            res = (np.int64(fr[c]) << 6) - mm - er[c]
             if abs(res) >= clip:
                 continue
+            t = 0
             span = np.int64(0)
-            for t in range(k):
-                d = np.int64(m[at + offsets[t]]) - mm
-                span = max(span, np.int64(abs(d)))
-                row[t] = d
-            row[k] = res
+            for dx in range(-2, 3):
+                d = np.int64(q0[c + dx]) - mm
+                span = max(span, abs(d))
+                flat[t, nf] = d
+                t += 1
+            for dx in range(-2, 3):
+                d = np.int64(q1[c + dx]) - mm
+                span = max(span, abs(d))
+                flat[t, nf] = d
+                t += 1
+            for dx in (-2, -1, 1, 2):
+                d = np.int64(q2[c + dx]) - mm
+                span = max(span, abs(d))
+                flat[t, nf] = d
+                t += 1
+            for dx in range(-2, 3):
+                d = np.int64(q3[c + dx]) - mm
+                span = max(span, abs(d))
+                flat[t, nf] = d
+                t += 1
+            for dx in range(-2, 3):
+                d = np.int64(q4[c + dx]) - mm
+                span = max(span, abs(d))
+                flat[t, nf] = d
+                t += 1
+            flat[k, nf] = res
             if span < split:
-                flat[:, nf] = row
                 nf += 1
             elif span < limit:
-                detail[:, nd] = row
+                detail[:, nd] = flat[:, nf]
                 nd += 1
     return nf, nd
 
@@ -218,7 +242,7 @@ def fit(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
         return None
     rows = ((h - 4 + _ROW_STEP - 1) // _ROW_STEP) * ((w - 4 + _COL_STEP - 1) // _COL_STEP)
     flat, detail = np.empty((TAPS.shape[0] + 1, rows)), np.empty((TAPS.shape[0] + 1, rows))
-    nf, nd = _samples(f, m64, est, other, TAPS, FILTER_SPLIT, FILTER_LIMIT, _CLIP, flat, detail)
+    nf, nd = _samples(f, m64, est, other, FILTER_SPLIT, FILTER_LIMIT, _CLIP, flat, detail)
     coefs = np.zeros((FILTERS, TAPS.shape[0]), np.int8)
     precisions = np.full(FILTERS, PRECISIONS[0], np.int64)
     for i, (x, n) in enumerate(((flat, nf), (detail, nd))):
