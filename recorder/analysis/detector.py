@@ -213,6 +213,7 @@ def _most_prominent(top_excess: np.ndarray, boxes: list[int], limit: int, budget
 
 
 _MOSAIC_MAX_ROWS = 64  # windows up to this tall are labelled together, side by side
+_FLAT_SAMPLE_ROWS = 64  # flat_answer's first look: every 64th row (8 rows of a 512-row frame)
 
 
 def _components(windows: list[tuple[int, int, np.ndarray]], structure: np.ndarray,
@@ -326,10 +327,42 @@ class HotSpotDetector:
         fog, the sea, a lens cap) then costs the cell grid alone: half of a flat 640x512 frame."""
         if not mean.size:
             return False
-        lo, hi = np.array([mean.min()]), np.array([cmax.max()])
+        return self._within_threshold(np.array([mean.min()]), np.array([cmax.max()]), affine)
+
+    def _within_threshold(self, lo: np.ndarray, hi: np.ndarray, affine: tuple[np.float32, np.float32] | None) -> bool:
         if affine is not None:
             lo, hi = _affine32(lo, *affine), _affine32(hi, *affine)
         return bool(((hi - lo) < self.threshold_k)[0])
+
+    def flat_answer(self, raw: np.ndarray) -> tuple[list[Detection], dict[str, Any]] | None:
+        """``detect(raw)``'s answer for a frame of counts too flat to hold any candidate, decided
+        from its coldest and warmest count alone; ``None`` where it may hold one, or where the
+        model is not linear in counts or the frame has bad pixels to mend (then only ``detect``
+        knows). The tracks are left as they are: the caller that answers a frame this way must
+        ``forget_tracks`` on the detector that sees the next frame, as ``detect`` would have.
+
+        Why: the recorder's detector runs in a child process, and handing it a frame (a copy into
+        shared memory, a message each way, two threads woken) cost a file source of a flat view
+        more than the detector's answer does. Exact, and never a frame ``detect`` would answer
+        otherwise: the coldest count is at most the coldest cell's mean and the warmest is the
+        warmest cell's maximum, so this span is never narrower than ``_too_flat``'s, through the
+        same monotonic float32 steps. A sparse sample of rows is looked at first: a frame whose
+        sample already spans the threshold (every ordinary scene) costs a few microseconds."""
+        if raw.dtype != np.uint16 or raw.ndim != 2 or not raw.size:
+            return None
+        affine = _counts_affine(self.model) if not self._has_bad_pixels(raw.shape) else None
+        if affine is None:
+            return None
+        sample = raw[::_FLAT_SAMPLE_ROWS]
+        if not self._within_threshold(np.array([sample.min()]), np.array([sample.max()]), affine):
+            return None
+        if not self._within_threshold(np.array([raw.min()]), np.array([raw.max()]), affine):
+            return None
+        return [], self._analysis([], [], None)
+
+    def forget_tracks(self) -> None:
+        """What a frame with no target does to the tracks (``flat_answer``'s other half)."""
+        self._tracks = []
 
     def background(self, temps: np.ndarray) -> np.ndarray:
         """The local background (C) at full resolution."""
@@ -492,11 +525,16 @@ class HotSpotDetector:
     def _answer(self, dets: list[Detection], per_target: list[dict[str, Any]],
                 capped: dict[str, Any] | None) -> tuple[list[Detection], dict[str, Any]]:
         self._track(dets)
+        return dets, self._analysis(dets, per_target, capped)
+
+    @staticmethod
+    def _analysis(dets: list[Detection], per_target: list[dict[str, Any]],
+                  capped: dict[str, Any] | None) -> dict[str, Any]:
         conf = max((d.confidence for d in dets), default=None)
         analysis = frame_analysis(per_target, source="detector", confidence=round(conf, 3) if conf else None)
         if capped is not None:
             analysis["detection_capped"] = capped
-        return dets, analysis
+        return analysis
 
     def _track(self, dets: list[Detection]) -> None:
         """Keep a target's id while its box overlaps the one it had in the previous frame."""

@@ -6,7 +6,8 @@ share (issue #40's goal: >= 0.5x the rate without analysis), and on a flat scene
 own work is the smaller part: the recording process copies the frame into a shared slot, sends
 its number, and its results thread wakes for the answer. The line measures that process's CPU a
 frame over a burst of frames, with the child sending its results in batches while it is behind
-(as recordings do) against one message a frame (as before), alternated in the same run."""
+(as recordings do) against one message a frame (as before), alternated in the same run; and a
+flat frame, which the recording process answers itself."""
 
 from __future__ import annotations
 
@@ -44,19 +45,25 @@ def _burst(frame: np.ndarray, frames: int, batch: int | None) -> tuple[float, in
 
 
 def handoff_cpu(frames: int = 2000, rounds: int = 3, size: tuple[int, int] = (640, 512)) -> dict[str, Any]:
-    """The median over ``rounds`` alternated pairs, a flat frame (the detector's cheapest, so the
-    hand-off is most of what analysis costs the recording process)."""
+    """The median over ``rounds`` alternated pairs, on a flat frame with one warm pixel: the
+    detector's cheapest frame that still travels (a frame too flat for any candidate is
+    answered in the recording process and never does, ``HotSpotDetector.flat_answer``), so the
+    hand-off is most of what analysis costs the recording process. Beside it, what the flat
+    frame itself costs that process."""
     w, h = size
     frame = np.full((h, w), 2000, np.uint16)
-    batched, single, messages = [], [], []
+    frame[0, 0] += 400  # one pixel 14 K above the rest: not flat, and no target (below min_area)
+    batched, single, messages, flat = [], [], [], []
     for _ in range(rounds):
         us, msgs = _burst(frame, frames, None)
         batched.append(us)
         messages.append(msgs)
         single.append(_burst(frame, frames, 1)[0])
+        flat.append(_burst(np.full((h, w), 2000, np.uint16), frames, None)[0])
     b, s = statistics.median(batched), statistics.median(single)
     return {"size": f"{w}x{h}", "frames": frames, "rounds": rounds,
             "recording_cpu_us_per_frame_batched": round(b, 1),
             "recording_cpu_us_per_frame_one_message_a_frame": round(s, 1),
             "batched_vs_one_message_a_frame": round(b / s, 3),
-            "answer_messages_batched": int(statistics.median(messages))}
+            "answer_messages_batched": int(statistics.median(messages)),
+            "recording_cpu_us_per_frame_flat_answered_here": round(statistics.median(flat), 1)}

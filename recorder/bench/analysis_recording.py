@@ -45,6 +45,7 @@ def _record(path: Path, w: int, h: int, root: Path, analysis: bool) -> dict[str,
     if res.analysis_runner:
         out["runner"] = res.analysis_runner["runner"]
         out["detector_ms_per_frame"] = round(1e3 * res.analysis_runner["cpu_s"] / max(1, res.frames_written), 3)
+        out["answered_in_recorder"] = res.analysis_runner["answered_in_recorder"]
     shutil.rmtree(root, ignore_errors=True)
     return out
 
@@ -78,6 +79,8 @@ def record_vs_no_analysis(frames_640: int = 400, rounds: int = 3, workdir: str |
                     "ratio_rounds_median": round(statistics.median(pairs), 3) if pairs else None,
                     "frames_skipped": sum(r["skipped"] for r in runs), "runner": runs[0].get("runner"),
                     "detector_ms_per_frame": statistics.median(r.get("detector_ms_per_frame", 0.0) for r in runs),
+                    # frames too flat for a target, answered without the detector's process
+                    "answered_in_recorder": runs[0].get("answered_in_recorder", 0),
                     "rounds": rounds, "frames": n}
     return out
 
@@ -88,5 +91,5 @@ def print_lines(res: dict[str, Any]) -> list[str]:
         lines.append(f"  {name:34} {r['fps_with_analysis']:>8} vs {r['fps_without']:>8} fps = {r['ratio']}x "
                      f"(rounds' median {r['ratio_rounds_median']}x)  "
                      f"(detector {r['detector_ms_per_frame']} ms a frame in a {r['runner']}, "
-                     f"{r['frames_skipped']} frames skipped)")
+                     f"{r['frames_skipped']} frames skipped, {r['answered_in_recorder']} too flat to send)")
     return lines

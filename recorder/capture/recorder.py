@@ -685,6 +685,8 @@ class Recorder:
                 "fallback": next((f.runner_fallback for f in runners if f.runner_fallback), None),
                 "cpu_s": round(sum(f.runner.cpu_s for f in runners if f.runner), 3),
                 "slots": [f.runner.slots for f in runners if f.runner],
+                # frames too flat for any target, answered without the child (ProcessRunner)
+                "answered_in_recorder": sum(getattr(f.runner, "answered_here", 0) for f in runners),
                 "failure": failures[0] if failures else None}
 
     def _offer_analysis(self, feed: CameraFeed, frame: CapturedFrame) -> None:

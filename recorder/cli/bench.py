@@ -101,7 +101,8 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
                    f"{hand['recording_cpu_us_per_frame_batched']} us a frame with answers in batches vs "
                    f"{hand['recording_cpu_us_per_frame_one_message_a_frame']} one message a frame = "
                    f"{hand['batched_vs_one_message_a_frame']}x ({hand['answer_messages_batched']} messages "
-                   f"for {hand['frames']} frames)")
+                   f"for {hand['frames']} frames); a flat frame, answered here: "
+                   f"{hand['recording_cpu_us_per_frame_flat_answered_here']} us")
     for r in res.get("samples", []):
         click.echo(f"{r['file']:46} {r['format']:16} hot spots {r['hot_spots']}  "
                    + (f"grade {r['grade']}  scene {r['scene_c']} C  largest {r['largest_px']} px"

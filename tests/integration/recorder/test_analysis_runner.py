@@ -101,6 +101,39 @@ def test_a_frame_larger_than_a_slot_still_reaches_the_detector():
     assert got == [_plain(det.detect(px)) for px in frames]
 
 
+def _blob_and_flat_frames() -> list[np.ndarray]:
+    """A warm target, a flat view, the target again at the same place, then flat views between
+    targets: the detector gives the third frame a new id (the flat frame ended the track)."""
+    rng = np.random.default_rng(1)
+
+    def blob(y: int, x: int) -> np.ndarray:
+        f = np.rint(2000 + rng.normal(0, 0.4, (96, 128))).astype(np.uint16)
+        f[y:y + 8, x:x + 8] += 400  # 14 K above a 20 C wall at 0.036 K a count
+        return f
+
+    flat = np.full((96, 128), 2000, np.uint16)
+    return [blob(20, 30), flat, blob(20, 30), blob(21, 31), flat, flat, blob(21, 31), blob(60, 90)]
+
+
+def test_a_flat_frame_is_answered_without_the_child_which_still_ends_the_tracks_it_would_have():
+    """Issue 40: handing a flat frame (a wall, a lens cap) to the child cost a file source more
+    than the detector's answer. Answered in the recorder, exactly; the next frame sent tells the
+    child to forget its tracks, so every id is the in-process detector's."""
+    frames = _blob_and_flat_frames()
+    model = SimSource(frames=1).model
+    det = HotSpotDetector(model)
+    expected = [_plain(det.detect(px)) for px in frames]
+    ids = [[t["target_id"] for t in e[0]] for e in expected]
+    assert ids[0] == ["HS00001"] and ids[2] == ["HS00002"], "the flat frame must end the first track"
+    runner = ProcessRunner(HotSpotDetector(model), slots=2, frame_bytes=frames[0].nbytes)
+    try:
+        got = [_plain(a) for a in _answers(runner, frames)]
+    finally:
+        runner.close(30)
+    assert got == expected
+    assert runner.answered_here == 3
+
+
 def test_a_live_source_never_waits_for_a_busy_child():
     frames = _frames(3)
     runner = ProcessRunner(HotSpotDetector(SimSource(frames=1).model), slots=1, frame_bytes=frames[0].nbytes)
@@ -167,6 +200,22 @@ def test_every_frame_of_a_file_is_analysed_and_both_runners_record_the_same_side
     expected = [_plain(det.detect(px)) for px in frames]
     assert targets == [e[0] for e in expected]
     assert any(targets)
+
+
+@pytest.mark.parametrize("runner", ["process", "thread"])
+def test_a_file_with_flat_views_between_targets_records_the_same_sidecars_either_way(tmp_path, runner):
+    frames = _blob_and_flat_frames() * 3
+    path = _raw_file(tmp_path, frames)
+    rec = Recorder(RawSource(str(path), width=128, height=96, model=DEFAULT_MODEL), tmp_path / runner,
+                   recover_leftovers=False, analysis_runner=runner, analysis_queue=2)
+    res = rec.run()
+    assert res.error is None and res.frames_written == len(frames) and res.analysis_skipped == 0
+    assert res.analysis_runner["answered_in_recorder"] == (9 if runner == "process" else 0)
+    sidecars = [f.sidecar_dict() for f in iter_session_frames(res.session_dir)]
+    det = HotSpotDetector(DEFAULT_MODEL)
+    expected = [_plain(det.detect(px)) for px in frames]
+    assert [s["targets"] for s in sidecars] == [e[0] for e in expected]
+    assert [s["thermal_analysis"] for s in sidecars] == [{**e[1]} for e in expected]
 
 
 def test_the_recording_says_where_the_detector_ran_and_no_child_outlives_it(tmp_path):

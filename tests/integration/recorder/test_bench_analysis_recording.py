@@ -32,6 +32,7 @@ def test_the_hand_off_line_measures_batched_answers_against_one_message_a_frame(
     assert abs(res["batched_vs_one_message_a_frame"] - res["recording_cpu_us_per_frame_batched"]
                / res["recording_cpu_us_per_frame_one_message_a_frame"]) < 0.01
     assert 0 < res["answer_messages_batched"] <= 200
+    assert res["recording_cpu_us_per_frame_flat_answered_here"] > 0
 
 
 def test_the_recordings_go_where_dir_says_and_a_missing_dir_is_named(tmp_path, monkeypatch):

@@ -284,6 +284,41 @@ def test_a_frame_too_flat_for_any_candidate_answers_as_the_full_path(h, w, level
     assert _run(early, [frame]) == _run(full, [frame])
 
 
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 90), st.integers(1, 90), st.integers(500, 9000), st.floats(0.0, 200.0),
+       st.integers(0, 80), st.integers(0, 80), st.integers(1, 12), st.sampled_from([0.0, 0.4, 2.0]),
+       st.integers(0, 2**32 - 1))
+def test_a_flat_answer_is_given_only_where_detect_gives_it_and_is_the_same(h, w, level, amplitude, y, x, size, noise,
+                                                                          seed):
+    """``flat_answer`` (what the recorder answers without the detector's process) is never
+    given for a frame ``detect`` answers otherwise, is ``detect``'s answer when given, and is
+    given for every frame within the threshold (139 counts at 0.036 K a count)."""
+    frame = _blob_frame(h, w, level, amplitude, min(y, h - 1), min(x, w - 1), size, noise, seed)
+    det = HotSpotDetector(LinearModel())
+    flat = det.flat_answer(frame)
+    span = int(frame.max()) - int(frame.min())
+    if span <= 138:
+        assert flat is not None
+    if flat is not None:
+        assert _run(HotSpotDetector(LinearModel()), [frame]) == [([], flat[1])]
+        assert flat[0] == []
+
+
+def test_a_flat_answer_is_left_to_detect_for_a_curve_bad_pixels_or_a_warm_spot_between_sampled_rows():
+    flat = np.full((256, 320), 2000, np.uint16)
+    model = LinearModel()
+    assert HotSpotDetector(model).flat_answer(flat) is not None
+    assert HotSpotDetector(_SameLineAsACurve(model)).flat_answer(flat) is None  # type: ignore[arg-type]
+    bad = np.zeros(flat.shape, bool)
+    bad[10, 10] = True
+    assert HotSpotDetector(model, bad_pixel_map=bad).flat_answer(flat) is None
+    assert HotSpotDetector(model).flat_answer(flat.astype(np.float32)) is None
+    spot = flat.copy()
+    spot[100:103, 50:53] += 400  # rows 100-102: none of them sampled (every 64th row)
+    assert HotSpotDetector(model).flat_answer(spot) is None
+    assert [d.bbox for d in HotSpotDetector(model).detect(spot)[0]] == [[50, 100, 52, 102]]  # found, not hidden
+
+
 def test_the_early_answer_is_taken_at_the_thresholds_edge_and_not_past_it():
     model = LinearModel()
     below, above = (_blob_frame(64, 64, 2000, a, 20, 20, 8, 0.0, 1) for a in (138, 140))
