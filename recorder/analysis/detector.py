@@ -350,13 +350,15 @@ class HotSpotDetector:
         sample already spans the threshold (every ordinary scene) costs a few microseconds."""
         if raw.dtype != np.uint16 or raw.ndim != 2 or not raw.size:
             return None
-        affine = _counts_affine(self.model) if not self._has_bad_pixels(raw.shape) else None
+        affine = _counts_affine(self.model)
         if affine is None:
             return None
         sample = raw[::_FLAT_SAMPLE_ROWS]
         if not self._within_threshold(np.array([sample.min()]), np.array([sample.max()]), affine):
             return None
-        if not self._within_threshold(np.array([raw.min()]), np.array([raw.max()]), affine):
+        # after the sample: the bad-pixel map's check reads the whole map
+        if self._has_bad_pixels(raw.shape) or \
+                not self._within_threshold(np.array([raw.min()]), np.array([raw.max()]), affine):
             return None
         return [], self._analysis([], [], None)
 
