@@ -50,17 +50,25 @@ def _plain(answer):
     return [d.to_sidecar() for d in dets], analysis
 
 
-def test_the_child_answers_as_the_detector_does_in_process_with_ids_kept_across_frames():
-    frames = _frames()
-    model = SimSource(frames=1).model
-    det = HotSpotDetector(model)
-    expected = [_plain(det.detect(px)) for px in frames]
-    assert any(e[0] for e in expected), "the scene must hold targets for the comparison to mean anything"
-    runner = ProcessRunner(HotSpotDetector(model), slots=3, frame_bytes=frames[0].nbytes)
+def _in_process(frames: list[np.ndarray]) -> list:
+    det = HotSpotDetector(SimSource(frames=1).model)
+    return [_plain(det.detect(px)) for px in frames]
+
+
+def _through_a_child(frames: list[np.ndarray], slots: int) -> tuple[ProcessRunner, list]:
+    """The same frames' answers from a detector in a child process, which is closed after."""
+    runner = ProcessRunner(HotSpotDetector(SimSource(frames=1).model), slots=slots, frame_bytes=frames[0].nbytes)
     try:
-        got = [_plain(a) for a in _answers(runner, frames)]
+        return runner, [_plain(a) for a in _answers(runner, frames)]
     finally:
         runner.close(30)
+
+
+def test_the_child_answers_as_the_detector_does_in_process_with_ids_kept_across_frames():
+    frames = _frames()
+    expected = _in_process(frames)
+    assert any(e[0] for e in expected), "the scene must hold targets for the comparison to mean anything"
+    runner, got = _through_a_child(frames, slots=3)
     assert got == expected
     assert runner.cpu_s > 0
     assert runner._proc.poll() is not None  # the child is gone
@@ -120,16 +128,10 @@ def test_a_flat_frame_is_answered_without_the_child_which_still_ends_the_tracks_
     than the detector's answer. Answered in the recorder, exactly; the next frame sent tells the
     child to forget its tracks, so every id is the in-process detector's."""
     frames = _blob_and_flat_frames()
-    model = SimSource(frames=1).model
-    det = HotSpotDetector(model)
-    expected = [_plain(det.detect(px)) for px in frames]
+    expected = _in_process(frames)
     ids = [[t["target_id"] for t in e[0]] for e in expected]
     assert ids[0] == ["HS00001"] and ids[2] == ["HS00002"], "the flat frame must end the first track"
-    runner = ProcessRunner(HotSpotDetector(model), slots=2, frame_bytes=frames[0].nbytes)
-    try:
-        got = [_plain(a) for a in _answers(runner, frames)]
-    finally:
-        runner.close(30)
+    runner, got = _through_a_child(frames, slots=2)
     assert got == expected
     assert runner.answered_here == 3
 
