@@ -381,6 +381,8 @@ class HotSpotDetector:
         assert self.bad_pixel_map is not None
         if self._bad_coords is None:
             self._bad_coords = np.argwhere(self.bad_pixel_map)
+        if temps.dtype == np.float32 and self.bad_pixel_map.dtype == np.bool_ and detector_kernels.available():
+            return detector_kernels.mend_bad_pixels(temps, self.bad_pixel_map, self._bad_coords)
         out = temps.copy()
         for y, x in self._bad_coords:  # dead and hot pixels would read as 1-px targets
             win = temps[max(0, y - 1):y + 2, max(0, x - 1):x + 2]

@@ -133,6 +133,29 @@ def test_compiled_local_mean_is_scipys_uniform_filter(h, w, size, spread, celsiu
     assert np.array_equal(detector_kernels.box_mean(grid, size), want)
 
 
+@needs_numba
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 24), st.integers(1, 24), st.floats(0.0, 1.0), st.floats(0.0, 0.2), st.booleans(),
+       st.integers(0, 2**32 - 1))
+def test_compiled_bad_pixel_mending_is_the_numpy_medians(h, w, bad_share, nan_share, few_values, seed):
+    """Each bad pixel the median of its good 3x3 neighbours, to the bit: odd and even counts
+    (the two middle values' float32 sum halved), at the frame's edges and corners, beside other
+    bad pixels, with none good, with ties (few distinct values) and with NaN."""
+    from unittest import mock
+
+    rng = np.random.default_rng(seed)
+    temps = (rng.integers(0, 4, (h, w)) * np.float32(0.5) if few_values
+             else rng.normal(20, 30, (h, w))).astype(np.float32)
+    temps[rng.random((h, w)) < nan_share] = np.nan
+    bad = rng.random((h, w)) < bad_share
+    det = HotSpotDetector(LinearModel(), bad_pixel_map=bad)
+    compiled = det._fix_bad_pixels(temps)
+    with mock.patch.object(detector_kernels, "available", return_value=False):
+        plain = HotSpotDetector(LinearModel(), bad_pixel_map=bad)._fix_bad_pixels(temps)
+    assert np.array_equal(compiled, plain, equal_nan=True)
+    assert np.array_equal(compiled[~bad], temps[~bad], equal_nan=True)  # only the bad pixels change
+
+
 def _prominent_by_full_sort(top_excess, boxes, limit, budget):
     """The region choice as the detector first wrote it: every region sorted, then taken in turn."""
     chosen, spent = [], 0
