@@ -282,6 +282,9 @@ class HotSpotDetector:
     max_examined_share: float = 0.1  # of the frame's area, in the candidate regions' boxes
     _tracks: list[tuple[str, list[int]]] = field(default_factory=list, repr=False)
     _bad_coords: np.ndarray | None = field(default=None, repr=False)
+    # the map _bad_coords was taken from: a map assigned later is read again; one changed in
+    # place is not (assign a new array)
+    _bad_source: np.ndarray | None = field(default=None, repr=False)
     _next_id: int = field(default=1, repr=False)
 
     _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _cells assume 4)
@@ -372,19 +375,27 @@ class HotSpotDetector:
         h, w = temps.shape
         return np.repeat(np.repeat(opened, self._F, axis=0), self._F, axis=1)[:h, :w]
 
+    def _bad_pixels(self) -> np.ndarray:
+        """The map's bad pixels, (y, x) a row: taken once for each map assigned, not on every
+        frame (reading a 640x512 map was 10-20 us, twice a frame)."""
+        if self._bad_source is not self.bad_pixel_map or self._bad_coords is None:
+            self._bad_coords = np.argwhere(self.bad_pixel_map) if self.bad_pixel_map is not None \
+                else np.zeros((0, 2), np.intp)
+            self._bad_source = self.bad_pixel_map
+        return self._bad_coords
+
     def _has_bad_pixels(self, shape: tuple[int, ...]) -> bool:
-        return self.bad_pixel_map is not None and self.bad_pixel_map.shape == shape and bool(self.bad_pixel_map.any())
+        return self.bad_pixel_map is not None and self.bad_pixel_map.shape == shape and len(self._bad_pixels()) > 0
 
     def _fix_bad_pixels(self, temps: np.ndarray) -> np.ndarray:
         if not self._has_bad_pixels(temps.shape):
             return temps
         assert self.bad_pixel_map is not None
-        if self._bad_coords is None:
-            self._bad_coords = np.argwhere(self.bad_pixel_map)
+        coords = self._bad_pixels()
         if temps.dtype == np.float32 and self.bad_pixel_map.dtype == np.bool_ and detector_kernels.available():
-            return detector_kernels.mend_bad_pixels(temps, self.bad_pixel_map, self._bad_coords)
+            return detector_kernels.mend_bad_pixels(temps, self.bad_pixel_map, coords)
         out = temps.copy()
-        for y, x in self._bad_coords:  # dead and hot pixels would read as 1-px targets
+        for y, x in coords:  # dead and hot pixels would read as 1-px targets
             win = temps[max(0, y - 1):y + 2, max(0, x - 1):x + 2]
             good = win[~self.bad_pixel_map[max(0, y - 1):y + 2, max(0, x - 1):x + 2]]
             out[y, x] = np.median(good) if good.size else out[y, x]

@@ -156,6 +156,23 @@ def test_compiled_bad_pixel_mending_is_the_numpy_medians(h, w, bad_share, nan_sh
     assert np.array_equal(compiled[~bad], temps[~bad], equal_nan=True)  # only the bad pixels change
 
 
+def test_a_bad_pixel_map_assigned_later_is_the_one_mended():
+    """The bad pixels' coordinates were taken from the first map a detector mended with and kept
+    when another map was assigned: the new map's pixels were left as they were, and the old
+    ones mended."""
+    temps = np.full((16, 16), 20.0, np.float32)
+    temps[5, 5] = temps[10, 10] = 90.0
+    first, second = np.zeros((16, 16), bool), np.zeros((16, 16), bool)
+    first[5, 5] = second[10, 10] = True
+    det = HotSpotDetector(LinearModel(), bad_pixel_map=first)
+    assert det._fix_bad_pixels(temps)[5, 5] == 20.0
+    det.bad_pixel_map = second
+    mended = det._fix_bad_pixels(temps)
+    assert mended[10, 10] == 20.0 and mended[5, 5] == 90.0
+    det.bad_pixel_map = np.zeros((16, 16), bool)  # none bad: the frame as it came
+    assert det._fix_bad_pixels(temps) is temps
+
+
 def _prominent_by_full_sort(top_excess, boxes, limit, budget):
     """The region choice as the detector first wrote it: every region sorted, then taken in turn."""
     chosen, spent = [], 0
