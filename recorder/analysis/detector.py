@@ -359,15 +359,16 @@ class HotSpotDetector:
         sample = raw[::_FLAT_SAMPLE_ROWS]
         if not self._within_threshold(np.array([sample.min()]), np.array([sample.max()]), affine):
             return None
-        # after the sample: the bad-pixel map's check reads the whole map
+        # a frame with bad pixels to mend is detect's to answer (on temperatures, mended)
         if self._has_bad_pixels(raw.shape) or \
                 not self._within_threshold(np.array([raw.min()]), np.array([raw.max()]), affine):
             return None
         return [], self._analysis([], [], None)
 
     def forget_tracks(self) -> None:
-        """What a frame with no target does to the tracks (``flat_answer``'s other half)."""
-        self._tracks = []
+        """What a frame with no target does to the tracks (``flat_answer``'s other half): the
+        same tracking step, with nothing found."""
+        self._track([])
 
     def background(self, temps: np.ndarray) -> np.ndarray:
         """The local background (C) at full resolution."""
