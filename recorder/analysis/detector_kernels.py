@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["available", "box_mean", "cell_mean_max", "mend_bad_pixels", "region_facts", "warm",
+__all__ = ["available", "box_mean", "cell_mean_max", "grid_excess", "mend_bad_pixels", "region_facts", "warm",
            "window_components"]
 
 try:
@@ -42,34 +42,55 @@ def available() -> bool:
 
 if njit is not None:
     @njit(nogil=True, cache=True)
-    def _cell_mean_max(padded, f):  # uint16 [h, w], whole cells -> (float32 mean, uint16 max) [h/f, w/f]
+    def _cell_mean_max(padded):  # uint16 [h, w], whole 4x4 cells -> (float32 mean, uint16 max) [h/4, w/4]
+        # A cell row's four rows in one contiguous pass (vectorised), then each cell's four
+        # columns: 25% less than a pass a row (0.15 against 0.11 ms a 640x512 frame, Zen 4)
         h, w = padded.shape
-        ch, cw = h // f, w // f
+        ch, cw = h // 4, w // 4
         mean = np.empty((ch, cw), np.float32)
         cmax = np.empty((ch, cw), padded.dtype)
-        col_sum = np.empty(w, np.uint32)  # a cell row's columns first: contiguous, vectorised loops
+        col_sum = np.empty(w, np.uint32)
         col_max = np.empty(w, padded.dtype)
-        scale = np.float32(1.0 / (f * f))
+        s4 = col_sum.reshape(cw, 4)
+        m4 = col_max.reshape(cw, 4)
+        scale = np.float32(1.0 / 16)
         for cy in range(ch):
-            first = padded[cy * f]
+            r0, r1, r2, r3 = padded[cy * 4], padded[cy * 4 + 1], padded[cy * 4 + 2], padded[cy * 4 + 3]
             for x in range(w):
-                col_sum[x] = first[x]
-                col_max[x] = first[x]
-            for dy in range(1, f):
-                row = padded[cy * f + dy]
-                for x in range(w):
-                    v = row[x]
-                    col_sum[x] += v
-                    col_max[x] = max(col_max[x], v)
+                a, b, c, d = r0[x], r1[x], r2[x], r3[x]
+                col_sum[x] = np.uint32(a) + np.uint32(b) + np.uint32(c) + np.uint32(d)
+                col_max[x] = max(max(a, b), max(c, d))
+            mrow, xrow = mean[cy], cmax[cy]
             for cx in range(cw):
-                s = np.uint32(0)
-                m = col_max[cx * f]
-                for dx in range(f):
-                    s += col_sum[cx * f + dx]
-                    m = max(m, col_max[cx * f + dx])
-                mean[cy, cx] = np.float32(s) * scale
-                cmax[cy, cx] = m
+                mrow[cx] = np.float32(s4[cx, 0] + s4[cx, 1] + s4[cx, 2] + s4[cx, 3]) * scale
+                xrow[cx] = max(max(m4[cx, 0], m4[cx, 1]), max(m4[cx, 2], m4[cx, 3]))
         return mean, cmax
+
+    @njit(nogil=True, cache=True)
+    def _grid_excess(opened, mean, cmax, scale, offset, thr):
+        # detector._affine32 of the three grids (the same float32 multiply, then add), each
+        # cell's excess over the background and whether it stands thr above it, in one pass:
+        # five numpy operations and a count on counts took 55 us of a 640x512 frame
+        h, w = opened.shape
+        opened_t = np.empty((h, w), np.float32)
+        mean_t = np.empty((h, w), np.float32)
+        cmax_t = np.empty((h, w), np.float32)
+        excess = np.empty((h, w), np.float32)
+        cells = np.empty((h, w), np.bool_)
+        n = 0
+        for y in range(h):
+            for x in range(w):
+                o = np.float32(opened[y, x]) * scale + offset
+                c = np.float32(cmax[y, x]) * scale + offset
+                e = c - o
+                opened_t[y, x] = o
+                mean_t[y, x] = np.float32(mean[y, x]) * scale + offset
+                cmax_t[y, x] = c
+                excess[y, x] = e
+                hit = e >= thr
+                cells[y, x] = hit
+                n += hit
+        return opened_t, mean_t, cmax_t, excess, cells, n
 
     @njit(nogil=True, cache=True)
     def _box_mean(a, size):  # float32 [h, w] -> float32: scipy's uniform_filter(size, mode="nearest")
@@ -307,10 +328,24 @@ if njit is not None:
 
 
 def cell_mean_max(padded: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
-    """Each f x f cell's mean (float32) and maximum of uint16 counts padded to whole cells."""
-    assert njit is not None and padded.dtype == np.uint16
-    out: tuple[np.ndarray, np.ndarray] = _cell_mean_max(padded, f)
+    """Each f x f cell's mean (float32) and maximum of uint16 counts padded to whole cells (f is
+    the detector's 4)."""
+    assert njit is not None and padded.dtype == np.uint16 and f == 4
+    out: tuple[np.ndarray, np.ndarray] = _cell_mean_max(padded)
     return out
+
+
+def grid_excess(opened: np.ndarray, mean: np.ndarray, cmax: np.ndarray, scale: np.float32, offset: np.float32,
+                thr: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The coarse grids of counts in temperatures (``scale * grid + offset`` in float32, as
+    ``detector._affine32``), the cell maxima's excess over the background, the cells standing
+    ``thr`` (in float32, as numpy compares a float32 array with a Python float) above it, and
+    how many do: (opened, mean, cmax, excess, cells, count), to the bit."""
+    assert njit is not None
+    *grids, n = _grid_excess(np.ascontiguousarray(opened), np.ascontiguousarray(mean), np.ascontiguousarray(cmax),
+                             np.float32(scale), np.float32(offset), np.float32(thr))
+    opened_t, mean_t, cmax_t, excess, cells = grids
+    return opened_t, mean_t, cmax_t, excess, cells, int(n)
 
 
 def mend_bad_pixels(temps: np.ndarray, bad: np.ndarray, coords: np.ndarray) -> np.ndarray:
@@ -369,6 +404,8 @@ def _try_kernels() -> bool:
     try:
         cell_mean_max(np.zeros((4, 4), np.uint16), 4)
         box_mean(np.zeros((2, 2), np.float32), 3)
+        grid_excess(np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.uint16),
+                    np.float32(1.0), np.float32(0.0), 5.0)
         mend_bad_pixels(np.zeros((2, 2), np.float32), np.eye(2, dtype=bool), np.array([[0, 0]]))
         region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
         for src in (np.zeros((8, 8), np.uint16), np.zeros((8, 8), np.float32)):

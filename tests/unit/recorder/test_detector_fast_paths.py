@@ -123,6 +123,43 @@ def test_compiled_cell_grid_is_the_strided_one(ch, cw, seed):
 
 @needs_numba
 @settings(max_examples=80, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.sampled_from([0.036, 0.01, 1.0, 0.0123456]),
+       st.sampled_from([-40.0, 0.0, -273.15, 12.3456]), st.sampled_from([5.0, 5.1, 0.3, 1e-3]), st.integers(0, 2**32 - 1))
+def test_compiled_grid_excess_is_the_numpy_steps(ch, cw, scale, offset, thr, seed):
+    """The grids in temperatures, the excess and the candidate cells to the bit: a threshold
+    float32 cannot hold (5.1) is compared as numpy compares it, in float32."""
+    from thermcap.recorder.analysis.detector import _affine32
+
+    rng = np.random.default_rng(seed)
+    cmax = rng.integers(0, 2**14, (ch, cw), dtype=np.uint16)
+    mean = (cmax - rng.integers(0, 300, (ch, cw))).clip(0).astype(np.float32) + np.float32(0.0625)
+    opened = (mean - rng.integers(0, 200, (ch, cw))).clip(0).astype(np.float32)
+    affine = (np.float32(scale), np.float32(offset))
+    want = [_affine32(a, *affine) for a in (opened, mean, cmax)]
+    excess = want[2] - want[0]
+    cells = excess >= thr
+    got = detector_kernels.grid_excess(opened, mean, cmax, *affine, thr)
+    for a, b in zip([*want, excess, cells], got[:5], strict=True):
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert got[5] == int(np.count_nonzero(cells))
+
+
+@needs_numba
+def test_compiled_grid_excess_compares_as_numpy_does_at_a_threshold_float32_cannot_hold():
+    """An excess of exactly float32(5.1), which is below 5.1: numpy compares a float32 array with
+    a Python float in float32 and calls it a candidate; a float64 comparison would not."""
+    thr = 5.1
+    cmax = np.full((2, 3), 8, np.uint16)
+    opened = np.full((2, 3), np.float32(8) - np.float32(thr), np.float32)  # exact (Sterbenz)
+    opened[1, 2] = np.nextafter(opened[1, 2], np.float32(9))  # just short of the threshold
+    got = detector_kernels.grid_excess(opened, opened, cmax, np.float32(1.0), np.float32(0.0), thr)
+    assert got[3][0, 0] == np.float32(thr) and float(got[3][0, 0]) < thr
+    assert np.array_equal(got[4], (cmax.astype(np.float32) - opened) >= thr)
+    assert got[4].tolist() == [[True, True, True], [True, True, False]] and got[5] == 5
+
+
+@needs_numba
+@settings(max_examples=80, deadline=None)
 @given(st.integers(1, 70), st.integers(1, 70), st.integers(1, 41), st.sampled_from([0.01, 1.0, 45.0, 3000.0]),
        st.booleans(), st.integers(0, 2**32 - 1))
 def test_compiled_local_mean_is_scipys_uniform_filter(h, w, size, spread, celsius, seed):
