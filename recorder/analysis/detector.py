@@ -421,6 +421,22 @@ class HotSpotDetector:
             out[y, x] = np.median(good) if good.size else out[y, x]
         return out
 
+    def _standing_out(self, stats: _RegionStats, examine: list[int],
+                      local_mean: np.ndarray) -> list[tuple[int, int, int, int]]:
+        """The boxes (in cells: y0, y1, x0, x1) of the regions of ``examine`` (labels) whose warmest
+        cell stands out from the local mean at the box's centre. The others are texture, dropped
+        here at quarter resolution before any full-resolution work. All the regions at once:
+        one at a time, 32 regions of a noisy frame cost 30-45 us of Python."""
+        if not examine:
+            return []
+        i = np.asarray(examine, np.intp) - 1
+        boxes = np.stack([stats.y0[i], stats.y1[i], stats.x0[i], stats.x1[i]], axis=1)
+        cy = np.minimum((boxes[:, 0] + boxes[:, 1]) // 2, local_mean.shape[0] - 1)
+        cx = np.minimum((boxes[:, 2] + boxes[:, 3]) // 2, local_mean.shape[1] - 1)
+        # "not below" rather than "at or above": a NaN (a temperature path) is kept, as before
+        stands = ~(stats.top_cmax[i] - local_mean[cy, cx] < 0.8 * self.threshold_k)
+        return [(a, b, c, d) for a, b, c, d in boxes[stands].tolist()]
+
     def _window_components(self, src: np.ndarray, padded_src: np.ndarray, opened: np.ndarray,
                            boxes: list[tuple[int, int, int, int]], affine: tuple[np.float32, np.float32] | None,
                            celsius: Any) -> list[tuple[int, int, int, tuple[slice, slice], np.ndarray]]:
@@ -498,16 +514,7 @@ class HotSpotDetector:
                           "limit": region_limit, "area_budget": self.max_examined_share,
                           "why": "only the most prominent candidate regions were examined"}
                 examine = sorted(chosen)
-            kept: list[tuple[int, int, int, int]] = []  # boxes in cells, per region kept
-            for k in examine:
-                cy0, cy1, cx0, cx1 = stats.box(k)
-                # Regions whose warmest cell does not stand out from the local mean are texture:
-                # dropped here, at quarter resolution, before any full-resolution work.
-                cy = min((cy0 + cy1) // 2, local_mean.shape[0] - 1)
-                cx = min((cx0 + cx1) // 2, local_mean.shape[1] - 1)
-                if stats.top_cmax[k - 1] - local_mean[cy, cx] < 0.8 * self.threshold_k:
-                    continue
-                kept.append((cy0, cy1, cx0, cx1))
+            kept = self._standing_out(stats, examine, local_mean)
             found = []
             for y0, x0, area, sl, own in self._window_components(src, padded_src, opened, kept, affine, celsius):
                 found.append((area, sl[0].start + y0, sl[0].stop + y0, sl[1].start + x0, sl[1].stop + x0, own))

@@ -428,3 +428,29 @@ def test_the_background_leaves_a_warm_target_out_and_keeps_the_frames_size():
     bg = det.background(temps)
     assert bg.shape == temps.shape
     assert np.allclose(bg, 20.0)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.floats(0.05, 0.9), st.floats(0.0, 0.3), st.integers(0, 2**32 - 1))
+def test_regions_standing_out_are_the_per_region_tests(h, w, p, nan_share, seed):
+    """All the examined regions at once give the boxes the loop over each region gave, in the
+    same order; a NaN local mean (the temperature path) keeps its region, as before."""
+    from thermcap.recorder.analysis.detector import _regions
+
+    rng = np.random.default_rng(seed)
+    cells = rng.random((h, w)) < p
+    excess = rng.normal(3.0, 3.0, (h, w)).astype(np.float32)
+    cmax = rng.normal(30.0, 4.0, (h, w)).astype(np.float32)
+    local_mean = rng.normal(26.0, 2.0, (h, w)).astype(np.float32)
+    local_mean[rng.random((h, w)) < nan_share] = np.nan
+    n, stats = _regions(cells, excess, cmax, np.ones((3, 3), bool))
+    det = HotSpotDetector(LinearModel())
+    examine = sorted(rng.choice(np.arange(1, n + 1), size=min(n, 32), replace=False).tolist()) if n else []
+    want = []
+    for k in examine:
+        cy0, cy1, cx0, cx1 = stats.box(k)
+        cy, cx = min((cy0 + cy1) // 2, h - 1), min((cx0 + cx1) // 2, w - 1)
+        if stats.top_cmax[k - 1] - local_mean[cy, cx] < 0.8 * det.threshold_k:
+            continue
+        want.append((cy0, cy1, cx0, cx1))
+    assert det._standing_out(stats, examine, local_mean) == want
