@@ -29,7 +29,7 @@ __all__ = ["KernelReport", "compile_all", "kernel_modules", "main"]
 
 _MODULES = ("thermcap.archive.rans", "thermcap.archive.tpred_kernels", "thermcap.archive.tpred_key",
             "thermcap.archive.tpred_filter", "thermcap.archive.lzw_kernels", "thermcap.archive.summary_kernels",
-            "thermcap.recorder.analysis.detector_kernels")
+            "thermcap.recorder.analysis.detector_jit")
 _FORMATS = ["tiff-lzw", "tpred"]  # the formats whose writers and readers run compiled loops
 
 

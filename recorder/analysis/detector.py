@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy import ndimage
 
 from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.icd.names import CROSSOVER_GRADE, DETECTION_THRESHOLD_K
@@ -44,6 +43,30 @@ class Detection:
         return {"target_id": self.target_id, "bbox": self.bbox, "centroid": self.centroid,
                 "max_temp_c": round(self.max_temp_c, 3), "mean_temp_c": round(self.mean_temp_c, 3),
                 "classification": self.classification, "confidence": round(self.confidence, 3)}
+
+
+def _ndimage() -> Any:
+    """scipy.ndimage, imported where a numpy path needs it (without numba's kernels). Importing it
+    at the top cost every ``thermcap record`` 0.4-0.9 s before its first frame, in a process that
+    hands its frames to the detector's and runs none of it."""
+    from scipy import ndimage
+
+    return ndimage
+
+
+def _dilated(mask: np.ndarray, iterations: int) -> np.ndarray:
+    """``scipy.ndimage.binary_dilation(mask, structure=<the 4-connected cross>,
+    iterations=iterations)``, nothing beyond the edges: each step adds every pixel's four
+    neighbours. numpy alone, so a detector that finds a target needs no scipy."""
+    out = mask.copy()
+    for _ in range(iterations):
+        grown = out.copy()
+        grown[1:] |= out[:-1]
+        grown[:-1] |= out[1:]
+        grown[:, 1:] |= out[:, :-1]
+        grown[:, :-1] |= out[:, 1:]
+        out = grown
+    return out
 
 
 def iou(a: list[int], b: list[int]) -> float:
@@ -166,7 +189,7 @@ def _regions(cells: np.ndarray, excess: np.ndarray, cmax: np.ndarray,
     if detector_kernels.available():
         n, facts = detector_kernels.region_facts(cells, excess, cmax)
         return n, _RegionStats(*facts)
-    regions, n = ndimage.label(cells, structure=structure)
+    regions, n = _ndimage().label(cells, structure=structure)
     return n, _region_stats(cells, regions, n, excess, cmax)
 
 
@@ -174,7 +197,7 @@ def _local_mean(cell_mean: np.ndarray, size: int) -> np.ndarray:
     """The mean around each coarse cell (``uniform_filter``, edges repeated), compiled where it can."""
     if cell_mean.dtype == np.float32 and detector_kernels.available():
         return detector_kernels.box_mean(cell_mean, size)
-    return ndimage.uniform_filter(cell_mean, size=size, mode="nearest")
+    return _ndimage().uniform_filter(cell_mean, size=size, mode="nearest")
 
 
 def _pick(order: Any, boxes: list[int], limit: int, budget: float) -> tuple[list[int], bool]:
@@ -233,7 +256,7 @@ def _components(windows: list[tuple[int, int, np.ndarray]], structure: np.ndarra
         keep = np.flatnonzero(areas[1:] >= min_area)
         if not keep.size:
             return
-        objects = ndimage.find_objects(labels)
+        objects = _ndimage().find_objects(labels)
         starts = np.fromiter((objects[i][1].start for i in keep.tolist()), np.intp, keep.size)
         owners = (np.searchsorted(offsets, starts, side="right") - 1).tolist()
         for i, j in zip(keep.tolist(), owners, strict=True):
@@ -246,7 +269,7 @@ def _components(windows: list[tuple[int, int, np.ndarray]], structure: np.ndarra
     zero = np.zeros(1, np.intp)
     for i, (_, _, m) in enumerate(windows):
         if m.size and m.shape[0] > _MOSAIC_MAX_ROWS:
-            labels, n = ndimage.label(m, structure=structure)
+            labels, n = _ndimage().label(m, structure=structure)
             add(labels, n, [i], zero)
     if small:
         offsets = np.cumsum([0] + [windows[i][2].shape[1] + 1 for i in small])
@@ -254,7 +277,7 @@ def _components(windows: list[tuple[int, int, np.ndarray]], structure: np.ndarra
         for i, off in zip(small, offsets[:-1].tolist(), strict=False):
             m = windows[i][2]
             canvas[:m.shape[0], off:off + m.shape[1]] = m
-        labels, n = ndimage.label(canvas, structure=structure)
+        labels, n = _ndimage().label(canvas, structure=structure)
         add(labels, n, small, offsets)
     out.sort(key=lambda c: (c[0], c[1]))
     return [(y0, x0, area, sl, own) for _, _, y0, x0, area, sl, own in out]
@@ -290,7 +313,7 @@ class HotSpotDetector:
     _F = 4  # the coarse grid: 4x4 pixels a cell (the strided sums in _cells assume 4)
     # Built once: scipy builds the structure again on every call otherwise, a frame labels ~20 regions
     _EIGHT: Any = field(default_factory=lambda: np.ones((3, 3), bool), repr=False)
-    _FOUR: Any = field(default_factory=lambda: ndimage.generate_binary_structure(2, 1), repr=False)
+    _FOUR: Any = field(default_factory=lambda: np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], bool), repr=False)
 
     def _cells(self, temps: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Quarter-resolution (cell mean, cell maximum) of ``temps``, and ``temps`` edge-padded to
@@ -548,7 +571,7 @@ class HotSpotDetector:
                 if excess < self.threshold_k or excess < self.min_sigma * (float(np.std(ring)) + 1e-3):
                     continue
                 warm = (crop - bg(Y0, Y1, X0, X1)) >= self.threshold_k  # this and any neighbouring target
-                bmask = ~ndimage.binary_dilation(warm | tmask, structure=self._FOUR, iterations=2)
+                bmask = ~_dilated(warm | tmask, 2)
                 if not bmask.any():
                     continue
                 m = contrast_metrics(crop, tmask, bmask)

@@ -182,6 +182,10 @@ class CameraFeed:
     written: int = 0
     paused: int = 0
     analysis_skipped: int = 0
+    # how long the writer waited for the detector's answers (a source that waits: every frame is
+    # analysed, so a costly scene holds the recording), and how often each of its caps bit
+    analysis_wait_ns: int = 0
+    analysis_capped: dict[str, int] = field(default_factory=dict)
     pauses: list[list[int | None]] = field(default_factory=list)  # [first paused frame, first after]
     first_mono: int | None = None
     last_mono: int | None = None
@@ -687,6 +691,11 @@ class Recorder:
                 "slots": [f.runner.slots for f in runners if f.runner],
                 # frames too flat for any target, answered without the child (ProcessRunner)
                 "answered_in_recorder": sum(getattr(f.runner, "answered_here", 0) for f in runners),
+                # what tells a user why analysis slowed a file's recording: the writer's wait for
+                # the detector, and the frames where a cap bit (noise or texture), by rule
+                "waited_for_detector_s": round(sum(f.analysis_wait_ns for f in runners) / 1e9, 3),
+                "capped": {rule: sum(f.analysis_capped.get(rule, 0) for f in runners)
+                           for rule in sorted({r for f in runners for r in f.analysis_capped})},
                 "failure": failures[0] if failures else None}
 
     def _offer_analysis(self, feed: CameraFeed, frame: CapturedFrame) -> None:
@@ -905,7 +914,12 @@ class Recorder:
         analysis, targets = extra.get("thermal_analysis") or _NO_ANALYSIS, extra.get("targets", [])
         if frame.analysis is not None:
             try:
-                result = frame.analysis.result(timeout=None if feed.can_wait else self.analysis_wait_s)
+                if feed.can_wait and not frame.analysis.done():
+                    waited = time.perf_counter_ns()
+                    result = frame.analysis.result()
+                    feed.analysis_wait_ns += time.perf_counter_ns() - waited
+                else:
+                    result = frame.analysis.result(timeout=None if feed.can_wait else self.analysis_wait_s)
             except FutureTimeout:
                 result = None
             if result is None:
@@ -918,6 +932,9 @@ class Recorder:
                 analysis, targets = _NO_ANALYSIS, []
             else:
                 analysis, targets = result[1], [d.to_sidecar() for d in result[0]]
+                capped = analysis.get("detection_capped")
+                if capped:
+                    feed.analysis_capped[capped["rule"]] = feed.analysis_capped.get(capped["rule"], 0) + 1
         return {
             "capture": capture,
             "environment": extra.get("environment", {}),

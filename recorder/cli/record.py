@@ -266,6 +266,9 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
         if analysis:
             click.echo(f"analysis: {result.frames_written - result.analysis_skipped} frames analysed, "
                        f"{result.analysis_skipped} skipped; {result.events} events")
+            for line in analysis_notes(result.analysis_runner or {}, result.wall_s,
+                                       result.frames_written - result.analysis_skipped):
+                click.echo(line)
         for name, cam in result.cameras.items():
             click.echo(f"camera {name}: {cam['frames_captured']} captured, {cam['frames_written']} written, "
                        f"{cam['frames_dropped']} dropped" + (f"; {cam['error']}" if cam["error"] else ""))
@@ -338,6 +341,30 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
         click.echo(status_text(json.loads(text)))
     if code >= 400:
         sys.exit(1)
+
+
+#: The writer's wait for the detector worth a line: a tenth of the recording's time
+_WAIT_WORTH_SAYING = 0.1
+
+
+def analysis_notes(runner: dict[str, Any], wall_s: float, analysed: int) -> list[str]:
+    """Why analysis slowed a recording, for a person: the frames where a detection cap bit (the
+    view held more candidates than targets can: noise or texture), and how long the recording
+    waited for the detector (a file is analysed frame by frame, so a costly scene holds it)."""
+    out = []
+    if capped := runner.get("capped"):
+        rules = ", ".join(f"{rule} {n}" for rule, n in capped.items())
+        out.append(f"analysis: a cap bit on {sum(capped.values())} frames ({rules}): the view held more "
+                   "candidates than targets can (noise or texture); each frame names it in "
+                   "thermal_analysis.detection_capped")
+    waited = float(runner.get("waited_for_detector_s") or 0.0)
+    if waited > 0 and waited >= _WAIT_WORTH_SAYING * wall_s:
+        cpu = float(runner.get("cpu_s") or 0.0)
+        per_frame = f", which took {1e3 * cpu / analysed:.2f} ms of CPU a frame" if cpu and analysed else ""
+        out.append(f"analysis: the recording waited {waited:.1f} s of its {wall_s:.1f} s for the detector"
+                   f"{per_frame}: a file is analysed frame by frame. --no-analysis records it without; "
+                   "`thermcap analyze SESSION` runs the detector afterwards")
+    return out
 
 
 def status_text(st: dict[str, Any]) -> str:

@@ -262,3 +262,67 @@ def test_the_child_runs_one_blas_thread_unless_the_user_said_otherwise(monkeypat
         assert f"OPENBLAS_NUM_THREADS={users or 1}".encode() in environ
     finally:
         runner.close(10.0)
+
+
+def test_a_file_of_noise_says_which_cap_bit_and_how_long_the_recording_waited(tmp_path):
+    """What tells a user why analysis slowed a file's recording: every frame of noise (sigma 45 counts) holds
+    more candidate regions than a 320x256 frame examines (8), so each names max_regions; the
+    result, its JSON and the command's summary say how often, and how long the writer waited."""
+    from click.testing import CliRunner
+
+    from thermcap.recorder.cli.root import cli
+
+    rng = np.random.default_rng(7)
+    frames = [(2000 + rng.normal(0, 45, (256, 320))).astype(np.uint16) for _ in range(12)]
+    path = _raw_file(tmp_path, frames)
+    res = Recorder(RawSource(str(path), width=320, height=256, model=DEFAULT_MODEL), tmp_path / "a",
+                   recover_leftovers=False).run()
+    capped = [f.sidecar_dict()["thermal_analysis"].get("detection_capped", {}).get("rule")
+              for f in iter_session_frames(res.session_dir)]
+    assert capped == ["max_regions"] * 12
+    runner = res.to_dict()["analysis_runner"]
+    assert runner["capped"] == {"max_regions": 12}
+    assert 0.0 <= runner["waited_for_detector_s"] <= res.wall_s
+    out = CliRunner().invoke(cli, ["record", "--root", str(tmp_path / "b"), "--source", f"raw:{path}",
+                                   "--width", "320", "--height", "256"])
+    assert out.exit_code == 0, out.output
+    assert "analysis: a cap bit on 12 frames (max_regions 12): the view held more candidates" in out.output
+
+
+class _AnsweredLate(Future):
+    """A detector's answer that is not there yet when the writer asks (``done()`` starts the
+    thread that gives it), so the writer must wait for it."""
+
+    def __init__(self, answer) -> None:
+        super().__init__()
+        self._answer = answer
+        self._started = False
+
+    def done(self) -> bool:
+        if not self._started:
+            self._started = True
+            import threading
+
+            threading.Thread(target=self.set_result, args=(self._answer,)).start()
+            return False
+        return super().done()
+
+
+def test_the_writers_wait_for_the_detector_is_counted_only_where_the_source_waits(tmp_path):
+    from thermcap.recorder.capture.sources.base import CapturedFrame
+
+    src = SimSource(width=64, height=48, frames=1, paced=False, seed=1)
+    rec = Recorder(src, tmp_path, recover_leftovers=False)
+    feed = rec.feeds[0]
+    px = next(iter(src.frames())).pixels
+    answer = HotSpotDetector(DEFAULT_MODEL).detect(px)
+    rec.analysis_wait_s = 120.0  # a live source's wait for an answer: long enough never to matter here
+    for can_wait in (True, False):
+        feed.can_wait, feed.analysis_wait_ns = can_wait, 0
+        frame = CapturedFrame(index=0, timestamp_ns=1, pixels=px)
+        frame.analysis = _AnsweredLate(answer)
+        if not can_wait:  # a live source never asks whether the answer is there: start it here
+            frame.analysis.done()
+        blocks = rec._sidecar_blocks(feed, frame)
+        assert blocks["thermal_analysis"] == answer[1]
+        assert (feed.analysis_wait_ns > 0) is can_wait

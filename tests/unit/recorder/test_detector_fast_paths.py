@@ -124,7 +124,8 @@ def test_compiled_cell_grid_is_the_strided_one(ch, cw, seed):
 @needs_numba
 @settings(max_examples=80, deadline=None)
 @given(st.integers(1, 30), st.integers(1, 30), st.sampled_from([0.036, 0.01, 1.0, 0.0123456]),
-       st.sampled_from([-40.0, 0.0, -273.15, 12.3456]), st.sampled_from([5.0, 5.1, 0.3, 1e-3]), st.integers(0, 2**32 - 1))
+       st.sampled_from([-40.0, 0.0, -273.15, 12.3456]), st.sampled_from([5.0, 5.1, 0.3, 1e-3]),
+       st.integers(0, 2**32 - 1))
 def test_compiled_grid_excess_is_the_numpy_steps(ch, cw, scale, offset, thr, seed):
     """The grids in temperatures, the excess and the candidate cells to the bit: a threshold
     float32 cannot hold (5.1) is compared as numpy compares it, in float32."""
@@ -454,3 +455,28 @@ def test_regions_standing_out_are_the_per_region_tests(h, w, p, nan_share, seed)
             continue
         want.append((cy0, cy1, cx0, cx1))
     assert det._standing_out(stats, examine, local_mean) == want
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 24), st.integers(1, 24), st.floats(0.0, 0.4), st.integers(0, 3), st.integers(0, 2**32 - 1))
+def test_the_background_ring_dilation_is_scipys(h, w, p, iterations, seed):
+    """The ring a target is graded against leaves out the target and its warm neighbours grown
+    by two pixels: numpy's cross dilation gives scipy's binary_dilation to the pixel, edges included."""
+    from thermcap.recorder.analysis.detector import _dilated
+
+    mask = np.random.default_rng(seed).random((h, w)) < p
+    cross = ndimage.generate_binary_structure(2, 1)
+    want = ndimage.binary_dilation(mask, structure=cross, iterations=iterations) if iterations else mask
+    assert np.array_equal(_dilated(mask, iterations), want)
+
+
+def test_importing_the_recorder_imports_neither_scipy_nor_numba():
+    """The recording process hands its frames to the detector's process, so neither library is
+    loaded there before the first frame (together 0.6-1.3 s of every `thermcap record`'s start)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, thermcap.recorder.capture.recorder, thermcap.recorder.analysis.process_runner; "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'scipy', 'numba'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
