@@ -343,27 +343,30 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
         sys.exit(1)
 
 
-#: The writer's wait for the detector worth a line: a tenth of the recording's time
-_WAIT_WORTH_SAYING = 0.1
+#: The detector's share worth a line: a tenth of the recording's time, in CPU or in waiting
+_WORTH_SAYING = 0.1
 
 
 def analysis_notes(runner: dict[str, Any], wall_s: float, analysed: int) -> list[str]:
     """Why analysis slowed a recording, for a person: the frames where a detection cap bit (the
-    view held more candidates than targets can: noise or texture), and how long the recording
-    waited for the detector (a file is analysed frame by frame, so a costly scene holds it)."""
+    view held more candidates than targets can: noise or texture), and, for a source that waits
+    for the detector (a file, a pipe: every frame is analysed), what the detector cost beside
+    the recording and how long the recording waited for it. On two cores the detector's CPU is
+    what slows a file most, more than the waits: both processes share the cores."""
     out = []
     if capped := runner.get("capped"):
         rules = ", ".join(f"{rule} {n}" for rule, n in capped.items())
         out.append(f"analysis: a cap bit on {sum(capped.values())} frames ({rules}): the view held more "
                    "candidates than targets can (noise or texture); each frame names it in "
                    "thermal_analysis.detection_capped")
-    waited = float(runner.get("waited_for_detector_s") or 0.0)
-    if waited > 0 and waited >= _WAIT_WORTH_SAYING * wall_s:
-        cpu = float(runner.get("cpu_s") or 0.0)
-        per_frame = f", which took {1e3 * cpu / analysed:.2f} ms of CPU a frame" if cpu and analysed else ""
-        out.append(f"analysis: the recording waited {waited:.1f} s of its {wall_s:.1f} s for the detector"
-                   f"{per_frame}: a file is analysed frame by frame. --no-analysis records it without; "
-                   "`thermcap analyze SESSION` runs the detector afterwards")
+    waited = float(runner.get("waited_for_detector_s") or 0.0)  # only a source that waits waits
+    cpu = float(runner.get("cpu_s") or 0.0)
+    if waited > 0 and max(waited, cpu) >= _WORTH_SAYING * wall_s:
+        per_frame = f" ({1e3 * cpu / analysed:.2f} ms a frame)" if analysed else ""
+        out.append(f"analysis: the detector took {cpu:.1f} s of CPU{per_frame} beside the recording, which "
+                   f"waited {waited:.1f} s of its {wall_s:.1f} s for it: a file is analysed frame by frame, on "
+                   "the same cores. --no-analysis records it without; `thermcap analyze SESSION` runs the "
+                   "detector afterwards")
     return out
 
 

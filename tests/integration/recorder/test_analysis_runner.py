@@ -326,3 +326,17 @@ def test_the_writers_wait_for_the_detector_is_counted_only_where_the_source_wait
         blocks = rec._sidecar_blocks(feed, frame)
         assert blocks["thermal_analysis"] == answer[1]
         assert (feed.analysis_wait_ns > 0) is can_wait
+
+
+def test_the_summary_names_the_detectors_cost_only_where_a_waiting_source_felt_it():
+    from thermcap.recorder.cli.record import analysis_notes
+
+    costly = {"cpu_s": 1.0, "waited_for_detector_s": 0.4, "capped": {"max_regions": 900, "max_candidates": 3}}
+    lines = analysis_notes(costly, wall_s=3.0, analysed=1000)
+    assert lines[0].startswith("analysis: a cap bit on 903 frames (max_regions 900, max_candidates 3)")
+    assert "the detector took 1.0 s of CPU (1.00 ms a frame) beside the recording, which waited 0.4 s of its " \
+           "3.0 s" in lines[1]
+    # a live camera never waits (nothing to say about its rate), nor does a cheap detector matter
+    assert analysis_notes({"cpu_s": 1.0, "waited_for_detector_s": 0.0}, 3.0, 1000) == []
+    assert analysis_notes({"cpu_s": 0.01, "waited_for_detector_s": 0.02}, 3.0, 1000) == []
+    assert len(analysis_notes({"cpu_s": 0.01, "waited_for_detector_s": 0.5}, 3.0, 0)) == 1
