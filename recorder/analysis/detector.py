@@ -160,10 +160,6 @@ class _RegionStats:
     def areas(self) -> list[int]:
         return ((self.y1 - self.y0) * (self.x1 - self.x0)).tolist()
 
-    def box(self, k: int) -> tuple[int, int, int, int]:
-        i = k - 1
-        return int(self.y0[i]), int(self.y1[i]), int(self.x0[i]), int(self.x1[i])
-
 
 def _region_stats(cells: np.ndarray, regions: np.ndarray, n: int, excess: np.ndarray,
                   cmax: np.ndarray) -> _RegionStats:

@@ -80,13 +80,19 @@ def _labelled_grid(h: int, w: int, p: float, seed: int):
     return cells, excess, cmax, regions, n
 
 
+def _box(stats, k: int) -> tuple[int, int, int, int]:
+    """Region ``k``'s box (in cells: y0, y1, x0, x1), as find_objects gives it."""
+    i = k - 1
+    return int(stats.y0[i]), int(stats.y1[i]), int(stats.x0[i]), int(stats.x1[i])
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(1, 40), st.integers(1, 40), st.floats(0.05, 0.8), st.integers(0, 2**32 - 1))
 def test_region_facts_match_find_objects_and_labelled_maxima(h, w, p, seed):
     cells, excess, cmax, regions, n = _labelled_grid(h, w, p, seed)
     stats = _region_stats(cells, regions, n, excess, cmax)
     objects = ndimage.find_objects(regions)
-    assert [stats.box(k) for k in range(1, n + 1)] == \
+    assert [_box(stats, k) for k in range(1, n + 1)] == \
         [(o[0].start, o[0].stop, o[1].start, o[1].stop) for o in objects]
     if n:
         idx = np.arange(1, n + 1)
@@ -449,7 +455,7 @@ def test_regions_standing_out_are_the_per_region_tests(h, w, p, nan_share, seed)
     examine = sorted(rng.choice(np.arange(1, n + 1), size=min(n, 32), replace=False).tolist()) if n else []
     want = []
     for k in examine:
-        cy0, cy1, cx0, cx1 = stats.box(k)
+        cy0, cy1, cx0, cx1 = _box(stats, k)
         cy, cx = min((cy0 + cy1) // 2, h - 1), min((cx0 + cx1) // 2, w - 1)
         if stats.top_cmax[k - 1] - local_mean[cy, cx] < 0.8 * det.threshold_k:
             continue
