@@ -866,12 +866,9 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     profiles, and only the best few on the lines themselves, which is 1/10 of trying every shift
     on the lines."""
     from thermcap.archive import tpred_kernels
-    if axis == 0:  # rows: work on the transpose
-        cur, prev = cur.T, prev.T
-    lines = slice(None, None, 8)
-    c = cur[lines]
-    # np.roll(prev, other, axis=0)[lines], without rolling the lines that are not looked at
-    p = prev[lines] if other == 0 else prev[(np.arange(0, prev.shape[0], 8) - other) % prev.shape[0]]
+    # for rows (axis 0), the transposes' lines; np.roll(prev, other, axis=0)[::8] for the columns
+    c = tpred_kernels.sampled_lines(cur, axis, 8, 0)
+    p = tpred_kernels.sampled_lines(prev, axis, 8, other)
     n = c.shape[1]
     shifts = [s for s in range(-max_shift, max_shift + 1) if n - abs(s) >= max(1, n // 2)]
     if not shifts:
@@ -879,12 +876,11 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
 
     # medians, not means, and clipped differences: a hot target that moves on its own (fixed on
     # the sensor while the view pans) must not outvote the scene
-    cp, pp = np.median(c, axis=0), np.median(p, axis=0)
+    cp, pp = tpred_kernels.column_medians(c), tpred_kernels.column_medians(p)
     by_profile = tpred_kernels.shift_costs(cp[None, :], pp[None, :], np.asarray(shifts), _CLIP)
     order = np.argsort(by_profile, kind="stable")[:_CANDIDATES]
     tried = np.asarray(sorted({shifts[i] for i in order} | {0}))
-    costs = tpred_kernels.shift_costs(np.ascontiguousarray(c, np.float64), np.ascontiguousarray(p, np.float64),
-                                      tried, _CLIP)
+    costs = tpred_kernels.line_shift_costs(c, p, tried, _CLIP)
     best, best_cost = 0, np.inf
     for s, k in zip(tried.tolist(), costs.tolist(), strict=True):
         if k < best_cost - 1e-9:

@@ -66,7 +66,7 @@ def test_the_filters_are_the_specified_integer_arithmetic(h, w, seed, spread, pr
     """The compiled step runs in float32 for speed; it must equal the specification's integers
     bit for bit: at the split's and the limit's edge (spreads around 8 and 64 counts), with the
     extreme coefficients, at 65535 counts, at the frame's replicated edge, and on frames smaller
-    than the filter."""
+    than the filter; the encoder's call with its two costs, and the decoder's in place."""
     rng = np.random.default_rng(seed)
     base = int(rng.integers(0, (65535 << 6) - spread))
     m64 = (base + rng.integers(0, spread + 1, (h, w))).astype(np.int32)
@@ -83,11 +83,21 @@ def test_the_filters_are_the_specified_integer_arithmetic(h, w, seed, spread, pr
     coefs = rng.choice(np.array([-128, -127, 127, 0, 1, -1, 5], np.int8), (2, 24)) if rng.random() < 0.3 else \
         rng.integers(-128, 128, (2, 24)).astype(np.int8)
     precisions = np.asarray(precisions, np.int64)
-    p, m64c = np.empty_like(pred), np.empty_like(m64)
-    tpred_filter.filter_apply(pred, m64, est, other, pred, coefs, precisions, tpred_filter.FILTER_SPLIT,
-                              tpred_filter.FILTER_LIMIT, False, p, m64c)
     want_p, want_m = _reference(m64, est, other, pred, coefs, precisions)
+    # the encoder's call, which also measures both predictions against the frame
+    f = np.clip(want_p + rng.integers(-9, 10, (h, w)), 0, 65535).astype(np.int32)
+    p, m64c = np.empty_like(pred), np.empty_like(m64)
+    costs = tpred_filter.filter_apply(f, m64, est, other, pred, coefs, precisions, tpred_filter.FILTER_SPLIT,
+                                      tpred_filter.FILTER_LIMIT, True, p, m64c)
     assert np.array_equal(p, want_p) and np.array_equal(m64c, want_m)
+    scene = ~other[::2, ::2]
+    f64 = f[::2, ::2].astype(np.int64)
+    assert costs == (int(np.abs(f64 - pred[::2, ::2])[scene].sum()), int(np.abs(f64 - want_p[::2, ::2])[scene].sum()))
+    # the decoder's call: the prediction filtered in place
+    in_place, m64c = pred.copy(), np.empty_like(m64)
+    tpred_filter.filter_apply(in_place, m64, est, other, in_place, coefs, precisions, tpred_filter.FILTER_SPLIT,
+                              tpred_filter.FILTER_LIMIT, False, in_place, m64c)
+    assert np.array_equal(in_place, want_p) and np.array_equal(m64c, want_m)
 
 
 @pytest.mark.parametrize("view", ["fixed", "patrol"])
