@@ -79,7 +79,7 @@ def _tokens(values: np.ndarray, tok: np.ndarray, extra: np.ndarray, nbits: np.nd
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _put(x: Any, t: Any, nb: int, e: Any, x_max: np.ndarray, rcp: np.ndarray, rshift: np.ndarray, bias: np.ndarray,
+def _put(x: Any, t: Any, nb: Any, e: Any, x_max: np.ndarray, rcp: np.ndarray, rshift: np.ndarray, bias: np.ndarray,
          cmpl: np.ndarray, out: np.ndarray, pos: int) -> tuple[Any, int]:  # pragma: no cover
     """One value (token ``t``, ``nb`` extra bits ``e``) onto state ``x``, backwards, its bytes
     before ``out[pos]``: (the new state, the new position; -1 if ``out`` was too small)."""
