@@ -189,3 +189,16 @@ def _cut_inside_filters(record: bytes) -> bytes:
 def test_a_damaged_filter_is_refused_with_the_reason(alter, what):
     with pytest.raises(TpredError, match=what):
         _decode_altered(alter)
+
+
+@pytest.mark.parametrize("taps", [24, 5, 4, 1])
+@pytest.mark.parametrize("n", [0, 1, 2047, 2048, 2049, 5000])
+def test_the_fits_normal_equations_are_exact(taps, n):
+    """``X^T X`` and ``X^T y`` in float64 equal the integer sums exactly, for every pairing of
+    rows the compiled loop takes (pairs, the column no pair covers, an odd tap left alone) and at
+    the cache blocks' edges."""
+    x = np.random.default_rng(taps * 10_000 + n).integers(-4095, 4096, (taps + 1, 5000)).astype(np.float64)
+    x[-1] = np.random.default_rng(n).integers(-511, 512, 5000)
+    g, b = tpred_filter._normal_equations(x, n)
+    exact = x[:, :n].astype(np.int64) @ x[:, :n].T.astype(np.int64)
+    assert np.array_equal(g, exact[:taps, :taps]) and np.array_equal(b, exact[:taps, taps])
