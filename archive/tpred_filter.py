@@ -26,6 +26,8 @@ from typing import Any
 import numba
 import numpy as np
 
+from thermcap.archive.tpred_kernels import row_costs
+
 __all__ = ["FILTERS", "FILTER_LIMIT", "FILTER_SPLIT", "PRECISIONS", "TAPS", "filter_apply", "fit"]
 
 #: The 24 neighbours of a 5x5 filter, (dy, dx) in row-major order without the centre: the order
@@ -253,11 +255,9 @@ def filter_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
             mo[c] = np.int32(m) if keep else m_in[c]
             po[c] = np.int32(np.floor((m + np.float32(e[c]) + half) * sixty_fourth)) if keep else p_in[c]
         if measure and r % 2 == 0:
-            fr = f[r]
-            for c in range(0, w, 2):  # without a branch: the scene's pixels counted once, the rest naught
-                scene = np.int64(not o[c])
-                before += abs(np.int64(fr[c]) - p_in[c]) * scene
-                after += abs(np.int64(fr[c]) - po[c]) * scene
+            row_before, row_after = row_costs(f[r], p_in, po, o)
+            before += row_before
+            after += row_after
     return before, after
 
 

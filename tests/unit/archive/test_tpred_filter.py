@@ -202,3 +202,20 @@ def test_the_fits_normal_equations_are_exact(taps, n):
     g, b = tpred_filter._normal_equations(x, n)
     exact = x[:, :n].astype(np.int64) @ x[:, :n].T.astype(np.int64)
     assert np.array_equal(g, exact[:taps, :taps]) and np.array_equal(b, exact[:taps, taps])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.integers(0, 2**32 - 1))
+def test_the_encoders_costs_count_the_scene_on_every_other_row_and_column(h, w, seed):
+    """``residual_costs`` (version 6's and 8's measure of a correction, without a branch): the
+    sums of ``|f - pred|`` and ``|f - p|`` over the even rows' and columns' pixels not in
+    ``other``, at odd sizes too, where the last row or column is counted."""
+    from thermcap.archive.tpred_kernels import residual_costs
+
+    rng = np.random.default_rng(seed)
+    f, pred, p = (rng.integers(0, 65536, (h, w)).astype(np.int32) for _ in range(3))
+    other = rng.random((h, w)) < 0.3
+    scene = ~other[::2, ::2]
+    f64 = f[::2, ::2].astype(np.int64)
+    want = (int(np.abs(f64 - pred[::2, ::2])[scene].sum()), int(np.abs(f64 - p[::2, ::2])[scene].sum()))
+    assert residual_costs(f, pred, p, other) == want
