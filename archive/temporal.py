@@ -654,10 +654,9 @@ class _StuckPixels:
         if self.last is None or self.last.shape != f.shape or self.run is None:
             self.run = np.zeros(f.shape, np.uint8)
         else:
-            same = f == self.last
-            np.minimum(self.run, 254, out=self.run)
-            self.run += 1
-            self.run *= same
+            from thermcap.archive import tpred_kernels
+
+            tpred_kernels.count_runs(f, self.last, self.run)
         self.last = f
 
     def listed(self) -> np.ndarray:

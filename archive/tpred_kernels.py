@@ -15,9 +15,9 @@ from typing import Any
 import numba
 import numpy as np
 
-__all__ = ["apply_modes", "block_choices", "block_sads", "column_medians", "learn_and_push", "line_shift_costs",
-           "merge_residuals", "predict", "residual_costs", "row_costs", "sampled_lines", "shift_costs",
-           "split_residuals", "subpel_apply", "subpel_sums", "trim"]
+__all__ = ["apply_modes", "block_choices", "block_sads", "column_medians", "count_runs", "learn_and_push",
+           "line_shift_costs", "merge_residuals", "predict", "residual_costs", "row_costs", "sampled_lines",
+           "shift_costs", "split_residuals", "subpel_apply", "subpel_sums", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -254,6 +254,17 @@ def trim(wsum: np.ndarray, wcount: np.ndarray, old: np.ndarray, weight: np.ndarr
         for c in range(w):
             wsum[r, c] -= old[r, c]
             wcount[r, c] -= weight[r, c] if use_weight else 1
+
+
+@numba.njit(cache=True, nogil=True)
+def count_runs(f: np.ndarray, last: np.ndarray, run: np.ndarray) -> None:  # pragma: no cover
+    """Each pixel's run of frames unchanged, in place: one more where ``f`` equals ``last``
+    (held at 255), else naught. One pass, where numpy's four took 0.27 ms a 640x512 frame."""
+    h, w = f.shape
+    for r in range(h):
+        fr, lr, rr = f[r], last[r], run[r]
+        for c in range(w):
+            rr[c] = (min(rr[c], 254) + 1) * (fr[c] == lr[c])
 
 
 @numba.njit(cache=True, nogil=True)

@@ -1,6 +1,6 @@
-"""tpred's motion search in compiled steps: the lines it samples, their medians and the shifts'
-costs, each held to the numpy it replaced. The encoder's records depend on every one of these
-numbers (a different median can pick a different shift), so they must be the same, not close."""
+"""tpred's encoder steps compiled from numpy: the motion search's lines, their medians and the
+shifts' costs, and the defect watch's runs, each held to the numpy it replaced. The records depend
+on every one of these numbers (a different median can pick a different shift): the same, not close."""
 
 from __future__ import annotations
 
@@ -47,3 +47,17 @@ def test_line_costs_are_the_float_costs(rows, n, spread, seed):
     shifts = np.arange(-(n // 2), n // 2 + 1)
     want = tpred_kernels.shift_costs(x.astype(np.float64), y.astype(np.float64), shifts, _CLIP)
     assert np.array_equal(tpred_kernels.line_shift_costs(x, y, shifts, _CLIP), want)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.integers(0, 2**32 - 1))
+def test_the_defect_watch_counts_runs_as_numpy_did(h, w, seed):
+    """A pixel's run of unchanged frames goes up by one where the frame equals the last (held at
+    255, never wrapping to 0) and back to naught where it does not."""
+    rng = np.random.default_rng(seed)
+    run = rng.integers(0, 256, (h, w)).astype(np.uint8)
+    f, last = (rng.integers(0, 3, (h, w)).astype(np.int32) for _ in range(2))
+    want = np.minimum(run, 254) + np.uint8(1)
+    want *= f == last
+    tpred_kernels.count_runs(f, last, run)
+    assert np.array_equal(run, want)
