@@ -197,7 +197,7 @@ def test_the_fits_normal_equations_are_exact(taps, n):
     """``X^T X`` and ``X^T y`` in float64 equal the integer sums exactly, for every pairing of
     rows the compiled loop takes (pairs, the column no pair covers, an odd tap left alone) and at
     the cache blocks' edges."""
-    x = np.random.default_rng(taps * 10_000 + n).integers(-4095, 4096, (taps + 1, 5000)).astype(np.float64)
+    x = np.random.default_rng(taps * 10_000 + n).integers(-4095, 4096, (taps + 1, 5000)).astype(np.float32)
     x[-1] = np.random.default_rng(n).integers(-511, 512, 5000)
     g, b = tpred_filter._normal_equations(x, n)
     exact = x[:, :n].astype(np.int64) @ x[:, :n].T.astype(np.int64)
