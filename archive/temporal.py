@@ -711,30 +711,43 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
 
 
 def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
-            other: np.ndarray) -> tuple[tuple[int, int, int], np.ndarray, np.ndarray, int | None]:
-    """Version 6's encoder side: ``((sx, sy, sl), prediction, scene mean, cost)``, the shift and
-    the Laplacian's weight in sixteenths fitted by least squares to the residual against the
-    scene mean's gradients and Laplacian, and the prediction and mean corrected by them; zeros
-    and the inputs where the fit is degenerate or does not lower the residual's absolute sum (on
-    every other row and column). The cost is that sum for what is returned (``None`` where the
-    fit was degenerate and nothing was measured)."""
+            other: np.ndarray) -> tuple[tuple[int, int, int], int | None]:
+    """Version 6's encoder side, measured: ``((sx, sy, sl), cost)``, the shift and the
+    Laplacian's weight in sixteenths fitted by least squares to the residual against the scene
+    mean's gradients and Laplacian; zeros where the fit is degenerate or does not lower the
+    residual's absolute sum (on every other row and column). The cost is that sum for the terms
+    returned (``None`` where the fit was degenerate and nothing was measured). The correction is
+    measured on those pixels alone and applied by ``_corrected`` only where the record keeps it:
+    version 8's filters replace it on most shaking frames."""
     from thermcap.archive import tpred_kernels
 
     sums = tpred_kernels.subpel_sums(f, m64, est, other, SUBPEL_LIMIT, _SUBPEL_CLIP)
     a, rhs = sums[:, :3], sums[:, 3]
     scale = float(np.prod(a.diagonal()))
     if scale <= 0 or abs(float(np.linalg.det(a))) <= 1e-9 * scale:  # a flat frame, or too few pixels
-        return (0, 0, 0), pred, m64, None
+        return (0, 0, 0), None
     fit = np.linalg.solve(a, rhs) * 16
     sx, sy = (max(-15, min(15, round(v))) for v in fit[:2])  # less than a pixel: a whole one is dx, dy
     sl = max(-16, min(16, round(fit[2])))
     if sx == 0 and sy == 0 and sl == 0:
-        return (0, 0, 0), pred, m64, None
-    moved, m64c = np.empty_like(pred), np.empty_like(m64)
-    before, after = tpred_kernels.subpel_apply(f, m64, est, other, pred, sx, sy, sl, SUBPEL_LIMIT, True, moved, m64c)
+        return (0, 0, 0), None
+    before, after = tpred_kernels.subpel_costs(f, m64, est, other, pred, sx, sy, sl, SUBPEL_LIMIT)
     if after >= before:
-        return (0, 0, 0), pred, m64, before
-    return (sx, sy, sl), moved, m64c, after
+        return (0, 0, 0), before
+    return (sx, sy, sl), after
+
+
+def _corrected(pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
+               terms: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """The prediction and the scene mean corrected by version 6's ``terms`` (the inputs where
+    they are zeros), as a decoder corrects them."""
+    if terms == (0, 0, 0):
+        return pred, m64
+    from thermcap.archive import tpred_kernels
+
+    moved, m64c = np.empty_like(pred), np.empty_like(m64)
+    tpred_kernels.subpel_apply(pred, m64, est, other, pred, *terms, SUBPEL_LIMIT, False, moved, m64c)
+    return moved, m64c
 
 
 def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
@@ -940,16 +953,18 @@ class TemporalEncoder:
             shift = b""
             if self.bitstream >= 6:
                 assert st.pattern is not None and other is not None
-                plain_pred, plain_m64 = pred, m64
-                terms, pred, m64, cost = _subpel(f, pred, m64, st.pattern.est, other)
+                terms, cost = _subpel(f, pred, m64, st.pattern.est, other)
                 self._shake.append(terms[0] ** 2 + terms[1] ** 2)
                 filt = b"\0" if self.bitstream >= 8 else b""
+                filtered = None
                 if self.bitstream >= 8 and (terms[:2] != (0, 0) or self._keep() < self.window):
                     # it moved by a fraction of a pixel: a filter may follow the move's blur too
-                    filtered = _filtered(f, plain_pred, plain_m64, st.pattern.est, other, cost)
-                    if filtered is not None:
-                        filt, pred, m64 = filtered
-                        terms = (0, 0, 0)
+                    filtered = _filtered(f, pred, m64, st.pattern.est, other, cost)
+                if filtered is not None:
+                    filt, pred, m64 = filtered
+                    terms = (0, 0, 0)
+                else:
+                    pred, m64 = _corrected(pred, m64, st.pattern.est, other, terms)
                 shift = _SUBPEL.pack(*terms) + filt
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:

@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = ["apply_modes", "block_choices", "block_sads", "column_medians", "count_runs", "learn_and_push",
            "line_shift_costs", "merge_residuals", "predict", "residual_costs", "row_costs", "sampled_lines",
-           "shift_costs", "split_residuals", "subpel_apply", "subpel_sums", "trim"]
+           "shift_costs", "split_residuals", "subpel_apply", "subpel_costs", "subpel_sums", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -101,6 +101,62 @@ def subpel_sums(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarr
     return out
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _corrected_mean(up: np.ndarray, row: np.ndarray, down: np.ndarray, c: int, fx: Any, fy: Any, fl: Any,
+                    lim: Any) -> Any:  # pragma: no cover
+    """Version 6's corrected scene mean at column ``c`` of ``row`` (not on the frame's edge), in
+    float32: ``mm + ((sx gx + sy gy + sl lap) >> 4)`` where the three terms (``_terms``) stay
+    within the limit, else ``mm``. Exact: a mean in 1/64 counts is below 2**22, so the terms
+    (a Laplacian's numerator below 2**24), a kept correction's sum (below 2**18) and each
+    halving, quartering and division by 16 are exact, and ``floor`` is the integer shift's
+    rounding. Float32 vectorises eight pixels at a time where numba's int64 (and AVX2's lack of
+    an arithmetic shift of 64-bit lanes) did not."""
+    mm = np.float32(row[c])
+    left, right = np.float32(row[c - 1]), np.float32(row[c + 1])
+    u, d = np.float32(up[c]), np.float32(down[c])
+    gx = np.floor((right - left) * np.float32(0.5))
+    gy = np.floor((d - u) * np.float32(0.5))
+    lap = np.floor((np.float32(4) * mm - left - right - u - d) * np.float32(0.25))
+    ok = abs(gx) < lim and abs(gy) < lim and abs(lap) < lim
+    return mm + (np.floor((fx * gx + fy * gy + fl * lap) * np.float32(1 / 16)) if ok else np.float32(0))
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def _predicted(m: Any, e: Any) -> Any:  # pragma: no cover
+    """``(m + e + 32) >> 6`` for a float32 mean ``m`` (exact, as in ``_corrected_mean``)."""
+    return np.int32(np.floor((m + np.float32(e) + np.float32(_HALF)) * np.float32(1 / 64)))
+
+
+@numba.njit(cache=True, nogil=True)
+def subpel_costs(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, pred: np.ndarray, sx: int,
+                 sy: int, sl: int, limit: int) -> tuple[Any, Any]:  # pragma: no cover
+    """``subpel_apply``'s two costs without the corrected frame: the prediction is worked out
+    only on the rows the costs read (every other one), half the pass, and written nowhere. The
+    encoder measures the correction on every shaking frame and version 8's filters then replace
+    it on most of them; it writes the whole corrected frame only where the record keeps it. A
+    row at a time, every column (which vectorises, where every other column did not), then
+    ``row_costs`` on its even columns."""
+    h, w = m64.shape
+    before = np.int64(0)
+    after = np.int64(0)
+    fx, fy, fl, lim = np.float32(sx), np.float32(sy), np.float32(sl), np.float32(limit)
+    made = np.empty(w, pred.dtype)
+    for r in range(0, h, 2):
+        fr, given, o = f[r], pred[r], other[r]
+        if r == 0 or r == h - 1:  # the frame's edge has no terms: it keeps pred
+            b, a = row_costs(fr, given, given, o)
+        else:
+            up, row, down, er = m64[r - 1], m64[r], m64[r + 1], est[r]
+            made[0] = given[0]
+            made[w - 1] = given[w - 1]
+            for c in range(1, w - 1):
+                made[c] = _predicted(_corrected_mean(up, row, down, c, fx, fy, fl, lim), er[c])
+            b, a = row_costs(fr, given, made, o)
+        before += b
+        after += a
+    return before, after
+
+
 @numba.njit(cache=True, nogil=True)
 def subpel_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, pred: np.ndarray, sx: int,
                  sy: int, sl: int, limit: int, measure: bool, p: np.ndarray,
@@ -109,22 +165,30 @@ def subpel_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
     stay within ``limit``, ``m64c = m64 + ((sx gx + sy gy + sl lap) >> 4)`` (``m64`` elsewhere)
     and ``p = (m64c + est + 32) >> 6``; the other pixels keep ``pred`` (``p`` may be ``pred``).
     ``measure`` (the encoder): also the sums of ``|f - pred|`` and ``|f - p|`` over the scene's
-    pixels on every other row and column, to keep the correction only where it pays. The
-    frame's edge has no terms, so it keeps ``pred`` and ``m64`` as they are; the inside is one
-    branch-free pass, which vectorises."""
+    pixels on every other row and column. The frame's edge has no terms, so it keeps ``pred``
+    and ``m64`` as they are; the inside is one branch-free pass in float32
+    (``_corrected_mean``), which vectorises."""
     h, w = m64.shape
+    fx, fy, fl, lim = np.float32(sx), np.float32(sy), np.float32(sl), np.float32(limit)
+    means = np.empty(w, np.float32)
     for r in range(h):
-        step = 1 if r == 0 or r == h - 1 else max(1, w - 1)  # the first and last rows whole, else both ends
-        for c in range(0, w, step):
-            m64c[r, c] = m64[r, c]
-            p[r, c] = pred[r, c]
-    for r in range(1, h - 1):
+        row, given, mo, po = m64[r], pred[r], m64c[r], p[r]
+        if r == 0 or r == h - 1:
+            for c in range(w):
+                mo[c] = row[c]
+                po[c] = given[c]
+            continue
+        up, down, er, o = m64[r - 1], m64[r + 1], est[r], other[r]
+        # three passes over the row, each with few arrays: one pass that read six rows and wrote
+        # two needed more runtime checks that they do not overlap than the vectoriser makes
+        means[0], means[w - 1] = row[0], row[w - 1]
         for c in range(1, w - 1):
-            mm, gx, gy, lap = _terms(m64, r, c)
-            ok = abs(gx) < limit and abs(gy) < limit and abs(lap) < limit
-            m = mm + (((sx * gx + sy * gy + sl * lap) >> 4) if ok else 0)
-            m64c[r, c] = m
-            p[r, c] = pred[r, c] if other[r, c] else (m + est[r, c] + _HALF) >> _SCALE
+            means[c] = _corrected_mean(up, row, down, c, fx, fy, fl, lim)
+        for c in range(w):
+            mo[c] = np.int32(means[c])
+        po[0], po[w - 1] = given[0], given[w - 1]
+        for c in range(1, w - 1):
+            po[c] = given[c] if o[c] else _predicted(means[c], er[c])
     return residual_costs(f, pred, p, other) if measure else (0, 0)
 
 

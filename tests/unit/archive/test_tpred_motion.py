@@ -1,6 +1,6 @@
-"""tpred's encoder steps compiled from numpy: the motion search's lines, their medians and the
-shifts' costs, and the defect watch's runs, each held to the numpy it replaced. The records depend
-on every one of these numbers (a different median can pick a different shift): the same, not close."""
+"""tpred's encoder steps compiled from numpy or measured on fewer pixels: the motion search's
+lines, their medians and the shifts' costs, the defect watch's runs, and version 6's costs. Each is
+held to what it replaced: the records depend on every one of these numbers, the same, not close."""
 
 from __future__ import annotations
 
@@ -61,3 +61,60 @@ def test_the_defect_watch_counts_runs_as_numpy_did(h, w, seed):
     want *= f == last
     tpred_kernels.count_runs(f, last, run)
     assert np.array_equal(run, want)
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 24), st.integers(1, 24), st.integers(0, 2**32 - 1), st.integers(-15, 15), st.integers(-15, 15),
+       st.integers(-16, 16), st.sampled_from([0, 200, 5000]))
+def test_the_corrections_costs_are_the_applied_ones(h, w, seed, sx, sy, sl, spread):
+    """Version 6's correction measured without writing the corrected frame gives the costs that
+    applying it and measuring gives: at the frame's edge (no terms), at odd sizes (the last row
+    or column is an edge counted), at the limit (terms left out) and outside the scene."""
+    rng = np.random.default_rng(seed)
+    m64 = (rng.integers(0, 60000 << 6) + rng.integers(0, spread + 1, (h, w))).astype(np.int32)
+    est = rng.integers(-512, 513, (h, w)).astype(np.int32)
+    other = rng.random((h, w)) < 0.2
+    pred = ((m64.astype(np.int64) + est + 32) >> 6).astype(np.int32)
+    f = np.clip(pred + rng.integers(-20, 21, (h, w)), 0, 65535).astype(np.int32)
+    moved, m64c = np.empty_like(pred), np.empty_like(m64)
+    limit = 64 << 6
+    applied = tpred_kernels.subpel_apply(f, m64, est, other, pred, sx, sy, sl, limit, True, moved, m64c)
+    assert tpred_kernels.subpel_costs(f, m64, est, other, pred, sx, sy, sl, limit) == applied
+
+
+def _subpel_reference(m64, est, other, pred, sx, sy, sl, limit):
+    """Version 6's correction as the bitstream specifies it, in numpy int64."""
+    m = m64.astype(np.int64)
+    p, mc = pred.astype(np.int64), m.copy()
+    if m.shape[0] > 2 and m.shape[1] > 2:
+        mm, left, right = m[1:-1, 1:-1], m[1:-1, :-2], m[1:-1, 2:]
+        up, down = m[:-2, 1:-1], m[2:, 1:-1]
+        gx, gy, lap = (right - left) >> 1, (down - up) >> 1, (4 * mm - left - right - up - down) >> 2
+        ok = (np.abs(gx) < limit) & (np.abs(gy) < limit) & (np.abs(lap) < limit)
+        inner = mm + np.where(ok, (sx * gx + sy * gy + sl * lap) >> 4, 0)
+        mc[1:-1, 1:-1] = inner
+        p[1:-1, 1:-1] = np.where(other[1:-1, 1:-1], p[1:-1, 1:-1], (inner + est[1:-1, 1:-1] + 32) >> 6)
+    return p, mc
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 24), st.integers(1, 24), st.integers(0, 2**32 - 1), st.integers(-15, 15), st.integers(-15, 15),
+       st.integers(-16, 16), st.sampled_from([0, 200, 5000, 65535 << 6]))
+def test_the_correction_is_the_specified_integer_arithmetic(h, w, seed, sx, sy, sl, spread):
+    """The compiled correction runs in float32 for speed; it must equal the specification's
+    integers bit for bit: means up to 65535 counts in 1/64, terms at and beyond the limit,
+    negative terms (the shifts' floor), the frame's edge, and frames too small to have an inside.
+    The decoder's call (in place) too."""
+    rng = np.random.default_rng(seed)
+    base = int(rng.integers(0, (65535 << 6) - min(spread, (65535 << 6) - 1)))
+    m64 = (base + rng.integers(0, spread + 1, (h, w))).clip(0, 65535 << 6).astype(np.int32)
+    est = rng.integers(-512, 513, (h, w)).astype(np.int32)
+    other = rng.random((h, w)) < 0.2
+    pred = rng.integers(0, 65536, (h, w)).astype(np.int32)
+    want_p, want_m = _subpel_reference(m64, est, other, pred, sx, sy, sl, 64 << 6)
+    p, m64c = np.empty_like(pred), np.empty_like(m64)
+    tpred_kernels.subpel_apply(pred, m64, est, other, pred, sx, sy, sl, 64 << 6, False, p, m64c)
+    assert np.array_equal(p, want_p) and np.array_equal(m64c, want_m)
+    in_place = pred.copy()
+    tpred_kernels.subpel_apply(in_place, m64, est, other, in_place, sx, sy, sl, 64 << 6, False, in_place, m64c)
+    assert np.array_equal(in_place, want_p)
