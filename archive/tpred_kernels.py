@@ -34,21 +34,24 @@ def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, es
     h, w = p.shape
     unseen = 0
     for r in range(h):
+        sr, nr, er, pr, mr, orow = s[r], n[r], est[r], p[r], m64[r], other[r]
         for c in range(w):
-            nn = n[r, c]
-            m = np.int64(s[r, c] / max(nn, 1))
-            m64[r, c] = m
-            p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
-            other[r, c] = nn == 0
+            nn = nr[c]
+            m = np.int32(sr[c] / max(nn, 1))  # |S| < 2**31: the quotient fits, truncated as int64's would be
+            mr[c] = m
+            # (m + est + 32) >> 6 in float64, exact: AVX2 converts float64 to int32 and has no
+            # arithmetic shift of 64-bit lanes, so int64 steps here ran a pixel at a time
+            pr[c] = np.int32(np.floor((np.float64(m) + np.float64(er[c]) + _HALF) * (1.0 / (1 << _SCALE))))
+            orow[c] = nn == 0
             unseen += nn == 0
     if unseen:
         for r in range(h):
             rr = min(max(r - dy, 0), h - 1)
             for c in range(w):
                 if n[r, c] == 0:
-                    m = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
-                    m64[r, c] = m
-                    p[r, c] = (m + est[r, c] + _HALF) >> _SCALE
+                    moved = np.int64(last[rr, min(max(c - dx, 0), w - 1)])
+                    m64[r, c] = moved
+                    p[r, c] = (moved + est[r, c] + _HALF) >> _SCALE
     for i in range(defects.size):
         r = defects[i] // w
         c = defects[i] % w
@@ -281,32 +284,39 @@ def learn_and_push(f: np.ndarray, m64: np.ndarray, other: np.ndarray, defect: np
     """The pattern learns frame ``f``'s residual against the scene (``n`` frames learned, this
     one included) and ``est`` becomes the new estimate; then ``64 f - est`` (0 at a defect)
     goes into ``kept`` and onto the window's canvas slices ``wsum``/``wcount``. Branch-free
-    passes (the masks multiply), so they vectorise."""
+    passes (the masks select), so they vectorise."""
     h, w = f.shape
     for r in range(h):
+        fr, mr, orow, sums = f[r], m64[r], other[r], pixsum[r]
         for c in range(w):
-            keep = np.int64(1 - np.int64(other[r, c]))
-            e = (np.int64(f[r, c]) << _SCALE) - m64[r, c]
-            e = min(max(e, -_CLIP), _CLIP) * keep
-            pixsum[r, c] += e
+            keep = not orow[c]
+            e = (np.int64(fr[c]) << _SCALE) - mr[c]
+            e = min(max(e, -_CLIP), _CLIP) if keep else np.int64(0)
+            sums[c] += e
             colsum[c] += e
             colcnt[c] += keep
     col = np.zeros(w, np.int64)
+    col_f = np.zeros(w)  # col and n * col in float64 (exact), so the pixel pass converts int32 alone
+    col_n = np.zeros(w)
     for c in range(w):
         if colcnt[c] > 0:
             col[c] = (colsum[c] + colcnt[c] // 2) // colcnt[c]
+        col_f[c] = np.float64(col[c])
+        col_n[c] = np.float64(n * col[c])
     # floor division by n + shrink, in float64: exact while |numerator| < 2**53 (a quotient that
     # is not an integer is at least 1/div from one, beyond float64's rounding there), and a
-    # pipelined division where an int64 one takes ~40 cycles a pixel
+    # pipelined division where an int64 one takes ~40 cycles a pixel. The estimate fits int32
+    # (the pattern's array), and AVX2 converts float64 to int32 eight lanes at a time, not int64
     div = np.float64(n + shrink)
     for r in range(h):
+        fr, sums, er, kr, ws, wc, dr, wr = f[r], pixsum[r], est[r], kept[r], wsum[r], wcount[r], defect[r], weight[r]
         for c in range(w):
-            x = np.int64(np.floor(np.float64(np.int64(pixsum[r, c]) - n * col[c]) / div)) + col[c]
-            est[r, c] = x
-            v = ((np.int64(f[r, c]) << _SCALE) - x) * np.int64(1 - np.int64(defect[r, c]))
-            kept[r, c] = v
-            wsum[r, c] += v
-            wcount[r, c] += weight[r, c] if use_weight else 1
+            x = np.int32(np.floor((np.float64(sums[c]) - col_n[c]) / div) + col_f[c])
+            er[c] = x
+            v = np.int32(0) if dr[c] else np.int32((fr[c] << _SCALE) - x)
+            kr[c] = v
+            ws[c] += v
+            wc[c] += wr[c] if use_weight else 1
 
 
 @numba.njit(cache=True, nogil=True)
