@@ -466,34 +466,60 @@ def block_sads(f: np.ndarray, pred: np.ndarray, hb: int, wb: int, block: int) ->
     return sad
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, inline="always")
+def _block_cost(f: np.ndarray, ref: np.ndarray, r0: int, c0: int, vx: int, vy: int, block: int,
+                acc: np.ndarray) -> Any:  # pragma: no cover
+    """The sum over a block of ``min(|f - ref moved by (vx, vy)|, 20)`` where the block and its
+    moved copy lie inside the frame: no clamping, and in float32 (each term an integer up to 20,
+    the sum up to 5,120: exact in any order, which ``reassoc`` lets the sum take), so each row's
+    16 pixels vectorise."""
+    cap = np.float32(20)
+    acc[:] = 0  # a column's sum each: the rows add lane by lane, and one sum at the end
+    for i in range(block):
+        fr, qr = f[r0 + i, c0:c0 + block], ref[r0 + i - vy, c0 - vx:c0 - vx + block]
+        for j in range(block):
+            acc[j] += min(abs(np.float32(fr[j]) - np.float32(qr[j])), cap)
+    return np.int64(acc.sum())
+
+
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
 def block_choices(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, cand: np.ndarray, wb: int, block: int,
                   vectors: np.ndarray) -> np.ndarray:  # pragma: no cover
     """For each candidate block, the first vector (1-based) whose moved previous frame beats the
     scene by more than ``2 * block`` (0: none does); pixels of a partial block repeat the
-    frame's last row or column, the moved frame is edge replicated (encoder only)."""
+    frame's last row or column, the moved frame is edge replicated (encoder only). A block whose
+    pixels and moved pixels all lie inside the frame takes ``_block_cost``, the same sums without
+    the clamping (0.34-0.92 ms a frame on the pans before)."""
     h, w = f.shape
     choice = np.zeros(cand.size, np.uint8)
+    acc = np.empty(block, np.float32)
     for n in range(cand.size):
         r0 = (cand[n] // wb) * block
         c0 = (cand[n] % wb) * block
-        best = 0
-        for i in range(block):
-            xr = min(r0 + i, h - 1)
-            for j in range(block):
-                xc = min(c0 + j, w - 1)
-                best += min(abs(np.int64(f[xr, xc]) - pred[xr, xc]), 20)
+        whole = r0 + block <= h and c0 + block <= w
+        if whole:
+            best = _block_cost(f, pred, r0, c0, 0, 0, block, acc)
+        else:
+            best = 0
+            for i in range(block):
+                xr = min(r0 + i, h - 1)
+                for j in range(block):
+                    xc = min(c0 + j, w - 1)
+                    best += min(abs(np.int64(f[xr, xc]) - pred[xr, xc]), 20)
         for k in range(vectors.shape[0]):
             vx = vectors[k, 0]
             vy = vectors[k, 1]
-            cost = 2 * block
-            for i in range(block):
-                xr = min(r0 + i, h - 1)
-                qr = min(max(r0 + i - vy, 0), h - 1)
-                for j in range(block):
-                    xc = min(c0 + j, w - 1)
-                    qc = min(max(c0 + j - vx, 0), w - 1)
-                    cost += min(abs(np.int64(f[xr, xc]) - prev[qr, qc]), 20)
+            if whole and r0 - vy >= 0 and r0 + block - vy <= h and c0 - vx >= 0 and c0 + block - vx <= w:
+                cost = 2 * block + _block_cost(f, prev, r0, c0, vx, vy, block, acc)
+            else:
+                cost = 2 * block
+                for i in range(block):
+                    xr = min(r0 + i, h - 1)
+                    qr = min(max(r0 + i - vy, 0), h - 1)
+                    for j in range(block):
+                        xc = min(c0 + j, w - 1)
+                        qc = min(max(c0 + j - vx, 0), w - 1)
+                        cost += min(abs(np.int64(f[xr, xc]) - prev[qr, qc]), 20)
             if cost < best:
                 best = cost
                 choice[n] = k + 1

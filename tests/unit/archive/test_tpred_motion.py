@@ -1,6 +1,7 @@
 """tpred's encoder steps compiled from numpy or measured on fewer pixels: the motion search's
-lines, their medians and the shifts' costs, the defect watch's runs, and version 6's costs. Each is
-held to what it replaced: the records depend on every one of these numbers, the same, not close."""
+lines, their medians and the shifts' costs, the defect watch's runs, version 6's correction and its
+costs, and the block modes. Each is held to what it replaced or to the rule in integers: the records
+depend on every one of these numbers, the same, not close."""
 
 from __future__ import annotations
 
@@ -118,3 +119,40 @@ def test_the_correction_is_the_specified_integer_arithmetic(h, w, seed, sx, sy, 
     in_place = pred.copy()
     tpred_kernels.subpel_apply(in_place, m64, est, other, in_place, sx, sy, sl, 64 << 6, False, in_place, m64c)
     assert np.array_equal(in_place, want_p)
+
+
+def _block_choices_reference(f, pred, prev, cand, wb, block, vectors):
+    """The block-mode rule in numpy int64: partial blocks repeat the frame's last row and column,
+    the moved previous frame is edge replicated, the first vector beating the scene by more than
+    ``2 * block`` is taken (1-based), 0 where none does."""
+    h, w = f.shape
+    out = np.zeros(cand.size, np.uint8)
+    for n, b in enumerate(cand.tolist()):
+        r0, c0 = (b // wb) * block, (b % wb) * block
+        rows = np.minimum(np.arange(r0, r0 + block), h - 1)[:, None]
+        cols = np.minimum(np.arange(c0, c0 + block), w - 1)[None, :]
+        fb = f[rows, cols].astype(np.int64)
+        best = int(np.minimum(np.abs(fb - pred[rows, cols]), 20).sum())
+        for k, (vx, vy) in enumerate(vectors.tolist()):
+            qr = np.clip(np.arange(r0, r0 + block) - vy, 0, h - 1)[:, None]
+            qc = np.clip(np.arange(c0, c0 + block) - vx, 0, w - 1)[None, :]
+            cost = 2 * block + int(np.minimum(np.abs(fb - prev[qr, qc]), 20).sum())
+            if cost < best:
+                best, out[n] = cost, k + 1
+    return out
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 70), st.integers(1, 70), st.integers(0, 2**32 - 1), st.sampled_from([30, 65536]))
+def test_block_modes_are_chosen_by_the_rule(h, w, seed, spread):
+    """Blocks inside the frame take the unclamped float32 sums, blocks at its edge or moved past
+    it the clamped ones; both choose as the rule does, ties included (small spreads)."""
+    from thermcap.archive.temporal import _VECTOR_ARRAY, BLOCK
+
+    rng = np.random.default_rng(seed)
+    f = rng.integers(0, spread, (h, w)).astype(np.int32)
+    pred, prev = ((f + rng.integers(-40, 40, (h, w))).astype(np.int32) for _ in range(2))
+    hb, wb = -(-h // BLOCK), -(-w // BLOCK)
+    cand = rng.permutation(hb * wb)[: int(rng.integers(1, hb * wb + 1))].astype(np.int64)
+    got = tpred_kernels.block_choices(f, pred, prev, cand, wb, BLOCK, _VECTOR_ARRAY)
+    assert np.array_equal(got, _block_choices_reference(f, pred, prev, cand, wb, BLOCK, _VECTOR_ARRAY))
