@@ -80,6 +80,13 @@ def compile_all() -> KernelReport:
         if res.error is not None:
             raise RuntimeError(f"the kernels' warm-up session did not record: {res.error}")
         archive_session(rec.session_dir, _FORMATS)
+    # a sequence encoded on its own (bench temporal, a library caller): tpred keeps its own watch
+    # for defects, which the archive's encoder (given the session's defects) does not run
+    from thermcap.archive.temporal import TemporalEncoder
+
+    enc = TemporalEncoder()
+    for frame in SimSource(width=96, height=64, frames=3, paced=False, seed=1).frames():
+        enc.encode(frame.pixels)
     if not detector_kernels.available():
         raise RuntimeError("the detector's kernels do not compile on this machine (the detector keeps numpy)")
     compiled = loaded = kernels = 0
