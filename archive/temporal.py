@@ -738,16 +738,18 @@ def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
 
 
 def _corrected(pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
-               terms: tuple[int, int, int]) -> tuple[np.ndarray, np.ndarray]:
-    """The prediction and the scene mean corrected by version 6's ``terms`` (the inputs where
-    they are zeros), as a decoder corrects them."""
+               terms: tuple[int, int, int]) -> np.ndarray:
+    """Version 6's correction by ``terms``, the encoder's and the decoder's alike: ``pred``
+    corrected in place; returns the corrected scene mean (``m64`` itself where the terms are
+    zeros)."""
     if terms == (0, 0, 0):
-        return pred, m64
+        return m64
     from thermcap.archive import tpred_kernels
 
-    moved, m64c = np.empty_like(pred), np.empty_like(m64)
-    tpred_kernels.subpel_apply(pred, m64, est, other, pred, *terms, SUBPEL_LIMIT, False, moved, m64c)
-    return moved, m64c
+    m64c = np.empty_like(m64)
+    tpred_kernels.subpel_apply(pred, m64, est, other, pred, *terms, SUBPEL_LIMIT, False,
+                               pred, m64c)  # nothing measured: pred stands in for the frame
+    return m64c
 
 
 def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
@@ -964,7 +966,7 @@ class TemporalEncoder:
                     filt, pred, m64 = filtered
                     terms = (0, 0, 0)
                 else:
-                    pred, m64 = _corrected(pred, m64, st.pattern.est, other, terms)
+                    m64 = _corrected(pred, m64, st.pattern.est, other, terms)
                 shift = _SUBPEL.pack(*terms) + filt
             modes = _choose_modes(f, pred, st.prev)
             if modes is not None:
@@ -1107,14 +1109,9 @@ class TemporalDecoder:
     def _apply_terms(self, terms: tuple[int, int, int], pred: np.ndarray, m64: np.ndarray,
                      other: np.ndarray | None) -> np.ndarray:
         """Version 6: ``pred`` corrected in place; returns the corrected scene mean."""
-        from thermcap.archive import tpred_kernels
-
         st = self._state
         assert isinstance(st, _State4) and st.pattern is not None and other is not None
-        m64c = np.empty_like(m64)
-        tpred_kernels.subpel_apply(pred, m64, st.pattern.est, other, pred, *terms, SUBPEL_LIMIT, False,
-                                   pred, m64c)  # the decoder has no frame to measure against: pred stands in
-        return m64c
+        return _corrected(pred, m64, st.pattern.est, other, terms)
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
         from thermcap.archive import tpred_key
