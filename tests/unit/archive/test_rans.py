@@ -8,6 +8,8 @@ import glob
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from tests.conftest import SAMPLES
 from thermcap.archive import rans, tpred_key
@@ -42,6 +44,20 @@ def test_the_encoder_writes_the_bytes_it_always_wrote():
     pinned = ["c1222de4e169250092f8", "91ce86b889a17b3ae292", "0799a42def7f420b2f82", "eb955cad8e21567e4ee1",
               "eeaaa8be7e10f0ce7573"]
     assert [hashlib.sha256(rans.encode(v)).hexdigest()[:20] for v in _pinned_streams()] == pinned
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.integers(-2**31, 2**31 - 1))
+def test_a_values_token_follows_the_hybrid_integer_rule(v):
+    """The rule in ``archive.rans``'s docstring, from Python's own bit length: the coder finds
+    ``k`` with a loop it may shorten, and a wrong ``k`` writes other bytes for the same value."""
+    u = 2 * v if v >= 0 else -2 * v - 1
+    if u < 32:
+        expected = (u, 0, 0)
+    else:
+        k = u.bit_length() - 1
+        expected = (32 + 2 * (k - 5) + ((u >> (k - 1)) & 1), k - 1, u & ((1 << (k - 1)) - 1))
+    assert tuple(int(x) for x in rans.token(np.int64(v))) == expected
 
 
 def test_an_empty_stream_is_empty():
