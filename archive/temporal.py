@@ -1043,12 +1043,9 @@ class TemporalEncoder:
         dy = _best_shift(f, self._prev, 0, min(self.max_shift, 8), other=dx)
         if (dx, dy) == (0, 0):
             return 0, 0
-        sub = (slice(None, None, 4), slice(None, None, 4))
-        h, w = f.shape
-        rows = np.clip(np.arange(0, h, 4) - dy, 0, h - 1)
-        cols = np.clip(np.arange(0, w, 4) - dx, 0, w - 1)
-        still = np.minimum(np.abs(f[sub] - self._prev[sub]), _CLIP).sum()
-        moved = np.minimum(np.abs(f[sub] - self._prev[rows[:, None], cols[None, :]]), _CLIP).sum()  # _shift(prev)[sub]
+        from thermcap.archive import tpred_kernels
+
+        still, moved = tpred_kernels.motion_sums(f, self._prev, dx, dy, 4, _CLIP)  # against _shift(prev)
         return (dx, dy) if moved < still else (0, 0)
 
 

@@ -16,8 +16,8 @@ import numba
 import numpy as np
 
 __all__ = ["apply_modes", "block_choices", "block_sads", "column_medians", "count_runs", "learn_and_push",
-           "line_shift_costs", "merge_residuals", "predict", "residual_costs", "row_costs", "sampled_lines",
-           "shift_costs", "split_residuals", "subpel_apply", "subpel_costs", "subpel_sums", "trim"]
+           "line_shift_costs", "merge_residuals", "motion_sums", "predict", "residual_costs", "row_costs",
+           "sampled_lines", "shift_costs", "split_residuals", "subpel_apply", "subpel_costs", "subpel_sums", "trim"]
 
 _CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
 _HALF = 32
@@ -60,43 +60,55 @@ def predict(s: np.ndarray, n: np.ndarray, last: np.ndarray, dx: int, dy: int, es
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _terms(m64: np.ndarray, r: int, c: int) -> tuple[Any, Any, Any, Any]:  # pragma: no cover
-    """Version 6's terms of the scene mean at a pixel inside the frame's edge: the mean, its
-    central differences halved and its four-neighbour Laplacian quartered (floor each)."""
-    mm = np.int64(m64[r, c])
-    left, right = np.int64(m64[r, c - 1]), np.int64(m64[r, c + 1])
-    up, down = np.int64(m64[r - 1, c]), np.int64(m64[r + 1, c])
-    return mm, (right - left) >> 1, (down - up) >> 1, (4 * mm - left - right - up - down) >> 2
+def _terms(up: np.ndarray, row: np.ndarray, down: np.ndarray, c: int) -> tuple[Any, Any, Any, Any]:  # pragma: no cover
+    """Version 6's terms of the scene mean at column ``c`` of ``row`` (not on the frame's edge),
+    in float32: the mean, its central differences halved and its four-neighbour Laplacian
+    quartered (floor each, the integer shift's rounding). Exact wherever a term can count: a
+    mean in 1/64 counts is within 2**22 (plus the pattern's 8 counts), so a difference, its
+    half and a Laplacian's numerator below 2**24 are integers float32 holds; only a numerator
+    past 2**24 (a saturated pixel among zeros) can round, and its quarter is then 2**22, far
+    beyond the limit every use compares it with. Float32 vectorises eight pixels at a time where
+    numba's int64 (and AVX2's lack of an arithmetic shift of 64-bit lanes) did not."""
+    mm = np.float32(row[c])
+    left, right = np.float32(row[c - 1]), np.float32(row[c + 1])
+    u, d = np.float32(up[c]), np.float32(down[c])
+    gx = np.floor((right - left) * np.float32(0.5))
+    gy = np.floor((d - u) * np.float32(0.5))
+    lap = np.floor((np.float32(4) * mm - left - right - u - d) * np.float32(0.25))
+    return mm, gx, gy, lap
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath={"reassoc"})
 def subpel_sums(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray, limit: int,
                 clip: int) -> np.ndarray:  # pragma: no cover
     """The encoder's least-squares sums for version 6's correction, on every other row and
     column (a quarter of the pixels fit three numbers as well as all of them): over the scene's
     pixels whose three terms stay within ``limit`` and whose residual ``64 f - m64 - est`` within
-    ``clip``, the normal equations' matrix (3x3) and right-hand side (the fourth column). In
-    int64, exact (each product is below 2**26, a frame's sum below 2**48), and branch-free."""
+    ``clip``, the normal equations' matrix (3x3) and right-hand side (the fourth column).
+    Exact: the terms and the residual are float32 integers (``_terms``), each product of two
+    kept ones is below 2**24 (limit 2**12, clip 2**9), and every sum an integer below 2**53 in
+    float64, the same in any order (``reassoc``). Branch-free."""
     h, w = f.shape
-    xx = xy = xl = yy = yl = ll = xr = yr = lr = np.int64(0)
+    xx = xy = xl = yy = yl = ll = xr = yr = lr = np.float64(0)
+    lim, cap = np.float32(limit), np.float32(clip)
     for r in range(1, h - 1, 2):
+        up, row, down, fr, er, o = m64[r - 1], m64[r], m64[r + 1], f[r], est[r], other[r]
         for c in range(1, w - 1, 2):
-            mm, gx, gy, lap = _terms(m64, r, c)
-            res = (np.int64(f[r, c]) << _SCALE) - mm - est[r, c]
-            keep = np.int64(not other[r, c] and abs(gx) < limit and abs(gy) < limit and abs(lap) < limit
-                            and abs(res) < clip)
+            mm, gx, gy, lap = _terms(up, row, down, c)
+            res = np.float32(fr[c] << _SCALE) - mm - np.float32(er[c])
+            keep = np.float32(not o[c] and abs(gx) < lim and abs(gy) < lim and abs(lap) < lim and abs(res) < cap)
             gx *= keep
             gy *= keep
             lap *= keep
-            xx += gx * gx
-            xy += gx * gy
-            xl += gx * lap
-            yy += gy * gy
-            yl += gy * lap
-            ll += lap * lap
-            xr += gx * res
-            yr += gy * res
-            lr += lap * res
+            xx += np.float64(gx * gx)
+            xy += np.float64(gx * gy)
+            xl += np.float64(gx * lap)
+            yy += np.float64(gy * gy)
+            yl += np.float64(gy * lap)
+            ll += np.float64(lap * lap)
+            xr += np.float64(gx * res)
+            yr += np.float64(gy * res)
+            lr += np.float64(lap * res)
     out = np.empty((3, 4))
     out[0, 0], out[0, 1], out[0, 2], out[0, 3] = xx, xy, xl, xr
     out[1, 0], out[1, 1], out[1, 2], out[1, 3] = xy, yy, yl, yr
@@ -109,17 +121,9 @@ def _corrected_mean(up: np.ndarray, row: np.ndarray, down: np.ndarray, c: int, f
                     lim: Any) -> Any:  # pragma: no cover
     """Version 6's corrected scene mean at column ``c`` of ``row`` (not on the frame's edge), in
     float32: ``mm + ((sx gx + sy gy + sl lap) >> 4)`` where the three terms (``_terms``) stay
-    within the limit, else ``mm``. Exact: a mean in 1/64 counts is below 2**22, so the terms
-    (a Laplacian's numerator below 2**24), a kept correction's sum (below 2**18) and each
-    halving, quartering and division by 16 are exact, and ``floor`` is the integer shift's
-    rounding. Float32 vectorises eight pixels at a time where numba's int64 (and AVX2's lack of
-    an arithmetic shift of 64-bit lanes) did not."""
-    mm = np.float32(row[c])
-    left, right = np.float32(row[c - 1]), np.float32(row[c + 1])
-    u, d = np.float32(up[c]), np.float32(down[c])
-    gx = np.floor((right - left) * np.float32(0.5))
-    gy = np.floor((d - u) * np.float32(0.5))
-    lap = np.floor((np.float32(4) * mm - left - right - u - d) * np.float32(0.25))
+    within the limit, else ``mm``. Exact: a kept correction's sum is below 2**18, and its
+    division by 16 and ``floor`` are the integer shift."""
+    mm, gx, gy, lap = _terms(up, row, down, c)
     ok = abs(gx) < lim and abs(gy) < lim and abs(lap) < lim
     return mm + (np.floor((fx * gx + fy * gy + fl * lap) * np.float32(1 / 16)) if ok else np.float32(0))
 
@@ -354,11 +358,31 @@ def sampled_lines(f: np.ndarray, axis: int, step: int, other: int) -> np.ndarray
             out[i] = f[(i * step - other) % h]
     else:
         out = np.empty(((w + step - 1) // step, h), f.dtype)
+        cols = np.empty(out.shape[0], np.int64)  # the columns taken, worked out once, not a division a pixel
+        for i in range(out.shape[0]):
+            cols[i] = (i * step - other) % w
         for y in range(h):
             row = f[y]
             for i in range(out.shape[0]):
-                out[i, y] = row[(i * step - other) % w]
+                out[i, y] = row[cols[i]]
     return out
+
+
+@numba.njit(cache=True, nogil=True)
+def motion_sums(f: np.ndarray, prev: np.ndarray, dx: int, dy: int, step: int,
+                clip: int) -> tuple[int, int]:  # pragma: no cover
+    """The motion search's last check (encoder only), on every ``step``-th row and column: the
+    sum of ``min(|f - prev|, clip)`` as it stands and with ``prev`` moved by ``(dx, dy)`` (edge
+    replicated). One pass, where numpy's fancy indexing and temporaries took 0.2 ms."""
+    h, w = f.shape
+    still = moved = 0
+    for r in range(0, h, step):
+        fr, pr, qr = f[r], prev[r], prev[min(max(r - dy, 0), h - 1)]
+        for c in range(0, w, step):
+            v = np.int64(fr[c])
+            still += min(abs(v - pr[c]), clip)
+            moved += min(abs(v - qr[min(max(c - dx, 0), w - 1)]), clip)
+    return still, moved
 
 
 @numba.njit(cache=True, nogil=True)

@@ -50,6 +50,23 @@ def test_line_costs_are_the_float_costs(rows, n, spread, seed):
     assert np.array_equal(tpred_kernels.line_shift_costs(x, y, shifts, _CLIP), want)
 
 
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 40), st.integers(-45, 45), st.integers(-45, 45), st.sampled_from([1, 4]),
+       st.sampled_from([3, 40, 65536]), st.integers(0, 2**32 - 1))
+def test_the_motion_checks_sums_are_numpys(h, w, dx, dy, step, spread, seed):
+    """The search's last check: the clipped differences against the previous frame as it is and
+    moved by (dx, dy) with its edges repeated, summed on every ``step``-th row and column, as
+    numpy's fancy indexing summed them; moves past the frame's edge included."""
+    rng = np.random.default_rng(seed)
+    f, prev = (rng.integers(0, spread, (h, w)).astype(np.int32) for _ in range(2))
+    sub = (slice(None, None, step), slice(None, None, step))
+    rows = np.clip(np.arange(0, h, step) - dy, 0, h - 1)
+    cols = np.clip(np.arange(0, w, step) - dx, 0, w - 1)
+    still = int(np.minimum(np.abs(f[sub] - prev[sub]), _CLIP).sum())
+    moved = int(np.minimum(np.abs(f[sub] - prev[rows[:, None], cols[None, :]]), _CLIP).sum())
+    assert tpred_kernels.motion_sums(f, prev, dx, dy, step, _CLIP) == (still, moved)
+
+
 @settings(max_examples=60, deadline=None)
 @given(st.integers(1, 30), st.integers(1, 30), st.integers(0, 2**32 - 1))
 def test_the_defect_watch_counts_runs_as_numpy_did(h, w, seed):
@@ -119,6 +136,52 @@ def test_the_correction_is_the_specified_integer_arithmetic(h, w, seed, sx, sy, 
     in_place = pred.copy()
     tpred_kernels.subpel_apply(in_place, m64, est, other, in_place, sx, sy, sl, 64 << 6, False, in_place, m64c)
     assert np.array_equal(in_place, want_p)
+
+
+def _subpel_sums_reference(f, m64, est, other, limit, clip):
+    """Version 6's least-squares sums as the encoder's rule states them, in numpy int64."""
+    out = np.zeros((3, 4))
+    if f.shape[0] < 3 or f.shape[1] < 3:
+        return out
+    m = m64.astype(np.int64)
+    inner = (slice(1, -1, 2), slice(1, -1, 2))
+    mm = m[1:-1, 1:-1][::2, ::2]
+    left, right = m[1:-1, :-2][::2, ::2], m[1:-1, 2:][::2, ::2]
+    up, down = m[:-2, 1:-1][::2, ::2], m[2:, 1:-1][::2, ::2]
+    gx, gy, lap = (right - left) >> 1, (down - up) >> 1, (4 * mm - left - right - up - down) >> 2
+    res = (f[inner].astype(np.int64) << 6) - mm - est[inner]
+    keep = ~other[inner] & (np.abs(gx) < limit) & (np.abs(gy) < limit) & (np.abs(lap) < limit) & (np.abs(res) < clip)
+    terms = [np.where(keep, t, 0) for t in (gx, gy, lap)]
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = int((terms[i] * terms[j]).sum())
+        out[i, 3] = int((terms[i] * res).sum())
+    return out
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 30), st.integers(0, 2**32 - 1), st.sampled_from([0, 200, 5000, 65535 << 6]),
+       st.sampled_from(["scene", "saturated", "at the clip"]))
+def test_the_corrections_fit_sums_are_the_rules_integers(h, w, seed, spread, kind):
+    """The fit's sums run in float32 terms and float64 sums for speed; they must equal the
+    integers: means up to 65535 counts in 1/64 with the pattern's estimate on top (past 2**22),
+    saturated pixels among zeros (a Laplacian's numerator past 2**24, which float32 rounds, left
+    out by the limit), residuals on either side of the clip, terms beyond the limit, odd sizes."""
+    rng = np.random.default_rng(seed)
+    limit, clip = 64 << 6, 8 << 6
+    base = int(rng.integers(0, (65535 << 6) - min(spread, (65535 << 6) - 1)))
+    m64 = (base + rng.integers(0, spread + 1, (h, w))).clip(0, 65535 << 6)
+    est = rng.integers(-512, 513, (h, w)).astype(np.int64)
+    if kind == "saturated":  # a checkerboard of a saturated mean (plus the estimate) and a negative one
+        board = (np.add.outer(np.arange(h), np.arange(w)) % 2).astype(bool)
+        m64 = np.where(board, (65535 << 6) + 512, -int(rng.integers(0, 513)))
+    f = np.clip(((m64 + est + 32) >> 6) + rng.integers(-12, 13, (h, w)), 0, 65535)
+    if kind == "at the clip":  # the residual 64 f - m64 - est one either side of the clip, or on it
+        m64 = (f << 6) - est - rng.choice([-clip - 1, -clip, -clip + 1, 0, clip - 1, clip, clip + 1], (h, w))
+    other = rng.random((h, w)) < 0.2
+    f, m64, est = f.astype(np.int32), m64.astype(np.int32), est.astype(np.int32)
+    got = tpred_kernels.subpel_sums(f, m64, est, other, limit, clip)
+    assert np.array_equal(got, _subpel_sums_reference(f, m64, est, other, limit, clip))
 
 
 def _block_choices_reference(f, pred, prev, cand, wb, block, vectors):
