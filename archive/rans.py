@@ -103,7 +103,7 @@ def _put(x: Any, t: Any, nb: Any, e: Any, x_max: np.ndarray, rcp: np.ndarray, rs
     # position moved by how many count (the next value's bytes overwrite the rest)
     if pos < 10:
         return x, -1
-    nout = np.int64(x >= xm) + np.int64(x >= (xm << np.uint64(8)))
+    nout = int(x >= xm) + int(x >= (xm << np.uint64(8)))
     out[pos - 1] = np.uint8(x & np.uint64(0xFF))
     out[pos - 2] = np.uint8((x >> np.uint64(8)) & np.uint64(0xFF))
     pos -= nout
