@@ -45,7 +45,6 @@ FILTER_LIMIT = 64 << 6
 PRECISIONS = range(4, 10)
 _CLIP = 8 << 6  # residuals the fit leaves out: something moving on its own
 _ROW_STEP, _COL_STEP = 2, 7  # the fit's pixels: 1/14 of them, within 0.05 % of 1/4's fit
-_BLOCK = 2048  # samples a block of the normal equations: 25 taps of them, 400 KB, stay in L2
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -53,12 +52,14 @@ def _row_taps(line: np.ndarray, c: int, mm: Any, flat: np.ndarray, t: int, nf: i
               centre: bool) -> tuple[int, Any]:  # pragma: no cover
     """One row of a sample's taps into ``flat[t:, nf]`` (the centre's column left out where
     ``centre`` is False): the next tap's row and the span so far. Inlined where it is called, so
-    the five calls compile as five unrolled rows of constant columns."""
+    the five calls compile as five unrolled rows of constant columns. A difference is stored as
+    int16, which holds it wherever the sample is kept (below ``FILTER_LIMIT``, 2**12); a larger
+    one wraps, and its sample is overwritten by the next."""
     for dx in range(-2, 3):
         if centre or dx != 0:
-            d = np.float32(line[c + dx]) - mm
+            d = np.int64(line[c + dx]) - mm
             span = max(span, abs(d))
-            flat[t, nf] = d
+            flat[t, nf] = np.int16(d)
             t += 1
     return t, span
 
@@ -75,8 +76,8 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
     constants (``_row_taps``, inlined), and each sample is written straight into ``flat``'s next
     column (moved to ``detail``'s where it belongs there): 0.93 -> 0.60 ms a 640x512 frame against
     a loop over ``TAPS``' flat offsets through a scratch row (2026-12-06, ninth sitting). The
-    differences in float32, as the samples are kept (exact): 1.71 -> 1.46 ms on an AVX2 machine,
-    where int64's had to be converted one at a time (2026-12-07)."""
+    samples are int16 (``_normal_equations`` says why); a difference goes in by truncation, where
+    float32's conversion from int64 went a value at a time on AVX2."""
     h, w = f.shape
     k = TAPS.shape[0]
     nf = nd = 0
@@ -89,8 +90,8 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
             res = (np.int64(fr[c]) << 6) - q2[c] - er[c]
             if abs(res) >= clip:
                 continue
-            mm = np.float32(q2[c])  # a mean in 1/64 counts is below 2**22: exact, and so is each difference
-            t, span = _row_taps(q0, c, mm, flat, 0, nf, np.float32(0), True)
+            mm = np.int64(q2[c])
+            t, span = _row_taps(q0, c, mm, flat, 0, nf, np.int64(0), True)
             t, span = _row_taps(q1, c, mm, flat, t, nf, span, True)
             t, span = _row_taps(q2, c, mm, flat, t, nf, span, False)
             t, span = _row_taps(q3, c, mm, flat, t, nf, span, True)
@@ -104,20 +105,31 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
     return nf, nd
 
 
-@numba.njit(cache=True, nogil=True, fastmath=True)
-def _normal_equations(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
-    """``X^T X`` and ``X^T y`` over the first ``n`` samples of ``x`` (one row a tap, the last
-    the residual). Every product is an integer below 2**24 and every sum below 2**53, so each is
-    exact in float64 in any order: ``fastmath`` may reorder the sums (and vectorise them) without
-    changing a bit. In blocks of samples that stay in the cache for all 325 sums, and two rows
-    against two at a time: four sums from four loads, where one sum from two loads waited on the
-    cache (0.36 against 0.64 ms for 11,000 samples, 2026-12-07). The samples are float32, which
-    holds each exactly (a difference of two means in 1/64 counts is below 2**22), half the bytes
-    to read; each product is taken in float64."""
+def _block_for(bound: int) -> int:
+    """Samples a block of ``_normal_equations`` for differences below ``bound``: as many as keep
+    a sum of their products within int32 (at most 4,096), in whole vectors of 16. A bound where
+    16 would not fit is refused: the filters' differences are far below it."""
+    block = min(4096, (2**31 - 1) // max(1, bound - 1) ** 2 // 16 * 16)
+    if block < 16:
+        raise ValueError(f"tpred: samples below {bound} do not fit int32 sums of 16")
+    return block
+
+
+@numba.njit(cache=True, nogil=True, boundscheck=False)
+def _normal_equations(x: np.ndarray, n: int, block: int) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover
+    """``X^T X`` and ``X^T y`` over the first ``n`` samples of ``x`` (int16, one row a tap, the
+    last the residual), as float64 holding the exact integers. Integer arithmetic, exact: each
+    product of two samples fits int32, and so does a sum of ``block`` of them (``_block_for``
+    the samples' bound: 128 for the detail filter's differences below 2**12, 4,096 for the flat
+    one's below 2**9); the blocks' sums add in int64. Each step is truncated to int32, which
+    numba would otherwise widen to int64: AVX2 then multiplies and adds 16 samples' pairs in one
+    instruction (``vpmaddwd``) where float64 took four products and their conversions. Two rows
+    against two at a time, four sums from four loads: 0.17-0.20 against 0.32 ms for 11,000
+    samples on a Zen 4, the same numbers (2026-12-08)."""
     k = x.shape[0] - 1
-    acc = np.zeros((k + 1, k + 1))
-    for start in range(0, n, _BLOCK):
-        stop = min(start + _BLOCK, n)
+    acc = np.zeros((k + 1, k + 1), np.int64)
+    for start in range(0, n, block):
+        stop = min(start + block, n)
         m = stop - start
         for i in range(0, k - 1, 2):
             a0 = x[i, start:stop]
@@ -125,24 +137,24 @@ def _normal_equations(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:  
             for j in range(i, k - 1, 2):
                 b0 = x[j, start:stop]
                 b1 = x[j + 1, start:stop]
-                s00 = s01 = s10 = s11 = 0.0
+                s00 = s01 = s10 = s11 = np.int32(0)
                 for q in range(m):
-                    u0, u1, v0, v1 = np.float64(a0[q]), np.float64(a1[q]), np.float64(b0[q]), np.float64(b1[q])
-                    s00 += u0 * v0
-                    s01 += u0 * v1
-                    s10 += u1 * v0
-                    s11 += u1 * v1
+                    u0, u1, v0, v1 = np.int32(a0[q]), np.int32(a1[q]), np.int32(b0[q]), np.int32(b1[q])
+                    s00 = np.int32(s00 + u0 * v0)
+                    s01 = np.int32(s01 + u0 * v1)
+                    s10 = np.int32(s10 + u1 * v0)
+                    s11 = np.int32(s11 + u1 * v1)
                 acc[i, j] += s00
                 acc[i, j + 1] += s01
                 acc[i + 1, j] += s10
                 acc[i + 1, j + 1] += s11
             for j in range(k - 1 if k % 2 else k, k + 1):  # the columns no pair covers
                 b0 = x[j, start:stop]
-                s0 = s1 = 0.0
+                s0 = s1 = np.int32(0)
                 for q in range(m):
-                    v0 = np.float64(b0[q])
-                    s0 += np.float64(a0[q]) * v0
-                    s1 += np.float64(a1[q]) * v0
+                    v0 = np.int32(b0[q])
+                    s0 = np.int32(s0 + np.int32(a0[q]) * v0)
+                    s1 = np.int32(s1 + np.int32(a1[q]) * v0)
                 acc[i, j] += s0
                 acc[i + 1, j] += s1
         if k % 2:  # the last tap's row alone
@@ -150,17 +162,17 @@ def _normal_equations(x: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:  
             a0 = x[i, start:stop]
             for j in range(i, k + 1):
                 b0 = x[j, start:stop]
-                s0 = 0.0
+                s0 = np.int32(0)
                 for q in range(m):
-                    s0 += np.float64(a0[q]) * np.float64(b0[q])
+                    s0 = np.int32(s0 + np.int32(a0[q]) * np.int32(b0[q]))
                 acc[i, j] += s0
     g = np.empty((k, k))
     b = np.empty(k)
     for i in range(k):
         for j in range(i, k):
-            g[i, j] = acc[i, j]
-            g[j, i] = acc[i, j]
-        b[i] = acc[i, k]
+            g[i, j] = np.float64(acc[i, j])
+            g[j, i] = np.float64(acc[i, j])
+        b[i] = np.float64(acc[i, k])
     return g, b
 
 
@@ -267,12 +279,12 @@ def filter_apply(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndar
     return before, after
 
 
-def _solve(x: np.ndarray, n: int) -> tuple[np.ndarray, int] | None:
+def _solve(x: np.ndarray, n: int, bound: int) -> tuple[np.ndarray, int] | None:
     """One filter's coefficients as int8 and their precision, fitted to ``x``'s first ``n``
-    samples; ``None`` where they are too few or too flat to fit 24 numbers."""
+    samples (each below ``bound``); ``None`` where they are too few or too flat to fit 24 numbers."""
     if n < 4 * TAPS.shape[0]:
         return None
-    g, b = _normal_equations(x, n)
+    g, b = _normal_equations(x, n, _block_for(bound))
     diag = g.diagonal()
     if not np.all(diag > 0):
         return None
@@ -298,12 +310,13 @@ def fit(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
     if h < 5 or w < 5:
         return None
     rows = ((h - 4 + _ROW_STEP - 1) // _ROW_STEP) * ((w - 4 + _COL_STEP - 1) // _COL_STEP)
-    flat, detail = np.empty((TAPS.shape[0] + 1, rows), np.float32), np.empty((TAPS.shape[0] + 1, rows), np.float32)
+    flat, detail = np.empty((TAPS.shape[0] + 1, rows), np.int16), np.empty((TAPS.shape[0] + 1, rows), np.int16)
     nf, nd = _samples(f, m64, est, other, FILTER_SPLIT, FILTER_LIMIT, _CLIP, flat, detail)
     coefs = np.zeros((FILTERS, TAPS.shape[0]), np.int8)
     precisions = np.full(FILTERS, PRECISIONS[0], np.int64)
-    for i, (x, n) in enumerate(((flat, nf), (detail, nd))):
-        solved = _solve(x, n)
+    for i, (x, n, bound) in enumerate(((flat, nf, max(FILTER_SPLIT, _CLIP)),
+                                           (detail, nd, max(FILTER_LIMIT, _CLIP)))):
+        solved = _solve(x, n, bound)
         if solved is not None:
             coefs[i], precisions[i] = solved
     if not coefs.any():

@@ -192,16 +192,35 @@ def test_a_damaged_filter_is_refused_with_the_reason(alter, what):
 
 
 @pytest.mark.parametrize("taps", [24, 5, 4, 1])
-@pytest.mark.parametrize("n", [0, 1, 2047, 2048, 2049, 5000])
-def test_the_fits_normal_equations_are_exact(taps, n):
-    """``X^T X`` and ``X^T y`` in float64 equal the integer sums exactly, for every pairing of
-    rows the compiled loop takes (pairs, the column no pair covers, an odd tap left alone) and at
-    the cache blocks' edges."""
-    x = np.random.default_rng(taps * 10_000 + n).integers(-4095, 4096, (taps + 1, 5000)).astype(np.float32)
-    x[-1] = np.random.default_rng(n).integers(-511, 512, 5000)
-    g, b = tpred_filter._normal_equations(x, n)
+@pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 4095, 4096, 4097, 9000])
+@pytest.mark.parametrize("bound", [tpred_filter.FILTER_SPLIT, tpred_filter.FILTER_LIMIT])
+@pytest.mark.parametrize("extreme", [False, True])
+def test_the_fits_normal_equations_are_exact(taps, n, bound, extreme):
+    """``X^T X`` and ``X^T y`` equal the integer sums exactly, for every pairing of rows the
+    compiled loop takes (pairs, the column no pair covers, an odd tap left alone), at the blocks'
+    edges, and with every sample at its bound (one sign, then alternating): a block's sum of
+    products is at its largest there, and one sample more a block would overflow int32."""
+    rng = np.random.default_rng(taps * 10_000 + n)
+    x = rng.integers(1 - bound, bound, (taps + 1, 9000))
+    x[-1] = rng.integers(-511, 512, 9000)
+    if extreme:
+        x[:-1] = (bound - 1) * np.where(rng.random(taps) < 0.5, 1, -1)[:, None]
+        x[-1] = 511
+    g, b = tpred_filter._normal_equations(x.astype(np.int16), n, tpred_filter._block_for(bound))
     exact = x[:, :n].astype(np.int64) @ x[:, :n].T.astype(np.int64)
     assert np.array_equal(g, exact[:taps, :taps]) and np.array_equal(b, exact[:taps, taps])
+
+
+def test_a_block_of_the_normal_equations_stays_within_int32():
+    """The block for a bound: the most samples whose products' sum fits int32, in vectors of 16."""
+    for bound in (tpred_filter.FILTER_SPLIT, tpred_filter.FILTER_LIMIT, 2, 11_585):
+        block = tpred_filter._block_for(bound)
+        assert block % 16 == 0 and 16 <= block <= 4096
+        if block < 4096:
+            assert block * (bound - 1) ** 2 < 2**31 <= (block + 16) * (bound - 1) ** 2
+    assert tpred_filter._block_for(tpred_filter.FILTER_LIMIT) == 128
+    with pytest.raises(ValueError, match="do not fit"):
+        tpred_filter._block_for(11_587)
 
 
 @settings(max_examples=60, deadline=None)
