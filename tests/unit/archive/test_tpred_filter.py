@@ -191,6 +191,48 @@ def test_a_damaged_filter_is_refused_with_the_reason(alter, what):
         _decode_altered(alter)
 
 
+def _samples_reference(f, m64, est, other, split, limit, clip):
+    """The fit's samples as the encoder's rule states them, a pixel at a time in Python ints."""
+    flat, detail = [], []
+    h, w = f.shape
+    for r in range(2, h - 2, 2):
+        for c in range(2, w - 2, 7):
+            res = (int(f[r, c]) << 6) - int(m64[r, c]) - int(est[r, c])
+            if other[r, c] or abs(res) >= clip:
+                continue
+            d = [int(m64[r + dy, c + dx]) - int(m64[r, c]) for dy, dx in tpred_filter.TAPS.tolist()]
+            span = max(abs(x) for x in d)
+            if span < split:
+                flat.append([*d, res])
+            elif span < limit:
+                detail.append([*d, res])
+    return flat, detail
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 40), st.integers(1, 60), st.integers(0, 2**32 - 1), st.floats(0, 1))
+def test_the_fits_samples_are_the_rules(h, w, seed, share):
+    """Every sampled scene pixel whose residual is within the clip, its differences in
+    ``TAPS``' order and its residual, into the flat or the detail samples by its span: spans and
+    residuals on each side of their bounds and on them (``share`` of the means sit at a bound
+    from a common base), differences past int16 (left out), the frame's edges, odd sizes."""
+    split, limit, clip = tpred_filter.FILTER_SPLIT, tpred_filter.FILTER_LIMIT, 512
+    rng = np.random.default_rng(seed)
+    steps = np.array([-40_000, -limit, -limit + 1, -split, -split + 1, 0, split - 1, split, limit - 1, limit])
+    m64 = 2_000_000 + np.where(rng.random((h, w)) < share, rng.choice(steps, (h, w)), rng.integers(-300, 301, (h, w)))
+    f = rng.integers(30_000, 32_000, (h, w))
+    est = (f << 6) - m64 - rng.choice([-clip - 1, -clip, -clip + 1, -7, 0, 9, clip - 1, clip, clip + 1], (h, w))
+    other = rng.random((h, w)) < 0.1
+    f, m64, est = f.astype(np.int32), m64.astype(np.int32), est.astype(np.int32)
+    size = max(1, ((h - 4 + 1) // 2) * ((w - 4 + 6) // 7))
+    flat, detail = np.empty((25, size), np.int16), np.empty((25, size), np.int16)
+    nf, nd = tpred_filter._samples(f, m64, est, other, split, limit, clip, flat, detail)
+    want_flat, want_detail = _samples_reference(f, m64, est, other, split, limit, clip)
+    assert (nf, nd) == (len(want_flat), len(want_detail))
+    assert np.array_equal(flat[:, :nf].T, np.array(want_flat, np.int64).reshape(nf, 25))
+    assert np.array_equal(detail[:, :nd].T, np.array(want_detail, np.int64).reshape(nd, 25))
+
+
 @pytest.mark.parametrize("taps", [24, 5, 4, 1])
 @pytest.mark.parametrize("n", [0, 1, 127, 128, 129, 4095, 4096, 4097, 9000])
 @pytest.mark.parametrize("bound", [tpred_filter.FILTER_SPLIT, tpred_filter.FILTER_LIMIT])
