@@ -601,8 +601,8 @@ class _State4(_State3):
         p = np.empty(shape, np.int32)
         m64 = np.empty(shape, np.int32)
         other = np.empty(shape, bool)
-        tpred_kernels.predict(win.sum[sl], win.count[sl], win.last, dx, dy, pat.est, self.prev, self.defects,
-                              p, m64, other)
+        tpred_kernels.predict(win.sum, win.count, sl[0].start, sl[1].start, win.last, dx, dy, pat.est, self.prev,
+                              self.defects, p, m64, other)
         return p, m64, other  # the mask even where it is all False: every later step takes it as it is
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
@@ -615,7 +615,8 @@ class _State4(_State3):
         kept = np.empty(f.shape, np.int32)
         tpred_kernels.learn_and_push(
             f, m64, np.zeros(f.shape, bool) if other is None else other, self._defect, pat.pixsum, pat.colsum,
-            pat.colcnt, pat.n, pat.SHRINK, pat.est, win.sum[sl], win.count[sl], *self._weight(), kept)
+            pat.colcnt, pat.n, pat.SHRINK, pat.est, win.sum, win.count, sl[0].start, sl[1].start, *self._weight(),
+            kept)
         win.frames.append((kept, win.cx, win.cy))
         win.last = kept
         self.prev = f
@@ -627,7 +628,7 @@ class _State4(_State3):
             old, ox, oy = win.frames.popleft()
             sl = win._at(old.shape, ox, oy)
             assert sl is not None and win.sum is not None and win.count is not None
-            tpred_kernels.trim(win.sum[sl], win.count[sl], old, *self._weight())
+            tpred_kernels.trim(win.sum, win.count, sl[0].start, sl[1].start, old, *self._weight())
 
     def _weight(self) -> tuple[np.ndarray, bool]:
         w = self.window.weight

@@ -219,3 +219,19 @@ def test_block_modes_are_chosen_by_the_rule(h, w, seed, spread):
     cand = rng.permutation(hb * wb)[: int(rng.integers(1, hb * wb + 1))].astype(np.int64)
     got = tpred_kernels.block_choices(f, pred, prev, cand, wb, BLOCK, _VECTOR_ARRAY)
     assert np.array_equal(got, _block_choices_reference(f, pred, prev, cand, wb, BLOCK, _VECTOR_ARRAY))
+
+
+def test_the_windows_passes_read_contiguous_rows():
+    """The window's canvases go to ``predict``, ``learn_and_push`` and ``trim`` whole, with the
+    frame's offset: a slice of them is compiled for any strides, and those passes then ran a
+    pixel at a time (2.5x slower). A pan moves the frame across the canvas, so every call has an
+    offset."""
+    from thermcap.archive.temporal import TemporalEncoder
+    from thermcap.recorder.capture.sources.sim import SimSource
+
+    enc = TemporalEncoder(window=4)  # frames leave the window from the fifth on
+    for frame in SimSource(width=96, height=64, frames=12, paced=False, seed=3, view="patrol").frames():
+        enc.encode(frame.pixels)
+    for kernel in (tpred_kernels.predict, tpred_kernels.learn_and_push, tpred_kernels.trim):
+        assert kernel.signatures
+        assert all(getattr(t, "layout", "C") == "C" for sig in kernel.signatures for t in sig), kernel
