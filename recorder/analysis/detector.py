@@ -333,11 +333,14 @@ class HotSpotDetector:
             cmax = np.maximum(np.maximum(rmx[:, 0::f], rmx[:, 1::f]), np.maximum(rmx[:, 2::f], rmx[:, 3::f]))
         return mean, cmax, padded
 
-    def _opening(self, mean: np.ndarray) -> np.ndarray:
+    def _opening(self, mean: np.ndarray, counts: bool = False) -> np.ndarray:
         """The background: a grey opening (min then max filter) of the cell means wider than any
         target (``max_size``). It removes warm objects but keeps edges such as the horizon, where
-        a smoothed or block background would leave a band of false targets."""
+        a smoothed or block background would leave a band of false targets. On ``counts`` (no
+        NaN) one compiled pass where numba is installed, the same numbers."""
         k = self.max_size // self._F + 1
+        if counts and mean.dtype == np.float32 and detector_kernels.available():
+            return detector_kernels.opening(mean, k)
         return sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
 
     def _too_flat(self, mean: np.ndarray, cmax: np.ndarray, affine: tuple[np.float32, np.float32] | None) -> bool:
@@ -497,7 +500,7 @@ class HotSpotDetector:
         if self._too_flat(cell_mean, cmax, affine):
             return self._answer(dets, per_target, None)
         opened, cell_mean, cmax, excess_cells, cells, hits = self._grid_excess(
-            self._opening(cell_mean), cell_mean, cmax, affine)
+            self._opening(cell_mean, counts=cmax.dtype == np.uint16), cell_mean, cmax, affine)
         if affine is not None:  # on counts; only the grid and the windows looked at are converted
             def celsius(a: np.ndarray) -> np.ndarray:
                 return _affine32(a, *affine)

@@ -67,6 +67,63 @@ def _grid_excess(opened, mean, cmax, scale, offset, thr):
     return opened_t, mean_t, cmax_t, excess, cells, n
 
 @njit(nogil=True, cache=True)
+def _extreme_down(a, k, take_max):  # float32 [h, w] -> the max (or min) over k rows, edges repeated
+    # van Herk / Gil-Werman: blocks of k padded rows, the running extreme forward within each
+    # block (g) and backward (b); the window of k rows from padded row i is op(b[i], g[i + k - 1]).
+    # Three comparisons a value whatever k, each a pass over whole rows (vectorised).
+    h, w = a.shape
+    r = k // 2
+    n = h + k - 1
+    g = np.empty((n, w), np.float32)
+    b = np.empty((n, w), np.float32)
+    for j in range(n):
+        src = a[min(max(j - r, 0), h - 1)]
+        gj = g[j]
+        if j % k == 0:
+            for x in range(w):
+                gj[x] = src[x]
+        elif take_max:
+            gp = g[j - 1]
+            for x in range(w):
+                gj[x] = max(gp[x], src[x])
+        else:
+            gp = g[j - 1]
+            for x in range(w):
+                gj[x] = min(gp[x], src[x])
+    for j in range(n - 1, -1, -1):
+        src = a[min(max(j - r, 0), h - 1)]
+        bj = b[j]
+        if j == n - 1 or (j + 1) % k == 0:
+            for x in range(w):
+                bj[x] = src[x]
+        elif take_max:
+            bn = b[j + 1]
+            for x in range(w):
+                bj[x] = max(bn[x], src[x])
+        else:
+            bn = b[j + 1]
+            for x in range(w):
+                bj[x] = min(bn[x], src[x])
+    out = np.empty((h, w), np.float32)
+    for i in range(h):
+        bi, gi, oi = b[i], g[i + k - 1], out[i]
+        if take_max:
+            for x in range(w):
+                oi[x] = max(bi[x], gi[x])
+        else:
+            for x in range(w):
+                oi[x] = min(bi[x], gi[x])
+    return out
+
+@njit(nogil=True, cache=True)
+def _opening(a, k):  # float32 [h, w] with no NaN -> the k x k minimum filter, then the maximum filter
+    # each separable: the rows' pass, then the columns' as rows of the transpose (and back)
+    m = _extreme_down(a, k, False)
+    t = np.ascontiguousarray(m.T)
+    t = _extreme_down(_extreme_down(t, k, False), k, True)
+    return _extreme_down(np.ascontiguousarray(t.T), k, True)
+
+@njit(nogil=True, cache=True)
 def _box_mean(a, size):  # float32 [h, w] -> float32: scipy's uniform_filter(size, mode="nearest")
     # scipy's own arithmetic, line by line: a running sum in float64 over the edge-extended
     # line, each output that sum / size cast to float32, axis 0 first into a float32 array.

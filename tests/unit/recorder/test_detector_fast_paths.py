@@ -128,6 +128,21 @@ def test_compiled_cell_grid_is_the_strided_one(ch, cw, seed):
 
 
 @needs_numba
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 70), st.integers(1, 70), st.integers(1, 41), st.sampled_from([1, 45, 16383]),
+       st.integers(0, 2**32 - 1))
+def test_compiled_opening_is_the_doubling_windows(h, w, k, spread, seed):
+    """The background's opening by van Herk's blocks equals ``sliding_extreme``'s minimum then
+    maximum to the bit: windows wider than the grid, k = 1, even k, ties (a spread of 1),
+    grids of one row or column."""
+    from thermcap.recorder.analysis.detector import sliding_extreme
+
+    mean = (np.random.default_rng(seed).integers(0, spread + 1, (h, w)) / np.float32(16)).astype(np.float32)
+    want = sliding_extreme(sliding_extreme(mean, k, np.minimum), k, np.maximum)
+    assert np.array_equal(detector_kernels.opening(mean, k), want)
+
+
+@needs_numba
 @settings(max_examples=80, deadline=None)
 @given(st.integers(1, 30), st.integers(1, 30), st.sampled_from([0.036, 0.01, 1.0, 0.0123456]),
        st.sampled_from([-40.0, 0.0, -273.15, 12.3456]), st.sampled_from([5.0, 5.1, 0.3, 1e-3]),
@@ -417,7 +432,7 @@ def test_a_uniform_frame_costs_the_cell_grid_alone(monkeypatch):
     """A wall, fog, the sea, a lens cap: no opening is computed (it was half of a flat frame)."""
     det = HotSpotDetector(LinearModel())
 
-    def no_opening(_mean):
+    def no_opening(_mean, counts=False):
         raise AssertionError("the opening was computed for a frame with no possible candidate")
 
     monkeypatch.setattr(det, "_opening", no_opening)
