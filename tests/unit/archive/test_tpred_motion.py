@@ -235,3 +235,28 @@ def test_the_windows_passes_read_contiguous_rows():
     for kernel in (tpred_kernels.predict, tpred_kernels.learn_and_push, tpred_kernels.trim):
         assert kernel.signatures
         assert all(getattr(t, "layout", "C") == "C" for sig in kernel.signatures for t in sig), kernel
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.integers(1, 30), st.integers(1, 40), st.integers(0, 2**32 - 1),
+       st.sampled_from(["none", "edges", "scattered", "edges and scattered", "all"]))
+def test_the_residuals_split_as_the_mask_says(h, w, seed, where):
+    """The scene's residuals and the others', each in raster order, and the least and greatest
+    residual: rows with no other pixel, with others at their ends only (a pan's uncovered edge),
+    with others inside, and rows of others alone; predictions past the counts' range."""
+    rng = np.random.default_rng(seed)
+    f = rng.integers(0, 65536, (h, w)).astype(np.int32)
+    p = (f + rng.integers(-70_000, 70_001, (h, w))).astype(np.int32)
+    other = np.zeros((h, w), bool)
+    if "edges" in where:
+        other[:, :int(rng.integers(0, w + 1))] = True
+        other[:, w - int(rng.integers(0, w + 1)):] = True
+    if "scattered" in where:
+        other |= rng.random((h, w)) < 0.05
+    if where == "all":
+        other[:] = True
+    scene, rest = np.empty(f.size, np.int32), np.empty(f.size, np.int32)
+    n0, n1, lo, hi = tpred_kernels.split_residuals(f, p, other, scene, rest)
+    res = f.astype(np.int64) - p
+    assert (n0, n1, lo, hi) == (int((~other).sum()), int(other.sum()), int(res.min()), int(res.max()))
+    assert np.array_equal(scene[:n0], res[~other]) and np.array_equal(rest[:n1], res[other])
