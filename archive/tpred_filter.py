@@ -93,7 +93,7 @@ def _samples(f: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.ndarray,
     over the five rows, worked out for every column of the row at once (a pass that vectorises),
     then five of each a sample; only a sample that is kept has its differences written, straight
     into its own array. 0.98 -> 0.67 ms a 640x512 frame on a Zen 4, against a span from each
-    difference in turn, every sample written and the detail ones copied (2026-12-08); the same
+    difference in turn, every sample written and the detail ones copied (2026-12-07); the same
     samples."""
     h, w = f.shape
     nf = nd = 0
@@ -145,7 +145,7 @@ def _normal_equations(x: np.ndarray, n: int, block: int) -> tuple[np.ndarray, np
     numba would otherwise widen to int64: AVX2 then multiplies and adds 16 samples' pairs in one
     instruction (``vpmaddwd``) where float64 took four products and their conversions. Two rows
     against two at a time, four sums from four loads: 0.17-0.20 against 0.32 ms for 11,000
-    samples on a Zen 4, the same numbers (2026-12-08)."""
+    samples on a Zen 4, the same numbers (2026-12-07)."""
     k = x.shape[0] - 1
     acc = np.zeros((k + 1, k + 1), np.int64)
     for start in range(0, n, block):

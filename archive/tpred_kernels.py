@@ -243,7 +243,7 @@ def split_residuals(f: np.ndarray, p: np.ndarray, other: np.ndarray, scene: np.n
     two passes that vectorise; a row with none (most of a still view) goes to ``scene`` whole,
     and a row whose others lie at its ends (the edge a pan uncovers, every row of a moving view)
     in three copies. Only a row with others inside it is sorted a pixel at a time: 0.45 -> 0.21 ms
-    a 640x512 frame, against a branch a pixel on every row (2026-12-08)."""
+    a 640x512 frame, against a branch a pixel on every row (2026-12-07)."""
     h, w = f.shape
     i0 = 0
     i1 = 0
