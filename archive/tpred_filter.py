@@ -14,9 +14,9 @@ split at 4, 6, 11 or 16 counts were each worse (``docs/explanation/tpred.md``, v
 
 Specified in ``archive.temporal``'s docstring (version 8). The decoder's step
 (``filter_apply``) is integer arithmetic in effect; the encoder's fit (``fit``) gathers exact
-integer sums in float64 (each product below 2**24, each sum below 2**53, so any order gives the
-same numbers) and solves a 24x24 system a filter, which only decides the coefficients the record
-carries.
+integer sums (int16 samples, their products summed in int32 blocks and the blocks in int64, so
+any order gives the same numbers) and solves a 24x24 system a filter in float64, which only
+decides the coefficients the record carries.
 """
 
 from __future__ import annotations
