@@ -66,6 +66,10 @@ def _grid_excess(opened, mean, cmax, scale, offset, thr):
             n += hit
     return opened_t, mean_t, cmax_t, excess, cells, n
 
+@njit(nogil=True, cache=True, inline="always")
+def _extreme(x, y, take_max):  # the max (or min) of two values; a loop's take_max is hoisted out of it
+    return max(x, y) if take_max else min(x, y)
+
 @njit(nogil=True, cache=True)
 def _extreme_down(a, k, take_max):  # float32 [h, w] -> the max (or min) over k rows, edges repeated
     # van Herk / Gil-Werman: blocks of k padded rows, the running extreme forward within each
@@ -77,42 +81,28 @@ def _extreme_down(a, k, take_max):  # float32 [h, w] -> the max (or min) over k 
     g = np.empty((n, w), np.float32)
     b = np.empty((n, w), np.float32)
     for j in range(n):
-        src = a[min(max(j - r, 0), h - 1)]
-        gj = g[j]
+        src, gj = a[min(max(j - r, 0), h - 1)], g[j]
         if j % k == 0:
             for x in range(w):
                 gj[x] = src[x]
-        elif take_max:
-            gp = g[j - 1]
-            for x in range(w):
-                gj[x] = max(gp[x], src[x])
         else:
             gp = g[j - 1]
             for x in range(w):
-                gj[x] = min(gp[x], src[x])
+                gj[x] = _extreme(gp[x], src[x], take_max)
     for j in range(n - 1, -1, -1):
-        src = a[min(max(j - r, 0), h - 1)]
-        bj = b[j]
+        src, bj = a[min(max(j - r, 0), h - 1)], b[j]
         if j == n - 1 or (j + 1) % k == 0:
             for x in range(w):
                 bj[x] = src[x]
-        elif take_max:
-            bn = b[j + 1]
-            for x in range(w):
-                bj[x] = max(bn[x], src[x])
         else:
             bn = b[j + 1]
             for x in range(w):
-                bj[x] = min(bn[x], src[x])
+                bj[x] = _extreme(bn[x], src[x], take_max)
     out = np.empty((h, w), np.float32)
     for i in range(h):
         bi, gi, oi = b[i], g[i + k - 1], out[i]
-        if take_max:
-            for x in range(w):
-                oi[x] = max(bi[x], gi[x])
-        else:
-            for x in range(w):
-                oi[x] = min(bi[x], gi[x])
+        for x in range(w):
+            oi[x] = _extreme(bi[x], gi[x], take_max)
     return out
 
 @njit(nogil=True, cache=True)
