@@ -17,30 +17,117 @@ are in ``detector_jit``, imported by ``available()``: importing the detector imp
 
 from __future__ import annotations
 
+import contextlib
+import os
+import subprocess
+import sys
+import threading
 from typing import Any
 
 import numpy as np
 
+from thermcap.recorder.analysis.child_env import child_env
+
 __all__ = ["available", "box_mean", "cell_mean_max", "grid_excess", "mend_bad_pixels", "opening", "region_facts",
-           "warm", "window_components"]
+           "state", "warm", "warm_in_background", "window_components"]
 
 _usable: bool | None = None  # None until the kernels were tried once in this process
 _jit: Any = None  # detector_jit, imported on the first kernel asked for
+#: the kernels this module calls (the helpers they call are compiled into them, not cached apart)
+_ENTRY_POINTS = ("_cell_mean_max", "_grid_excess", "_opening", "_box_mean", "_mend", "_region_facts",
+                 "_window_components")
+_warming: threading.Thread | None = None  # warm_in_background's thread while it loads or compiles
 
 
 def available() -> bool:
     """Whether the compiled passes run here. Tried once, on tiny arrays: a kernel numba cannot
-    compile on this machine means the numpy path, never a detector (or a recording) that fails."""
-    global _usable, _jit
+    compile on this machine means the numpy path, never a detector (or a recording) that fails.
+    While :func:`warm_in_background` is still loading them, False without waiting: the numpy
+    path answers the same, to the bit."""
+    global _usable
+    if _warming is not None:
+        return False
     if _usable is None:
-        try:
-            from thermcap.recorder.analysis import detector_jit
-        except Exception:  # the base install (or a numba that cannot load): the detector's numpy path runs
-            _usable = False
-        else:
-            _jit = detector_jit
-            _usable = _try_kernels()
+        _usable = _load()
     return _usable
+
+
+def state() -> str:
+    """What the detector runs on now: ``"compiled"``, ``"numpy"``, ``"warming"`` (numpy while
+    the kernels load or compile beside it) or ``"untried"``."""
+    if _warming is not None:
+        return "warming"
+    return {None: "untried", True: "compiled", False: "numpy"}[_usable]
+
+
+def warm_in_background() -> None:
+    """Make the compiled passes ready without making a recording wait for a compile: loaded
+    now where numba's cache holds them (a fraction of a second, before the first frame), else
+    compiled beside the recording while the detector answers on its numpy path (the same
+    answers, to the bit) until they run.
+
+    The compile is a process of its own, at a lower priority, that outlives a recording shorter
+    than the compile, so the cache is filled once whatever happens to the recording; this
+    process then loads them from the cache in a thread. Compiling in a thread here held this
+    interpreter's lock for seconds beside the detector, and a recording that ended first took
+    the unfinished compile with it (a first boot, a new container: every short recording
+    compiled again)."""
+    global _usable, _warming
+    if _usable is not None or _warming is not None:
+        return
+    if _cached():
+        _usable = _load()
+        return
+
+    def load() -> None:
+        global _usable, _warming
+        try:
+            ok = _compiled_elsewhere() and _load()
+        except Exception:
+            ok = False
+        _usable, _warming = ok, None
+
+    _warming = threading.Thread(target=load, name="thermcap-detector-kernels", daemon=True)
+    _warming.start()
+
+
+def _cached() -> bool:
+    """Whether numba's cache holds every kernel for this source (its index, stamped with the
+    source file's time), read without compiling. numba has no public call for this; a numba
+    whose internals differ answers False, which costs a compile process, never a wrong answer."""
+    try:
+        from numba.core.registry import CPUDispatcher
+
+        from thermcap.recorder.analysis import detector_jit
+    except Exception:
+        return False
+    try:
+        kernels = [getattr(detector_jit, name) for name in _ENTRY_POINTS]
+        return all(isinstance(k, CPUDispatcher) and k._cache._cache_file._load_index() for k in kernels)
+    except Exception:
+        return False
+
+
+def _compiled_elsewhere() -> bool:
+    """Load-or-compile the kernels into numba's cache in a process of their own (this module's
+    ``main``); True once they are there."""
+    try:
+        proc = subprocess.Popen([sys.executable, "-m", __name__], stdin=subprocess.DEVNULL,
+                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+                                env=child_env())
+    except OSError:
+        return False
+    return proc.wait() == 0
+
+
+def _load() -> bool:
+    global _jit
+    try:
+        from thermcap.recorder.analysis import detector_jit
+    except Exception:  # the base install (or a numba that cannot load): the detector's numpy path runs
+        return False
+    _jit = detector_jit
+    return _try_kernels()
 
 
 def cell_mean_max(padded: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
@@ -114,8 +201,9 @@ def window_components(src: np.ndarray, opened: np.ndarray, boxes: np.ndarray, f:
     background grid in temperatures."""
     assert _jit is not None
     h, w = src.shape
+    # one signature a frame type: numba compiles an F-ordered grid (a transposed opening) apart
     labels, starts, win, lab, box, area = _jit._window_components(
-        src, opened, np.ascontiguousarray(boxes, dtype=np.intp), f, h, w, np.float32(scale), np.float32(offset),
+        src, np.ascontiguousarray(opened), np.ascontiguousarray(boxes, dtype=np.intp), f, h, w, np.float32(scale), np.float32(offset),
         np.float32(thr), min_area)
     out = []
     for i, k, (y0, y1, x0, x1), a in zip(win.tolist(), lab.tolist(), box.tolist(), area.tolist(), strict=True):
@@ -136,7 +224,12 @@ def _try_kernels() -> bool:
                     np.float32(1.0), np.float32(0.0), 5.0)
         mend_bad_pixels(np.zeros((2, 2), np.float32), np.eye(2, dtype=bool), np.array([[0, 0]]))
         region_facts(np.ones((2, 2), bool), np.zeros((2, 2), np.float32), np.zeros((2, 2), np.float32))
-        for src in (np.zeros((8, 8), np.uint16), np.zeros((8, 8), np.float32)):
+        # a frame in the detector process is a read-only view of its shared slot, which numba
+        # compiles apart from a writable array: both, or the first real frame compiles again
+        frozen = np.zeros((8, 8), np.uint16)
+        frozen.flags.writeable = False
+        cell_mean_max(frozen, 4)
+        for src in (np.zeros((8, 8), np.uint16), frozen, np.zeros((8, 8), np.float32)):
             window_components(src, np.zeros((2, 2), np.float32), np.array([[0, 2, 0, 2]]), 4, np.float32(1.0),
                               np.float32(0.0), 5.0, 4)
     except Exception:
@@ -145,6 +238,24 @@ def _try_kernels() -> bool:
 
 
 def warm() -> None:
-    """Load (or, on a machine whose cache has not seen them, compile) the kernels now, before
-    a recording's first frame: a first call otherwise costs that frame up to a second or two."""
+    """Load (or, on a machine whose cache has not seen them, compile) the kernels now and wait
+    for them: ``python -m thermcap.kernels`` and the benches, which want the compiled passes
+    from their first frame. A recording uses :func:`warm_in_background` instead."""
+    thread = _warming
+    if thread is not None:
+        thread.join()
     available()
+
+
+def main() -> int:
+    """``python -m thermcap.recorder.analysis.detector_kernels``: load or compile the kernels
+    into numba's cache on CPU time the recording leaves; exit 0 when they run."""
+    with contextlib.suppress(AttributeError, OSError):  # Linux: only CPU time nobody else wants
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    with contextlib.suppress(OSError):
+        os.nice(19)
+    return 0 if _load() else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -45,6 +45,7 @@ import numpy as np
 
 from thermcap.recorder.analysis import detector_kernels
 from thermcap.recorder.analysis.answers import analyse_one
+from thermcap.recorder.analysis.child_env import child_env
 from thermcap.recorder.analysis.detector import HotSpotDetector
 from thermcap.recorder.frame_heap import FRAME_HEAP_ENV
 
@@ -55,17 +56,13 @@ _START_TIMEOUT_S = 60.0  # an interpreter and scipy on a loaded machine; seconds
 
 
 def _child_env() -> dict[str, str]:
-    """The parent's environment, with its import path: the child must import the same thermcap
-    (a checkout on ``sys.path``, not only an installed copy)."""
-    env = dict(os.environ)
+    env = child_env()
     # the detector's frame-sized temporaries stay in the heap (see recorder.frame_heap)
     for key, value in FRAME_HEAP_ENV.items():
         env.setdefault(key, value)
     # one thread does the child's work: numpy's and scipy's OpenBLAS each started a pool of
     # workers that spun at import, 0.1-0.3 s of CPU before the first frame, for no BLAS call
     env.setdefault("OPENBLAS_NUM_THREADS", "1")
-    paths = [p for p in sys.path if p]
-    env["PYTHONPATH"] = os.pathsep.join(paths + ([env["PYTHONPATH"]] if env.get("PYTHONPATH") else []))
     return env
 
 
@@ -90,6 +87,9 @@ class ProcessRunner:
         self._detector = detector  # this process's copy answers the flat frames (flat_answer)
         self._forget = False  # a frame answered here since the last one sent: the child's tracks go
         self.answered_here = 0
+        #: the child's last word on its compiled passes: {"kernels": detector_kernels.state(),
+        #: "frames_before_kernels": frames answered on numpy while they compiled}
+        self.kernels: dict[str, object] = {}
         self._slot_bytes = max(int(frame_bytes), 16)
         size = self._slot_bytes * slots
         if not hasattr(os, "memfd_create"):
@@ -266,6 +266,7 @@ class ProcessRunner:
                     fut.set_result(result)
             elif msg[0] == "done":
                 self._cpu = float(msg[1])
+                self.kernels = dict(msg[2])
                 break
             else:  # "failed": the child could not set itself up
                 reason = str(msg[1])
@@ -288,7 +289,8 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int, batch: int 
     Results wait to be sent while more frames wait in the socket, up to ``batch`` of them."""
     try:
         detector = pickle.loads(conn.recv_bytes())
-        detector_kernels.warm()
+        detector_kernels.warm_in_background()  # numpy answers until the compiled passes run
+        detector.prime()
     except Exception as exc:
         with contextlib.suppress(Exception):
             conn.send(("failed", f"the detector process could not start: {type(exc).__name__}: {exc}"))
@@ -296,6 +298,7 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int, batch: int 
     conn.send(("ready",))
     cpu0 = time.process_time()
     held: list[tuple[int, object]] = []
+    before_kernels = 0  # frames answered on the numpy path while the kernels were compiled beside it
     while True:
         if held and (len(held) >= batch or not conn.poll(0)):
             _send_results(conn, held)
@@ -309,6 +312,7 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int, batch: int 
         seq, slot, shape, dtype, inline, forget = msg
         if forget:  # frames answered in the recorder since the last one: none held a target
             detector.forget_tracks()
+        before_kernels += detector_kernels.state() == "warming"
         if inline is not None:
             result = analyse_one(detector, inline)
         else:
@@ -319,7 +323,8 @@ def _child_main(conn: Connection, slots: mmap.mmap, slot_bytes: int, batch: int 
         held.append((seq, result))
     if held:
         _send_results(conn, held)
-    conn.send(("done", time.process_time() - cpu0))
+    conn.send(("done", time.process_time() - cpu0, {"kernels": detector_kernels.state(),
+                                                     "frames_before_kernels": before_kernels}))
 
 
 def _send_results(conn: Connection, held: list[tuple[int, object]]) -> None:

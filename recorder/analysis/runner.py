@@ -33,6 +33,9 @@ __all__ = ["DetectorRunner", "ThreadRunner", "Unanalysable", "analyse_one", "sta
 class DetectorRunner(Protocol):
     kind: str  # "process" or "thread": said in the session's timing block
     slots: int  # frames it may hold at once
+    #: once closed: {"kernels": detector_kernels.state(), "frames_before_kernels": frames answered
+    #: on the numpy path while the compiled passes were being built}
+    kernels: dict[str, object]
 
     def submit(self, pixels: np.ndarray, fut: Future, *, wait: bool) -> bool:
         """Hand one frame over. ``wait`` (a source that can wait) blocks for room; otherwise a
@@ -62,6 +65,8 @@ class ThreadRunner:
         self._thread = threading.Thread(target=self._loop, name=name, daemon=True)
         self._tid: int | None = None
         self._cpu = 0.0
+        self.kernels: dict[str, object] = {}  # as ProcessRunner.kernels
+        self._before_kernels = 0
         self._thread.start()
 
     def submit(self, pixels: np.ndarray, fut: Future, *, wait: bool) -> bool:
@@ -88,12 +93,15 @@ class ThreadRunner:
 
     def _loop(self) -> None:
         self._tid = threading.get_native_id()
-        detector_kernels.warm()  # here, not on capture's thread: frames queue (or skip) meanwhile
+        detector_kernels.warm_in_background()  # numpy answers until the compiled passes run
+        self._detector.prime()
         while True:
             item = self._queue.get()
             if item is None:
+                self.kernels = {"kernels": detector_kernels.state(), "frames_before_kernels": self._before_kernels}
                 return
             pixels, fut = item
+            self._before_kernels += detector_kernels.state() == "warming"
             t = time.thread_time()
             result = analyse_one(self._detector, pixels)
             self._cpu += time.thread_time() - t

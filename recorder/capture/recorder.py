@@ -696,7 +696,12 @@ class Recorder:
                 "waited_for_detector_s": round(sum(f.analysis_wait_ns for f in runners) / 1e9, 3),
                 "capped": {rule: sum(f.analysis_capped.get(rule, 0) for f in runners)
                            for rule in sorted({r for f in runners for r in f.analysis_capped})},
-                "failure": failures[0] if failures else None}
+                "failure": failures[0] if failures else None,
+                # "compiled", or "warming" when numba compiled them beside this recording (a first
+                # run on the machine) and the frames before them were answered on numpy
+                "kernels": runners[0].runner.kernels.get("kernels") if runners[0].runner else None,
+                "frames_before_kernels": sum(int(f.runner.kernels.get("frames_before_kernels", 0))  # type: ignore[call-overload]
+                                             for f in runners if f.runner)}
 
     def _offer_analysis(self, feed: CameraFeed, frame: CapturedFrame) -> None:
         fut: Future = Future()

@@ -20,6 +20,7 @@ def _size(path: Path) -> int:
 
 def describe_session(session_dir: Path) -> dict[str, Any]:
     """What ``ls`` says of one session, from its session.json and manifest (no frame is read)."""
+    from thermcap.recorder.icd.names import iso_utc
     from thermcap.recorder.storage.layout import SessionLayout
 
     layout = SessionLayout.of(session_dir)
@@ -33,15 +34,27 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
         manifest = {"formats": {}, "unreadable": True}
     formats = {f: ("damaged" if e.get("damaged") else "verified" if e.get("verified") else "unverified")
                for f, e in (manifest.get("formats") or {}).items()}
-    start, end = meta.get("started_ns"), meta.get("ended_ns")
+    start, end = _span(meta)
     state = meta.get("status") or "unknown"
     if layout.active_segments():
         state = "recording" if layout.lock.exists() else "interrupted (run `thermcap recover`)"
-    return {"id": meta.get("session_id") or session_dir.name, "start": meta.get("started"),
+    return {"id": meta.get("session_id") or session_dir.name, "start": iso_utc(start) if start else meta.get("started"),
             "duration_s": round((end - start) / 1e9, 3) if start and end else None,
             "frames": meta.get("frames_written", meta.get("frames")), "state": state,
             "source_deleted": not layout.segments() and bool(formats), "archived": formats,
             "bytes": _size(session_dir)}
+
+
+def _span(meta: dict[str, Any]) -> tuple[int | None, int | None]:
+    """The session's first and last message times, as ``info`` measures its span, from the
+    segments the recorder listed; the process's start and end only where it listed none (a
+    session still recording, or one ended by a kill). The process's own times hold its start-up
+    (a detector process, a first compile) and would make a 2 s recording look longer."""
+    segments = [s for s in meta.get("segments") or [] if isinstance(s, dict) and s.get("start_ns")
+                and s.get("end_ns")]
+    if segments:
+        return min(int(s["start_ns"]) for s in segments), max(int(s["end_ns"]) for s in segments)
+    return meta.get("started_ns"), meta.get("ended_ns")
 
 
 @cli.command("ls")
