@@ -203,8 +203,8 @@ def window_components(src: np.ndarray, opened: np.ndarray, boxes: np.ndarray, f:
     h, w = src.shape
     # one signature a frame type: numba compiles an F-ordered grid (a transposed opening) apart
     labels, starts, win, lab, box, area = _jit._window_components(
-        src, np.ascontiguousarray(opened), np.ascontiguousarray(boxes, dtype=np.intp), f, h, w, np.float32(scale), np.float32(offset),
-        np.float32(thr), min_area)
+        src, np.ascontiguousarray(opened), np.ascontiguousarray(boxes, dtype=np.intp), f, h, w, np.float32(scale),
+        np.float32(offset), np.float32(thr), min_area)
     out = []
     for i, k, (y0, y1, x0, x1), a in zip(win.tolist(), lab.tolist(), box.tolist(), area.tolist(), strict=True):
         cy0, _, cx0, cx1 = (int(v) for v in boxes[i])
