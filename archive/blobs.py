@@ -13,6 +13,7 @@ from typing import Any
 import obstore
 from obstore.store import LocalStore, S3Store
 
+from thermcap.recorder.install_hint import install_command
 from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["BlobStore", "open_store", "stored_digest", "upload_archive"]
@@ -194,7 +195,7 @@ def _upload_references(store: BlobStore, root: Path, session_dir: Path, h5_keys:
     try:
         from thermcap.archive.hdf5_refs import REFS_SUFFIX, hdf5_references
     except ImportError as exc:
-        return {"skipped": f"kerchunk is not installed ({exc.name}); pip install 'thermcap[python]'"}
+        return {"skipped": f"kerchunk is not installed ({exc.name}); {install_command('python')}"}
     import json
     import tempfile
 

@@ -3,6 +3,8 @@ that needs more says what to install instead of a traceback."""
 
 from __future__ import annotations
 
+from thermcap.recorder.install_hint import install_command
+
 __all__ = ["EXTRA_FOR", "missing_extra_message"]
 
 #: a module's top-level import name -> (the distribution, the extra that installs it)
@@ -19,7 +21,7 @@ EXTRA_FOR: dict[str, tuple[str, str]] = {
     "matplotlib": ("matplotlib", "reports"), "foxglove": ("foxglove-sdk", "live"),
     "xarray": ("xarray", "python"), "dask": ("dask", "python"), "zarr": ("zarr", "python"),
     "fsspec": ("fsspec", "python"), "aiohttp": ("aiohttp", "python"), "httpx": ("httpx", "python"),
-    "kerchunk": ("kerchunk", "python"), "s3fs": ("s3fs", "python"),
+    "kerchunk": ("kerchunk", "python"),
 }
 
 
@@ -32,4 +34,4 @@ def missing_extra_message(exc: ModuleNotFoundError, command: str | None = None) 
     dist, extra = EXTRA_FOR[top]
     what = f"`thermcap {command}`" if command else "this"
     return (f"{what} needs {dist}, which the base install leaves out; install the extra: "
-            f"pip install 'thermcap[{extra}]' (or 'thermcap[all]' for every command)")
+            f"{install_command(extra)} (or the extra all, for every command)")

@@ -25,6 +25,8 @@ import time
 from dataclasses import asdict, dataclass
 from types import ModuleType
 
+from thermcap.recorder.install_hint import install_command
+
 __all__ = ["KernelReport", "compile_all", "kernel_modules", "main"]
 
 _MODULES = ("thermcap.archive.rans", "thermcap.archive.tpred_kernels", "thermcap.archive.tpred_key",
@@ -109,7 +111,7 @@ def main(argv: list[str] | None = None) -> int:
         report = compile_all()
     except ImportError as exc:
         print(f"thermcap: nothing to compile: numba is not installed ({exc}); "
-              "`pip install 'thermcap[archive]'` brings it", file=sys.stderr)
+              f"`{install_command('archive')}` brings it", file=sys.stderr)
         return 1
     except RuntimeError as exc:
         print(f"thermcap: {exc}", file=sys.stderr)

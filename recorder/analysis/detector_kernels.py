@@ -18,17 +18,20 @@ are in ``detector_jit``, imported by ``available()``: importing the detector imp
 from __future__ import annotations
 
 import contextlib
+import fcntl
 import os
 import subprocess
 import sys
+import tempfile
 import threading
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from thermcap.recorder.analysis.child_env import child_env
 
-__all__ = ["available", "box_mean", "cell_mean_max", "grid_excess", "mend_bad_pixels", "opening", "region_facts",
+__all__ = ["available", "box_mean", "cached", "cell_mean_max", "grid_excess", "mend_bad_pixels", "opening", "region_facts",
            "state", "warm", "warm_in_background", "window_components"]
 
 _usable: bool | None = None  # None until the kernels were tried once in this process
@@ -36,7 +39,9 @@ _jit: Any = None  # detector_jit, imported on the first kernel asked for
 #: the kernels this module calls (the helpers they call are compiled into them, not cached apart)
 _ENTRY_POINTS = ("_cell_mean_max", "_grid_excess", "_opening", "_box_mean", "_mend", "_region_facts",
                  "_window_components")
-_warming: threading.Thread | None = None  # warm_in_background's thread while it loads or compiles
+_warming: threading.Thread | None = None
+#: held by the process compiling the kernels into the cache (``main``), until it exits
+_COMPILE_LOCK = Path(tempfile.gettempdir()) / "thermcap-detector-kernels.lock"  # warm_in_background's thread while it loads or compiles
 
 
 def available() -> bool:
@@ -75,7 +80,7 @@ def warm_in_background() -> None:
     global _usable, _warming
     if _usable is not None or _warming is not None:
         return
-    if _cached():
+    if cached():
         _usable = _load()
         return
 
@@ -91,10 +96,14 @@ def warm_in_background() -> None:
     _warming.start()
 
 
-def _cached() -> bool:
+def cached() -> bool:
     """Whether numba's cache holds every kernel for this source (its index, stamped with the
-    source file's time), read without compiling. numba has no public call for this; a numba
-    whose internals differ answers False, which costs a compile process, never a wrong answer."""
+    source file's time), read without compiling, and no compile process is still adding to it
+    (a second recording started while the first one's compile runs). numba has no public call
+    for this; a numba whose internals differ answers False, which costs a compile process,
+    never a wrong answer."""
+    if _compiling_now():
+        return False
     try:
         from numba.core.registry import CPUDispatcher
 
@@ -102,10 +111,25 @@ def _cached() -> bool:
     except Exception:
         return False
     try:
-        kernels = [getattr(detector_jit, name) for name in _ENTRY_POINTS]
+        kernels: list[Any] = [getattr(detector_jit, name) for name in _ENTRY_POINTS]
         return all(isinstance(k, CPUDispatcher) and k._cache._cache_file._load_index() for k in kernels)
     except Exception:
         return False
+
+
+def _compiling_now() -> bool:
+    """Whether a compile process (``main``) holds the lock: it holds it until it exits."""
+    try:
+        fd = os.open(_COMPILE_LOCK, os.O_RDONLY | os.O_CREAT, 0o644)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)  # and with it our lock
+    return False
 
 
 def _compiled_elsewhere() -> bool:
@@ -254,6 +278,9 @@ def main() -> int:
         os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
     with contextlib.suppress(OSError):
         os.nice(19)
+    # one compile at a time: a second waits, then loads what the first put in the cache
+    fd = os.open(_COMPILE_LOCK, os.O_RDONLY | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX)
     return 0 if _load() else 1
 
 

@@ -18,6 +18,7 @@ from typing import Any
 
 from thermcap.recorder.bench.cameras import measure_recording
 from thermcap.recorder.capture.sources.sim import SimSource
+from thermcap.recorder.install_hint import install_command
 
 __all__ = ["bench_live", "print_table"]
 
@@ -70,7 +71,7 @@ def bench_live(seconds: float = 10.0, viewers: int = 2, live_fps: float = 60.0, 
         import websockets  # noqa: F401  (the viewers need it)
     except ImportError as exc:
         raise RuntimeError("bench live needs the websockets package for its viewers "
-                           "(pip install 'thermcap[test]')") from exc
+                           f"({install_command('test')})") from exc
     from thermcap.recorder.live.branch import LiveBranch
     from thermcap.recorder.live.publisher import LiveOptions
 

@@ -150,3 +150,22 @@ def bench_live_cmd(seconds: float, viewers: int, live_fps: float, live_width: in
     click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
     if res["with_viewers"]["frames_dropped"]:
         sys.exit(1)
+
+
+@bench.command("first-record")
+@click.option("--duration", type=Number(minimum=0.1, maximum=3600, unit="s"), default=2.0, show_default=True,
+              help="Seconds each recording lasts.")
+@click.option("--rounds", type=Number(minimum=1, maximum=20, integer=True), default=3, show_default=True,
+              help="Cold/warm pairs (the median is reported).")
+@click.option("--size", default="640x512", show_default=True, help="The simulator's frame size, WIDTHxHEIGHT.")
+@json_option
+def bench_first_record_cmd(duration: float, rounds: int, size: str, as_json: bool) -> None:
+    """The first recording on an empty numba cache (a first boot) against the next one."""
+    from thermcap.recorder.bench.first_record import bench_first_record, print_lines
+
+    try:
+        w, h = (int(v) for v in size.lower().split("x"))
+    except ValueError:
+        fail(f"--size must look like 640x512, got {size!r}")
+    res = bench_first_record(duration, rounds, (w, h))
+    click.echo(json.dumps(res, indent=2) if as_json else "\n".join(print_lines(res)))

@@ -21,6 +21,7 @@ import numpy as np
 import tifffile
 
 from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.install_hint import install_command
 
 __all__ = ["gcp_tags", "gdal_metadata_xml", "geotransform_tags", "utm_tags", "write_cog", "write_temperature_tiff"]
 
@@ -99,7 +100,7 @@ def write_cog(path: str | Path, data: np.ndarray, *, geotransform: Sequence[floa
         from rasterio.crs import CRS
         from rasterio.transform import Affine
     except ImportError:
-        raise ThermcapError("a Cloud-Optimized GeoTIFF needs rasterio (pip install 'thermcap[geo]')") from None
+        raise ThermcapError(f"a Cloud-Optimized GeoTIFF needs rasterio ({install_command('maps')})") from None
     h, w = data.shape
     e0, a, b, n0, c, d = geotransform
     profile: dict[str, Any] = {"driver": "COG", "width": w, "height": h, "count": 1, "dtype": str(data.dtype),
@@ -123,7 +124,7 @@ def _write_cog(target: str | Path | io.BytesIO, data: np.ndarray, *, units: str,
         from rasterio.crs import CRS
         from rasterio.errors import NotGeoreferencedWarning
     except ImportError:
-        raise ThermcapError("a Cloud-Optimized GeoTIFF needs rasterio (pip install 'thermcap[geo]')") from None
+        raise ThermcapError(f"a Cloud-Optimized GeoTIFF needs rasterio ({install_command('maps')})") from None
     h, w = data.shape
     profile: dict[str, Any] = {"driver": "COG", "width": w, "height": h, "count": 1, "dtype": "float32",
                                "nodata": float("nan"), "compress": "DEFLATE", "predictor": 3,

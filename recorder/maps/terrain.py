@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.install_hint import install_command
 
 __all__ = ["Dem", "DemError"]
 
@@ -46,7 +47,7 @@ class Dem:
         try:
             import rasterio
         except ImportError as exc:  # pragma: no cover - the geo extra
-            raise DemError("a DEM needs rasterio (pip install 'thermcap[geo]')") from exc
+            raise DemError(f"a DEM needs rasterio ({install_command('maps')})") from exc
         try:
             with rasterio.open(path) as src:
                 band = src.read(1, masked=True).astype(np.float64)

@@ -1,6 +1,6 @@
 """The quality report as a person reads it: an HTML page and a PDF (matplotlib), both with the
 requirements table, the stability series and the flat field. matplotlib is imported only here
-(``pip install 'thermcap[report]'``)."""
+(the ``reports`` extra)."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ from typing import Any
 
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.exports.percentiles import percentiles
+from thermcap.recorder.install_hint import install_command
 from thermcap.recorder.reports.quality import QualityReport
 
 __all__ = ["write_inspection_report", "write_quality_report"]
@@ -26,7 +27,7 @@ def _figures(rep: QualityReport) -> list[Any]:
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError as exc:  # pragma: no cover - the report extra
-        raise ThermcapError("the quality report's PDF and plots need matplotlib (pip install 'thermcap[report]')") \
+        raise ThermcapError(f"the quality report's PDF and plots need matplotlib ({install_command('reports')})") \
             from exc
     figs = []
     if rep.series["t_s"]:

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.install_hint import install_command
 from thermcap.recorder.storage.digest import file_sha256
 
 __all__ = ["RECEIPTS_PREFIX", "DirTarget", "S3Target", "Target", "receipt_key"]
@@ -58,7 +59,7 @@ class S3Target:
             import boto3
             from botocore.config import Config
         except ImportError as exc:  # pragma: no cover - the sync extra
-            raise ThermcapError("sync to a bucket needs boto3 (pip install 'thermcap[sync]')") from exc
+            raise ThermcapError(f"sync to a bucket needs boto3 ({install_command('sync')})") from exc
         self.bucket, self.prefix = bucket, prefix.strip("/")
         self.name = f"s3://{bucket}/{self.prefix}" if self.prefix else f"s3://{bucket}"
         # credentials from AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY (boto3's own chain), never logged;

@@ -18,6 +18,7 @@ pytestmark = pytest.mark.system
 
 def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweedfs):
     import imagecodecs.numcodecs
+    import obstore.fsspec
     import xarray as xr
 
     root = make_root(tmp_path / "root")
@@ -32,8 +33,11 @@ def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweed
     (entry,) = manifest["upload"]["references"].values()
     refs_key = entry["references"]
     assert refs_key.endswith(".h5.refs.json")
-    s3 = {"key": seaweedfs["AWS_ACCESS_KEY_ID"], "secret": seaweedfs["AWS_SECRET_ACCESS_KEY"],
-          "client_kwargs": {"endpoint_url": seaweedfs["endpoint"]}}
+    # s3:// through obstore's fsspec adapter: the archive's own S3 client, not a second one
+    obstore.fsspec.register("s3", asynchronous=True)
+    s3 = {"config": {"endpoint": seaweedfs["endpoint"], "access_key_id": seaweedfs["AWS_ACCESS_KEY_ID"],
+                     "secret_access_key": seaweedfs["AWS_SECRET_ACCESS_KEY"], "region": "us-east-1"},
+          "client_options": {"allow_http": True}}
     imagecodecs.numcodecs.register_codecs()  # the frames' SZIP chunks
     ds = xr.open_dataset("reference://", engine="zarr", backend_kwargs={
         "consolidated": False,

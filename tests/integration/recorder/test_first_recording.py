@@ -18,7 +18,7 @@ pytestmark = pytest.mark.integration
 
 
 def _cached(env: dict[str, str]) -> bool:
-    code = "from thermcap.recorder.analysis import detector_kernels as k; print(k._cached())"
+    code = "from thermcap.recorder.analysis import detector_kernels as k; print(k.cached())"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     return r.stdout.strip() == "True"
 
