@@ -31,17 +31,17 @@ import numpy as np
 
 from thermcap.recorder.analysis.child_env import child_env
 
-__all__ = ["available", "box_mean", "cached", "cell_mean_max", "grid_excess", "mend_bad_pixels", "opening", "region_facts",
-           "state", "warm", "warm_in_background", "window_components"]
+__all__ = ["available", "box_mean", "cached", "cell_mean_max", "grid_excess", "mend_bad_pixels", "opening",
+           "region_facts", "state", "warm", "warm_in_background", "window_components"]
 
 _usable: bool | None = None  # None until the kernels were tried once in this process
 _jit: Any = None  # detector_jit, imported on the first kernel asked for
 #: the kernels this module calls (the helpers they call are compiled into them, not cached apart)
 _ENTRY_POINTS = ("_cell_mean_max", "_grid_excess", "_opening", "_box_mean", "_mend", "_region_facts",
                  "_window_components")
-_warming: threading.Thread | None = None
+_warming: threading.Thread | None = None  # warm_in_background's thread while it loads or compiles
 #: held by the process compiling the kernels into the cache (``main``), until it exits
-_COMPILE_LOCK = Path(tempfile.gettempdir()) / "thermcap-detector-kernels.lock"  # warm_in_background's thread while it loads or compiles
+_COMPILE_LOCK = Path(tempfile.gettempdir()) / "thermcap-detector-kernels.lock"
 
 
 def available() -> bool:
@@ -112,7 +112,8 @@ def cached() -> bool:
         return False
     try:
         kernels: list[Any] = [getattr(detector_jit, name) for name in _ENTRY_POINTS]
-        return all(isinstance(k, CPUDispatcher) and k._cache._cache_file._load_index() for k in kernels)
+        return all(isinstance(k, CPUDispatcher) and getattr(k, "_cache")._cache_file._load_index()  # noqa: B009
+                   for k in kernels)
     except Exception:
         return False
 
