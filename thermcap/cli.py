@@ -112,6 +112,7 @@ def cut(session: str, root: str, start: str | None, end: str | None, topics: str
     from pathlib import Path
 
     from thermcap.cut import cut_session
+    from thermcap.recorder.exceptions import McapFileError
     from thermcap.recorder.storage.reader import resolve_session
 
     try:
@@ -120,6 +121,8 @@ def cut(session: str, root: str, start: str | None, end: str | None, topics: str
                           [t for t in (topics or "").split(",") if t] or None)
     except (ValueError, FileExistsError) as exc:
         fail(str(exc))
+    except McapFileError as exc:
+        fail(f"{exc}; nothing was written (`thermcap scrub` and `thermcap recover` say what the session still holds)")
     if as_json:
         click.echo(json.dumps({"out": str(res.out), "bytes": res.bytes, "start_ns": res.start_ns,
                                "end_ns": res.end_ns, "topics": res.topics}, indent=2))

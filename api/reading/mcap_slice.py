@@ -1,8 +1,10 @@
 """A valid, indexed MCAP of one time range and some topics, streamed in constant memory.
 
 From the MCAP source, chunks that lie wholly inside the range (and topic set) are copied byte
-for byte with their message indexes, no decompression; only the chunks at the range's edges
-are re-read message by message. When the source was deleted after archiving, the frames and
+for byte with their message indexes, each checked against its CRC-32 first (decompressed, not
+decoded); only the chunks at the range's edges are re-read message by message. A damaged
+chunk stops the export with ``McapFileError`` naming it: never a copy of bytes that no longer
+hold. When the source was deleted after archiving, the frames and
 sidecars come from the archive instead.
 """
 
@@ -13,16 +15,19 @@ import hashlib
 import heapq
 import io
 import json
+import struct
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, BinaryIO, cast
 
 from mcap.data_stream import ReadDataStream
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import breakup_chunk
 
+from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.rosmsg import SIDECAR
 from thermcap.recorder.icd.topics import (
     IMAGE_SCHEMA_NAME,
@@ -31,6 +36,7 @@ from thermcap.recorder.icd.topics import (
     TOPIC_METADATA,
     image_message_parts,
 )
+from thermcap.recorder.storage.chunks import checked_chunk
 from thermcap.recorder.storage.reader import session_segments
 from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
@@ -85,8 +91,11 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
     kept = _Kept(writer)
     for seg in segs:
         with open(seg, "rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            summary = reader.get_summary()
+            try:
+                reader = make_reader(f, validate_crcs=True)
+                summary = reader.get_summary()
+            except (McapError, ValueError, struct.error, UnicodeDecodeError, MemoryError) as exc:
+                raise McapFileError(f"{seg}: its summary does not read ({type(exc).__name__}: {exc})") from exc
             if summary is None:
                 continue
             # Register this segment's schemas and channels in the output (same order, same ids).
@@ -114,8 +123,12 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
                     continue
                 inside = (t0 is None or ci.message_start_time >= t0) and (t1 is None or ci.message_end_time < t1)
                 f.seek(ci.chunk_start_offset)
+                where = f"{seg}: chunk at byte {ci.chunk_start_offset}"
                 if inside and same_ids:
                     record = f.read(ci.chunk_length + ci.message_index_length)
+                    # copied without decoding its messages, but never unchecked: a chunk whose
+                    # records no longer match its CRC-32 stops the export, named
+                    checked_chunk(memoryview(record)[:ci.chunk_length], where)
                     counts = {}
                     for cid, off in ci.message_index_offsets.items():
                         rel = off - ci.chunk_start_offset
@@ -123,7 +136,7 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
                         counts[cid] = len(MessageIndex.read(stream).records)
                     writer.add_raw_chunk(record, ci, counts)
                 else:
-                    for msg in _chunk_messages(f.read(ci.chunk_length)):
+                    for msg in _chunk_messages(f.read(ci.chunk_length), where):
                         if msg.channel_id in wanted and (t0 is None or msg.log_time >= t0) \
                                 and (t1 is None or msg.log_time < t1):
                             writer.add_message(wanted[msg.channel_id], msg.log_time, msg.data, msg.publish_time,
@@ -133,10 +146,13 @@ def _from_mcap(writer: ChunkedWriter, sink: _Sink, segs: list[Path], t0: int | N
     writer.flush()
 
 
-def _chunk_messages(record: bytes) -> list[Message]:
+def _chunk_messages(record: bytes, where: str) -> list[Message]:
     """The messages of one chunk record (opcode and length included), in the order written."""
-    chunk = Chunk.read(ReadDataStream(io.BytesIO(record[9:])))
-    return [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
+    try:
+        chunk = Chunk.read(ReadDataStream(io.BytesIO(record[9:])))
+        return [r for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]
+    except Exception as exc:  # mcap and each codec raise their own types on damaged bytes
+        raise McapFileError(f"{where}: does not read ({type(exc).__name__}: {exc})") from exc
 
 
 class _Kept:

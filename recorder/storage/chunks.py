@@ -37,6 +37,7 @@ __all__ = [
     "RawMessage",
     "SegmentIndex",
     "StaleIndexError",
+    "checked_chunk",
     "iter_messages",
     "message_records",
     "messages_at",
@@ -141,11 +142,20 @@ def read_chunk(index: SegmentIndex, chunk: int) -> ChunkRecords:
         raw = os.pread(f.fileno(), length, offset)
     if len(raw) != length:
         raise McapFileError(f"{where}: {len(raw)} of its {length} bytes are on disk")
+    return checked_chunk(raw, where)
+
+
+def checked_chunk(raw: bytes | memoryview, where: str) -> ChunkRecords:
+    """A chunk record's bytes (opcode and length first), its records decompressed and checked
+    against the chunk's CRC-32: the one check every path that hands a chunk on makes, whether
+    it reads frames out of it or copies it whole (``thermcap cut``, ``export.mcap``). Raises
+    ``McapFileError`` naming ``where`` for a chunk that does not hold."""
+    length = len(raw)
     try:
         opcode, body_len = _RECORD_HEAD.unpack_from(raw, 0)
         _, _, size, crc = _CHUNK_FIXED.unpack_from(raw, 9)
         (name_len,) = struct.unpack_from("<I", raw, 37)
-        compression = raw[41:41 + name_len].decode()
+        compression = bytes(raw[41:41 + name_len]).decode()
         (records_len,) = struct.unpack_from("<Q", raw, 41 + name_len)
     except (struct.error, UnicodeDecodeError) as exc:
         raise McapFileError(f"{where}: not a chunk record ({exc})") from exc

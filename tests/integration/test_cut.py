@@ -57,3 +57,39 @@ def test_a_cut_never_overwrites_and_says_what_is_wrong(root, tmp_path):
     r = run_cli("cut", "s", "--root", str(root), "--start", "2", "--end", "1", "--out", str(tmp_path / "y.mcap"))
     assert r.returncode == 1 and "after" in r.stderr
     assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "y.mcap").exists()
+
+
+def test_a_cut_never_copies_a_damaged_chunk(tmp_path):
+    """Issue 65, defect 4: a chunk whose bytes no longer match its CRC-32 was copied whole into
+    the cut (exit 0), where the default reader returned a frame with wrong pixels. The chunk is
+    checked as it is copied: the cut stops, names the damaged chunk, and leaves no file."""
+    root = tmp_path / "root"
+    assert run_cli("record", "--root", str(root), "--session", "d", "--duration", "1", "--width", "64",
+                   "--height", "48").returncode == 0
+    (segment,) = sorted((root / "sessions" / "d").glob("*.mcap"))
+    with open(segment, "rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    chunk = sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)[0]
+    data = bytearray(segment.read_bytes())
+    data[chunk.chunk_start_offset + chunk.chunk_length // 2] ^= 0x40  # inside its compressed records
+    segment.write_bytes(bytes(data))
+    out = tmp_path / "c.mcap"
+    r = run_cli("cut", "d", "--root", str(root), "--out", str(out))
+    assert r.returncode == 1, (r.stdout, r.stderr)
+    assert f"chunk at byte {chunk.chunk_start_offset}" in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists() and not out.with_name("c.mcap.partial").exists()
+
+
+@pytest.mark.parametrize("garbage", [b"\x89MCAP0\r\n" + bytes(range(256)) * 40, bytes(reversed(range(256))) * 40],
+                         ids=["magic-then-garbage", "no-magic"])
+def test_a_cut_of_a_garbage_segment_names_it(tmp_path, garbage):
+    """Issue 65, defect 17: garbage MCAP files gave `cut` a Python traceback."""
+    root = tmp_path / "root"
+    assert run_cli("record", "--root", str(root), "--session", "g", "--duration", "0.5", "--width", "32",
+                   "--height", "24").returncode == 0
+    (segment,) = sorted((root / "sessions" / "g").glob("*.mcap"))
+    segment.write_bytes(garbage)
+    r = run_cli("cut", "g", "--root", str(root), "--out", str(tmp_path / "c.mcap"))
+    assert r.returncode == 1 and "Traceback" not in r.stderr, r.stderr
+    assert "0000.mcap" in r.stderr and not (tmp_path / "c.mcap").exists()
