@@ -116,12 +116,15 @@ class RecordingResult:
     frames_unconfirmed: int = 0
     # where the detector ran ("process", or "thread" and why), its CPU and any failure
     analysis_runner: dict[str, Any] | None = None
+    # what the (first) source went through: a supervised command's restarts and gaps (the
+    # session's "source" is what it is, from describe())
+    source_health: dict[str, Any] = field(default_factory=dict)
 
     @property
     def ok(self) -> bool:
-        """True only when nothing went wrong and nothing was dropped or skipped."""
+        """True only when nothing went wrong and nothing was dropped, skipped or missed."""
         return self.error is None and not any(self.dropped.values()) and not self.analysis_skipped \
-            and not any(c.get("error") for c in self.cameras.values())
+            and not any(c.get("error") for c in self.cameras.values()) and not self.source_health.get("restarts")
 
     @property
     def problems(self) -> list[str]:
@@ -132,6 +135,9 @@ class RecordingResult:
             failure = (self.analysis_runner or {}).get("failure")
             out.append(f"{self.analysis_skipped} frames not analysed ("
                        f"{failure or 'the detector fell behind or failed'})")
+        if self.source_health.get("restarts"):
+            out.append(f"the source ended {self.source_health['restarts']} times and was started again "
+                       f"({self.source_health.get('gap_s', 0)} s without frames; see the source_gap events)")
         late = self.timing.get("frames_late") or 0
         if late:
             out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "
@@ -156,7 +162,7 @@ class RecordingResult:
                 "analysis_unavailable_why": self.analysis_unavailable_why, "events": self.events,
                 "timing": self.timing, "analysis_runner": self.analysis_runner,
                 "frames_paused": self.frames_paused, "evicted_segments": self.evicted_segments,
-                "evicted_bytes": self.evicted_bytes,
+                "evicted_bytes": self.evicted_bytes, "source_health": self.source_health,
                 **({"cameras": self.cameras} if self.cameras else {}),
                 **({"live": self.live} if self.live is not None else {})}
 
@@ -288,6 +294,7 @@ class Recorder:
                 feed.detector = HotSpotDetector(src.model, bad_pixel_map=src.bad_pixel_map)
                 feed.analysis_period_ns = int(1e9 / (analysis_max_fps or src.sensor.frame_rate_hz or 60.0))
             self.feeds.append(feed)
+            src.report = lambda ev, feed=feed: self._requests.put(("source_event", (feed, ev)))
         self.analysis_wait_s = analysis_wait_s
         if analysis_runner not in ("process", "thread"):
             raise RecordingError(f"analysis_runner must be 'process' or 'thread', not {analysis_runner!r}")
@@ -360,6 +367,7 @@ class Recorder:
             "queue_depth": self.queue.qsize(), "queue_capacity": self.queue.maxsize, "segment": seg,
             "segments": len(self._session.segments) if self._session else 0,
             "write_latency_ms": self.latency.summary_ms(), "events": len(self._recorder_events),
+            "source_health": self.source.health(),
             "last_event": self._recorder_events[-1] if self._recorder_events else None,
             "seconds_since_last_frame": round(time.monotonic() - max(f.last_wall for f in self.feeds), 3),
             "cameras": {f.label: f.summary(c.dropped) for f in self.feeds},
@@ -477,6 +485,8 @@ class Recorder:
                 past_deadline = deadline is not None and time.monotonic() > deadline
                 if stop_asked is None and (self._stop.is_set() or past_deadline):
                     stop_asked = time.monotonic()
+                    for f in self.feeds:  # a source waiting for its input (a command giving nothing) hears it too
+                        f.source.stop()
                 if stop_asked is not None and time.monotonic() - stop_asked > self.stop_grace_s:
                     self._abandon_stalled(captures)
         finally:
@@ -515,7 +525,8 @@ class Recorder:
             evicted_bytes=self._evictor.state.evicted_bytes if self._evictor else 0,
             cameras={str(f.name): f.summary(self.counters.dropped) for f in self.feeds} if self.multi else {},
             analysis_runner=self._runner_summary(),
-            live=self.live.snapshot() if self.live is not None else None, frames_unconfirmed=unconfirmed)
+            live=self.live.snapshot() if self.live is not None else None, frames_unconfirmed=unconfirmed,
+            source_health=self.source.health())
         if lost_on_disk:
             result.error = (f"{result.error}; {lost_on_disk} frames handed to the writer never reached a closed "
                             f"chunk and are lost ({written} are on disk)")
@@ -824,6 +835,9 @@ class Recorder:
             elif kind == "mark":
                 reason, _, note = arg.partition("\0")
                 self._protect(at, "mark", reason, note)
+            elif kind == "source_event":  # a gap the source reported: when it began, with its end
+                feed, ev = arg
+                self._record_event({**ev, **({"camera": feed.name} if self.multi else {})})
 
     def _protect(self, at: int, kind: str, reason: str, note: str = "", camera: str | None = None) -> None:
         ev: dict[str, Any] = {"kind": kind, "at_ns": at, "reason": reason, "note": note,
@@ -837,7 +851,8 @@ class Recorder:
         self._record_event(ev)
 
     def _record_event(self, ev: dict[str, Any]) -> None:
-        self._recorder_events.append({**ev, "start_ns": ev["at_ns"], "end_ns": ev.get("protect_end_ns") or ev["at_ns"]})
+        self._recorder_events.append({**ev, "start_ns": ev.get("start_ns") or ev["at_ns"],
+                                      "end_ns": ev.get("protect_end_ns") or ev.get("end_ns") or ev["at_ns"]})
         if self._session is not None:
             self._session.write_message(TOPIC_EVENTS, ev["at_ns"], json.dumps(ev, separators=(",", ":")).encode())
         if self.live is not None:

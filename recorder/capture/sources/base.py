@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 from abc import ABC, abstractmethod
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
@@ -87,6 +87,10 @@ class FrameSource(ABC):
     #: its declared rate says so instead of stamping frames it did not deliver on time)
     frames_late: int = 0
 
+    #: where a source tells what happened to it while it runs (a command that ended and came
+    #: back, a camera that reconnected): the recorder sets it and records each as an event
+    report: Callable[[dict[str, Any]], None] | None = None
+
     @abstractmethod
     def frames(self) -> Iterator[CapturedFrame]:
         """Yield frames as they are captured; stop at the end of the input or when ``stop()`` is called."""
@@ -103,6 +107,11 @@ class FrameSource(ABC):
 
     def describe(self) -> dict[str, Any]:
         return {"source": self.name, "time_basis": self.time_basis}
+
+    def health(self) -> dict[str, Any]:
+        """What the source went through while it ran (restarts, gaps), for ``ctl status``, the
+        recording's result and ``info``; empty for a source with nothing to tell."""
+        return {}
 
 
 class Pacer:

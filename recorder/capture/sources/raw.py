@@ -1,4 +1,5 @@
-"""Headerless Gray16 little-endian frames from a file or stdin (``raw:PATH``, ``raw:-``).
+"""Headerless Gray16 little-endian frames from any readable path or stdin (``raw:PATH``,
+``raw:-``): a file, a named FIFO, ``/dev/stdin``, a device.
 
 This is what ``ffmpeg ... -pix_fmt gray16le -f rawvideo -`` or a camera's SDK tool writes, so a
 pipe goes straight into a recording. A file or a pipe can wait, so the recorder never drops
@@ -16,6 +17,7 @@ from __future__ import annotations
 
 import io
 import os
+import stat
 import sys
 import time
 from collections.abc import Iterator
@@ -53,18 +55,25 @@ class RawSource(FrameSource):
         self.sensor = SensorInfo(model=sensor_model, sensor_id=sensor_id, width=width, height=height,
                                  frame_rate_hz=fps, pixel_pitch_um=None, netd_mk=None)
         self._stream = stream
+        self.file_remainder = 0
         if stream is None and path != "-":
-            if not os.path.isfile(path):
-                raise SourceError(f"raw source {path}: no such file")
-            size = os.path.getsize(path)
-            frame_bytes = width * height * 2
-            if size == 0:
-                raise SourceError(f"raw source {path}: the file is empty")
-            # Checked again while reading (a growing file may differ); said early so a user learns
-            # of a wrong --width/--height before a long recording, not after.
-            self.file_remainder = size % frame_bytes
-        else:
-            self.file_remainder = 0
+            # any readable path: a file, a named FIFO, /dev/stdin, a device that gives raw frames
+            try:
+                st = os.stat(path)
+            except FileNotFoundError:
+                raise SourceError(f"raw source {path}: no such file") from None
+            except OSError as exc:
+                raise SourceError(f"raw source {path}: {exc.strerror or exc}") from None
+            if stat.S_ISDIR(st.st_mode):
+                raise SourceError(f"raw source {path}: a directory, not a stream of frames")
+            if not os.access(path, os.R_OK):
+                raise SourceError(f"raw source {path}: not readable by this user")
+            if stat.S_ISREG(st.st_mode):
+                if st.st_size == 0:
+                    raise SourceError(f"raw source {path}: the file is empty")
+                # Checked again while reading (a growing file may differ); said early so a user
+                # learns of a wrong --width/--height before a long recording, not after.
+                self.file_remainder = st.st_size % (width * height * 2)
 
     def describe(self) -> dict:
         return {"source": "raw", "path": self.path, "width": self.width, "height": self.height, "fps": self.fps,

@@ -1,6 +1,8 @@
 """``--source`` values: ``[NAME=]KIND[,key=value...]``, one per camera.
 
-``sim``, ``raw:PATH`` and ``raw:-`` as before; a name puts the camera under
+``sim``, ``raw:PATH``, ``raw:-`` and ``exec:COMMAND`` (the rest of the value is the command,
+commas and all, so it takes no ``,key=value`` of its own: the command's ``--width`` and the
+like apply); a name puts the camera under
 ``/thermal/<name>/`` in a session of several (``left=sim,width=320,height=256,fps=30``). Keys
 given here override the command's own ``--width``/``--fps``/... for that camera only.
 """
@@ -34,7 +36,7 @@ def _bool(v: str | bool) -> bool:
 
 @dataclass(frozen=True)
 class SourceSpec:
-    kind: str  # "sim", "raw:PATH", "raw:-"
+    kind: str  # "sim", "raw:PATH", "raw:-", "exec:COMMAND"
     name: str | None = None
     options: dict[str, Any] = field(default_factory=dict)
 
@@ -44,6 +46,11 @@ class SourceSpec:
 
 
 def parse_source_spec(text: str) -> SourceSpec:
+    name, rest = _name(text)
+    if rest.startswith("exec:"):  # the rest is the command, commas and all (ffmpeg's filters have them)
+        if not rest[5:].strip():
+            raise SourceError(f"--source {text!r}: exec: needs a command (exec:COMMAND ARGS...)")
+        return SourceSpec(kind=rest, name=name)
     head, *pairs = text.split(",")
     name = None
     if "=" in head and (":" not in head or head.index("=") < head.index(":")):
@@ -53,7 +60,8 @@ def parse_source_spec(text: str) -> SourceSpec:
         except ValueError as exc:
             raise SourceError(f"--source {text!r}: {exc}") from None
     if head != "sim" and not head.startswith("raw:"):
-        raise SourceError(f"--source {text!r}: unknown source {head!r}: use 'sim', 'raw:PATH' or 'raw:-' for stdin")
+        raise SourceError(f"--source {text!r}: unknown source {head!r}: use 'sim', 'raw:PATH', 'raw:-' for stdin "
+                          f"or 'exec:COMMAND'")
     options: dict[str, Any] = {}
     for pair in pairs:
         key, sep, value = pair.partition("=")
@@ -66,3 +74,16 @@ def parse_source_spec(text: str) -> SourceSpec:
         except ValueError as exc:
             raise SourceError(f"--source {text!r}: {key}: {exc}") from None
     return SourceSpec(kind=head, name=name, options=options)
+
+
+def _name(text: str) -> tuple[str | None, str]:
+    """``NAME=`` before the kind, if any (checked as a camera name), and the rest."""
+    head = text.split(",", 1)[0]
+    if "=" in head and (":" not in head or head.index("=") < head.index(":")):
+        name, rest = text.split("=", 1)
+        try:
+            check_camera_name(name)
+        except ValueError as exc:
+            raise SourceError(f"--source {text!r}: {exc}") from None
+        return name, rest
+    return None, text
