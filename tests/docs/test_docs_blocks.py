@@ -127,10 +127,17 @@ PAGES_WITH_BLOCKS = [p for p in PAGES if blocks(p)]
 
 @pytest.mark.parametrize("page", PAGES_WITH_BLOCKS, ids=[str(p.relative_to(ROOT)) for p in PAGES_WITH_BLOCKS])
 def test_page_runs(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    run_page(page, tmp_path, monkeypatch)
+
+
+def run_page(page: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+             environ: dict[str, str] | None = None) -> None:
+    """Every block of ``page`` in order, in ``tmp_path``; shell blocks see ``environ`` (default
+    this process's environment: a venv of the page's own puts its ``bin`` first on PATH)."""
     monkeypatch.chdir(tmp_path)
     monkeypatch.delenv("THERMCAP_ROOT", raising=False)
     monkeypatch.setenv("MPLBACKEND", "Agg")
-    env = {k: v for k, v in os.environ.items() if k != "THERMCAP_ROOT"}
+    env = {k: v for k, v in (environ or os.environ).items() if k != "THERMCAP_ROOT"}
     env["THERMCAP_SAMPLES"] = str(SAMPLES)
     env["COLUMNS"] = "100"  # the width tables are laid out for, in the page as in the run
     monkeypatch.setenv("COLUMNS", "100")
