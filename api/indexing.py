@@ -39,7 +39,7 @@ from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_METADATA
 from thermcap.recorder.storage.digest import frame_proof
 from thermcap.recorder.storage.layout import SessionLayout
-from thermcap.recorder.storage.lock import holder
+from thermcap.recorder.storage.lock import holder, session_status
 from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
 __all__ = ["IndexReport", "convert_legacy_frames", "fingerprint", "index_root", "index_session", "sidecar_summary"]
@@ -259,7 +259,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
         "fps": sensor.get("frame_rate_hz"), "start_ns": min(valid_times) if valid_times else None,
         "end_ns": max(valid_times) if valid_times else None, "frames": len(frame_rows),
         "frames_dropped": int(meta.get("frames_dropped") or 0), "radiometric_model": json.dumps(model),
-        "status": meta.get("status"), "min_grade": min(grades) if grades else None,
+        "status": session_status(session_dir, meta.get("status"))[0], "min_grade": min(grades) if grades else None,
         "max_grade": max(grades) if grades else None,
         "has_targets": any(r["target_count"] for r in frame_rows),
         "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),

@@ -22,6 +22,7 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
     """What ``ls`` says of one session, from its session.json and manifest (no frame is read)."""
     from thermcap.recorder.icd.names import iso_utc
     from thermcap.recorder.storage.layout import SessionLayout
+    from thermcap.recorder.storage.lock import session_status
 
     layout = SessionLayout.of(session_dir)
     try:
@@ -35,9 +36,11 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
     formats = {f: ("damaged" if e.get("damaged") else "verified" if e.get("verified") else "unverified")
                for f, e in (manifest.get("formats") or {}).items()}
     start, end = _span(meta)
-    state = meta.get("status") or "unknown"
-    if layout.active_segments():
-        state = "recording" if layout.lock.exists() else "interrupted (run `thermcap recover`)"
+    # the session lock, held only by a live process, says whether "recording" is still true (a
+    # recorder killed with SIGKILL leaves session.json saying so, and its lock file behind)
+    state, hint = session_status(session_dir, meta.get("status"))
+    if state == "interrupted" or (hint and layout.active_segments()):
+        state = "interrupted (run `thermcap recover`)"
     return {"id": meta.get("session_id") or session_dir.name, "start": iso_utc(start) if start else meta.get("started"),
             "duration_s": round((end - start) / 1e9, 3) if start and end else None,
             "frames": meta.get("frames_written", meta.get("frames")), "state": state,
@@ -73,9 +76,11 @@ def ls(root: str, as_json: bool) -> None:
     if not rows:
         click.echo(f"{root}: no sessions")
         return
-    click.echo(f"{'id':24} {'start':24} {'duration':>9} {'frames':>8} {'state':10} {'bytes':>14}  archived")
+    click.echo(f"{'id':24} {'start':24} {'duration':>9} {'frames':>8} {'state':11} {'bytes':>14}  archived")
     for r in rows:
         dur = f"{r['duration_s']:.1f} s" if r.get("duration_s") is not None else "-"
         arch = ", ".join(f"{f}" + ("" if s == "verified" else f" ({s})") for f, s in r.get("archived", {}).items())
         click.echo(f"{r['id'][:24]:24} {(r.get('start') or '-')[:24]:24} {dur:>9} {r.get('frames') or 0:>8} "
-                   f"{r['state'][:10]:10} {r.get('bytes', 0):>14,}  {arch or '-'}")
+                   f"{r['state'].split(' (')[0][:11]:11} {r.get('bytes', 0):>14,}  {arch or '-'}")
+    if any(r["state"].startswith("interrupted") for r in rows):
+        click.echo("interrupted: the recorder stopped without finishing; `thermcap recover SESSION` finishes it")
