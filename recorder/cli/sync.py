@@ -82,7 +82,16 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
                 def shown(key: str, done: int, total: int, bar=bar, task=task) -> None:
                     bar.update(task, description=f"sync {key}", completed=done, total=total)
 
-                report = syncer.run_once(only, on_progress=shown)
+                try:
+                    report = syncer.run_once(only, on_progress=shown)
+                except (ThermcapError, OSError) as exc:
+                    if not watch:
+                        raise
+                    # --watch ends only when asked: a pass that failed is said, and the next one tries
+                    click.echo(f"thermcap: this pass stopped: {exc}; the next in {interval:g} s", err=True)
+                    if stop.wait(interval):
+                        break
+                    continue
             freed = syncer.delete_confirmed() if delete_confirmed else []
             out = {**report.__dict__, "freed": freed, "status": syncer.status(only).to_dict()}
             out["status"].pop("objects")
@@ -92,10 +101,12 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
                        + (f", {len(freed)} segments freed" if freed else "")
                        + (f"; stopped early: {report.failed[-1]}" if report.stopped_early else "")
                        + (f"; {len(report.diverged)} confirmed segments changed here since and were not sent "
-                          f"again: {', '.join(report.diverged[:3])}" if report.diverged else ""))
+                          f"again: {', '.join(report.diverged[:3])}" if report.diverged else "")
+                       + (f"; {len(report.evicted)} evicted by the ring before they were sent (skipped): "
+                          f"{', '.join(report.evicted[:3])}" if report.evicted else ""))
             if not watch or stop.wait(interval):
                 break
-    except ThermcapError as exc:
+    except (ThermcapError, OSError) as exc:
         fail(str(exc))
     if not watch and report.stopped_early:
         sys.exit(1)

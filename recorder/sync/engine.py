@@ -50,6 +50,8 @@ class SyncReport:
     # segments whose local bytes changed after the cloud confirmed them: the confirmed copy is
     # the good one (a closed segment never changes), so it is never overwritten from here
     diverged: list[str] = field(default_factory=list)
+    # segments the vehicle's ring evicted before they were all sent: skipped, their partial gone
+    evicted: list[str] = field(default_factory=list)
 
 
 @dataclass
@@ -136,8 +138,24 @@ class Syncer:
                 report.failed.append(f"{item.key}: {exc}")
                 report.stopped_early = True
                 break
+            except FileNotFoundError:
+                if item.path.exists():
+                    raise
+                self._evicted(item, report)
         report.confirmed = self.check_receipts()
         return report
+
+    def _evicted(self, item: SyncItem, report: SyncReport) -> None:
+        """A segment gone from the vehicle before it was all sent: on a ring, the recorder evicts
+        the oldest segments to keep its disk budget, whether or not sync holds them
+        (``--evict-only-synced`` is the other policy). What was sent of it goes from the target,
+        the journal forgets it, and the pass goes on; the report and the log name it."""
+        st = self.journal.get(item.key)
+        if st is not None and st.upload_id is not None:
+            self.target.abort(item.key, st.upload_id)
+        self.journal.forget(item.key)
+        report.evicted.append(item.key)
+        log.warning("sync: %s was evicted on the vehicle before it was sent; skipped", item.key)
 
     def _ship(self, item: SyncItem, report: SyncReport, on_progress: Callable[[str, int, int], None] | None) -> bool:
         st = self.journal.get(item.key)

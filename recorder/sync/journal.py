@@ -76,6 +76,11 @@ class Journal:
             self.objects[obj.key] = obj
             self._save()
 
+    def forget(self, key: str) -> None:
+        """Drop ``key`` (a segment evicted before it was sent: nothing of it is left to resume)."""
+        if self.objects.pop(key, None) is not None:
+            self.save()
+
     def save(self) -> None:
         with self._lock:
             self._save()

@@ -11,6 +11,7 @@ and renames the file once its sha256 matches. Receipts are read from ``receipts/
 from __future__ import annotations
 
 import base64
+import contextlib
 import hashlib
 import json
 import os
@@ -46,6 +47,10 @@ class Target(Protocol):
                  md5_b64: str) -> str: ...
 
     def complete(self, key: str, upload_id: str, parts: list[tuple[int, str]], sha256: str) -> None: ...
+
+    def abort(self, key: str, upload_id: str) -> None:
+        """Give up an upload whose source is gone (evicted before it was sent): what the store
+        holds of it goes, best effort (a store that cannot be reached now expires it itself)."""
 
     def put_small(self, key: str, data: bytes, sha256: str) -> None: ...
 
@@ -123,6 +128,10 @@ class S3Target:
     def complete(self, key: str, upload_id: str, parts: list[tuple[int, str]], sha256: str) -> None:
         self.s3.complete_multipart_upload(Bucket=self.bucket, Key=self._k(key), UploadId=upload_id,
                                           MultipartUpload={"Parts": [{"PartNumber": n, "ETag": e} for n, e in parts]})
+
+    def abort(self, key: str, upload_id: str) -> None:
+        with contextlib.suppress(Exception):  # best effort: an S3 store's lifecycle rule expires the rest
+            self.s3.abort_multipart_upload(Bucket=self.bucket, Key=self._k(key), UploadId=upload_id)
 
     def put_small(self, key: str, data: bytes, sha256: str) -> None:
         md5 = base64.b64encode(hashlib.md5(data).digest()).decode()
@@ -202,6 +211,10 @@ class DirTarget:
         if file_sha256(partial) != sha256:
             raise ThermcapError(f"{key}: the assembled copy's sha256 differs from the vehicle's")
         os.replace(partial, p)
+
+    def abort(self, key: str, upload_id: str) -> None:
+        p = self._p(key)
+        p.with_name(p.name + ".partial").unlink(missing_ok=True)
 
     def put_small(self, key: str, data: bytes, sha256: str) -> None:
         p = self._p(key)

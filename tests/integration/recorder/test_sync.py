@@ -232,3 +232,42 @@ def test_a_segment_damaged_here_after_confirmation_never_overwrites_the_cloud(ve
     assert report.diverged == [key]
     assert (dest / key).read_bytes() == good
     assert key not in syncer.delete_confirmed() and seg.exists()
+
+
+class _EvictingTarget(DirTarget):
+    """The ring evicts the segment being sent, after its first part (as on a vehicle whose
+    budget is tight): the file is gone from the folder while sync holds it open."""
+
+    def __init__(self, dest: Path, root: Path) -> None:
+        super().__init__(dest)
+        self.root = root
+        self.evicted: list[str] = []
+
+    def put_part(self, key, upload_id, number, offset, body, size, md5_b64):
+        etag = super().put_part(key, upload_id, number, offset, body, size, md5_b64)
+        if not self.evicted and key.endswith(".mcap"):
+            (self.root / key).unlink()
+            self.evicted.append(key)
+        return etag
+
+
+def test_a_segment_evicted_under_sync_is_skipped_and_sync_goes_on(vehicle, tmp_path):
+    """Issue 64: sync died with `No such file or directory` when the ring evicted the segment it
+    was copying (exit 1, a .partial left in the depot), and `--watch` then shipped nothing."""
+    root = _copy(vehicle, tmp_path / "vehicle")
+    depot = tmp_path / "depot"
+    target = _EvictingTarget(depot, root)
+    syncer = Syncer(root, target, part_size=5 * MiB)
+    report = syncer.run_once()
+    (gone,) = target.evicted
+    assert report.evicted == [gone] and not report.stopped_early, report
+    assert not list(depot.rglob("*.partial"))  # its partial cleaned
+    assert not (depot / gone).exists()
+    shipped = sorted(p.relative_to(depot).as_posix() for p in depot.rglob("*.mcap"))
+    left = sorted(p.relative_to(root).as_posix() for p in (root / "sessions").rglob("*.mcap"))
+    assert shipped == left and left, (shipped, left)  # every other segment went
+    for key in shipped:
+        assert (depot / key).read_bytes() == (root / key).read_bytes()
+    again = syncer.run_once()  # the next pass does not trip on it either
+    assert again.evicted == [] and not again.failed
+    assert syncer.status().to_dict()["pending"] == 0
