@@ -56,6 +56,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
+from thermcap.api.cache_policy import Kind, cache_control
 from thermcap.api.http_conventions import body_etag, etag_matches
 from thermcap.api.reading.frame_columns import FrameColumns, FrameColumnsCache
 from thermcap.api.reading.mcap_frames import McapFrames
@@ -75,7 +76,6 @@ __all__ = ["FrameFastPath"]
 _PATH = re.compile(r"/api/v1/sessions/([A-Za-z0-9][A-Za-z0-9_.-]{0,127})/"
                    r"(?:frames/([0-9]{1,9})|zarr/counts/([0-9]{1,9})\.0\.0)")
 CHECK_S = 2.0  # how stale a session's cached locations may be before its index row is looked at again
-_CACHE_CONTROL = b"public, max-age=31536000, immutable"
 _PNG16 = get_codec("png16")
 
 
@@ -118,6 +118,7 @@ class FrameFastPath:
     def __init__(self, app: Any, *, engine: Engine, root: Path, store_kind: str, tokens: dict[str, frozenset[str]],
                  locations: ArchiveLocations, state: Any = None, keep_sessions: int = 16, keep_files: int = 64) -> None:
         self.app, self.engine, self.root, self.tokens = app, engine, Path(root), tokens
+        self._cache_control = cache_control(Kind.FIXED, guarded=bool(tokens)).encode()  # counts only, here
         self.locations = locations  # the frame reader's: one cache of central directories
         self._state = state  # the application's, for its frame summaries (state.regions)
         if state is not None:
@@ -159,7 +160,7 @@ class FrameFastPath:
             return
         body, etag, headers = answer
         self.served += 1
-        headers = [*headers, (b"etag", etag), (b"cache-control", _CACHE_CONTROL)]
+        headers = [*headers, (b"etag", etag), (b"cache-control", self._cache_control)]
         if etag_matches(inm, etag):
             await send({"type": "http.response.start", "status": 304, "headers": headers})
             await send({"type": "http.response.body", "body": b""})

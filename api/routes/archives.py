@@ -10,6 +10,7 @@ from fastapi.responses import RedirectResponse, StreamingResponse
 from sqlalchemy import select
 
 from thermcap.api import db
+from thermcap.api.cache_policy import Kind, cache_headers
 from thermcap.api.http_conventions import etag_matches
 from thermcap.api.reading.frames import Damage
 from thermcap.api.routes.common import session_row
@@ -86,7 +87,7 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
         if url:
             return RedirectResponse(url, status_code=307)
     size = entry["bytes"]
-    base = {"ETag": etag, "Accept-Ranges": "bytes", "Cache-Control": "public, max-age=3600",
+    base = {"ETag": etag, "Accept-Ranges": "bytes", **cache_headers(request, Kind.FIXED),  # named by its digest
             "Content-Type": "application/octet-stream"}
     if etag_matches(request.headers.get("if-none-match"), etag):
         return Response(status_code=304, headers=base)

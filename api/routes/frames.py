@@ -8,6 +8,7 @@ from urllib.parse import quote
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Query, Request, Response
 
+from thermcap.api.cache_policy import Kind, cache_headers
 from thermcap.api.http_conventions import body_etag, etag_matches
 from thermcap.api.routes.common import CelsiusQuery, FrameModel, kept, session_row
 from thermcap.api.security import require
@@ -22,7 +23,6 @@ router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"
 
 # The archive's own PNG16 writer (Up filter + libdeflate, read by libpng, Pillow and browsers).
 _PNG16 = get_codec("png16")
-_CACHE = {"Cache-Control": "public, max-age=31536000, immutable"}  # a recorded frame never changes
 
 
 def _send(request: Request, body: bytes, media_type: str, headers: dict[str, str]) -> Response:
@@ -66,10 +66,10 @@ def get_frame(request: Request, session_id: str, n: int,
     if format == "png16":
         stored = reader.encoded(session_id, n, "png16")
         body = stored if stored is not None else _PNG16.encode(np.asarray(reader.pixels(session_id, n)))
-        return _send(request, body, "image/png", _CACHE)
+        return _send(request, body, "image/png", cache_headers(request, Kind.FIXED))
     frame = reader.pixels(session_id, n)
     h, w = frame.shape
-    dims = {"X-Width": str(w), "X-Height": str(h), **_CACHE}
+    dims = {"X-Width": str(w), "X-Height": str(h), **cache_headers(request, Kind.FIXED)}
     if format == "raw":
         return _send(request, frame.astype("<u2", copy=False).tobytes(), "application/octet-stream",
                      {**dims, "X-Dtype": "uint16le"})
@@ -85,7 +85,8 @@ def get_frame(request: Request, session_id: str, n: int,
         return _send(request, body, "image/jpeg", {**dims, "Content-Disposition": disposition})
     models = FrameModel(request, row)
     model, said = models.at(n)
-    dims = {**dims, "X-Model-Version": str(said["model_version"])}
+    # from here on the bytes are temperatures: a new model version changes them
+    dims = {**dims, "X-Model-Version": str(said["model_version"]), **cache_headers(request, Kind.MODEL)}
     if format == "celsius-tiff":
         return _send(request, celsius_tiff(models.temperatures(n, frame)), "image/tiff", dims)
     if min is not None and max is not None and max <= min:

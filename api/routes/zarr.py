@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
+from thermcap.api.cache_policy import Kind, cache_headers
 from thermcap.api.reading.frame_table import FrameTable
 from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
 from thermcap.api.routes.common import FrameModel, kept, session_row
@@ -18,7 +19,6 @@ __all__ = ["router"]
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/zarr", tags=["zarr"],
                    dependencies=[Depends(require("read"))])
 
-_CACHE = {"Cache-Control": "private, max-age=3600"}
 
 
 def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str, Any]]:
@@ -48,8 +48,8 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     """A key of the store: a metadata document (JSON) or a chunk (raw little-endian bytes)."""
     row = session_row(request, session_id)
     table, meta = _store(request, row)
-    if key in meta:
-        return Response(dumps(meta[key]), media_type="application/json")
+    if key in meta:  # it names the model in force
+        return Response(dumps(meta[key]), media_type="application/json", headers=cache_headers(request, Kind.MODEL))
     chunk = parse_chunk_key(key)
     if chunk is None:  # zarr.json and the like: a reader probing for format 3 must see "not here"
         raise HTTPException(404, f"no key {key!r} in this Zarr store")
@@ -64,7 +64,8 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
             body = counts.astype("<u2", copy=False).tobytes()
         else:
             body = FrameModel(request, row).temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
-        return Response(body, media_type="application/octet-stream", headers=_CACHE)
+        kind = Kind.FIXED if var == "counts" else Kind.MODEL
+        return Response(body, media_type="application/octet-stream", headers=cache_headers(request, kind))
     if i != 0 or var not in (*COORDINATES, "time", "y", "x"):
         raise HTTPException(404, f"no key {key!r} in this Zarr store")
     if var == "time":
@@ -76,7 +77,8 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     else:
         values = table.fields[var]
         values = values.astype(values.dtype.newbyteorder("<"), copy=False)
-    return Response(values.tobytes(), media_type="application/octet-stream", headers=_CACHE)
+    # coordinates come from the index, which a reindex may change: revalidated
+    return Response(values.tobytes(), media_type="application/octet-stream", headers=cache_headers(request, Kind.MODEL))
 
 
 def zarr_url(base: str, session_id: str) -> str:
