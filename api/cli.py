@@ -283,7 +283,8 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 
 @click.command()
 @root_option
-@click.option("--keep-days", type=float, default=None, help="Delete sessions older than this.")
+@click.option("--keep-days", type=Number(minimum=0, maximum=36_500, unit="days"), default=None,
+              help="Delete sessions older than this many days (0: any age).")
 @click.option("--max-bytes", type=str, default=None, help="Keep the root under this size (e.g. 500G, 2T).")
 @click.option("--require-upload/--no-require-upload", default=None,
               help="Only delete sessions already uploaded (default: on when a store is configured).")

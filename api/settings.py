@@ -20,6 +20,8 @@ __all__ = ["Settings"]
 
 
 MIN_TOKEN_LENGTH = 8
+#: how the examples' placeholders begin (.env.example, the docs): never a token
+_PLACEHOLDERS = ("replace-with", "change-me", "changeme", "your-token", "token-here")
 
 
 def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
@@ -34,6 +36,9 @@ def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
         unknown = scope_set - {"read", "write"}
         if unknown:
             raise ValueError(f"THERMCAP_TOKENS item {n}: unknown scope(s) {sorted(unknown)}; use read and/or write")
+        if token.lower().startswith(_PLACEHOLDERS):
+            raise ValueError(f"THERMCAP_TOKENS item {n}: a placeholder from an example, not a token; make one "
+                             "with `python -c 'import secrets; print(secrets.token_hex(16))'`")
         if len(token) < MIN_TOKEN_LENGTH:
             raise ValueError(f"THERMCAP_TOKENS item {n}: the token is {len(token)} characters; use at least "
                              f"{MIN_TOKEN_LENGTH} (for example "
@@ -63,9 +68,11 @@ class Settings:
         self.root = Path(self.root)
         if not self.tokens:
             text = os.environ.get("THERMCAP_TOKENS", "")
-            if text.strip() and not _parse_tokens(text):
-                raise ValueError("THERMCAP_TOKENS is set but holds no token (only comments or separators); "
-                                 "refusing to serve without authentication")
+            # set means meant, even empty (compose gives '' for a variable the .env lacks): fail closed
+            if "THERMCAP_TOKENS" in os.environ and not _parse_tokens(text):
+                raise ValueError("THERMCAP_TOKENS is set but holds no token (empty, or only comments or "
+                                 "separators); refusing to serve without authentication (unset it to serve "
+                                 "without tokens on 127.0.0.1)")
             path = os.environ.get("THERMCAP_TOKENS_FILE")
             if path:
                 from_file = _parse_tokens(Path(path).read_text())

@@ -70,6 +70,8 @@ OTHER = [
     (["sync", "--part-size", "1"], "--part-size"),
     (["audit", "--project-days", "0"], "--project-days"),
     (["report", "quality", "x", "--blackbody", "inf"], "--blackbody"),
+    (["gc", "--keep-days", "-1"], "--keep-days"),  # issue 65, defect 17: it was accepted
+    (["gc", "--keep-days", "nan"], "--keep-days"),
 ]
 
 

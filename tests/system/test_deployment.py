@@ -114,8 +114,10 @@ def test_compose_services_run_as_written(postgres_url, seaweedfs, tmp_path):
                                     example.get("POSTGRES_DB", "thermcap"))
     # SeaweedFS takes its S3 user from the same two variables compose gives both it and thermcap.
     creds = {k: seaweedfs[k] for k in ("AWS_ACCESS_KEY_ID", "AWS_SECRET_ACCESS_KEY")}
+    # a token of the user's own, as the example asks (its placeholder is refused as a token)
     compose = Compose({"postgres:5432": pg_hostport, "http://seaweedfs:8333": seaweedfs["endpoint"]},
-                      {**creds, "THERMCAP_S3_BUCKET": seaweedfs["bucket"]})
+                      {**creds, "THERMCAP_S3_BUCKET": seaweedfs["bucket"],
+                       "THERMCAP_TOKENS": "compose-deployment-token-0123456789=read,write"})
     data = tmp_path / "data"
     local = {"THERMCAP_ROOT": str(data), "THERMCAP_S3_PREFIX": f"compose-{tmp_path.name}"}
 

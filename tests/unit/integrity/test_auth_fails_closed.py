@@ -99,3 +99,25 @@ def test_a_malformed_content_length_is_400(client):
     finally:
         server.should_exit = True
         t.join(10)
+
+
+@pytest.mark.parametrize("text", ["", "   "])
+def test_a_tokens_variable_set_but_empty_is_an_error(tmp_path, monkeypatch, text):
+    """Issue 65, defect 17: `THERMCAP_TOKENS=''` (compose substituting an unset variable) served
+    with no authentication, while `';'` was refused. Set means meant: it must hold a token."""
+    monkeypatch.delenv("THERMCAP_TOKENS_FILE", raising=False)
+    monkeypatch.setenv("THERMCAP_TOKENS", text)
+    with pytest.raises(ValueError, match="holds no token"):
+        Settings(root=tmp_path)
+
+
+def test_the_example_placeholder_is_not_a_token(tmp_path, monkeypatch):
+    """Issue 65, defect 17: `.env.example`'s placeholder was accepted as a real token."""
+    from pathlib import Path
+
+    example = (Path(__file__).resolve().parents[3] / ".env.example").read_text()
+    (line,) = [v for v in example.splitlines() if v.startswith("THERMCAP_TOKENS=")]
+    monkeypatch.delenv("THERMCAP_TOKENS_FILE", raising=False)
+    monkeypatch.setenv("THERMCAP_TOKENS", line.partition("=")[2])
+    with pytest.raises(ValueError, match="placeholder"):
+        Settings(root=tmp_path)
