@@ -248,8 +248,8 @@ class ControlServer:
                 elif url.path == "/resume":
                     self._send(200, {"paused": False, "changed": rec.resume()})
                 elif url.path in ("/mark", "/snapshot"):
-                    rec.mark(note, reason="manual" if url.path == "/mark" else "snapshot")
-                    self._send(202, {"mark": "requested", "note": note})
+                    keeps = rec.mark(note, reason="manual" if url.path == "/mark" else "snapshot")
+                    self._send(202, {"mark": "requested", "note": note, **({"keeps": keeps} if keeps else {})})
                 else:
                     self._send(404, {"error": f"no such route {url.path}"})
 

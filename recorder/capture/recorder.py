@@ -339,10 +339,41 @@ class Recorder:
         self._requests.put(("resume", ""))
         return True
 
-    def mark(self, note: str = "", reason: str = "manual") -> None:
+    def mark(self, note: str = "", reason: str = "manual") -> dict[str, Any] | None:
         """An event at the current frame, on the events topic and in events.json; with --ring its
-        window (pre/post) is protected from eviction."""
+        window (pre/post) is protected from eviction. Returns what the ring will keep of it
+        (``mark_outlook``), so the one who marks hears it now, not when the window expires."""
         self._requests.put(("mark", f"{reason}\0{note}"))
+        return self.mark_outlook()
+
+    def mark_outlook(self) -> dict[str, Any] | None:
+        """What a window made now would hold, against the share of the ring's budget event
+        windows may hold (``--max-protected``, half of ``--max-disk`` by default), at the rate
+        this session has been written: ``kept`` is "whole", "whole, older windows expire" or
+        "not whole" with the seconds that fit. None without a ring."""
+        ring = self.ring
+        if ring is None:
+            return None
+        out: dict[str, Any] = {"pre_s": ring.pre_s, "post_s": ring.post_s}
+        budget = None if ring.keep_events else ring.protected_budget
+        rate = self._session.bytes_per_s() if self._session is not None else None
+        if budget is None or rate is None:
+            out["kept"] = "whole" if budget is None else "whole, if it fits (no rate measured yet)"
+            return out
+        want = int((ring.pre_s + ring.post_s) * rate)
+        in_use = self._evictor.protected_bytes() if self._evictor is not None else 0
+        fits_s = round(budget / rate, 1)
+        out.update(bytes_per_s=int(rate), window_bytes=want, protected_budget=budget, protected_in_use=in_use)
+        if want <= budget - in_use:
+            out["kept"] = "whole"
+        elif want <= budget:
+            out["kept"] = "whole, older windows expire to make room"
+        else:
+            out.update(kept="not whole", seconds_that_fit=fits_s,
+                       why=f"a {ring.pre_s + ring.post_s:g} s window is about {want / 1e6:,.0f} MB at "
+                           f"{rate / 1e6:,.1f} MB/s, over the {budget / 1e6:,.0f} MB event windows may hold; "
+                           f"about {fits_s:g} s fit: shorten --pre/--post or raise --max-protected/--max-disk")
+        return out
 
     @property
     def paused(self) -> bool:

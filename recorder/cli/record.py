@@ -335,12 +335,26 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
         fail(f"{base}{route}: {code}: {said}")
     if action == "metrics":
         click.echo(text, nl=False)
+    elif action in ("mark", "snapshot") and not as_json:
+        click.echo(mark_text(json.loads(text)))
     elif as_json or action != "status":
         click.echo(text)
     else:
         click.echo(status_text(json.loads(text)))
     if code >= 400:
         sys.exit(1)
+
+
+def mark_text(answer: dict[str, Any]) -> str:
+    """``ctl mark``'s answer for a person: what the ring will keep of the window."""
+    keeps = answer.get("keeps")
+    line = f"marked{': ' + answer['note'] if answer.get('note') else ''}"
+    if not keeps:
+        return line
+    window = f"{keeps['pre_s']:g} s before and {keeps['post_s']:g} s after"
+    if keeps["kept"] == "not whole":
+        return f"{line}\nwarning: the window ({window}) will not be kept whole: {keeps['why']}"
+    return f"{line}; its window ({window}) is kept: {keeps['kept']}"
 
 
 #: The detector's share worth a line: a tenth of the recording's time, in CPU or in waiting

@@ -342,6 +342,10 @@ class Evictor(threading.Thread):
         self.state.blocked, self.state.blocked_reason = True, reason
         return done
 
+    def protected_bytes(self) -> int:
+        """Bytes of the segments event windows protect now."""
+        return self._protected_bytes(self._candidates())
+
     def _protected_bytes(self, candidates: list[_Candidate]) -> int:
         total = 0
         for c in candidates:

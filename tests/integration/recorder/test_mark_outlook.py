@@ -1,0 +1,46 @@
+"""Issue 64: the vehicle page's mark ("its window is kept whatever the ring evicts") expired 9 s
+later: a 60 s window at about 35 MB/s cannot fit the 100 MB that a 200M ring keeps for events.
+The answer to `ctl mark` now says what will be kept, from the rate the session is written at."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+
+import httpx
+import pytest
+
+from tests.conftest import run_cli, wait_for
+
+pytestmark = pytest.mark.integration
+
+TOKEN = "mark-outlook-token-0123456789"
+
+
+@pytest.mark.parametrize(("window", "kept"), [(("--pre", "30", "--post", "30"), "not whole"),
+                                              (("--pre", "0.5", "--post", "0.5"), "whole")])
+def test_a_mark_says_what_the_ring_will_keep(tmp_path, window, kept):
+    env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "m",
+                             "--ring", "--max-disk", "200M", "--segment-duration", "1", "--control", "--no-analysis",
+                             *window], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        address = tmp_path / "run" / "m.control.json"
+        assert wait_for(address.is_file, 60), proc.stderr.read() if proc.poll() is not None else "no control file"
+        url = json.loads(address.read_text())["url"]
+        with httpx.Client(base_url=url, timeout=10, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
+            # a rate is measured once a segment is closed
+            assert wait_for(lambda: c.get("/status").json()["segments"] >= 2, 60)
+            answer = c.post("/mark", json={"note": "deer on the road"}).json()
+        keeps = answer["keeps"]
+        assert keeps["kept"] == kept, keeps
+        if kept == "not whole":
+            assert 0 < keeps["seconds_that_fit"] < 60 and keeps["window_bytes"] > keeps["protected_budget"], keeps
+            said = run_cli("ctl", "mark", "--root", str(tmp_path), "--note", "a second deer", env=env)
+            assert said.returncode == 0 and "will not be kept whole" in said.stdout, (said.stdout, said.stderr)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=120)
