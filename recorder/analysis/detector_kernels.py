@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import importlib.util
 import os
 import subprocess
 import sys
@@ -79,6 +80,13 @@ def warm_in_background() -> None:
     compiled again)."""
     global _usable, _warming
     if _usable is not None or _warming is not None:
+        return
+    try:
+        has_numba = importlib.util.find_spec("numba") is not None
+    except (ImportError, ValueError):
+        has_numba = False
+    if not has_numba:  # the base install: numpy it is, and no compile process
+        _usable = False
         return
     if cached():
         _usable = _load()
