@@ -3,7 +3,7 @@
 ``read_file(path)`` detects the format from the bytes (never the extension alone), and returns
 the frames or raises ImportFileError naming the file and the problem. Formats: FLIR radiometric
 JPEG / FFF / SEQ / CSQ, DJI R-JPEG (iirp, dirp, girp, hirp), TERRA-REF ``_ir.bin``, ICD TIFF
-and raw Gray16 with their JSON sidecars.
+and raw Gray16 with their JSON sidecars, ROS 2 bags (MCAP storage) of a 16-bit image topic.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ from thermcap.recorder.importers.file_view import FileView
 from thermcap.recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from thermcap.recorder.importers.icd_files import iter_icd_tiff, read_icd_raw, read_icd_tiff, sidecar_for
 from thermcap.recorder.importers.jpeg import app_segments
+from thermcap.recorder.importers.ros2_bag import MCAP_MAGIC, is_ros2_bag, iter_ros2_bag
 from thermcap.recorder.importers.terraref import metadata_for, read_terraref
 
 __all__ = ["MAX_FILE_BYTES", "ImportFileError", "ImportedFrame", "TruncatedImageError", "detect", "iter_file",
@@ -42,10 +43,15 @@ def detect(path: str, data: bytes) -> str:
         return "terraref-bin"
     if sidecar_for(path) is not None and Path(path).suffix.lower() in (".raw", ".gray16", ".bin"):
         return "icd-raw"
+    if data[:8] == MCAP_MAGIC:
+        if is_ros2_bag(path):
+            return "ros2-bag"
+        raise ImportFileError(f"{path}: an MCAP file with no ROS 2 image topic (sensor_msgs/msg/Image); "
+                              "a thermcap session's segments are a session already (`thermcap info` them)")
     if data[:8] == b"\x89PNG\r\n\x1a\n":
         raise ImportFileError(f"{path}: a PNG image; thermcap imports radiometric files (FLIR, DJI, TERRA-REF, ICD)")
     raise ImportFileError(f"{path}: unrecognised file (not a FLIR/DJI radiometric JPEG, FFF/SEQ/CSQ, TIFF, "
-                       "TERRA-REF _ir.bin or ICD raw with a .json sidecar)")
+                       "TERRA-REF _ir.bin, ICD raw with a .json sidecar or a ROS 2 bag's MCAP)")
 
 
 def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[ImportedFrame]:
@@ -65,6 +71,8 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
             return read_icd_tiff(path, data)
         if kind == "terraref-bin":
             return read_terraref(path, data, variant=terraref_variant)
+        if kind == "ros2-bag":
+            return list(iter_ros2_bag(path))
         return read_icd_raw(path, data)
     except ImportFileError:
         raise
@@ -96,6 +104,10 @@ def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Genera
     try:
         with open(path, "rb") as fh:
             head = fh.read(4)
+            if head == MCAP_MAGIC[:4] and fh.read(4) == MCAP_MAGIC[4:] and is_ros2_bag(path):
+                fh.close()
+                yield from iter_ros2_bag(path)  # a message at a time, however long the bag
+                return
             if head in _TIFF_MAGIC:  # a stack of pages: decoded one page at a time
                 fh.close()
                 yield from iter_icd_tiff(path, _file_bytes(path))

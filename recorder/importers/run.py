@@ -56,8 +56,8 @@ def _walk(paths: list[str]) -> list[str]:
         if os.path.isdir(p):
             for dirpath, _dirs, names in sorted(os.walk(p)):
                 for n in sorted(names):
-                    if n.endswith((".json", ".txt", ".md")) or n.startswith("."):
-                        continue  # sidecars and notes are read with the file they describe
+                    if n.endswith((".json", ".txt", ".md")) or n.startswith(".") or n == "metadata.yaml":
+                        continue  # sidecars, notes and a bag's metadata are read with the file they describe
                     out.append(os.path.join(dirpath, n))
         else:
             out.append(p)
