@@ -16,8 +16,9 @@ from dataclasses import dataclass, field
 from thermcap.archive.manifest import file_problem
 from thermcap.archive.manifest_types import ExtrasEntry, FormatEntry, Manifest
 from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.ledger import lost_segments
 
-__all__ = ["Cover", "copy_problems", "extras_problems", "local_cover"]
+__all__ = ["Cover", "copy_problems", "extras_problems", "local_cover", "source_problems"]
 
 
 def copy_problems(layout: SessionLayout, fid: str, entry: FormatEntry | None) -> list[str]:
@@ -79,4 +80,25 @@ def local_cover(layout: SessionLayout, manifest: Manifest, formats: Iterable[str
     problems += found
     if not found:
         relies.append("extras.mcap verified, hash rechecked")
+    found = source_problems(layout, manifest)
+    problems += found
+    if not found:
+        relies.append("every segment on disk is one the archive covers, and none the recorder wrote is missing")
     return Cover(relies, problems)
+
+
+def source_problems(layout: SessionLayout, manifest: Manifest) -> list[str]:
+    """Why the segments on disk now are not exactly the ones the archive was made from: a segment
+    the archive never saw (restored from a depot, renamed back from ``.unreadable``) or one that
+    changed size since, and segments the recorder wrote that are gone with no record of why
+    (``recorder.storage.ledger``). Deleting the source on such an archive loses frames."""
+    covered = {s.get("name"): s.get("bytes") for s in (manifest.get("source") or {}).get("segments") or []}
+    problems = []
+    for seg in layout.segments():
+        if seg.name not in covered:
+            problems.append(f"{seg.name}: a segment the archive does not cover (archive the session again)")
+        elif covered[seg.name] is not None and seg.stat().st_size != covered[seg.name]:
+            problems.append(f"{seg.name}: {seg.stat().st_size:,} bytes, not the {covered[seg.name]:,} archived")
+    for lost in lost_segments(layout.dir):
+        problems.append(f"{lost.name}: {lost.frames} frames the recorder wrote, gone with no record of why")
+    return problems

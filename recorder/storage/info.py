@@ -18,6 +18,7 @@ from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
 from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
+from thermcap.recorder.storage.ledger import lost_segments
 from thermcap.recorder.storage.lock import session_status
 from thermcap.recorder.storage.reader import archived_frame_count
 from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
@@ -108,6 +109,9 @@ class SessionInfo:
     ring: dict[str, Any] | None = None  # the --ring budget the session was recorded under
     evicted_segments: int = 0
     cameras: dict[str, CameraUsage] = field(default_factory=dict)  # a session of several cameras
+    # segments session.json lists that are gone with no record of why (recorder.storage.ledger)
+    lost_segments: list[dict[str, Any]] = field(default_factory=list)
+    frames_lost: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -201,6 +205,11 @@ def session_info(path: str | Path) -> SessionInfo:
     comp = sum(s.compressed_bytes for s in segs)
     uncomp = sum(s.uncompressed_bytes for s in segs)
     status, hint = session_status(path, meta.get("status"))
+    lost = lost_segments(path, meta) if meta else []
+    if lost:
+        said = ", ".join(f"{s.name} ({s.frames} frames)" for s in lost)
+        hint = (f"{sum(s.frames for s in lost)} frames the recorder wrote are missing: {said} gone from the "
+                f"folder with no eviction, sync or archive on record" + (f"; {hint}" if hint else ""))
     timing = meta.get("timing") or {}
     return SessionInfo(
         path=str(path),
@@ -236,6 +245,7 @@ def session_info(path: str | Path) -> SessionInfo:
         ring=meta.get("ring"),
         evicted_segments=_evicted(Path(path), meta),
         cameras=_cameras(meta, topics, span),
+        lost_segments=[{"name": s.name, "frames": s.frames} for s in lost], frames_lost=sum(s.frames for s in lost),
     )
 
 
@@ -251,7 +261,7 @@ def _evicted(session_dir: Path, meta: dict[str, Any]) -> int:
                     entry = json.loads(line)
                 except ValueError:
                     continue
-                n += entry.get("session") == session_dir.name and "segment" in entry
+                n += entry.get("session") == session_dir.name and "segment" in entry and "freed_by" not in entry
     return max(n, int(meta.get("evicted_segments") or 0))
 
 

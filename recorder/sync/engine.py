@@ -26,6 +26,7 @@ from typing import Any
 
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.storage.digest import file_sha256
+from thermcap.recorder.storage.ledger import record_freed
 from thermcap.recorder.storage.ring import load_windows
 from thermcap.recorder.sync.journal import Journal, ObjectState, PartState
 from thermcap.recorder.sync.plan import SyncItem, plan_root
@@ -330,6 +331,8 @@ class Syncer:
                 if any(w.overlaps(start, end) for w in windows):
                     continue
             path.unlink()
+            record_freed(self.root, path.parent.name, path.name, st.size, "sync",
+                         "the cloud confirmed its bytes (sha256 and size in its receipt)")
             freed.append(st.key)
         self.journal.save()
         return freed
