@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import AsyncIterator, Iterator
+from datetime import timedelta
 from pathlib import Path
 from typing import Any
 
@@ -111,6 +112,11 @@ def open_store(root: Path, *, bucket: str | None = None, endpoint: str | None = 
         for env, key in (("AWS_ACCESS_KEY_ID", "access_key_id"), ("AWS_SECRET_ACCESS_KEY", "secret_access_key")):
             if os.environ.get(env):
                 kwargs[key] = os.environ[env]
+        # a read the store keeps failing (a rotted object fails its own CRC) is said in seconds,
+        # not after object_store's ten retries (147 s, seen): the caller tries another copy
+        kwargs["retry_config"] = {"max_retries": 3, "retry_timeout": timedelta(seconds=20),
+                                  "backoff": {"init_backoff": timedelta(milliseconds=100),
+                                              "max_backoff": timedelta(seconds=2), "base": 2}}
         return BlobStore(S3Store(bucket, **kwargs), prefix=prefix, kind="s3", url=f"s3://{bucket}")
     root.mkdir(parents=True, exist_ok=True)
     return BlobStore(LocalStore(str(root.resolve())), kind="local")

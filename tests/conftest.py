@@ -189,7 +189,7 @@ def seaweedfs(tmp_path_factory):
                     raise RuntimeError("SeaweedFS did not start: " + (d / "log").read_text()[-2000:]) from None
                 _time.sleep(0.2)
         _time.sleep(1.0)
-        yield {"endpoint": endpoint, "bucket": "thermcap", **creds}
+        yield {"endpoint": endpoint, "bucket": "thermcap", "dir": d, **creds}  # dir: its volumes, for rot tests
     finally:
         proc.terminate()
         try:

@@ -23,6 +23,7 @@ from typing import Any
 
 from thermcap.api.storage import BlobStore
 from thermcap.archive.archiver import DEFAULT_FORMATS
+from thermcap.archive.blobs import stored_digest
 from thermcap.archive.evidence import local_cover
 from thermcap.archive.manifest import archived_files, iso_now, load_manifest, save_manifest
 from thermcap.archive.manifest_types import Manifest
@@ -70,8 +71,10 @@ class GcResult:
 def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str | None]:
     """(what deleting the local folder relies on, or why it cannot go). The upload hashed each
     object as the store gave it back and kept its ETag; now every object must still be there at
-    its size and with that ETag (the same object, not rewritten since), and scrub must not have
-    found any of them damaged. A manifest's word alone, with no store to ask, is not enough."""
+    its size and with that ETag (the same object, not rewritten since), every archive file must
+    hash, read back now, to the digest it was verified with (a store can rot a byte under an
+    unchanged HEAD), and scrub must not have found any of them damaged. A manifest's word alone,
+    with no store to ask, is not enough."""
     up = m.get("upload") or {}
     if not up.get("complete"):
         return [], "not uploaded to the object store"
@@ -79,9 +82,11 @@ def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str 
         return [], "an upload is recorded, but no store is configured to recheck it (THERMCAP_S3_BUCKET)"
     if up.get("damaged"):
         return [], f"scrub found {len(up['damaged'])} damaged objects in the store"
-    sizes = {f.rel: f.bytes for f in archived_files(m)}
+    files = {f.rel: f for f in archived_files(m)}
+    sizes = {rel: f.bytes for rel, f in files.items()}
     etags = up.get("etags") or {}
     keys = up.get("keys", [])
+    read_back = 0
     for key in keys:
         rel = key.split("/archive/", 1)[-1]
         head = store.head(key)
@@ -89,10 +94,21 @@ def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str 
             return [], f"object {key} is missing from the store or has another size"
         if key in etags and str(head.get("e_tag")) != etags[key]:
             return [], f"object {key} was rewritten since it was uploaded and hashed (ETag differs)"
+        if rel in files:  # the archive's own files: their bytes, read back now, must hash as verified
+            f = files[rel]
+            try:
+                got = stored_digest(store, key, f.digest)
+            except Exception as exc:  # the store's own check failed, or the link: no evidence either way
+                return [], f"object {key} cannot be read back now ({type(exc).__name__}: {str(exc)[:200]})"
+            if got != f.hex:
+                return [], (f"object {key}'s bytes no longer hash as when they were verified (the store's copy "
+                            "is damaged)")
+            read_back += 1
     missing = [rel for rel in sizes if not any(k.endswith("/archive/" + rel) for k in keys)]
     if missing:
         return [], f"{len(missing)} archived files were never uploaded ({missing[0]}, ...)"
-    return [f"{len(keys)} objects in the {store.kind} store, sizes and ETags rechecked"], None
+    return [f"{len(keys)} objects in the {store.kind} store, sizes and ETags rechecked, the {read_back} archive files "
+            f"read back and hashed"], None
 
 
 def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,

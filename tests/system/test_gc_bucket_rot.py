@@ -1,0 +1,49 @@
+"""Issue 65, defect 2: `gc` deleted the last good copy on a bucket's word. One byte of an
+uploaded archive file rotted inside the store (HEAD still answered the same size and ETag; GET
+failed on the store's own CRC), and `gc --keep-days 0` deleted the local folder "relying on: 7
+objects in the s3 store, sizes and ETags rechecked". The bucket's copy is now read back and
+hashed against the manifest before the local one goes, as local copies always were."""
+
+from __future__ import annotations
+
+import json
+import uuid
+
+import pytest
+
+from tests.conftest import run_cli
+from tests.support.api_data import make_root
+
+pytestmark = pytest.mark.system
+
+
+def _rot_in_store(store_dir, original: bytes) -> bool:
+    """Flip one byte of ``original``'s bytes where SeaweedFS keeps them (its volume files)."""
+    probe = original[len(original) // 2: len(original) // 2 + 64]
+    for path in store_dir.rglob("*.dat"):
+        data = bytearray(path.read_bytes())
+        at = data.find(probe)
+        if at >= 0:
+            data[at + 10] ^= 0x40
+            path.write_bytes(bytes(data))
+            return True
+    return False
+
+
+def test_gc_keeps_the_local_copy_when_the_buckets_copy_rotted(tmp_path, seaweedfs):
+    root = make_root(tmp_path / "root")
+    session = root / "sessions" / "s-archived"
+    prefix = f"rot-{uuid.uuid4().hex[:12]}"
+    env = {"THERMCAP_S3_BUCKET": seaweedfs["bucket"], "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"],
+           "THERMCAP_S3_PREFIX": prefix, "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
+           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    r = run_cli("upload", "s-archived", "--root", str(root), "--json", env=env)
+    assert r.returncode == 0, r.stderr
+    zips = sorted((session / "archive" / "png16").glob("*.zip"))
+    assert zips and _rot_in_store(seaweedfs["dir"], zips[-1].read_bytes()), "the object's bytes were not found"
+    r = run_cli("gc", "--root", str(root), "--keep-days", "0", "--json", env=env)
+    assert session.is_dir(), (r.stdout, r.stderr)  # the last good copy stays
+    out = json.loads(r.stdout)
+    (decision,) = [d for d in out["decisions"] if str(d["session"]).endswith("s-archived")]
+    assert "no longer hash" in json.dumps(decision) or "cannot be read back" in json.dumps(decision), decision
+    assert zips[-1].is_file()
