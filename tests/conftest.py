@@ -119,6 +119,14 @@ class ApiServer:
             self.proc.kill()
 
 
+def bucket_env(weed: dict, prefix: str) -> dict[str, str]:
+    """What a thermcap process needs to use the test SeaweedFS under ``prefix`` (the bucket is
+    shared by every test of the run)."""
+    return {"THERMCAP_S3_BUCKET": weed["bucket"], "THERMCAP_S3_ENDPOINT": weed["endpoint"],
+            "THERMCAP_S3_PREFIX": prefix, "AWS_ACCESS_KEY_ID": weed["AWS_ACCESS_KEY_ID"],
+            "AWS_SECRET_ACCESS_KEY": weed["AWS_SECRET_ACCESS_KEY"]}
+
+
 def _pg_bin(name: str) -> str | None:
     found = _shutil.which(name)
     if found:

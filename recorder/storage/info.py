@@ -17,8 +17,8 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
-from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
-from thermcap.recorder.storage.ledger import lost_segments
+from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.ledger import deletions, lost_segments
 from thermcap.recorder.storage.lock import session_status
 from thermcap.recorder.storage.reader import archived_frame_count
 from thermcap.recorder.storage.segments import ACTIVE_SUFFIX, SEGMENT_STATS_METADATA, SESSION_METADATA
@@ -250,18 +250,8 @@ def session_info(path: str | Path) -> SessionInfo:
 
 
 def _evicted(session_dir: Path, meta: dict[str, Any]) -> int:
-    """Segments the ring deleted from this session: ROOT/eviction.log is the record (written as
-    each one goes, so it survives a crash that session.json's end-of-run count does not)."""
-    log = session_dir.resolve().parents[1] / EVICTION_LOG if len(session_dir.resolve().parents) > 1 else None
-    n = 0
-    if log is not None and log.is_file():
-        with open(log) as f:
-            for line in f:
-                try:
-                    entry = json.loads(line)
-                except ValueError:
-                    continue
-                n += entry.get("session") == session_dir.name and "segment" in entry and "freed_by" not in entry
+    """Segments the ring deleted from this session (not those sync freed once the cloud had them)."""
+    n = sum("freed_by" not in entry for entry in deletions(session_dir))
     return max(n, int(meta.get("evicted_segments") or 0))
 
 

@@ -18,7 +18,7 @@ from typing import Any
 
 from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
 
-__all__ = ["LostSegment", "lost_segments", "record_freed"]
+__all__ = ["LostSegment", "deletions", "lost_segments", "record_freed"]
 
 
 @dataclass(frozen=True)
@@ -62,17 +62,24 @@ def _source_deleted_by_archive(d: Path) -> bool:
 
 
 def _deleted_on_record(d: Path) -> set[str]:
-    log = d.resolve().parent.parent / EVICTION_LOG
-    out: set[str] = set()
+    return {str(entry["segment"]) for entry in deletions(d)}
+
+
+def deletions(session_dir: str | Path) -> list[dict[str, Any]]:
+    """This session's lines of ``ROOT/eviction.log``: a segment each, deleted by the ring or freed
+    by sync (``freed_by``), with why. Written as each goes, so it survives a crash that
+    ``session.json``'s end-of-run counts do not."""
+    d = Path(session_dir).resolve()
+    out: list[dict[str, Any]] = []
     try:
-        with open(log) as f:
+        with open(d.parent.parent / EVICTION_LOG) as f:
             for line in f:
                 try:
                     entry = json.loads(line)
                 except ValueError:
                     continue
-                if entry.get("session") == d.name and entry.get("segment"):
-                    out.add(str(entry["segment"]))
+                if isinstance(entry, dict) and entry.get("session") == d.name and entry.get("segment"):
+                    out.append(entry)
     except OSError:
         pass
     return out

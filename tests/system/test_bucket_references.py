@@ -9,7 +9,7 @@ import uuid
 import numpy as np
 import pytest
 
-from tests.conftest import run_cli
+from tests.conftest import bucket_env, run_cli
 from tests.support.api_data import make_root
 from thermcap.recorder.storage.reader import iter_session_frames
 
@@ -23,10 +23,7 @@ def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweed
 
     root = make_root(tmp_path / "root")
     prefix = f"refs-{uuid.uuid4().hex[:12]}"  # the bucket is shared with other tests' sessions of this name
-    env = {"THERMCAP_S3_BUCKET": seaweedfs["bucket"], "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"],
-           "THERMCAP_S3_PREFIX": prefix,
-           "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
-           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    env = bucket_env(seaweedfs, prefix)
     r = run_cli("upload", "s-archived", "--root", str(root), "--json", env=env)
     assert r.returncode == 0, r.stderr
     manifest = json.loads((root / "sessions" / "s-archived" / "archive" / "manifest.json").read_text())
@@ -63,9 +60,7 @@ def test_thermcap_open_reads_an_uploaded_session_from_the_bucket(tmp_path, seawe
     root = make_root(tmp_path / "root")
     session = root / "sessions" / "s-archived"
     prefix = f"open-{uuid.uuid4().hex[:12]}"
-    env = {"THERMCAP_S3_BUCKET": seaweedfs["bucket"], "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"],
-           "THERMCAP_S3_PREFIX": prefix, "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
-           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    env = bucket_env(seaweedfs, prefix)
     # a version the bucket must carry: the model measured again 1 °C warmer
     base = model_from_dict(read_session_meta(session)["radiometric_model"])
     add_version(session, base, {}, who="test", why="a new calibration",

@@ -11,7 +11,7 @@ import uuid
 
 import pytest
 
-from tests.conftest import run_cli
+from tests.conftest import bucket_env, run_cli
 from tests.support.api_data import make_root
 
 pytestmark = pytest.mark.system
@@ -34,9 +34,7 @@ def test_gc_keeps_the_local_copy_when_the_buckets_copy_rotted(tmp_path, seaweedf
     root = make_root(tmp_path / "root")
     session = root / "sessions" / "s-archived"
     prefix = f"rot-{uuid.uuid4().hex[:12]}"
-    env = {"THERMCAP_S3_BUCKET": seaweedfs["bucket"], "THERMCAP_S3_ENDPOINT": seaweedfs["endpoint"],
-           "THERMCAP_S3_PREFIX": prefix, "AWS_ACCESS_KEY_ID": seaweedfs["AWS_ACCESS_KEY_ID"],
-           "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
+    env = bucket_env(seaweedfs, prefix)
     r = run_cli("upload", "s-archived", "--root", str(root), "--json", env=env)
     assert r.returncode == 0, r.stderr
     zips = sorted((session / "archive" / "png16").glob("*.zip"))

@@ -51,14 +51,7 @@ def parse_source_spec(text: str) -> SourceSpec:
         if not rest[5:].strip():
             raise SourceError(f"--source {text!r}: exec: needs a command (exec:COMMAND ARGS...)")
         return SourceSpec(kind=rest, name=name)
-    head, *pairs = text.split(",")
-    name = None
-    if "=" in head and (":" not in head or head.index("=") < head.index(":")):
-        name, head = head.split("=", 1)
-        try:
-            check_camera_name(name)
-        except ValueError as exc:
-            raise SourceError(f"--source {text!r}: {exc}") from None
+    head, *pairs = rest.split(",")
     if head != "sim" and not head.startswith("raw:"):
         raise SourceError(f"--source {text!r}: unknown source {head!r}: use 'sim', 'raw:PATH', 'raw:-' for stdin "
                           f"or 'exec:COMMAND'")
