@@ -250,11 +250,15 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
         for p in result.recovered:
             click.echo(f"recovered leftover segment {p}")
         lat = result.write_latency_ms
-        fps_eff = result.frames_written / result.wall_s if result.wall_s else 0.0
         unconfirmed = (f"{result.frames_unconfirmed} unconfirmed by the disk (complete in .active files), "
                        if result.frames_unconfirmed else "")
+        # one rate, the one info and the stats give: frames over their own span (the command's
+        # wall time, start-up included, is said apart)
+        spans = [(s["start_ns"], s["end_ns"]) for s in result.segments if s.get("start_ns") and s.get("end_ns")]
+        span_s = (max(e for _, e in spans) - min(b for b, _ in spans)) / 1e9 if spans else 0.0
+        rate = f"{(result.frames_written - 1) / span_s:.1f} fps over {span_s:.1f} s, " if span_s > 0 else ""
         click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, {unconfirmed}"
-                   f"{result.frames_dropped} dropped  ({fps_eff:.1f} fps over {result.wall_s:.1f} s)")
+                   f"{result.frames_dropped} dropped  ({rate}{result.wall_s:.1f} s in all)")
         timing = result.timing
         click.echo(f"timestamps: {timing.get('time_basis')}  declared {timing.get('declared_fps')} fps, "
                    f"source achieved {timing.get('achieved_fps')} fps, {timing.get('frames_late', 0)} frames late")
