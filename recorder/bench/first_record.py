@@ -64,7 +64,7 @@ def bench_first_record(duration: float = 2.0, rounds: int = 3, size: tuple[int, 
             while not _cached(env):  # the compile outlives the recording: wait for its result
                 if time.monotonic() > deadline:
                     raise RuntimeError(f"the kernels were not in the cache {compile_timeout_s:g} s after the recording")
-                time.sleep(0.5)
+                time.sleep(2.0)  # each look is a Python process: it must not starve the compile
             warm.append(_record(root, "warm", duration, size, env))
 
     def med(rows: list[dict[str, Any]], key: str) -> float:

@@ -45,7 +45,7 @@ def test_a_recording_on_an_empty_kernel_cache(tmp_path):
     assert row["duration_s"] < 2.5
     assert result["analysis_runner"]["kernels"] == "warming", result["analysis_runner"]
     # the compile goes on after the recording and fills the cache; the next recording loads it
-    assert wait_for(lambda: _cached(env), timeout=600, step=1.0)
+    assert wait_for(lambda: _cached(env), timeout=900, step=3.0)  # each look is a Python process: not too often
     r = run_cli("record", "--root", str(root), "--session", "second", "--duration", "0.5", "--width", "320",
                 "--height", "256", "--json", env=env, timeout=300)
     assert r.returncode == 0, r.stderr
