@@ -11,7 +11,7 @@ import click
 from thermcap.recorder.cli.options import fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 
-__all__ = ["describe_session", "ls"]
+__all__ = ["describe_session", "ls", "recorded_span"]
 
 
 def _size(path: Path) -> int:
@@ -35,7 +35,7 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
         manifest = {"formats": {}, "unreadable": True}
     formats = {f: ("damaged" if e.get("damaged") else "verified" if e.get("verified") else "unverified")
                for f, e in (manifest.get("formats") or {}).items()}
-    start, end = _span(meta)
+    start, end = recorded_span(meta)
     # the session lock, held only by a live process, says whether "recording" is still true (a
     # recorder killed with SIGKILL leaves session.json saying so, and its lock file behind)
     state, hint = session_status(session_dir, meta.get("status"))
@@ -48,7 +48,7 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
             "bytes": _size(session_dir)}
 
 
-def _span(meta: dict[str, Any]) -> tuple[int | None, int | None]:
+def recorded_span(meta: dict[str, Any]) -> tuple[int | None, int | None]:
     """The session's first and last message times, as ``info`` measures its span, from the
     segments the recorder listed; the process's start and end only where it listed none (a
     session still recording, or one ended by a kill). The process's own times hold its start-up

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from thermcap.recorder.cli.listing import recorded_span
 from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import ThermcapError
@@ -254,8 +255,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
                        if result.frames_unconfirmed else "")
         # one rate, the one info and the stats give: frames over their own span (the command's
         # wall time, start-up included, is said apart)
-        spans = [(s["start_ns"], s["end_ns"]) for s in result.segments if s.get("start_ns") and s.get("end_ns")]
-        span_s = (max(e for _, e in spans) - min(b for b, _ in spans)) / 1e9 if spans else 0.0
+        first, last = recorded_span({"segments": result.segments})  # what ls shows
+        span_s = (last - first) / 1e9 if first and last else 0.0
         rate = f"{(result.frames_written - 1) / span_s:.1f} fps over {span_s:.1f} s, " if span_s > 0 else ""
         click.echo(f"frames: {result.frames_captured} captured, {result.frames_written} written, {unconfirmed}"
                    f"{result.frames_dropped} dropped  ({rate}{result.wall_s:.1f} s in all)")
