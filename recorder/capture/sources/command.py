@@ -32,7 +32,7 @@ from typing import IO, Any
 import numpy as np
 
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
-from thermcap.recorder.capture.sources.raw import _read_exactly
+from thermcap.recorder.capture.sources.raw import read_exactly
 from thermcap.recorder.exceptions import SourceError
 from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
@@ -105,7 +105,7 @@ class CommandSource(FrameSource):
                 assert proc.stdout is not None
                 while not self.stopped and (self.max_frames is None or index < self.max_frames):
                     buf = bytearray(frame_bytes)
-                    got = _read_exactly(proc.stdout, memoryview(buf))
+                    got = read_exactly(proc.stdout, memoryview(buf))
                     if got < frame_bytes:
                         self.incomplete_frames += got > 0
                         break

@@ -29,7 +29,7 @@ from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, P
 from thermcap.recorder.exceptions import SourceError, TruncatedFrameError
 from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
-__all__ = ["RawSource"]
+__all__ = ["RawSource", "read_exactly"]
 
 
 class RawSource(FrameSource):
@@ -95,7 +95,7 @@ class RawSource(FrameSource):
         try:
             while not self.stopped and (self.max_frames is None or index < self.max_frames):
                 buf = bytearray(frame_bytes)
-                got = _read_exactly(stream, memoryview(buf))
+                got = read_exactly(stream, memoryview(buf))
                 if got == 0:
                     return
                 if got < frame_bytes:
@@ -116,7 +116,7 @@ class RawSource(FrameSource):
                 stream.close()
 
 
-def _read_exactly(stream: Any, view: memoryview) -> int:
+def read_exactly(stream: Any, view: memoryview) -> int:
     """Fill ``view`` unless the stream ends; pipes deliver frames in pieces."""
     total = 0
     while total < view.nbytes:
