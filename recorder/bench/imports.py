@@ -24,10 +24,10 @@ __all__ = ["bench_import", "print_table"]
 
 def _simulated_icd(folder: Path, frames: int) -> list[Path]:
     from thermcap.recorder.capture.recorder import Recorder
-    from thermcap.recorder.capture.sources import make_source
+    from thermcap.recorder.capture.sources import SimSource
     from thermcap.recorder.exports.files import export_session
 
-    rec = Recorder(make_source("sim", frames=frames, paced=False, seed=7), folder / "rec", session_id="bench",
+    rec = Recorder(SimSource(frames=frames, paced=False, seed=7), folder / "rec", session_id="bench",
                    analysis=False)
     rec.run()
     export_session(folder / "rec" / "sessions" / "bench", "icd", folder / "icd")

@@ -40,6 +40,7 @@ from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector
 from thermcap.recorder.analysis.runner import DetectorRunner, Unanalysable, start_runner
 from thermcap.recorder.capture.counters import LatencyHistogram, RecorderCounters
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
+from thermcap.recorder.capture.sources.health import source_losses
 from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
 from thermcap.recorder.exceptions import RecordingError, ThermcapError
 from thermcap.recorder.exports.foxglove_layout import CountsRange, write_layout
@@ -124,7 +125,7 @@ class RecordingResult:
     def ok(self) -> bool:
         """True only when nothing went wrong and nothing was dropped, skipped or missed."""
         return self.error is None and not any(self.dropped.values()) and not self.analysis_skipped \
-            and not any(c.get("error") for c in self.cameras.values()) and not self.source_health.get("restarts")
+            and not any(c.get("error") for c in self.cameras.values()) and not source_losses(self.source_health)
 
     @property
     def problems(self) -> list[str]:
@@ -135,9 +136,7 @@ class RecordingResult:
             failure = (self.analysis_runner or {}).get("failure")
             out.append(f"{self.analysis_skipped} frames not analysed ("
                        f"{failure or 'the detector fell behind or failed'})")
-        if self.source_health.get("restarts"):
-            out.append(f"the source ended {self.source_health['restarts']} times and was started again "
-                       f"({self.source_health.get('gap_s', 0)} s without frames; see the source_gap events)")
+        out.extend(source_losses(self.source_health))
         late = self.timing.get("frames_late") or 0
         if late:
             out.append(f"{late} frames late: the source achieved {self.timing.get('achieved_fps')} fps "

@@ -16,7 +16,7 @@ from typing import Any
 
 import click
 
-from thermcap.recorder.capture.sources.spec import CAMERA_KEYS
+from thermcap.recorder.capture.sources.spec import CAMERA_KEYS, accepts_key
 
 __all__ = ["load_config"]
 
@@ -71,10 +71,12 @@ def _camera_spec(path: Path, cam: Any) -> str:
     """A ``[[record.camera]]`` table as the ``--source`` text it stands for."""
     if not isinstance(cam, dict) or "source" not in cam:
         raise click.BadParameter(f"{path}: each [[record.camera]] needs a source (and a name)", param_hint="--config")
-    extra = set(cam) - {"name", "source"} - {k.replace("-", "_") for k in CAMERA_KEYS} - set(CAMERA_KEYS)
+    extra = {k for k in set(cam) - {"name", "source"} if not accepts_key(str(cam["source"]), k)}
+    gige = str(cam["source"]).startswith("gige:")
     if extra:
         raise click.BadParameter(f"{path}: [[record.camera]] {cam.get('name', '?')}: unknown keys "
-                                 f"{', '.join(sorted(extra))} (allowed: name, source, {', '.join(CAMERA_KEYS)})",
+                                 f"{', '.join(sorted(extra))} (allowed: name, source, {', '.join(CAMERA_KEYS)}"
+                                 f"{'; a GigE camera also takes GenICam features' if gige else ''})",
                                  param_hint="--config")
     head = f"{cam['name']}={cam['source']}" if cam.get("name") else str(cam["source"])
     pairs = [f"{k.replace('_', '-')}={str(v).lower() if isinstance(v, bool) else v}"

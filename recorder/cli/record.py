@@ -23,10 +23,15 @@ if TYPE_CHECKING:
 MAX_FRAME_PIXELS = 8192 * 8192
 RING_FRAMES_AT_LEAST = 16  # the smallest --max-disk, in raw frames
 EXIT_DROPPED = 3  # the recording finished, but frames were dropped: not the same as a failure (1)
+# the recording kept every frame it was given, but the source lost some before it (a camera gone
+# for a while, incomplete buffers, frames the camera numbered that never came)
+EXIT_SOURCE_LOSS = 4
 
 @cli.command()
 @click.option("--source", "sources", multiple=True, default=["sim"], show_default=True, metavar="[NAME=]SOURCE",
-              help="sim, raw:PATH, or raw:- for stdin; repeat with names for several cameras in one session "
+              help="sim, raw:PATH (raw:- for stdin), exec:COMMAND (a command writing raw Gray16, restarted when "
+                   "it ends) or gige:CAMERA (GigE Vision through Aravis; GenICam features as Name=value keys); "
+                   "repeat with names for several cameras in one session "
                    "(left=sim --source right=raw:/dev/stdin,width=320,height=256,fps=30).")
 @click.option("--duration", type=Number(minimum=0, above=True, unit="s"), default=None,
               help="Seconds to record (default: until the input ends or Ctrl-C).")
@@ -123,6 +128,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
     from thermcap.recorder.capture.control import ControlServer
     from thermcap.recorder.capture.recorder import Recorder
     from thermcap.recorder.capture.sources import make_source
+    from thermcap.recorder.capture.sources.registry import CameraSettings, settings_from
     from thermcap.recorder.capture.sources.spec import parse_source_spec
     from thermcap.recorder.capture.triggers import TriggerPolicy
     from thermcap.recorder.storage.layout import check_session_name
@@ -145,22 +151,21 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
                 raise click.BadParameter(f"camera names must differ: {', '.join(str(n) for n in names)}")
         srcs = {}
         pixel_rate = 0.0
+        flags = CameraSettings(width=width, height=height, fps=fps, sensor_id=sensor_id, pace=pace,
+                               timestamps=timestamps, seed=seed, crossover=crossover, cue_period_s=cue_period,
+                               duration_s=duration)
         for sp in specs:
-            o = {"width": width, "height": height, "fps": fps, "seed": seed, "sensor": sensor_id, "pace": pace,
-                 "timestamps": timestamps, "crossover": crossover, "cue-period": cue_period, **sp.options}
-            src = make_source(sp.kind, width=o["width"], height=o["height"], fps=o["fps"], seed=o["seed"],
-                              crossover=o["crossover"], cue_period_s=o["cue-period"],
-                              paced=(sp.is_sim if o["pace"] is None else o["pace"]),
-                              duration_s=duration if sp.is_sim else None, sensor_id=o["sensor"],
-                              timestamps=None if sp.is_sim else o["timestamps"])
+            settings = settings_from(sp.options, flags)
+            src = make_source(sp, settings)
             remainder = getattr(src, "file_remainder", 0)
             if remainder:
-                click.echo(f"warning: {sp.kind[4:]} is not a whole number of {o['width']}x{o['height']} Gray16 "
-                           f"frames ({remainder} bytes left over); the last frame will be reported as truncated",
-                           err=True)
+                click.echo(f"warning: {sp.target} is not a whole number of {settings.width}x{settings.height} "
+                           f"Gray16 frames ({remainder} bytes left over); the last frame will be reported as "
+                           f"truncated", err=True)
             srcs[sp.name] = src
-            pixel_rate += o["width"] * o["height"] * o["fps"]
-        is_sim = all(sp.is_sim for sp in specs)
+            pixel_rate += settings.width * settings.height * settings.fps
+        # the simulator ends itself at --duration (exactly duration x fps frames); others are stopped
+        ends_itself = all(sp.source_kind.counts_duration for sp in specs)
         if compression == "auto":
             comp, default_level = auto_compression(int(pixel_rate), 1, 1.0)
         else:
@@ -235,7 +240,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             server.start()
             if not as_json:
                 click.echo(f"control: {server.url}  (thermcap ctl status --root {root})")
-        result = rec.run(duration_s=None if is_sim else duration, progress=progress)
+        result = rec.run(duration_s=None if ends_itself else duration, progress=progress)
     except ThermcapError as exc:
         fail(str(exc))
     finally:
@@ -287,6 +292,12 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
         fail(f"{result.frames_dropped} of {result.frames_captured} frames were dropped "
              f"({'; '.join(result.problems[:2])}); the session keeps the {result.frames_written} written",
              code=EXIT_DROPPED)
+    from thermcap.recorder.capture.sources.health import source_losses
+
+    losses = source_losses(result.source_health)
+    if losses:
+        fail(f"the source lost frames before the recorder: {'; '.join(losses)}; the session keeps the "
+             f"{result.frames_written} it was given", code=EXIT_SOURCE_LOSS)
 
 
 # -- ctl ------------------------------------------------------------------------------------
@@ -479,6 +490,11 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
                   + (f"[yellow]{late} frames late[/yellow]" if late else "0 frames late"))
     dropped = d.dropped or {}
     con.print(f"dropped: {sum(dropped.values()) if dropped else 0} messages {dropped if dropped else ''}")
+    if isinstance(d, SessionInfo) and d.source:
+        from thermcap.recorder.capture.sources.health import source_line, source_losses
+
+        line = source_line(d.source, d.source_health)
+        con.print(f"[yellow]{line}[/yellow]" if source_losses(d.source_health) else line)
     if isinstance(d, SessionInfo) and d.cameras:
         cams = Table("camera", "sensor", "frames", "captured", "dropped", "effective fps", "error",
                      box=None if plain else box.HEAVY_HEAD)

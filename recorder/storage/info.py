@@ -112,6 +112,10 @@ class SessionInfo:
     # segments session.json lists that are gone with no record of why (recorder.storage.ledger)
     lost_segments: list[dict[str, Any]] = field(default_factory=list)
     frames_lost: int = 0
+    source: dict[str, Any] = field(default_factory=dict)  # what the source was (describe())
+    # what it went through: gaps without frames, incomplete buffers, frames the camera sent that
+    # never came, restarts or reconnections (empty for a source with nothing to tell)
+    source_health: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -246,6 +250,7 @@ def session_info(path: str | Path) -> SessionInfo:
         evicted_segments=_evicted(Path(path), meta),
         cameras=_cameras(meta, topics, span),
         lost_segments=[{"name": s.name, "frames": s.frames} for s in lost], frames_lost=sum(s.frames for s in lost),
+        source=meta.get("source") or {}, source_health=meta.get("source_health") or {},
     )
 
 

@@ -32,7 +32,9 @@ from typing import IO, Any
 import numpy as np
 
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, SensorInfo
+from thermcap.recorder.capture.sources.gaps import GapLog
 from thermcap.recorder.capture.sources.raw import read_exactly
+from thermcap.recorder.capture.sources.registry import CameraSettings, SourceKind, register_source
 from thermcap.recorder.exceptions import SourceError
 from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
@@ -70,8 +72,7 @@ class CommandSource(FrameSource):
                                  frame_rate_hz=fps, pixel_pitch_um=None, netd_mk=None)
         self.restarts = 0  # times the command was started again after it ended
         self.incomplete_frames = 0  # frames a command's end left half-written: counted, never written
-        self.gaps: list[dict[str, Any]] = []
-        self._open_gap: dict[str, Any] | None = None  # since the command last ended, until a frame
+        self.gaps = GapLog(on_close=self._reported)  # since the command last ended, until a frame
         self._proc: subprocess.Popen | None = None
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -81,11 +82,11 @@ class CommandSource(FrameSource):
                 "fps": self.fps, "time_basis": self.time_basis}
 
     def health(self) -> dict[str, Any]:
-        open_s = (time.time_ns() - self._open_gap["start_ns"]) / 1e9 if self._open_gap is not None else 0.0
-        return {"restarts": self.restarts, "incomplete_frames": self.incomplete_frames,
-                "gaps": len(self.gaps) + (self._open_gap is not None),
-                "gap_s": round(sum(g["duration_s"] for g in self.gaps) + open_s, 3),
-                "waiting_for_frames": self._open_gap is not None}
+        return {"restarts": self.restarts, "incomplete_frames": self.incomplete_frames, **self.gaps.health()}
+
+    def _reported(self, gap: dict[str, Any]) -> None:
+        if self.report is not None:
+            self.report(gap)
 
     def stop(self) -> None:
         super().stop()
@@ -110,8 +111,7 @@ class CommandSource(FrameSource):
                         self.incomplete_frames += got > 0
                         break
                     ts = time.time_ns()
-                    if self._open_gap is not None:
-                        self._gap_closed(self._open_gap, ts)
+                    self.gaps.close(ts, restarts=self.restarts)
                     pixels = np.frombuffer(buf, dtype="<u2").reshape(self.height, self.width)
                     yield CapturedFrame(index=index, timestamp_ns=ts, pixels=pixels,
                                         capture_mono_ns=time.monotonic_ns())
@@ -126,16 +126,14 @@ class CommandSource(FrameSource):
             if delivered:
                 delay = self.backoff_s
             last = stderr[-1] if stderr else ""
-            if self._open_gap is None:
-                self._open_gap = {"kind": "source_gap", "start_ns": time.time_ns(), "exit_code": code,
-                           "reason": f"{self.argv[0]} exited ({_status(code)})" + (f": {last}" if last else ""),
-                           "frames_before": index}
+            self.gaps.open(f"{self.argv[0]} exited ({_status(code)})" + (f": {last}" if last else ""),
+                           exit_code=code, frames_before=index)
             self.restarts += 1
             self._wake.wait(delay)
             delay = min(delay * 2, self.max_backoff_s)
-        gap = self._open_gap
+        gap = self.gaps.open_gap
         if gap is not None:  # stopped before a frame came back: the gap ends with the recording
-            self._gap_closed({**gap, "reason": gap["reason"] + "; no frame came before the stop"}, time.time_ns())
+            self.gaps.close(reason=gap["reason"] + "; no frame came before the stop", restarts=self.restarts)
 
     def close(self) -> None:
         with self._lock:
@@ -156,15 +154,6 @@ class CommandSource(FrameSource):
             with self._lock:
                 _end(proc)
         return proc, stderr
-
-    def _gap_closed(self, gap: dict[str, Any], end_ns: int) -> None:
-        # logged when it is known, at its end (the frames before it are written already)
-        gap = {**gap, "at_ns": end_ns, "end_ns": end_ns,
-               "duration_s": round((end_ns - gap["start_ns"]) / 1e9, 3), "restarts": self.restarts}
-        self.gaps.append(gap)
-        self._open_gap = None
-        if self.report is not None:
-            self.report(gap)
 
 
 def _drain(stream: IO[bytes] | None, keep: collections.deque[str]) -> None:
@@ -201,3 +190,11 @@ def _status(code: int | None) -> str:
         with contextlib.suppress(ValueError):
             return f"killed by {signal.Signals(-code).name}"
     return f"exit code {code}"
+
+
+def _from_settings(command: str, s: CameraSettings) -> CommandSource:
+    return CommandSource(command, width=s.width, height=s.height, fps=s.fps,
+                         sensor_id=s.sensor_id or "GRAY16")
+
+
+register_source(SourceKind("exec", "exec:COMMAND", _from_settings, whole_rest=True))

@@ -26,6 +26,7 @@ from typing import Any, BinaryIO
 import numpy as np
 
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from thermcap.recorder.capture.sources.registry import CameraSettings, SourceKind, register_source
 from thermcap.recorder.exceptions import SourceError, TruncatedFrameError
 from thermcap.recorder.radiometry import DEFAULT_MODEL, RadiometricModel
 
@@ -128,3 +129,11 @@ def read_exactly(stream: Any, view: memoryview) -> int:
             break
         total += n
     return total
+
+
+def _from_settings(path: str, s: CameraSettings) -> RawSource:
+    return RawSource(path, width=s.width, height=s.height, fps=s.fps, paced=bool(s.pace),
+                     timestamps=s.timestamps, sensor_id=s.sensor_id or "GRAY16")
+
+
+register_source(SourceKind("raw", "raw:PATH (raw:- for stdin)", _from_settings))

@@ -54,6 +54,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource, Pacer, SensorInfo
+from thermcap.recorder.capture.sources.registry import CameraSettings, SourceKind, register_source
 from thermcap.recorder.icd.names import MAX_COUNT, iso_utc
 from thermcap.recorder.icd.quality import contrast_metrics, frame_analysis
 from thermcap.recorder.icd.topics import GROUND_TRUTH_SCHEMA, RADAR_CUE_SCHEMA, TOPIC_GROUND_TRUTH, TOPIC_RADAR_CUE
@@ -542,3 +543,12 @@ class SimSource(FrameSource):
                 messages=messages,
             )
             index += 1
+
+
+def _from_settings(_target: str, s: CameraSettings) -> SimSource:
+    return SimSource(width=s.width, height=s.height, fps=s.fps, seed=s.seed, crossover=s.crossover,
+                     cue_period_s=s.cue_period_s, paced=True if s.pace is None else s.pace, duration_s=s.duration_s,
+                     sensor_id=s.sensor_id or "SIM640")
+
+
+register_source(SourceKind("sim", "sim", _from_settings, counts_duration=True, paced_by_default=True))

@@ -143,3 +143,37 @@ def test_source_specs():
                      ("sim,fps=fast", "fps")]:
         with pytest.raises(SourceError, match=why):
             parse_source_spec(bad)
+
+
+def test_every_kind_of_source_is_registered_once_and_parsed_by_its_own_rules():
+    from thermcap.recorder.capture.sources import source_registry
+
+    assert set(source_registry) == {"sim", "raw", "exec", "gige"}
+    g = parse_source_spec("front=gige:10.0.0.5,fps=30,ExposureTime=8000,PixelFormat=Mono14")
+    assert (g.name, g.target, g.options) == ("front", "10.0.0.5",
+                                            {"fps": 30.0, "own": {"ExposureTime": "8000", "PixelFormat": "Mono14"}})
+    assert parse_source_spec("gige:").target == ""  # the first camera found
+    e = parse_source_spec("exec:ffmpeg -vf scale=1,crop=2 -")
+    assert e.target == "ffmpeg -vf scale=1,crop=2 -" and e.options == {}
+    for bad, why in [("sim,ExposureTime=1", "ExposureTime"), ("raw:", "needs a target"), ("usb:0", "gige:CAMERA")]:
+        with pytest.raises(SourceError, match=why):
+            parse_source_spec(bad)
+
+
+def test_block_ids_wrap_without_counting_a_loss():
+    from thermcap.recorder.capture.sources.gige import block_ids_missed
+
+    assert block_ids_missed(65534, 65535) == 0 and block_ids_missed(65535, 1) == 0  # 0 is never a block id
+    assert block_ids_missed(65533, 2) == 3 and block_ids_missed(10, 14) == 3
+
+
+def test_a_source_that_lost_frames_says_so_in_words():
+    from thermcap.recorder.capture.sources.health import source_line, source_losses
+
+    assert source_losses({"gaps": 0, "incomplete_frames": 0, "frames_missed": 0}) == []
+    said = source_losses({"gaps": 1, "gap_s": 4.5, "reconnects": 1, "incomplete_frames": 3,
+                          "incomplete_by_status": {"missing-packets": 3}, "frames_missed": 270})
+    assert len(said) == 3 and "reconnected 1 times" in said[0] and "missing-packets: 3" in said[1]
+    line = source_line({"source": "gige", "camera": "10.0.0.5", "genicam": {"DeviceVendorName": "FLIR",
+                        "DeviceModelName": "A70", "DeviceSerialNumber": "77"}}, {"gaps": 1, "gap_s": 4.5})
+    assert line.startswith("source: gige 10.0.0.5 (FLIR A70, serial 77)") and "gaps: 1 (4.5 s)" in line
