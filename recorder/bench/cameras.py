@@ -26,9 +26,9 @@ MIX = {"front": (640, 512, 60.0), "rear": (640, 512, 60.0), "aux": (320, 256, 30
 
 
 def measure_recording(sources: FrameSource | Mapping[str, FrameSource], root: Path, seconds: float,
-                      live: Any = None, during: Any = None) -> dict[str, Any]:
+                      live: Any = None, during: Any = None, analysis: bool = True) -> dict[str, Any]:
     """Record for ``seconds`` with CPU sampled per thread; ``during(rec)`` runs beside it."""
-    rec = Recorder(sources, root, live=live, recover_leftovers=False)
+    rec = Recorder(sources, root, live=live, recover_leftovers=False, analysis=analysis)
     cpu = ThreadCpu()
     cpu.start()
 

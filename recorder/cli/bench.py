@@ -169,3 +169,32 @@ def bench_first_record_cmd(duration: float, rounds: int, size: str, as_json: boo
         fail(f"--size must look like 640x512, got {size!r}")
     res = bench_first_record(duration, rounds, (w, h))
     click.echo(json.dumps(res, indent=2) if as_json else "\n".join(print_lines(res)))
+
+
+@bench.command("gige")
+@click.option("--seconds", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=10.0,
+              show_default=True, help="Seconds per recording.")
+@click.option("--camera", default=None,
+              help="A GigE Vision camera's address or name (default: Aravis's fake camera, started in a "
+                   "loopback-only network namespace; needs root).")
+@click.option("--dir", "workdir", type=click.Path(file_okay=False), default=None)
+@json_option
+def bench_gige_cmd(seconds: float, camera: str | None, workdir: str | None, as_json: bool) -> None:
+    """The GigE source's CPU per 640x512 Mono16 frame against a raw pipe's, in the same run."""
+    import os
+
+    from thermcap.recorder.bench.gige import INSIDE_ENV, bench_gige, print_lines, run_in_loopback_namespace
+    from thermcap.recorder.exceptions import ThermcapError
+
+    if camera is None and not os.environ.get(INSIDE_ENV):
+        argv = ["bench", "gige", "--seconds", str(seconds), "--camera", "127.0.0.1",
+                *(["--dir", workdir] if workdir else []), *(["--json"] if as_json else [])]
+        try:
+            sys.exit(run_in_loopback_namespace(argv))
+        except RuntimeError as exc:
+            fail(str(exc))
+    try:
+        res = bench_gige(seconds, camera or "127.0.0.1", workdir)
+    except ThermcapError as exc:
+        fail(str(exc))
+    click.echo(json.dumps(res, indent=2) if as_json else "\n".join(print_lines(res)))

@@ -179,3 +179,18 @@ def test_gige_without_a_camera_is_a_clear_error(tmp_path):
         r = ns.run([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--source",
                     "gige:127.0.0.1", "--duration", "1"], capture_output=True, text=True, timeout=180)
     assert r.returncode == 1 and "gige:127.0.0.1" in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+@needs_camera
+def test_bench_gige_measures_a_frame_beside_the_raw_pipe():
+    """``thermcap bench gige``'s short form: it starts the fake in its own namespace and reports
+    both figures from the same run."""
+    r = subprocess.run([sys.executable, "-m", "thermcap", "bench", "gige", "--seconds", "1.5", "--json"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    res = json.loads(r.stdout)
+    assert res["gige"]["frames"] > 0 and res["gige"]["capture_us_per_frame"] > 0
+    if shutil.which("ffmpeg"):
+        assert res["raw_pipe"]["frames"] > 0
+        assert res["gige_vs_raw_pipe"] == round(res["gige"]["capture_us_per_frame"]
+                                                / res["raw_pipe"]["capture_us_per_frame"], 2)
