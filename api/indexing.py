@@ -20,7 +20,6 @@ import json
 import statistics
 import time
 from dataclasses import asdict, dataclass, field
-from datetime import UTC
 from itertools import pairwise
 from pathlib import Path
 from typing import Any
@@ -101,9 +100,12 @@ def _sidecars_from_zip(session_dir: Path, fmt: str, files: list[dict[str, Any]])
     return sidecars
 
 
-def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None) -> tuple[list[dict], list[str]]:
+def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None,
+                        log_times: list[int] | None = None) -> tuple[list[dict], list[str]]:
     """Every readable sidecar of ``files``, chunk by chunk: a damaged chunk or a segment with no
-    readable summary hides only itself (named in ``problems``), never the rest of the session."""
+    readable summary hides only itself (named in ``problems``), never the rest of the session.
+    Each one's log time goes to ``log_times``, when given: where it sits in the session."""
+    log_times = [] if log_times is None else log_times
     from mcap.reader import make_reader
 
     from thermcap.recorder.storage.chunks import SegmentIndex, message_records, read_chunk
@@ -122,6 +124,7 @@ def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None) ->
                 for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA]):
                     out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
                     segs.append(seg.name)
+                    log_times.append(msg.log_time)
             continue
         cid = index.topics[TOPIC_METADATA]
         channel = index.channels[cid]
@@ -134,11 +137,82 @@ def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None) ->
                 problems.append(f"{seg.name}: {exc}; its frames are not served until `thermcap recover {seg}`")
                 continue
             view = memoryview(records.data)
-            for _t, _channel, _seq, _pub, start, stop in sorted(
+            for t, _channel, _seq, _pub, start, stop in sorted(
                     (m for m in message_records(records) if m[1] == cid), key=lambda m: m[0]):
                 out.append(json.loads(json_payload(channel.message_encoding, bytes(view[start:stop]))))
                 segs.append(seg.name)
+                log_times.append(t)
     return out, segs
+
+
+def _sidecars_by_manifest(session_dir: Path, manifest: dict[str, Any], verified: dict[str, Any],
+                          problems: list[str]) -> tuple[list[dict], list[int], list[str | None]]:
+    """Each frame of the manifest's table with its sidecar, taken from the cheapest copy that has
+    it: a stored-ZIP archive (its JSON entries), the MCAP source (placed by segment and log time,
+    so a segment that cannot be read leaves its frames' places empty, never shifts the others),
+    ``extras.mcap``, then any other verified format read in order. A copy that fails is named in
+    ``problems`` and passed over; a frame no copy gives keeps its place and time, its summary blank."""
+    from thermcap.archive.reading import frames_from_format, verified_formats
+
+    frames_meta = manifest.get("frames", {})
+    times: list[int] = [int(t) for t in frames_meta.get("timestamps_ns") or []]
+    segs: list[str | None] = list(frames_meta.get("segments") or [None] * len(times))
+    n = len(times)
+    got: dict[int, dict] = {}
+    layout = SessionLayout.of(session_dir)
+    for fmt in (f for f in ZIPPED_FORMATS if f in verified and layout.format_dir(f).is_dir()):
+        try:
+            from_zip = _sidecars_from_zip(session_dir, fmt, verified[fmt]["files"])
+        except Exception as exc:  # a damaged ZIP fails anywhere in its directory or entries
+            problems.append(f"archive/{fmt}: {type(exc).__name__}: {exc}; its copy is passed over (`thermcap scrub "
+                            f"--repair` rebuilds it from another)")
+            continue
+        if len(from_zip) == n:
+            got = dict(enumerate(from_zip))
+            break
+        problems.append(f"archive/{fmt}: {len(from_zip)} sidecars for the manifest's {n} frames; passed over")
+    if len(got) < n and session_segments(session_dir):
+        place = {(seg, t): i for i, (seg, t) in enumerate(zip(segs, times, strict=True))}
+        log_times: list[int] = []
+        found, names = _sidecars_from_mcap(session_segments(session_dir), problems, log_times)
+        for sc, seg, t in zip(found, names, log_times, strict=True):
+            i = place.get((seg, t))
+            if i is not None:
+                got.setdefault(i, sc)
+    if len(got) < n and layout.extras.is_file():
+        try:
+            extra, _ = _sidecars_from_mcap([layout.extras], problems)
+        except McapFileError as exc:
+            problems.append(f"archive/extras.mcap: {exc}")
+            extra = []
+        if len(extra) == n:
+            for i, sc in enumerate(extra):
+                got.setdefault(i, sc)
+    if len(got) < n:
+        for fmt in verified_formats(manifest, layout):  # type: ignore[arg-type]
+            try:
+                for frame in frames_from_format(manifest, layout, fmt):  # type: ignore[arg-type]
+                    if frame.index not in got:
+                        got[frame.index] = json.loads(frame.sidecar or b"{}")
+                    if len(got) == n:
+                        break
+            except Exception as exc:  # a damaged copy stops here; the next one may hold the rest
+                problems.append(f"archive/{fmt}: {type(exc).__name__}: {exc}")
+            if len(got) == n:
+                break
+    if len(got) < n:
+        problems.append(f"{n - len(got)} frames' sidecars could not be read from any copy: listed at their times, "
+                        f"their summaries blank")
+    sidecars = [got.get(i, {}) for i in range(n)]
+    # segments the archive does not cover yet (archived while more was recorded): after its frames
+    newer = [seg for seg in session_segments(session_dir) if seg.name not in set(segs)]
+    if newer:
+        log_times = []
+        found, names = _sidecars_from_mcap(newer, problems, log_times)
+        sidecars += found
+        segs += list(names)
+        times += log_times
+    return sidecars, times, segs
 
 
 def _coverage(times: list[int]) -> list[list[int]]:
@@ -156,17 +230,6 @@ def _coverage(times: list[int]) -> list[list[int]]:
             start = b
     spans.append([start, times[-1]])
     return spans
-
-
-def _ts(sidecar: dict[str, Any]) -> int | None:
-    stamp = (sidecar.get("capture") or {}).get("timestamp")
-    if not stamp:
-        return None
-    from datetime import datetime
-
-    main, _, frac = stamp.rstrip("Z").partition(".")
-    sec = int(datetime.strptime(main, "%Y-%m-%dT%H:%M:%S").replace(tzinfo=UTC).timestamp())
-    return sec * 1_000_000_000 + (int(frac.ljust(9, "0")[:9]) if frac else 0)
 
 
 def sidecar_summary(sc: dict[str, Any]) -> dict[str, Any]:
@@ -209,25 +272,17 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
     # A copy scrub found damaged is not offered until `scrub --repair` rebuilt and re-verified it.
     verified = {f: e for f, e in (manifest or {}).get("formats",
                                                       {}).items() if e.get("verified") and not e.get("damaged")}
-    layout = SessionLayout.of(session_dir)
-    zipped = next((f for f in ZIPPED_FORMATS if f in verified and layout.format_dir(f).is_dir()), None)
-    if zipped:
-        sidecars = _sidecars_from_zip(session_dir, zipped, verified[zipped]["files"])
-        segs = (manifest or {}).get("frames", {}).get("segments") or [None] * len(sidecars)
-        times = (manifest or {}).get("frames", {}).get("timestamps_ns") or [_ts(s) for s in sidecars]
-    elif session_segments(session_dir):
-        sidecars, segs = _sidecars_from_mcap(session_segments(session_dir), problems)
-        times = [_ts(s) for s in sidecars]
-    else:
-        # Source deleted and no zipped archive (hdf5, tiff-lzw ...): the sidecars live in extras.mcap
-        # exactly as recorded, and the manifest has each frame's time and segment.
-        extras = SessionLayout.of(session_dir).extras
-        sidecars, _ = _sidecars_from_mcap([extras] if extras.is_file() else [])
-        frames_meta = (manifest or {}).get("frames", {})
-        times = frames_meta.get("timestamps_ns") or [_ts(s) for s in sidecars]
-        segs = frames_meta.get("segments") or [None] * len(times)
-        if len(sidecars) != len(times):
-            sidecars = (sidecars + [{}] * len(times))[: len(times)]
+    sidecars: list[dict]
+    times: list[int]
+    segs: list[str | None]
+    if (manifest or {}).get("frames", {}).get("timestamps_ns"):
+        # archived: the manifest's frame table is the session's one numbering (every copy, every
+        # reader, the index); sidecars are placed in it from whichever copy gives them
+        sidecars, times, segs = _sidecars_by_manifest(session_dir, manifest or {}, verified, problems)
+    else:  # not archived: the source's frames in its order, at their log times (as the manifest keeps them)
+        times = []
+        sidecars, names = _sidecars_from_mcap(session_segments(session_dir), problems, times)
+        segs = list(names)
     analysed = SessionLayout.of(session_dir).analysis_jsonl
     if analysed.is_file():  # `thermcap analyze` results take precedence over the recorded sidecars
         by_index = {}
