@@ -106,9 +106,7 @@ def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None,
     readable summary hides only itself (named in ``problems``), never the rest of the session.
     Each one's log time goes to ``log_times``, when given: where it sits in the session."""
     log_times = [] if log_times is None else log_times
-    from mcap.reader import make_reader
-
-    from thermcap.recorder.storage.chunks import SegmentIndex, message_records, read_chunk
+    from thermcap.recorder.storage.chunks import SegmentIndex, message_records, read_chunk, read_through
 
     out, segs = [], []
     for seg in files:
@@ -120,11 +118,15 @@ def _sidecars_from_mcap(files: list[Path], problems: list[str] | None = None,
             problems.append(f"{seg.name}: {exc} (`thermcap recover {seg}` keeps every intact chunk)")
             continue
         if index is None or not index.chunks_in_time_order or TOPIC_METADATA not in index.topics:
-            with open(seg, "rb") as f:  # written without a chunk index: read through
-                for _, ch, msg in make_reader(f, validate_crcs=True).iter_messages(topics=[TOPIC_METADATA]):
+            try:  # written without a chunk index (or with none at all): read through
+                for _, ch, msg in read_through(seg, [TOPIC_METADATA]):
                     out.append(json.loads(json_payload(ch.message_encoding, msg.data)))
                     segs.append(seg.name)
                     log_times.append(msg.log_time)
+            except McapFileError as exc:
+                if problems is None:
+                    raise
+                problems.append(f"{seg.name}: {exc} (`thermcap recover {seg}` keeps every intact chunk)")
             continue
         cid = index.topics[TOPIC_METADATA]
         channel = index.channels[cid]

@@ -42,6 +42,7 @@ __all__ = [
     "message_records",
     "messages_at",
     "read_chunk",
+    "read_through",
 ]
 
 _CHUNK = 0x06
@@ -255,3 +256,18 @@ def iter_messages(index: SegmentIndex, channels: Container[int] | None = None) -
             found.sort(key=itemgetter(0))  # stable: equal times keep their place in the chunk
         for t, channel, sequence, published, start, stop in found:
             yield RawMessage(channel, sequence, t, published, view[start:stop])
+
+
+def read_through(path: str | Path, topics: list[str] | None = None) -> Iterator[tuple[Any, Any, Any]]:
+    """(schema, channel, message) of a whole file through mcap's own reader, CRCs checked, for a
+    segment with no usable chunk index (no summary, overlapping chunks, no chunk at all).
+
+    Damaged bytes make mcap raise nearly anything (``EndOfFile``, ``InvalidMagic``,
+    ``RecordLengthLimitExceeded``, ``UnicodeDecodeError``, ``MemoryError``); here each becomes
+    ``McapFileError`` naming the file, which every caller treats as one damaged part, so one file
+    can never hide the rest of its session. Messages before the damage are given first."""
+    with open(path, "rb") as f:
+        try:
+            yield from make_reader(f, validate_crcs=True).iter_messages(topics=topics)
+        except Exception as exc:
+            raise McapFileError(f"{path}: cannot be read ({type(exc).__name__}: {exc})") from exc

@@ -19,7 +19,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import camera_topics, decode_image, is_image_topic
 from thermcap.recorder.storage.archive_readers import ARCHIVE_READERS
-from thermcap.recorder.storage.chunks import SegmentIndex, iter_messages
+from thermcap.recorder.storage.chunks import SegmentIndex, iter_messages, read_through
 from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
 
 __all__ = [
@@ -141,8 +141,7 @@ def _segment_messages(path: Path, topics: tuple[str, ...] | None) -> Iterator[tu
     except McapFileError:
         index = None  # mcap's reader says what is wrong, or reads what it can
     if index is None or not index.chunks_in_time_order:
-        with open(path, "rb") as f:
-            yield from make_reader(f, validate_crcs=True).iter_messages(topics=None if topics is None else list(topics))
+        yield from read_through(path, None if topics is None else list(topics))
         return
     summary_channels, schemas = index.channels, index.schemas
     ids = None if topics is None else {cid for cid, ch in summary_channels.items() if ch.topic in topics}
