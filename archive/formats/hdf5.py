@@ -22,6 +22,7 @@ stored counts stay the recorded ones; any other model (Planck, a DJI lookup) is 
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -31,6 +32,7 @@ import numpy as np
 
 from thermcap.archive.exceptions import ArchiveError
 from thermcap.archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate, ordered_map
+from thermcap.archive.formats.hdf5_heap import HeapStrings, heap_strings
 from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["LIBVER", "Hdf5"]
@@ -169,12 +171,18 @@ class Hdf5(ArchiveFormat):
         for rel in files:
             path = out_dir / rel
             try:
-                with h5py.File(path, "r") as f:
+                with h5py.File(path, "r") as f, open(path, "rb") as raw:
                     d, meta = f["frames"], f["metadata"]
                     times = f["timestamps_ns"][...]
                     n = d.shape[0]
                     step = max(1, READ_BYTES // max(1, int(np.prod(d.shape[1:], dtype=np.int64)) * d.dtype.itemsize))
-                    blocks = [(d, meta, i, step) for i in range(0, n, step)]
+                    # the sidecars from the heap's bytes, bounded (HDF5's own read of a damaged
+                    # collection can loop for good): hdf5_heap
+                    fd = raw.fileno()
+                    at = heap_strings(meta)
+                    strings = HeapStrings(lambda off, size, fd=fd: os.pread(fd, size, off), *at, where=str(path)) \
+                        if at is not None else None
+                    blocks = [(d, meta, strings, i, step) for i in range(0, n, step)]
                     # the next block is read while the caller checks this one (two in flight)
                     for i, pixels, sidecars in ordered_map(_read_block, blocks, workers, window=2):
                         for k in range(pixels.shape[0]):
@@ -186,22 +194,38 @@ class Hdf5(ArchiveFormat):
 
     def read_frame(self, open_file, files: list[dict], index: int) -> DecodedFrame:
         """One chunk of ``frames`` (one frame per chunk) and one row each of the time and the
-        sidecar: h5py reads a file object with seeks, so this is a few ranged reads."""
+        sidecar: h5py reads a file object with seeks, so this is a few ranged reads. A sidecar
+        the heap cannot give (damaged) comes back empty, which its hash then reports, and the
+        pixels, checked by theirs, still serve."""
         rel, k = locate(files, index)
         with open_file(rel) as fh:
             try:
                 with h5py.File(fh, "r") as f:
-                    meta = f["metadata"][k]
-                    return DecodedFrame(f["frames"][k], meta.encode("utf-8") if isinstance(meta, str) else bytes(meta),
-                                        int(f["timestamps_ns"][k]))
+                    pixels, time_ns = f["frames"][k], int(f["timestamps_ns"][k])
+                    at = heap_strings(f["metadata"])
+                    if at is None:
+                        meta = f["metadata"][k]
+                        return DecodedFrame(pixels, meta.encode("utf-8") if isinstance(meta, str) else bytes(meta),
+                                            time_ns)
+
+                    def read_at(off: int, size: int) -> bytes:
+                        fh.seek(off)
+                        return fh.read(size)
+
+                    try:
+                        (sidecar,) = HeapStrings(read_at, *at, where=rel).get(k, k + 1)
+                    except ArchiveError:
+                        sidecar = b""
+                    return DecodedFrame(pixels, sidecar, time_ns)
             except (OSError, KeyError, ValueError) as exc:
                 raise ArchiveError(f"{rel}: not a readable HDF5 archive ({exc})") from exc
 
 
-def _read_block(job: tuple[Any, Any, int, int]) -> tuple[int, np.ndarray, Any]:
-    """Frames ``i .. i + step`` and their sidecars, in two h5py calls."""
-    frames, meta, i, step = job
-    return i, frames[i:i + step], meta[i:i + step]
+def _read_block(job: tuple[Any, Any, HeapStrings | None, int, int]) -> tuple[int, np.ndarray, Any]:
+    """Frames ``i .. i + step`` (one h5py call) and their sidecars."""
+    frames, meta, strings, i, step = job
+    pixels = frames[i:i + step]
+    return i, pixels, strings.get(i, i + pixels.shape[0]) if strings is not None else meta[i:i + step]
 
 
 class _SessionFile:
