@@ -179,9 +179,12 @@ class Hdf5(ArchiveFormat):
                     # the sidecars from the heap's bytes, bounded (HDF5's own read of a damaged
                     # collection can loop for good): hdf5_heap
                     fd = raw.fileno()
+
+                    def read_at(off: int, size: int, fd: int = fd) -> bytes:
+                        return os.pread(fd, size, off)  # the block threads share the file: no seek
+
                     at = heap_strings(meta)
-                    strings = HeapStrings(lambda off, size, fd=fd: os.pread(fd, size, off), *at, where=str(path)) \
-                        if at is not None else None
+                    strings = HeapStrings(read_at, *at, where=str(path)) if at is not None else None
                     blocks = [(d, meta, strings, i, step) for i in range(0, n, step)]
                     # the next block is read while the caller checks this one (two in flight)
                     for i, pixels, sidecars in ordered_map(_read_block, blocks, workers, window=2):

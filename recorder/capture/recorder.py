@@ -359,7 +359,13 @@ class Recorder:
         if budget is None or rate is None:
             out["kept"] = "whole" if budget is None else "whole, if it fits (no rate measured yet)"
             return out
-        want = int((ring.pre_s + ring.post_s) * rate)
+        # a window keeps the whole segments it touches: up to one more than it spans end to end
+        seg_s = min(filter(None, (self.policy.max_duration_s,
+                                  self.policy.max_bytes / rate if self.policy.max_bytes else None)), default=None)
+        span_s = ring.pre_s + ring.post_s
+        if seg_s:
+            span_s = (math.ceil(span_s / seg_s) + 1) * seg_s
+        want = int(span_s * rate)
         in_use = self._evictor.protected_bytes() if self._evictor is not None else 0
         fits_s = round(budget / rate, 1)
         out.update(bytes_per_s=int(rate), window_bytes=want, protected_budget=budget, protected_in_use=in_use)
@@ -370,7 +376,8 @@ class Recorder:
         else:
             out.update(kept="not whole", seconds_that_fit=fits_s,
                        why=f"a {ring.pre_s + ring.post_s:g} s window is about {want / 1e6:,.0f} MB at "
-                           f"{rate / 1e6:,.1f} MB/s, over the {budget / 1e6:,.0f} MB event windows may hold; "
+                           f"{rate / 1e6:,.1f} MB/s in the whole segments it touches, over the "
+                           f"{budget / 1e6:,.0f} MB event windows may hold; "
                            f"about {fits_s:g} s fit: shorten --pre/--post or raise --max-protected/--max-disk")
         return out
 

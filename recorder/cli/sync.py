@@ -74,7 +74,15 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
                        f"(waiting for a receipt), confirmed {len(st.confirmed)}")
             return
         stop = threading.Event()
+
+        def asked_to_stop(*_: object) -> None:
+            if stop.is_set():  # a second Ctrl-C: now (the journal resumes the part in flight)
+                raise KeyboardInterrupt
+            stop.set()  # the first: after this pass, exit 0
+
         signal.signal(signal.SIGTERM, lambda *_: stop.set())
+        if watch:
+            signal.signal(signal.SIGINT, asked_to_stop)
         while True:
             with progress(as_json=as_json) as bar:
                 task = bar.add_task("sync", total=None)

@@ -31,6 +31,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.topics import is_image_topic
 from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
 from thermcap.recorder.storage.layout import SESSION_JSON, SessionLayout
+from thermcap.recorder.storage.ledger import deletions
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import count_frames
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
@@ -453,7 +454,11 @@ def _mark_session(session_dir: Path, results: list[RecoveryResult] | None = None
         meta["status"] = "recovered"
         # a finished segment with no readable summary: `info` names it; no count is made up
         with contextlib.suppress(McapFileError):
-            meta["frames_written"] = sum(count_frames(session_dir).values())
+            on_disk = count_frames(session_dir)
+            # and the segments that left before (the ring, sync): written all the same
+            gone = {e["segment"]: int(e.get("frames") or 0) for e in deletions(session_dir)
+                    if e["segment"] not in on_disk}
+            meta["frames_written"] = sum(on_disk.values()) + sum(gone.values())
         meta["recovered_ns"] = time.time_ns()
         notes = meta.setdefault("recovered_segments", {})
         for r in repaired:
