@@ -63,7 +63,7 @@ def run_in_loopback_namespace(argv: list[str]) -> int:
     if shutil.which("unshare") is None or shutil.which(FAKE) is None:
         raise RuntimeError(f"the fake camera needs unshare and {FAKE} (apt: aravis-tools); or name a camera "
                            f"with --camera")
-    script = (f'ip link set lo up && {FAKE} -i lo >/dev/null 2>&1 & camera=$!; '
+    script = (f'ip link set lo up || exit 1; {FAKE} -i lo >/dev/null 2>&1 & camera=$!; '
               f'until ss -Huln "sport = :3956" | grep -q 3956; do kill -0 $camera || exit 1; sleep 0.05; done; '
               f'"$@"; code=$?; kill $camera; exit $code')
     env = {**os.environ, INSIDE_ENV: "1"}
