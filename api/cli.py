@@ -57,11 +57,15 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
                     fg="yellow", err=True)
     import uvicorn
 
+    from thermcap.api.request_head import BoundedHead
+
+    # the request head bounded in bytes and time before the app sees it (request_head.py)
     if workers > 1:
         uvicorn.run("thermcap.api.app:create_app", factory=True, host=host, port=port, workers=workers,
-                    log_level="info", access_log=access_log)
+                    log_level="info", access_log=access_log, http=BoundedHead)
     else:
-        uvicorn.run(create_app(settings), host=host, port=port, log_level="info", access_log=access_log)
+        uvicorn.run(create_app(settings), host=host, port=port, log_level="info", access_log=access_log,
+                    http=BoundedHead)
 
 
 @click.command("index")

@@ -16,7 +16,9 @@ from thermcap.recorder.exceptions import ThermcapError
 @cli.command()
 @click.argument("session")
 @root_option
-@click.option("--host", default="127.0.0.1", show_default=True, help="Address to serve on.")
+@click.option("--host", default="127.0.0.1", show_default=True,
+              help="Address to serve on: a loopback one, since the view has no token (reach it from elsewhere "
+                   "through an SSH tunnel).")
 @click.option("--port", type=PORT, default=8765, show_default=True, help="Port (0: any free port).")
 @click.option("--rate", type=Number(minimum=0, above=True, maximum=1000), default=1.0, show_default=True,
               help="Playback speed (2: twice as fast).")
@@ -36,10 +38,14 @@ def play(session: str, root: str, host: str, port: int, rate: float, loop: bool,
          max_width: int, duration_s: float | None, wait_for_viewer: float, as_json: bool) -> None:
     """Replay SESSION (a folder, or an id under ROOT/sessions) over the Foxglove WebSocket
     protocol: images, sidecars, annotations, temperatures and events, at the recorded pace."""
-    from thermcap.recorder.live.publisher import LiveOptions, LivePublisher
+    from thermcap.recorder.live.publisher import LiveOptions, LivePublisher, check_live_host
     from thermcap.recorder.live.replay import replay_session
     from thermcap.recorder.storage.reader import resolve_session
 
+    try:
+        check_live_host(host, port, "--host")
+    except ValueError as exc:
+        fail(str(exc))
     try:
         session_dir = resolve_session(session, root)
     except ThermcapError as exc:

@@ -191,13 +191,9 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             raise click.BadParameter("--control needs a token: set THERMCAP_CONTROL_TOKEN (or --control-token), "
                                      "or pass --control-insecure to run it open to every local user")
         if live:
-            from thermcap.recorder.capture.control import is_loopback
+            from thermcap.recorder.live.publisher import check_live_host
 
-            if not is_loopback(live_host):
-                raise click.BadParameter(
-                    f"--live-host {live_host}: the live view has no token of its own, so it is served on this "
-                    f"machine only (127.0.0.1); reach it from elsewhere through an SSH tunnel "
-                    f"(ssh -L {live_port}:127.0.0.1:{live_port} ...) or a proxy that checks a token")
+            check_live_host(live_host, live_port, "--live-host")
             from thermcap.recorder.live.branch import LiveBranch
             from thermcap.recorder.live.publisher import LiveOptions
 

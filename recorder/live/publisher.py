@@ -19,7 +19,18 @@ from foxglove.websocket import ServerListener
 
 from thermcap.recorder.radiometry import RadiometricModel
 
-__all__ = ["CameraTopics", "LiveOptions", "LivePublisher", "subsample"]
+__all__ = ["CameraTopics", "LiveOptions", "LivePublisher", "check_live_host", "subsample"]
+
+
+def check_live_host(host: str, port: int, flag: str) -> None:
+    """The Foxglove WebSocket view (``record --live``, ``play``) has no token of its own, so it
+    is served on this machine only; raises ValueError saying how to reach it from elsewhere."""
+    from thermcap.recorder.capture.control import is_loopback
+
+    if not is_loopback(host):
+        raise ValueError(f"{flag} {host}: the live view has no token of its own, so it is served on this machine "
+                         f"only (127.0.0.1); reach it from elsewhere through an SSH tunnel "
+                         f"(ssh -L {port}:127.0.0.1:{port} ...) or a proxy that checks a token")
 
 
 @dataclass(frozen=True)

@@ -79,3 +79,11 @@ OTHER = [
 def test_other_commands_refuse_absurd_values_at_parse_time(tmp_path, args, named):
     r = run_cli(*args, "--root", str(tmp_path))
     assert r.returncode == 2 and named in r.stderr and "Traceback" not in r.stderr, r.stderr
+
+
+def test_play_serves_its_tokenless_view_on_this_machine_only(tmp_path):
+    """Issue 65 (17): ``play --host 0.0.0.0`` served a session to the network with no token; the
+    rule ``record --live`` keeps is now one check both use."""
+    r = run_cli("play", "any-session", "--root", str(tmp_path), "--host", "0.0.0.0", "--duration", "1")
+    assert r.returncode == 1 and "--host 0.0.0.0" in r.stderr and "SSH tunnel" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr
