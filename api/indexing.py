@@ -17,10 +17,8 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-import statistics
 import time
 from dataclasses import asdict, dataclass, field
-from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +34,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.quality import graded_contrast
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_METADATA
+from thermcap.recorder.storage.coverage import coverage
 from thermcap.recorder.storage.digest import frame_proof
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import holder, session_status
@@ -217,23 +216,6 @@ def _sidecars_by_manifest(session_dir: Path, manifest: dict[str, Any], verified:
     return sidecars, times, segs
 
 
-def _coverage(times: list[int]) -> list[list[int]]:
-    """Spans with data; a gap is a step over 1.5x the median frame period (drops, pauses)."""
-    if not times:
-        return []
-    if len(times) < 3:
-        return [[times[0], times[-1]]]
-    steps = [b - a for a, b in pairwise(times)]
-    limit = 1.5 * statistics.median(steps)
-    spans, start = [], times[0]
-    for a, b in pairwise(times):
-        if b - a > limit:
-            spans.append([start, a])
-            start = b
-    spans.append([start, times[-1]])
-    return spans
-
-
 def sidecar_summary(sc: dict[str, Any]) -> dict[str, Any]:
     """A frame's searchable summary, by the index's column names (``FRAME_FIELDS`` reads them)."""
     ta = sc.get("thermal_analysis") or {}
@@ -320,7 +302,7 @@ def index_session(engine: Engine, session_dir: Path, *, force: bool = False,
         "max_grade": max(grades) if grades else None,
         "has_targets": any(r["target_count"] for r in frame_rows),
         "has_slew_to_cue": any(r["slew_to_cue"] for r in frame_rows),
-        "coverage": json.dumps(_coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
+        "coverage": json.dumps(coverage(sorted(valid_times))), "source_deleted": bool(src.get("deleted")),
         # a session read with problems is read again at every scan, so they are reported every time
         "fingerprint": f"damaged:{fp}" if problems else fp, "indexed_at": time.time_ns(),
         "summary": json.dumps((manifest or {})["summary"]) if (manifest or {}).get("summary") else None,

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-from itertools import pairwise
 from typing import Any, Literal
 
 import numpy as np
@@ -16,6 +15,7 @@ from thermcap.api.routes.common import decode_cursor, encode_cursor, iso, page_s
 from thermcap.api.security import require
 from thermcap.archive.manifest import record_digest
 from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
+from thermcap.recorder.storage.coverage import gaps as coverage_gaps
 
 router = APIRouter(prefix="/api/v1", tags=["sessions"], dependencies=[Depends(require("read"))])
 
@@ -94,7 +94,8 @@ def get_session(request: Request, session_id: str) -> dict:
         segments = conn.execute(select(db.segments).where(db.segments.c.session_id == session_id)
                                 .order_by(db.segments.c.name)).mappings().all()
     coverage = json.loads(row["coverage"] or "[]")
-    gaps = [[a[1], b[0]] for a, b in pairwise(coverage)]
+    period = 1e9 / row["fps"] if row.get("fps") else 0.0  # no declared rate: a gap's seconds are its span
+    gaps = coverage_gaps(coverage, period)
     return {
         **_session_summary(row, full_model=True),
         "archives": [{"format": a["format"], "bytes": a["bytes"], "objects": a["objects"], "ratio": a["ratio"],
@@ -105,7 +106,8 @@ def get_session(request: Request, session_id: str) -> dict:
                                 for f in json.loads(a["files"])]} for a in archives],
         "segments": [{"name": s["name"], "frames": s["frames"], "bytes": s["bytes"]} for s in segments],
         "coverage": [{"start": iso(a), "end": iso(b), "start_ns": a, "end_ns": b} for a, b in coverage],
-        "gaps": [{"start": iso(a), "end": iso(b), "seconds": (b - a) / 1e9} for a, b in gaps],
+        # recorder.storage.coverage: over 2.5 frame periods without a frame; seconds beyond the one period
+        "gaps": [{"start": iso(a), "end": iso(b), "seconds": round(seconds, 6)} for a, b, seconds in gaps],
         "temperature": _temperature_available(row["radiometric_model"]),
     }
 
