@@ -53,7 +53,8 @@ EXIT_SOURCE_LOSS = 4
 @click.option("--cue-period", type=Number(minimum=0, unit="s"), default=20.0, show_default=True,
               help="Simulator: seconds between radar cues (0: none).")
 @click.option("--segment-duration", type=Number(minimum=0, unit="s"), default=60.0, show_default=True,
-              help="Rotate segments after this many seconds.")
+              help="Rotate segments after this many seconds (with --ring --max-disk and not given: at most a "
+                   "tenth of the budget).")
 @click.option("--settle-timeout", type=Number(minimum=0, above=True, maximum=86_400, unit="s"), default=60.0,
               show_default=True,
               help="At the end, wait this long for the disk to confirm the last segments (fsync); past it the "
@@ -85,9 +86,10 @@ EXIT_SOURCE_LOSS = 4
               help="With --ring: never let an event window go; when only protected segments are left, new frames "
                    "are dropped (or a file or pipe waits) instead.")
 @click.option("--pre", "pre_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
-              help="Seconds kept before a trigger or mark.")
+              help="Seconds kept before a trigger or mark (with --ring --max-disk and not given: fitted to the "
+                   "budget).")
 @click.option("--post", "post_s", type=Number(minimum=0, maximum=86400, unit="s"), default=30.0, show_default=True,
-              help="Seconds kept after a trigger or mark.")
+              help="Seconds kept after a trigger or mark (fitted to the budget like --pre).")
 @click.option("--trigger-hot", type=Number(minimum=-273.15, maximum=5000, unit="°C"), default=None, metavar="DEGC",
               help="Trigger when a target at or above this temperature appears.")
 @click.option("--trigger-target-count", is_flag=True, help="Trigger when the number of targets changes.")
@@ -166,6 +168,28 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             pixel_rate += settings.width * settings.height * settings.fps
         # the simulator ends itself at --duration (exactly duration x fps frames); others are stopped
         ends_itself = all(sp.source_kind.counts_duration for sp in specs)
+        if ring and max_disk:
+            # the defaults (60 s segments, 30 s either side) shrunk to what the budget holds, where
+            # they were not given: the page's 200M could not keep one window or one segment
+            from click.core import ParameterSource
+
+            from thermcap.recorder.storage.ring import fit_to_budget, parse_size
+
+            ctx = click.get_current_context()
+            defaulted = {n for n in ("segment_duration", "pre_s", "post_s")
+                         if ctx.get_parameter_source(n) == ParameterSource.DEFAULT}
+            if defaulted:
+                disk = parse_size(max_disk)
+                fitted = fit_to_budget(disk, parse_size(max_protected) if max_protected else disk // 2,
+                                       pixel_rate * 2, segment_duration or 60.0, 30.0)
+                segment_duration = fitted.segment_s if "segment_duration" in defaulted else segment_duration
+                pre_s = fitted.pre_s if "pre_s" in defaulted else pre_s
+                post_s = fitted.post_s if "post_s" in defaulted else post_s
+                if not as_json and (segment_duration, pre_s, post_s) != (60.0, 30.0, 30.0):
+                    click.echo(f"ring: {segment_duration:g} s segments, events keep {pre_s:g} s before and "
+                               f"{post_s:g} s after: what --max-disk {max_disk} holds at "
+                               f"{pixel_rate * 2 / 1e6:,.0f} MB/s uncompressed (set --segment-duration, --pre, "
+                               f"--post to choose)", err=True)
         if compression == "auto":
             comp, default_level = auto_compression(int(pixel_rate), 1, 1.0)
         else:

@@ -38,6 +38,31 @@ __all__ = ["Eviction", "Evictor", "ProtectionBook", "RingPolicy", "Window", "dis
 MIN_RING_BYTES = 1 << 20
 
 
+@dataclass(frozen=True)
+class FittedDefaults:
+    """Segment length and event window derived from a disk budget (``fit_to_budget``)."""
+
+    segment_s: float
+    pre_s: float
+    post_s: float
+
+
+def fit_to_budget(max_disk: int, protected: int, raw_bytes_per_s: float, segment_s: float = 60.0,
+                  window_s: float = 30.0) -> FittedDefaults:
+    """The defaults (60 s segments, 30 s either side of an event) shrunk to what a small budget
+    holds, at the raw rate (compression only makes it hold more): a segment at most a tenth of
+    ``max_disk``, so the ring has segments to choose from; a window such that two of them, each
+    counted by the whole segments it touches (up to one more than it spans), fit in ``protected``.
+    A vehicle's real budget (hundreds of GB) leaves the defaults as they are; the page's 200M at
+    640x512 and 60 fps gets 0.5 s segments and windows the share of the budget can keep."""
+    rate = max(raw_bytes_per_s, 1.0)
+    seg = min(segment_s, max(0.25, max_disk / rate / 10))
+    seg = round(seg, 2)
+    span = protected / 2 / rate - seg  # two windows, each up to one segment more than it spans
+    half = max(0.0, min(window_s, span / 2))
+    return FittedDefaults(seg, round(half, 2), round(half, 2))
+
+
 def parse_size(text: str) -> int:
     """``500M``, ``2G``, ``1.5T``, ``123456`` (bytes): the sizes a user types."""
     t = str(text).strip().upper().removesuffix("B").removesuffix("I")

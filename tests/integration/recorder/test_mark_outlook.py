@@ -44,3 +44,29 @@ def test_a_mark_says_what_the_ring_will_keep(tmp_path, window, kept):
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=120)
+
+
+def test_the_pages_budget_keeps_the_pages_mark(tmp_path):
+    """Issue 64: on `--ring --max-disk 200M` with the defaults (30 s either side, 60 s segments)
+    the vehicle page's mark expired 9 s later. The defaults are now fitted to the budget: the
+    mark is answered "whole" and is still kept when the recording ends, the ring evicting around it."""
+    env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "p",
+                             "--ring", "--max-disk", "200M", "--control", "--no-analysis"], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    try:
+        address = tmp_path / "run" / "p.control.json"
+        assert wait_for(address.is_file, 60), proc.stderr.read() if proc.poll() is not None else "no control file"
+        url = json.loads(address.read_text())["url"]
+        with httpx.Client(base_url=url, timeout=10, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
+            assert wait_for(lambda: c.get("/status").json()["segments"] >= 2, 60)
+            answer = c.post("/mark", json={"note": "deer on the road"}).json()
+            assert answer["keeps"]["kept"] == "whole", answer
+            # recorded on until the ring has evicted past the mark's window several times over
+            assert wait_for(lambda: c.get("/status").json().get("ring", {}).get("evicted_segments", 0) >= 20, 120), \
+                c.get("/status").json()
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.communicate(timeout=120)
+    protected = json.loads((tmp_path / "sessions" / "p" / "protected.json").read_text())
+    assert "deer on the road" in [w["note"] for w in protected["windows"]] and not protected.get("expired"), protected
