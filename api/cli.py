@@ -96,6 +96,10 @@ def index(root_arg: str | None, root: str, force: bool, as_json: bool) -> None:
                    f"removed {len(result.removed)}, failed {len(result.failed)}")
         for name, err in result.failed.items():
             click.echo(f"  {name}: {err}", err=True)
+        for name, why in result.skipped.items():
+            click.echo(f"  {name}: not indexed: {why}", err=True)
+        for name, problems in result.damaged.items():
+            click.echo(f"  {name}: {'; '.join(problems)}", err=True)
     if result.failed:
         sys.exit(1)
 

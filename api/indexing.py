@@ -34,6 +34,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.quality import graded_contrast
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_METADATA
+from thermcap.recorder.importers.ros2_bag import is_ros2_bag_folder
 from thermcap.recorder.storage.coverage import coverage
 from thermcap.recorder.storage.digest import frame_proof
 from thermcap.recorder.storage.layout import SessionLayout
@@ -435,6 +436,8 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     for d in list_sessions(root):
         layout = SessionLayout.of(d)
         if not layout.session_json.exists() and not layout.archive.exists():
+            if is_ros2_bag_folder(d):  # copied in as it was recorded: said, not silently passed over
+                report.skipped[d.name] = f"a ROS 2 bag, not a session: `thermcap import {d}` makes it one"
             continue
         if layout.active_segments():
             if holder(d) is not None:

@@ -29,14 +29,30 @@ from thermcap.recorder.exceptions import ThermcapError
 @click.option("--terraref-variant", type=click.Choice(["pipeline", "physical", "plain"]), default="pipeline",
               show_default=True, help="TERRA-REF Planck form for uncalibrated _ir.bin: pipeline = what every published "
                                       "TERRA-REF product used; physical = the measurement equation inverted properly.")
+@click.option("--model", "model_json", default=None, metavar="JSON|FILE",
+              help="The camera's radiometric model, for files that carry none (a ROS 2 bag): a model object "
+                   "(as session.json's radiometric_model) or a file holding one, e.g. a Lepton in TLinear mode: "
+                   "'{\"kind\": \"linear\", \"scale_c_per_count\": 0.01, \"offset_c\": -273.15, "
+                   "\"bit_depth\": 16}'.")
 @json_option
 def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, session_per_file: bool, analysis: bool,
-               dji_sdk: str, terraref_variant: str, as_json: bool) -> None:
+               dji_sdk: str, terraref_variant: str, model_json: str | None, as_json: bool) -> None:
     """Import FLIR JPEG/FFF/SEQ/CSQ, DJI R-JPEG, TERRA-REF _ir.bin and ICD TIFF/raw files (by content)."""
     from thermcap.recorder.cli.progress import progress
     from thermcap.recorder.importers.dji_sdk import find_backend
     from thermcap.recorder.importers.run import import_paths
 
+    model = None
+    if model_json is not None:
+        from pathlib import Path
+
+        from thermcap.recorder.radiometry import model_from_dict
+
+        try:
+            text = Path(model_json).read_text() if not model_json.lstrip().startswith("{") else model_json
+            model = model_from_dict(json.loads(text))
+        except (OSError, ValueError, TypeError) as exc:
+            fail(f"--model {model_json[:80]}: {exc}")
     backend = find_backend(dji_sdk)
     if backend is not None and not as_json:
         click.echo(f"DJI temperatures by {backend.name}", err=True)
@@ -45,7 +61,7 @@ def import_cmd(paths: tuple[str, ...], root: str, session_name: str | None, sess
         task = bar.add_task("importing", total=len(paths))
         report = import_paths(list(paths), root, session=session_name, session_per_file=session_per_file,
                               analysis=analysis, dji_sdk=backend,
-                              terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task))
+                              terraref_variant=terraref_variant, on_file=lambda p: bar.advance(task), model=model)
     if as_json:
         click.echo(json.dumps({"files": report.files, "failed": report.failed, "truncated": report.truncated,
                                "dji_sdk": backend.name if backend else None,

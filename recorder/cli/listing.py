@@ -28,6 +28,11 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
     try:
         meta = json.loads(layout.session_json.read_text())
     except (OSError, ValueError) as exc:
+        from thermcap.recorder.importers.ros2_bag import is_ros2_bag_folder
+
+        if is_ros2_bag_folder(session_dir):  # a bag copied in: not a session until imported
+            return {"id": session_dir.name, "state": "ros2-bag (not imported)",
+                    "problem": f"a ROS 2 bag, not a session: `thermcap import {session_dir}` makes it one"}
         return {"id": session_dir.name, "state": "unreadable", "problem": f"session.json: {exc}"}
     try:
         manifest = json.loads(layout.manifest.read_text()) if layout.manifest.is_file() else {}
@@ -84,3 +89,6 @@ def ls(root: str, as_json: bool) -> None:
                    f"{r['state'].split(' (')[0][:11]:11} {r.get('bytes', 0):>14,}  {arch or '-'}")
     if any(r["state"].startswith("interrupted") for r in rows):
         click.echo("interrupted: the recorder stopped without finishing; `thermcap recover SESSION` finishes it")
+    for r in rows:
+        if r.get("problem"):
+            click.echo(f"{r['id']}: {r['problem']}")

@@ -3,7 +3,7 @@
 ``read_file(path)`` detects the format from the bytes (never the extension alone), and returns
 the frames or raises ImportFileError naming the file and the problem. Formats: FLIR radiometric
 JPEG / FFF / SEQ / CSQ, DJI R-JPEG (iirp, dirp, girp, hirp), TERRA-REF ``_ir.bin``, ICD TIFF
-and raw Gray16 with their JSON sidecars, ROS 2 bags (MCAP storage) of a 16-bit image topic.
+and raw Gray16 with their JSON sidecars, ROS 2 bags (MCAP or sqlite3 storage) of a 16-bit image topic.
 """
 
 from __future__ import annotations
@@ -17,7 +17,14 @@ from thermcap.recorder.importers.file_view import FileView
 from thermcap.recorder.importers.flir import iter_fff_file, read_fff_file, read_flir_jpeg
 from thermcap.recorder.importers.icd_files import iter_icd_tiff, read_icd_raw, read_icd_tiff, sidecar_for
 from thermcap.recorder.importers.jpeg import app_segments
-from thermcap.recorder.importers.ros2_bag import MCAP_MAGIC, is_ros2_bag, iter_ros2_bag
+from thermcap.recorder.importers.ros2_bag import (
+    MCAP_MAGIC,
+    SQLITE_MAGIC,
+    is_ros2_bag,
+    is_ros2_db3,
+    iter_ros2_bag,
+    iter_ros2_db3,
+)
 from thermcap.recorder.importers.terraref import metadata_for, read_terraref
 
 __all__ = ["MAX_FILE_BYTES", "ImportFileError", "ImportedFrame", "TruncatedImageError", "detect", "iter_file",
@@ -48,10 +55,12 @@ def detect(path: str, data: bytes) -> str:
             return "ros2-bag"
         raise ImportFileError(f"{path}: an MCAP file with no ROS 2 image topic (sensor_msgs/msg/Image); "
                               "a thermcap session's segments are a session already (`thermcap info` them)")
+    if data[:16] == SQLITE_MAGIC and is_ros2_db3(path):
+        return "ros2-db3"
     if data[:8] == b"\x89PNG\r\n\x1a\n":
         raise ImportFileError(f"{path}: a PNG image; thermcap imports radiometric files (FLIR, DJI, TERRA-REF, ICD)")
     raise ImportFileError(f"{path}: unrecognised file (not a FLIR/DJI radiometric JPEG, FFF/SEQ/CSQ, TIFF, "
-                       "TERRA-REF _ir.bin, ICD raw with a .json sidecar or a ROS 2 bag's MCAP)")
+                       "TERRA-REF _ir.bin, ICD raw with a .json sidecar or a ROS 2 bag, MCAP or .db3)")
 
 
 def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[ImportedFrame]:
@@ -73,6 +82,8 @@ def read_file(path: str | Path, *, terraref_variant: str = "pipeline") -> list[I
             return read_terraref(path, data, variant=terraref_variant)
         if kind == "ros2-bag":
             return list(iter_ros2_bag(path))
+        if kind == "ros2-db3":
+            return list(iter_ros2_db3(path))
         return read_icd_raw(path, data)
     except ImportFileError:
         raise
@@ -107,6 +118,10 @@ def iter_file(path: str | Path, *, terraref_variant: str = "pipeline") -> Genera
             if head == MCAP_MAGIC[:4] and fh.read(4) == MCAP_MAGIC[4:] and is_ros2_bag(path):
                 fh.close()
                 yield from iter_ros2_bag(path)  # a message at a time, however long the bag
+                return
+            if head == SQLITE_MAGIC[:4] and is_ros2_db3(path):
+                fh.close()
+                yield from iter_ros2_db3(path)
                 return
             if head in _TIFF_MAGIC:  # a stack of pages: decoded one page at a time
                 fh.close()

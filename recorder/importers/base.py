@@ -26,6 +26,9 @@ class ImportedFrame:
     vendor_metadata: dict[str, Any] = field(default_factory=dict)
     blobs: dict[str, bytes] = field(default_factory=dict)  # calibration blobs kept bit-exact
     frame_index: int = 0  # within a multi-frame file (SEQ/CSQ)
+    #: the file carries no radiometric model (a ROS 2 bag): ``model`` is assumed, and
+    #: ``thermcap import --model`` may give the camera's own
+    model_assumed: bool = False
 
 
 def read_exact(path: str, data: bytes, offset: int, length: int, what: str) -> bytes:

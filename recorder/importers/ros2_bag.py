@@ -27,9 +27,11 @@ import numpy as np
 from thermcap.recorder.importers.base import ImportedFrame, ImportFileError
 from thermcap.recorder.radiometry import DEFAULT_MODEL
 
-__all__ = ["MCAP_MAGIC", "is_ros2_bag", "iter_ros2_bag"]
+__all__ = ["MCAP_MAGIC", "SQLITE_MAGIC", "is_ros2_bag", "is_ros2_bag_folder", "is_ros2_db3", "iter_ros2_bag",
+           "iter_ros2_db3"]
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
 _IMAGE = "sensor_msgs/msg/Image"
 _INFO = "sensor_msgs/msg/CameraInfo"
 _SIXTEEN = ("mono16", "16UC1")
@@ -66,45 +68,109 @@ def iter_ros2_bag(path: str) -> Iterator[ImportedFrame]:
                       if (sc := summary.schemas.get(c.schema_id)) is not None and sc.name == _IMAGE}
             if not images:
                 raise ImportFileError(f"{path}: a bag with no {_IMAGE} topic")
-            blobs = _bag_metadata(path)
-            chosen: str | None = None
-            info: dict[str, Any] | None = None
-            index = 0
-            for _schema, channel, message, decoded in reader.iter_decoded_messages(
-                    topics=[*images, *{_info_topic(t) for t in images}], log_time_order=True):
-                if channel.topic not in images:
-                    info = _camera_info(decoded)
-                    continue
-                encoding = str(decoded.encoding)
-                if encoding not in _SIXTEEN:
-                    continue  # a colour or 8-bit view of the scene: not counts
-                if chosen is None:
-                    chosen = channel.topic
-                elif channel.topic != chosen:
-                    raise ImportFileError(f"{path}: 16-bit images on more than one topic ({chosen}, {channel.topic}); "
-                                          "one camera a session: split the bag (`ros2 bag convert`) first")
-                pixels = _pixels(path, decoded, index)
-                stamp = int(decoded.header.stamp.sec) * 1_000_000_000 + int(decoded.header.stamp.nanosec)
-                yield ImportedFrame(
-                    path=path, format="ros2-bag", layout=encoding, pixels=pixels, model=DEFAULT_MODEL,
-                    timestamp_ns=stamp or int(message.log_time), sensor_model=f"ROS 2 {channel.topic}",
-                    sensor_id=_sensor_id(channel.topic),
-                    vendor_metadata={"topic": channel.topic, "log_time_ns": int(message.log_time),
-                                     "publish_time_ns": int(message.publish_time),
-                                     "header": {"frame_id": str(decoded.header.frame_id), "stamp_ns": stamp},
-                                     "encoding": encoding, "is_bigendian": bool(decoded.is_bigendian),
-                                     "camera_info": info,
-                                     "radiometric_model": "assumed (the ICD's linear model): a bag carries none; "
-                                                          "`thermcap radiometry` sets the camera's own"},
-                    blobs=blobs if index == 0 else {}, frame_index=index)
-                index += 1
-            if chosen is None:
-                raise ImportFileError(f"{path}: no 16-bit image (mono16 or 16UC1) on {', '.join(sorted(images))}")
+            messages = ((channel.topic, int(message.log_time), int(message.publish_time), decoded)
+                        for _schema, channel, message, decoded in reader.iter_decoded_messages(
+                            topics=[*images, *{_info_topic(t) for t in images}], log_time_order=True))
+            yield from _frames(path, images, messages)
     except ImportFileError:
         raise
     except OSError as exc:
         raise ImportFileError(f"{path}: cannot read ({exc.strerror or exc})") from None
     except Exception as exc:  # a damaged bag may trip mcap or the CDR decoder anywhere: named, never a traceback
+        raise ImportFileError(f"{path}: corrupt ROS 2 bag ({type(exc).__name__}: {exc})") from None
+
+
+def _frames(path: str, images: set[str],
+            messages: Iterator[tuple[str, int, int | None, Any]]) -> Iterator[ImportedFrame]:
+    """Frames from a bag's decoded (topic, log time, publish time, message), in log-time order,
+    whichever storage they came from."""
+    blobs = _bag_metadata(path)
+    chosen: str | None = None
+    info: dict[str, Any] | None = None
+    index = 0
+    for topic, log_time, publish_time, decoded in messages:
+        if topic not in images:
+            info = _camera_info(decoded)
+            continue
+        encoding = str(decoded.encoding)
+        if encoding not in _SIXTEEN:
+            continue  # a colour or 8-bit view of the scene: not counts
+        if chosen is None:
+            chosen = topic
+        elif topic != chosen:
+            raise ImportFileError(f"{path}: 16-bit images on more than one topic ({chosen}, {topic}); "
+                                  "one camera a session: split the bag (`ros2 bag convert`) first")
+        pixels = _pixels(path, decoded, index)
+        stamp = int(decoded.header.stamp.sec) * 1_000_000_000 + int(decoded.header.stamp.nanosec)
+        yield ImportedFrame(
+            path=path, format="ros2-bag", layout=encoding, pixels=pixels, model=DEFAULT_MODEL,
+            timestamp_ns=stamp or log_time, sensor_model=f"ROS 2 {topic}", sensor_id=_sensor_id(topic),
+            vendor_metadata={"topic": topic, "log_time_ns": log_time,
+                             **({"publish_time_ns": publish_time} if publish_time is not None else {}),
+                             "header": {"frame_id": str(decoded.header.frame_id), "stamp_ns": stamp},
+                             "encoding": encoding, "is_bigendian": bool(decoded.is_bigendian),
+                             "camera_info": info,
+                             "radiometric_model": "assumed (the ICD's linear model): a bag carries none; "
+                                                  "`thermcap radiometry` sets the camera's own"},
+            blobs=blobs if index == 0 else {}, frame_index=index, model_assumed=True)
+        index += 1
+    if chosen is None:
+        raise ImportFileError(f"{path}: no 16-bit image (mono16 or 16UC1) on {', '.join(sorted(images))}")
+
+
+def is_ros2_bag_folder(folder: Path) -> bool:
+    """rosbag2's own folder: ``metadata.yaml`` naming the bag, beside its .mcap or .db3 files."""
+    try:
+        head = (folder / "metadata.yaml").read_text(errors="replace")[:200]
+    except OSError:
+        return False
+    return "rosbag2_bagfile_information" in head
+
+
+def is_ros2_db3(path: str) -> bool:
+    """A rosbag2 sqlite3 storage file (``*.db3``): SQLite with rosbag2's ``messages`` table."""
+    try:
+        with open(path, "rb") as f:
+            if f.read(16) != SQLITE_MAGIC:
+                return False
+    except OSError:
+        return False
+    return Path(path).suffix.lower() == ".db3"
+
+
+def iter_ros2_db3(path: str) -> Iterator[ImportedFrame]:
+    """A rosbag2 bag in sqlite3 storage (the default before Iron), read by rosbags, which knows
+    the standard message definitions: its folder (with ``metadata.yaml``) is the bag, read
+    whole from its first file; a split bag's later files are read with the first."""
+    try:
+        from rosbags.rosbag2 import Reader
+        from rosbags.typesys import Stores, get_typestore
+    except ImportError:
+        from thermcap.recorder.install_hint import install_command
+
+        raise ImportFileError(f"{path}: a ROS 2 bag in sqlite3 storage is read with rosbags: "
+                              f"{install_command('ros2')}") from None
+    bag = Path(path).parent
+    if not (bag / "metadata.yaml").is_file():
+        raise ImportFileError(f"{path}: a .db3 without the bag's metadata.yaml beside it (`ros2 bag reindex "
+                              f"{bag}` writes it)")
+    try:
+        typestore = get_typestore(Stores.ROS2_HUMBLE)
+        first = sorted(p.name for p in bag.glob("*.db3"))[0]
+        if Path(path).name != first:
+            return  # a split bag's later file: read with the first, as one bag
+        with Reader(bag) as reader:
+            images = {c.topic for c in reader.connections if c.msgtype == _IMAGE}
+            if not images:
+                raise ImportFileError(f"{path}: a bag with no {_IMAGE} topic")
+            wanted = [c for c in reader.connections
+                      if c.topic in images or (c.msgtype == _INFO and c.topic in {_info_topic(t) for t in images})]
+            messages = ((conn.topic, int(log_time), None, typestore.deserialize_cdr(raw, conn.msgtype))
+                        for conn, log_time, raw in reader.messages(connections=wanted))
+            yield from _frames(path, images, messages)
+    except ImportFileError:
+        raise
+    except Exception as exc:  # a damaged bag may trip sqlite, rosbags or the CDR decoder: named
         raise ImportFileError(f"{path}: corrupt ROS 2 bag ({type(exc).__name__}: {exc})") from None
 
 

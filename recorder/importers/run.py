@@ -128,6 +128,8 @@ class _ImportSource(FrameSource):
     def frames(self) -> Iterator[CapturedFrame]:
         for i, (path, k, ts) in enumerate(self.items):
             f = self._frames.frame(path, k)
+            if f.model_assumed and f.model.to_dict() != self.model.to_dict():  # given with --model
+                f.vendor_metadata["radiometric_model"] = "given on import (--model): the file carries none"
             yield CapturedFrame(
                 index=i, timestamp_ns=ts, pixels=f.pixels, capture_mono_ns=time.monotonic_ns(),
                 sidecar={"capture": {"source_file": os.path.basename(path)}},
@@ -213,9 +215,12 @@ def _split_tables(members: list[_Entry]) -> list[tuple[Any, list[_Entry]]]:
 
 def import_paths(paths: list[str], root: str | Path, *, session: str | None = None, session_per_file: bool = False,
                  analysis: bool = True, dji_sdk: DjiBackend | None = None, terraref_variant: str = "pipeline",
-                 on_file: Callable[[str], None] | None = None) -> ImportReport:
+                 on_file: Callable[[str], None] | None = None,
+                 model: RadiometricModel | None = None) -> ImportReport:
     """Import ``paths``; ``dji_sdk`` (see :func:`recorder.importers.dji_sdk.find_backend`) measures
-    DJI temperatures with DJI's own code, in batches of ``SDK_BATCH`` files to bound memory."""
+    DJI temperatures with DJI's own code, in batches of ``SDK_BATCH`` files to bound memory.
+    ``model`` is the camera's radiometric model for files that carry none (a ROS 2 bag); a file
+    with its own keeps it."""
     files, failed, truncated = [], [], []
     groups: dict[str, list[_Entry]] = {}
     waiting: list[_Entry] = []
@@ -240,6 +245,8 @@ def import_paths(paths: list[str], root: str | Path, *, session: str | None = No
         try:
             mtime = int(os.stat(path).st_mtime * 1e9)
             for f in iter_file(path, terraref_variant=terraref_variant):
+                if model is not None and f.model_assumed:
+                    f.model, f.model_assumed = model, False
                 e = _Entry(path, f.frame_index, f.timestamp_ns if f.timestamp_ns is not None else mtime, f)
                 if dji_sdk is not None and f.format == "dji-rjpeg":
                     waiting.append(e)  # measured in batches: the SDK's start-up is paid once per batch

@@ -20,7 +20,7 @@ W, H, N = 40, 30, 12
 T0 = 1_700_000_000_000_000_000
 
 
-def _write_bag(path, *, extra_mono16_topic: bool = False, big_endian_every: int = 0) -> None:
+def _write_bag(path, *, extra_mono16_topic: bool = False, big_endian_every: int = 0, storage: str = "mcap") -> None:
     from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
@@ -29,7 +29,8 @@ def _write_bag(path, *, extra_mono16_topic: bool = False, big_endian_every: int 
     Header, Time = ts.types["std_msgs/msg/Header"], ts.types["builtin_interfaces/msg/Time"]
     RoI = ts.types["sensor_msgs/msg/RegionOfInterest"]
     rng = np.random.default_rng(5)
-    with Writer(path, version=8, storage_plugin=StoragePlugin.MCAP) as w:
+    plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+    with Writer(path, version=8, storage_plugin=plugin) as w:
         img = w.add_connection("/flir_boson/image_raw", Image.__msgtype__, typestore=ts)
         info = w.add_connection("/flir_boson/camera_info", Info.__msgtype__, typestore=ts)
         other = w.add_connection("/mast/image_raw", Image.__msgtype__, typestore=ts) if extra_mono16_topic else None
@@ -70,9 +71,10 @@ def _rosbags_counts(path) -> list[tuple[int, int, np.ndarray]]:
     return out
 
 
-def test_a_ros2_bag_imports_bit_exact_with_its_own_times(tmp_path):
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
+def test_a_ros2_bag_imports_bit_exact_with_its_own_times(tmp_path, storage):
     bag = tmp_path / "drive"
-    _write_bag(bag, big_endian_every=3)
+    _write_bag(bag, big_endian_every=3, storage=storage)
     want = _rosbags_counts(bag)
     root = tmp_path / "root"
     r = run_cli("import", str(bag), "--root", str(root), "--session", "bag", "--json")
@@ -92,6 +94,7 @@ def test_a_ros2_bag_imports_bit_exact_with_its_own_times(tmp_path):
                    for _, c, m in reader.iter_messages(topics=["/import/source"])]
         attachments = [a.name for a in reader.iter_attachments()]
     assert [s["vendor"]["log_time_ns"] for s in sources] == [t for _, t, _ in want]
+    assert storage == "sqlite3" or "publish_time_ns" in sources[0]["vendor"]  # a .db3 keeps no publish time
     assert sources[1]["vendor"]["camera_info"]["k"][0] == 500.0
     assert "assumed" in sources[0]["vendor"]["radiometric_model"]
     assert any(a.endswith("metadata.yaml") for a in attachments), attachments
@@ -105,3 +108,35 @@ def test_a_bag_with_two_cameras_is_refused_naming_them(tmp_path):
     _write_bag(bag, extra_mono16_topic=True)
     r = run_cli("import", str(bag), "--root", str(tmp_path / "root"), "--session", "two")
     assert r.returncode != 0 and "/mast/image_raw" in (r.stdout + r.stderr) and "Traceback" not in r.stderr
+
+
+def test_a_bag_takes_the_cameras_model_from_the_command_line(tmp_path):
+    """A bag carries no radiometric model: ``--model`` gives the camera's (a Lepton in TLinear mode,
+    centikelvin), the session holds it and each frame's import record says where it came from."""
+    bag = tmp_path / "lepton"
+    _write_bag(bag)
+    lepton = {"kind": "linear", "scale_c_per_count": 0.01, "offset_c": -273.15, "bit_depth": 16}
+    root = tmp_path / "root"
+    r = run_cli("import", str(bag), "--root", str(root), "--session", "lep", "--model", json.dumps(lepton))
+    assert r.returncode == 0, r.stderr
+    meta = json.loads((root / "sessions" / "lep" / "session.json").read_text())
+    assert meta["radiometric_model"] == lepton
+    from mcap.reader import make_reader
+
+    with open(sorted((root / "sessions" / "lep").glob("*.mcap"))[0], "rb") as fh:
+        first = next(make_reader(fh).iter_messages(topics=["/import/source"]))
+        assert "given on import" in json.loads(json_payload(first[1].message_encoding, first[2].data))[
+            "vendor"]["radiometric_model"]
+    bad = run_cli("import", str(bag), "--root", str(root), "--model", '{"kind": "linear", "gain": 2}')
+    assert bad.returncode != 0 and "--model" in bad.stderr and "Traceback" not in bad.stderr, bad.stderr
+
+
+def test_a_bag_copied_under_sessions_is_named_not_hidden(tmp_path):
+    """`ls` said `unreadable` and the index passed the bag over in silence: both now say what it is
+    and how to make it a session."""
+    root = tmp_path / "root"
+    _write_bag(root / "sessions" / "drive")
+    ls = run_cli("ls", "--root", str(root))
+    assert "ros2-bag" in ls.stdout and "thermcap import" in ls.stdout, ls.stdout
+    index = run_cli("index", "--root", str(root))
+    assert "ROS 2 bag" in index.stderr and "thermcap import" in index.stderr, index.stderr
