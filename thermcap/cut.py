@@ -32,12 +32,26 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
 
     if out.exists():
         raise FileExistsError(f"{out} exists; thermcap does not overwrite a file (remove it or name another)")
+    layout = SessionLayout.of(session_dir)
+    if not layout.session_json.is_file() and not layout.manifest.is_file():
+        raise ValueError(f"{session_dir}: not a session (no session.json or archive manifest)")
     session = LocalSession(session_dir, root)
     times = session.table.timestamp_ns
     first = int(times[0]) if len(times) else 0
     t0, t1 = parse_instant(start, first, "start"), parse_instant(end, first, "end")
     if t0 is not None and t1 is not None and t1 <= t0:
         raise ValueError("--end must be after --start")
+    inside = [t for t in times if (t0 is None or t >= t0) and (t1 is None or t < t1)]
+    if len(times) and not inside:
+        raise ValueError(f"no frame between {_when(t0, 'the start')} and {_when(t1, 'the end')}: the session's "
+                         f"frames run from "
+                         f"{_when(int(times[0]))} to {_when(int(times[-1]))}")
+    if topics:
+        known = _topics(session_dir)
+        unknown = [t for t in topics if t not in known]
+        if unknown:
+            raise ValueError(f"no topic {', '.join(unknown)} in {session_dir.name} (its topics: "
+                             f"{', '.join(sorted(known))})")
     frames = extras = None
     if not session_segments(session_dir):
         reader, sid = session._reader, session.id
@@ -60,3 +74,31 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
         part.unlink(missing_ok=True)
         raise
     return CutResult(out, out.stat().st_size, t0, t1, topics)
+
+
+def _when(t: int | None, otherwise: str = "") -> str:
+    from thermcap.recorder.icd.names import iso_utc
+
+    return otherwise if t is None else iso_utc(t)
+
+
+def _topics(session_dir: Path) -> set[str]:
+    """Every topic the session holds: its segments' channels, or once they are deleted the
+    frames' topics and those of the archive's extras.mcap."""
+    from mcap.reader import make_reader
+
+    from thermcap.recorder.icd.topics import TOPIC_IMAGE, TOPIC_METADATA
+    from thermcap.recorder.storage.layout import SessionLayout
+    from thermcap.recorder.storage.reader import session_segments
+
+    files = session_segments(session_dir) or [p for p in [SessionLayout.of(session_dir).extras] if p.is_file()]
+    known = {TOPIC_IMAGE, TOPIC_METADATA}
+    for path in files:
+        try:
+            with open(path, "rb") as f:
+                summary = make_reader(f).get_summary()
+        except Exception:
+            continue
+        if summary is not None:
+            known |= {c.topic for c in summary.channels.values()}
+    return known

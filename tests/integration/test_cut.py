@@ -59,6 +59,19 @@ def test_a_cut_never_overwrites_and_says_what_is_wrong(root, tmp_path):
     assert not (tmp_path / "x.mcap").exists() and not (tmp_path / "y.mcap").exists()
 
 
+@pytest.mark.parametrize(("args", "said"), [
+    (["../../../etc"], "not a session"),
+    (["s", "--topics", "/no/such"], "no topic /no/such"),
+    (["s", "--start", "2099-01-01T00:00:00Z"], "no frame between"),
+], ids=["not-a-session", "unknown-topic", "past-the-end"])
+def test_a_cut_of_nothing_is_an_error_not_an_empty_file(root, tmp_path, args, said):
+    """Issue 65 (17): these exited 0 with an MCAP holding nothing."""
+    out = tmp_path / "c.mcap"
+    r = run_cli("cut", *args, "--root", str(root), "--out", str(out))
+    assert r.returncode == 1 and said in r.stderr and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists()
+
+
 def test_a_cut_never_copies_a_damaged_chunk(tmp_path):
     """Issue 65, defect 4: a chunk whose bytes no longer match its CRC-32 was copied whole into
     the cut (exit 0), where the default reader returned a frame with wrong pixels. The chunk is
