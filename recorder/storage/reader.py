@@ -209,14 +209,19 @@ def count_frames(session_dir: str | Path, camera: str | None = None) -> dict[str
 
 
 def resolve_session(arg: str | Path, root: str | Path) -> Path:
-    """A session folder from a path or an id under ``root/sessions``."""
+    """A session folder from a path or an id under ``root/sessions``: one that holds a session
+    (its ``session.json``, segments or archive), checked before any command writes in it (a lock,
+    an ``archive/`` folder), so a path given by mistake (``/etc``) is refused as it is."""
     p = Path(arg)
-    if p.is_dir():
-        return p
     candidate = Path(root) / "sessions" / str(arg)
-    if "/" not in str(arg) and candidate.is_dir():
-        return candidate
-    raise McapFileError(f"{arg}: no such session (not a folder, and not an id under {Path(root) / 'sessions'})")
+    found = p if p.is_dir() else candidate if "/" not in str(arg) and candidate.is_dir() else None
+    if found is None:
+        raise McapFileError(f"{arg}: no such session (not a folder, and not an id under {Path(root) / 'sessions'})")
+    layout = SessionLayout.of(found)
+    if not (layout.session_json.is_file() or layout.manifest.is_file() or session_segments(found)
+            or layout.active_segments()):
+        raise McapFileError(f"{arg}: not a session (no session.json, segments or archive in {found})")
+    return found
 
 
 def list_sessions(root: str | Path) -> list[Path]:

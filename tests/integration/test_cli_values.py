@@ -87,3 +87,15 @@ def test_play_serves_its_tokenless_view_on_this_machine_only(tmp_path):
     r = run_cli("play", "any-session", "--root", str(tmp_path), "--host", "0.0.0.0", "--duration", "1")
     assert r.returncode == 1 and "--host 0.0.0.0" in r.stderr and "SSH tunnel" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+@pytest.mark.parametrize("command", [["archive"], ["verify"], ["cut", "--out", "c.mcap"], ["info"]])
+def test_a_folder_that_is_not_a_session_is_refused_untouched(tmp_path, command):
+    """Issue 65 (13): ``archive --root R /etc`` created /etc/archive/ and /etc/.lock before failing.
+    Every command that takes a session checks it holds one before it writes anything there."""
+    folder = tmp_path / "not-a-session"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("mine")
+    r = run_cli(command[0], str(folder), "--root", str(tmp_path / "root"), *command[1:], cwd=tmp_path)
+    assert r.returncode != 0 and "Traceback" not in r.stderr, r.stderr
+    assert sorted(p.name for p in folder.iterdir()) == ["notes.txt"]
