@@ -91,6 +91,11 @@ class FrameSource(ABC):
     #: back, a camera that reconnected): the recorder sets it and records each as an event
     report: Callable[[dict[str, Any]], None] | None = None
 
+    def tell(self, event: dict[str, Any]) -> None:
+        """Pass an event (a ``source_gap``) to the recorder, which records it; nothing without one."""
+        if self.report is not None:
+            self.report(event)
+
     @abstractmethod
     def frames(self) -> Iterator[CapturedFrame]:
         """Yield frames as they are captured; stop at the end of the input or when ``stop()`` is called."""

@@ -72,7 +72,7 @@ class CommandSource(FrameSource):
                                  frame_rate_hz=fps, pixel_pitch_um=None, netd_mk=None)
         self.restarts = 0  # times the command was started again after it ended
         self.incomplete_frames = 0  # frames a command's end left half-written: counted, never written
-        self.gaps = GapLog(on_close=self._reported)  # since the command last ended, until a frame
+        self.gaps = GapLog(on_close=self.tell)  # since the command last ended, until a frame
         self._proc: subprocess.Popen | None = None
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -83,10 +83,6 @@ class CommandSource(FrameSource):
 
     def health(self) -> dict[str, Any]:
         return {"restarts": self.restarts, "incomplete_frames": self.incomplete_frames, **self.gaps.health()}
-
-    def _reported(self, gap: dict[str, Any]) -> None:
-        if self.report is not None:
-            self.report(gap)
 
     def stop(self) -> None:
         super().stop()

@@ -173,7 +173,7 @@ class GigESource(FrameSource):
                                                                                 or "unknown"),
                                  width=options.width, height=options.height, frame_rate_hz=options.fps,
                                  pixel_pitch_um=None, netd_mk=None)
-        self.gaps = GapLog(on_close=self._reported)
+        self.gaps = GapLog(on_close=self.tell)
         self.reconnects = 0
         self.incomplete: Counter[str] = Counter()  # by Aravis buffer status
         self.frames_missed = 0  # by block id, in the stream and across gaps
@@ -195,10 +195,6 @@ class GigESource(FrameSource):
                 "incomplete_frames": sum(self.incomplete.values()), "incomplete_by_status": dict(self.incomplete),
                 "frames_missed": self.frames_missed, **self.gaps.health(),
                 "stream": _summed(self._stream_stats, link.statistics() if link is not None else {})}
-
-    def _reported(self, gap: dict[str, Any]) -> None:
-        if self.report is not None:
-            self.report(gap)
 
     # -- capture ---------------------------------------------------------------------------
     def stop(self) -> None:

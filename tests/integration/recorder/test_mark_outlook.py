@@ -9,6 +9,8 @@ import os
 import signal
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import httpx
 import pytest
@@ -20,53 +22,48 @@ pytestmark = pytest.mark.integration
 TOKEN = "mark-outlook-token-0123456789"
 
 
-@pytest.mark.parametrize(("window", "kept"), [(("--pre", "30", "--post", "30"), "not whole"),
-                                              (("--pre", "0.5", "--post", "0.5"), "whole")])
-def test_a_mark_says_what_the_ring_will_keep(tmp_path, window, kept):
+@contextmanager
+def _ring(root, session: str, *args: str) -> Iterator[httpx.Client]:
+    """A ``--ring --max-disk 200M`` recording with its control endpoint; stopped as Ctrl-C would."""
     env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
-    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "m",
-                             "--ring", "--max-disk", "200M", "--segment-duration", "1", "--control", "--no-analysis",
-                             *window], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(root), "--session", session,
+                             "--ring", "--max-disk", "200M", "--control", "--no-analysis", *args], env=env,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
     try:
-        address = tmp_path / "run" / "m.control.json"
+        address = root / "run" / f"{session}.control.json"
         assert wait_for(address.is_file, 60), proc.stderr.read() if proc.poll() is not None else "no control file"
         url = json.loads(address.read_text())["url"]
         with httpx.Client(base_url=url, timeout=10, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
             # a rate is measured once a segment is closed
             assert wait_for(lambda: c.get("/status").json()["segments"] >= 2, 60)
-            answer = c.post("/mark", json={"note": "deer on the road"}).json()
-        keeps = answer["keeps"]
-        assert keeps["kept"] == kept, keeps
-        if kept == "not whole":
-            assert 0 < keeps["seconds_that_fit"] < 60 and keeps["window_bytes"] > keeps["protected_budget"], keeps
-            said = run_cli("ctl", "mark", "--root", str(tmp_path), "--note", "a second deer", env=env)
-            assert said.returncode == 0 and "will not be kept whole" in said.stdout, (said.stdout, said.stderr)
+            yield c
     finally:
         proc.send_signal(signal.SIGINT)
         proc.communicate(timeout=120)
+
+
+@pytest.mark.parametrize(("window", "kept"), [(("--pre", "30", "--post", "30"), "not whole"),
+                                              (("--pre", "0.5", "--post", "0.5"), "whole")])
+def test_a_mark_says_what_the_ring_will_keep(tmp_path, window, kept):
+    with _ring(tmp_path, "m", "--segment-duration", "1", *window) as c:
+        keeps = c.post("/mark", json={"note": "deer on the road"}).json()["keeps"]
+        assert keeps["kept"] == kept, keeps
+        if kept == "not whole":
+            assert 0 < keeps["seconds_that_fit"] < 60 and keeps["window_bytes"] > keeps["protected_budget"], keeps
+            said = run_cli("ctl", "mark", "--root", str(tmp_path), "--note", "a second deer",
+                           env={"THERMCAP_CONTROL_TOKEN": TOKEN})
+            assert said.returncode == 0 and "will not be kept whole" in said.stdout, (said.stdout, said.stderr)
 
 
 def test_the_pages_budget_keeps_the_pages_mark(tmp_path):
     """Issue 64: on `--ring --max-disk 200M` with the defaults (30 s either side, 60 s segments)
     the vehicle page's mark expired 9 s later. The defaults are now fitted to the budget: the
     mark is answered "whole" and is still kept when the recording ends, the ring evicting around it."""
-    env = {**os.environ, "THERMCAP_CONTROL_TOKEN": TOKEN}
-    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "record", "--root", str(tmp_path), "--session", "p",
-                             "--ring", "--max-disk", "200M", "--control", "--no-analysis"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    try:
-        address = tmp_path / "run" / "p.control.json"
-        assert wait_for(address.is_file, 60), proc.stderr.read() if proc.poll() is not None else "no control file"
-        url = json.loads(address.read_text())["url"]
-        with httpx.Client(base_url=url, timeout=10, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
-            assert wait_for(lambda: c.get("/status").json()["segments"] >= 2, 60)
-            answer = c.post("/mark", json={"note": "deer on the road"}).json()
-            assert answer["keeps"]["kept"] == "whole", answer
-            # recorded on until the ring has evicted past the mark's window several times over
-            assert wait_for(lambda: c.get("/status").json().get("ring", {}).get("evicted_segments", 0) >= 20, 120), \
-                c.get("/status").json()
-    finally:
-        proc.send_signal(signal.SIGINT)
-        proc.communicate(timeout=120)
+    with _ring(tmp_path, "p") as c:
+        answer = c.post("/mark", json={"note": "deer on the road"}).json()
+        assert answer["keeps"]["kept"] == "whole", answer
+        # recorded on until the ring has evicted past the mark's window several times over
+        assert wait_for(lambda: c.get("/status").json().get("ring", {}).get("evicted_segments", 0) >= 20, 120), \
+            c.get("/status").json()
     protected = json.loads((tmp_path / "sessions" / "p" / "protected.json").read_text())
     assert "deer on the road" in [w["note"] for w in protected["windows"]] and not protected.get("expired"), protected
