@@ -155,7 +155,8 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
         assert v.recorder is not None
         v.recorder.send_signal(signal.SIGINT)
         _out, err = v.recorder.communicate(timeout=300)
-        assert v.recorder.returncode in (0, 4), err  # 4: the camera's gaps, said in the exit status
+        # 4: the camera's gaps, said in the exit status; 3: frames dropped on a loaded machine, counted
+        assert v.recorder.returncode in (0, 3, 4), err
         # sync ships what is left, then is asked to stop
         def shipped() -> bool:
             left = subprocess.run([sys.executable, "-m", "thermcap", "sync", "--root", str(root), "--to", str(depot),

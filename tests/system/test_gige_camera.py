@@ -80,14 +80,18 @@ def test_gige_records_the_fake_camera_bit_exact(tmp_path):
         r = ns.run([sys.executable, "-m", "thermcap", "record", "--root", str(root), "--session", "gige",
                     "--source", "gige:127.0.0.1", "--duration", "4", "--no-analysis", "--json"],
                    capture_output=True, text=True, timeout=180)
-    assert r.returncode == 0, r.stderr
     result = json.loads(r.stdout)
+    health = result["source_health"]
+    missed, incomplete = health["frames_missed"], health["incomplete_frames"]
+    # 0, or 4 where a loaded machine lost packets on loopback: then the loss is counted and said
+    assert r.returncode == 0 or (r.returncode == 4 and missed + incomplete > 0), (r.returncode, r.stderr)
     session = root / "sessions" / "gige"
     ids = _check_every_count(session)
     assert len(ids) >= 30 and result["frames_written"] == len(ids)  # the fake's rate follows the machine's load
-    missed = result["source_health"]["frames_missed"]
     span = sum(1 + (b - a - 1 if b > a else 65535 - a + b - 1) for a, b in itertools.pairwise(ids)) + 1
-    assert span == len(ids) + missed  # every block id accounted for, across the wrap
+    # every block id accounted for, across the wrap: written, missed, or incomplete (counted, not
+    # written; those before the first frame or after the last lie outside the span)
+    assert len(ids) + missed <= span <= len(ids) + missed + incomplete, (span, len(ids), missed, incomplete)
     if len(ids) > 140:
         assert 65535 in ids and 1 in ids
     # the camera's configuration is kept with the session: read-back features and its GenICam XML
