@@ -52,7 +52,9 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
         else:  # an image or raw counts: the bytes as they are, for a pipe or a file
             click.echo(r.content, nl=False)
         sys.exit(0 if r.status_code == 200 else 1)
-    if host not in ("127.0.0.1", "localhost", "::1") and not settings.tokens:
+    from thermcap.recorder.loopback import is_loopback
+
+    if not is_loopback(host) and not settings.tokens:
         click.secho(f"warning: serving on {host} with no tokens: anyone who can reach it can read every session",
                     fg="yellow", err=True)
     import uvicorn

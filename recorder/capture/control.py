@@ -20,12 +20,13 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, urlsplit
 
+from thermcap.recorder.loopback import is_loopback
 from thermcap.recorder.storage.atomic import write_json_atomic
 
 if TYPE_CHECKING:
     from thermcap.recorder.capture.recorder import Recorder
 
-__all__ = ["MAX_BODY_BYTES", "ControlServer", "find_control", "is_loopback", "metrics_text"]
+__all__ = ["MAX_BODY_BYTES", "ControlServer", "find_control", "metrics_text"]
 
 RUN_DIR = "run"
 
@@ -94,19 +95,6 @@ def metrics_text(rec: Recorder) -> str:
 #: A control request's body is a note: nothing larger, or nested deeper, is read.
 MAX_BODY_BYTES = 16 << 10
 MAX_JSON_DEPTH = 8
-
-
-def is_loopback(host: str) -> bool:
-    """127.0.0.0/8, ::1 or localhost: where a token may be sent without leaving the machine."""
-    import ipaddress
-
-    name = host.strip("[]").lower()
-    if name == "localhost":
-        return True
-    try:
-        return ipaddress.ip_address(name).is_loopback
-    except ValueError:
-        return False
 
 
 def _depth(text: str) -> int:

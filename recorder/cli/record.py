@@ -339,7 +339,8 @@ def ctl(action: str, note: str, root: str, session_id: str | None, url: str | No
     import urllib.parse
     import urllib.request
 
-    from thermcap.recorder.capture.control import find_control, is_loopback
+    from thermcap.recorder.capture.control import find_control
+    from thermcap.recorder.loopback import is_loopback
 
     try:
         base = url or find_control(root, session_id)["url"]

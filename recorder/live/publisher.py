@@ -25,7 +25,7 @@ __all__ = ["CameraTopics", "LiveOptions", "LivePublisher", "check_live_host", "s
 def check_live_host(host: str, port: int, flag: str) -> None:
     """The Foxglove WebSocket view (``record --live``, ``play``) has no token of its own, so it
     is served on this machine only; raises ValueError saying how to reach it from elsewhere."""
-    from thermcap.recorder.capture.control import is_loopback
+    from thermcap.recorder.loopback import is_loopback
 
     if not is_loopback(host):
         raise ValueError(f"{flag} {host}: the live view has no token of its own, so it is served on this machine "
