@@ -347,9 +347,15 @@ def _glib_message(exc: BaseException) -> str:
 def _from_settings(camera: str, s: CameraSettings) -> GigESource:
     own = dict(s.own)
     pixel_format = own.pop("PixelFormat", "Mono16")
+    try:  # a triggered camera may be silent for long: how long before it counts as gone
+        silence = float(own.pop("silence", 3.0))
+    except ValueError:
+        raise SourceError(f"gige:{camera}: silence must be seconds, got {s.own.get('silence')!r}") from None
+    if not 0.1 <= silence <= 86_400:
+        raise SourceError(f"gige:{camera}: silence must be between 0.1 and 86400 s, got {silence:g}")
     return GigESource(GigEOptions(camera=camera, width=s.width, height=s.height, fps=s.fps, pixel_format=pixel_format,
-                                  features=tuple(own.items()), sensor_id=s.sensor_id or "GIGE"))
+                                  features=tuple(own.items()), sensor_id=s.sensor_id or "GIGE", silence_s=silence))
 
 
 register_source(SourceKind("gige", "gige:CAMERA (an address or name; gige: for the first found)", _from_settings,
-                           own_key=lambda key: key[:1].isupper(), target_optional=True))
+                           own_key=lambda key: key[:1].isupper() or key == "silence", target_optional=True))

@@ -153,6 +153,7 @@ def test_every_kind_of_source_is_registered_once_and_parsed_by_its_own_rules():
     assert (g.name, g.target, g.options) == ("front", "10.0.0.5",
                                             {"fps": 30.0, "own": {"ExposureTime": "8000", "PixelFormat": "Mono14"}})
     assert parse_source_spec("gige:").target == ""  # the first camera found
+    assert parse_source_spec("gige:cam,silence=30").options == {"own": {"silence": "30"}}
     e = parse_source_spec("exec:ffmpeg -vf scale=1,crop=2 -")
     assert e.target == "ffmpeg -vf scale=1,crop=2 -" and e.options == {}
     for bad, why in [("sim,ExposureTime=1", "ExposureTime"), ("raw:", "needs a target"), ("usb:0", "gige:CAMERA")]:
