@@ -128,6 +128,7 @@ class _Link:
         self.fps = self.camera.get_frame_rate()
         self.payload = self.camera.get_payload()
         self.xml = _genicam_xml(self.device)
+        self.xml_digest = hashlib.sha256(self.xml).hexdigest() if self.xml else ""  # a different camera: a new one
         self.stream = self.camera.create_stream(None, None)
         if self.stream is None:
             raise SourceError(f"gige:{options.camera}: the camera gave no stream")
@@ -254,9 +255,8 @@ class GigESource(FrameSource):
                                   capture_mono_ns=time.monotonic_ns(),
                                   sidecar={"capture": {"device_timestamp_ns": int(device_ns),
                                                        "device_frame_id": int(frame_id)}})
-            digest = hashlib.sha256(link.xml).hexdigest() if link.xml else ""
-            if digest and digest != self._xml_digest:  # the first frame, or a different camera after a gap
-                self._xml_digest = digest
+            if link.xml_digest and link.xml_digest != self._xml_digest:  # the first frame, or a new camera
+                self._xml_digest = link.xml_digest
                 frame.attachments.append((f"genicam-{index}.xml" if index else "genicam.xml", "application/xml",
                                           link.xml))
             index += 1
