@@ -494,7 +494,8 @@ class Recorder:
         self._session = SessionWriter(self.session_dir, session_meta=meta, extra_topics=extra_topics,
                                       bad_pixel_map=bad_pixels, policy=self.policy,
                                       on_chunk_written=self._chunk_written, on_segment_closed=self._segment_closed,
-                                      cameras=[str(f.name) for f in self.feeds] if self.multi else None)
+                                      cameras=[str(f.name) for f in self.feeds] if self.multi else None,
+                                      segment_attachments=self._segment_attachments)
         if self.ring is not None:
             self._book = ProtectionBook(self.session_dir)
             self._evictor = Evictor(self.root, self.ring, {self.session_dir: self._book},
@@ -902,6 +903,10 @@ class Recorder:
             except Exception as exc:  # eviction must never end a recording: it says so and goes on
                 self._evictor.state.blocked = True
                 self._evictor.state.blocked_reason = f"eviction failed: {type(exc).__name__}: {exc}"
+
+    def _segment_attachments(self) -> list[tuple[str, str, bytes]]:
+        return [(f"{feed.name}/{name}" if self.multi else name, media, data)
+                for feed in self.feeds for name, media, data in feed.source.segment_attachments()]
 
     def _write_frame(self, feed: CameraFeed, frame: CapturedFrame) -> None:
         ts = frame.timestamp_ns

@@ -205,9 +205,13 @@ class SessionWriter:
                  policy: SegmentPolicy | None = None,
                  on_chunk_written: Callable[[list[Any]], None] | None = None,
                  on_segment_closed: Callable[[], None] | None = None,
-                 cameras: Sequence[str] | None = None) -> None:
+                 cameras: Sequence[str] | None = None,
+                 segment_attachments: Callable[[], Sequence[tuple[str, str, bytes]]] | None = None) -> None:
         """``cameras``: the names of a session of several cameras (``/thermal/<name>/...``);
-        None keeps the single-camera layout. ``bad_pixel_map`` is then one map per name."""
+        None keeps the single-camera layout. ``bad_pixel_map`` is then one map per name.
+        ``segment_attachments`` gives what every segment carries from the start, as the bad-pixel
+        map (a camera's GenICam XML): a segment alone, once the ring evicted the others, still
+        says what recorded it."""
         self.dir = Path(session_dir)
         self.cameras: dict[str | None, CameraTopics] = {None: camera_topics(None)} if not cameras else \
             {n: camera_topics(n) for n in cameras}
@@ -216,6 +220,7 @@ class SessionWriter:
         self.session_meta = session_meta
         self.extra_topics = extra_topics
         self.bad_pixel_map = bad_pixel_map
+        self.segment_attachments = segment_attachments
         self.on_chunk_written = on_chunk_written
         self.segments: list[SegmentInfo] = []
         self._writer: ChunkedWriter | None = None
@@ -288,6 +293,8 @@ class SessionWriter:
                 writer.add_attachment(f"{camera}/bad_pixel_map.json" if camera else "bad_pixel_map.json",
                                       "application/json", json.dumps(bpm).encode(),
                                       log_time=time.time_ns(), create_time=time.time_ns())
+            for name, media_type, data in self.segment_attachments() if self.segment_attachments else ():
+                writer.add_attachment(name, media_type, data, log_time=time.time_ns(), create_time=time.time_ns())
         except OSError as exc:
             raise RecordingError(f"cannot start segment {path}: {exc.strerror or exc}") from exc
         self._writer = writer

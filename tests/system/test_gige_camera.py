@@ -78,8 +78,8 @@ def test_gige_records_the_fake_camera_bit_exact(tmp_path):
     with loopback_namespace() as ns:
         _start_camera(ns)
         r = ns.run([sys.executable, "-m", "thermcap", "record", "--root", str(root), "--session", "gige",
-                    "--source", "gige:127.0.0.1", "--duration", "4", "--no-analysis", "--json"],
-                   capture_output=True, text=True, timeout=180)
+                    "--source", "gige:127.0.0.1", "--duration", "4", "--no-analysis", "--segment-duration", "2",
+                    "--json"], capture_output=True, text=True, timeout=180)
     result = json.loads(r.stdout)
     health = result["source_health"]
     missed, incomplete = health["frames_missed"], health["incomplete_frames"]
@@ -98,9 +98,10 @@ def test_gige_records_the_fake_camera_bit_exact(tmp_path):
     meta = json.loads((session / "session.json").read_text())
     genicam = meta["source"]["genicam"]
     assert (genicam["DeviceVendorName"], genicam["PixelFormat"], genicam["Width"]) == ("Aravis", "Mono16", "640")
-    with open(sorted(session.glob("*.mcap"))[0], "rb") as f:
-        names = [a.name for a in make_reader(f).iter_attachments()]
-    assert "genicam.xml" in names
+    for segment in sorted(session.glob("*.mcap")):  # every segment carries the camera's XML from its start
+        with open(segment, "rb") as f:
+            names = [a.name for a in make_reader(f).iter_attachments()]
+        assert "genicam.xml" in names, (segment.name, names, meta["source"])
     info = json.loads(subprocess.run([sys.executable, "-m", "thermcap", "info", str(session), "--json"],
                                      capture_output=True, text=True, check=True, timeout=120).stdout)
     assert info["source"]["source"] == "gige" and info["source_health"]["gaps"] == 0

@@ -91,6 +91,11 @@ class FrameSource(ABC):
     #: back, a camera that reconnected): the recorder sets it and records each as an event
     report: Callable[[dict[str, Any]], None] | None = None
 
+    def segment_attachments(self) -> list[tuple[str, str, bytes]]:
+        """(name, media type, bytes) every segment carries from its start: what describes the
+        camera as it is now (a GigE camera's GenICam XML); none for most sources."""
+        return []
+
     def tell(self, event: dict[str, Any]) -> None:
         """Pass an event (a ``source_gap``) to the recorder, which records it; nothing without one."""
         if self.report is not None:

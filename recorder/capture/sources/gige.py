@@ -179,7 +179,8 @@ class GigESource(FrameSource):
         self.incomplete: Counter[str] = Counter()  # by Aravis buffer status
         self.frames_missed = 0  # by block id, in the stream and across gaps
         self.configs: list[dict[str, Any]] = [cfg]
-        self._xml_digest = ""
+        self._xml_digest = self._link.xml_digest  # the first camera's: every segment carries it
+        self._first_xml = self._link.xml
         self._stream_stats: dict[str, int] = {}  # the closed connections' stream counters, summed
         self._wake = threading.Event()
 
@@ -188,6 +189,7 @@ class GigESource(FrameSource):
         return {"source": "gige", "camera": self.options.camera, "pixel_format": self.options.pixel_format,
                 "width": self.options.width, "height": self.options.height, "fps": self.options.fps,
                 "features": dict(self.options.features), "genicam": self.configs[-1],
+                "genicam_xml_bytes": len(self._first_xml),  # 0: the camera gave none (said, not hidden)
                 "time_basis": self.time_basis}
 
     def health(self) -> dict[str, Any]:
@@ -196,6 +198,12 @@ class GigESource(FrameSource):
                 "incomplete_frames": sum(self.incomplete.values()), "incomplete_by_status": dict(self.incomplete),
                 "frames_missed": self.frames_missed, **self.gaps.health(),
                 "stream": _summed(self._stream_stats, link.statistics() if link is not None else {})}
+
+    def segment_attachments(self) -> list[tuple[str, str, bytes]]:
+        """The GenICam XML of the camera as connected, in every segment from its start."""
+        link = self._link
+        xml = link.xml if link is not None else self._first_xml
+        return [("genicam.xml", "application/xml", xml)] if xml else []
 
     # -- capture ---------------------------------------------------------------------------
     def stop(self) -> None:
@@ -255,10 +263,10 @@ class GigESource(FrameSource):
                                   capture_mono_ns=time.monotonic_ns(),
                                   sidecar={"capture": {"device_timestamp_ns": int(device_ns),
                                                        "device_frame_id": int(frame_id)}})
-            if link.xml_digest and link.xml_digest != self._xml_digest:  # the first frame, or a new camera
+            if link.xml_digest != self._xml_digest:  # a different camera after a gap: its XML with its frames
                 self._xml_digest = link.xml_digest
-                frame.attachments.append((f"genicam-{index}.xml" if index else "genicam.xml", "application/xml",
-                                          link.xml))
+                if index:
+                    frame.attachments.append((f"genicam-{index}.xml", "application/xml", link.xml))
             index += 1
             yield frame
         if self.gaps.open_gap is not None:
