@@ -19,6 +19,7 @@ is the long one, with the camera killed every few minutes.
 
 from __future__ import annotations
 
+import itertools
 import json
 import os
 import re
@@ -197,7 +198,11 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
         for ev in events:
             if ev["kind"] == "source_gap":
                 assert ev["frames_missed"] >= 0 and ev["duration_s"] > 0
-        times = np.array(sorted(f.log_time for f in frames))
+        by_time = sorted((f.log_time, f.sidecar_dict()["capture"]["device_frame_id"]) for f in frames)
+        times = np.array([t for t, _ in by_time])
+        ids = [i for _, i in by_time]
+        health = meta.get("source_health") or {}
+        lost = (meta.get("frames_dropped") or 0) + health.get("frames_missed", 0) + health.get("incomplete_frames", 0)
         for mark in (m for m in v.marks if m["session"] == session):
             kept = (mark["answer"].get("keeps") or {}).get("kept", "")
             w = windows.get(mark["note"])
@@ -207,10 +212,14 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
             gaps = [g for g in events if g["kind"] == "source_gap" and g["start_ns"] < hi and g["end_ns"] > lo]
             if gaps or (times.size and hi > times[-1]):  # a camera gap, or the recording's end, inside it
                 continue
-            inside = times[(times >= lo) & (times <= hi)]
-            period = 1e9 / FPS
-            assert inside.size and inside[0] - lo < 3 * period and hi - inside[-1] < 3 * period, (mark, w)
-            assert np.diff(inside).max() < 3 * period, (mark, np.diff(inside).max())
+            held = np.flatnonzero((times >= lo) & (times <= hi))
+            assert held.size, (mark, w)
+            # every frame the camera numbered inside the window is there (the fake's own pace may
+            # stall on a loaded machine: time holes are its, id holes would be ours), unless the
+            # session counted a loss (dropped, missed, incomplete), which it then says
+            window_ids = [ids[k] for k in held]
+            steps = [(b - a) % 65535 for a, b in itertools.pairwise(window_ids)]
+            assert lost or all(step == 1 for step in steps), (mark, window_ids)
             checked_marks.append(mark["note"])
     assert checked_marks, v.marks  # at least one mark's window was found whole in the depot
     assert camera_kills >= 1 and any(f["source_health"] and f["source_health"].get("gaps") for f in figures.values())
