@@ -22,8 +22,9 @@ What a camera does on a vehicle, and what is done about it:
   from ``backoff_s`` to ``max_backoff_s``, and the first frame after closes the gap with its
   duration, the reconnections it took and the frames missed (by block id when the camera's ids
   ran on, by time otherwise).
-- The camera's configuration (device, read-back features, the GenICam XML as an attachment) is
-  recorded with the session, again after a reconnection that finds a different one.
+- The camera's configuration is recorded with the session (device, read-back features), and its
+  GenICam XML in every segment from its start (a different camera found after a gap: its XML
+  with its first frame).
 
 A live camera cannot wait: when the writer is behind, the recorder drops (and counts) frames
 rather than stall the stream. Without CAP_NET_RAW Aravis streams over UDP; the socket buffer is
