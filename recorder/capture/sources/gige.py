@@ -128,7 +128,7 @@ class _Link:
                               f"{options.width}x{options.height} {options.pixel_format} asked for")
         self.fps = self.camera.get_frame_rate()
         self.payload = self.camera.get_payload()
-        self.xml = _genicam_xml(self.device)
+        self.xml, self.xml_problem = _genicam_xml(self.device)
         self.xml_digest = hashlib.sha256(self.xml).hexdigest() if self.xml else ""  # a different camera: a new one
         self.stream = self.camera.create_stream(None, None)
         if self.stream is None:
@@ -182,6 +182,7 @@ class GigESource(FrameSource):
         self.configs: list[dict[str, Any]] = [cfg]
         self._xml_digest = self._link.xml_digest  # the first camera's: every segment carries it
         self._first_xml = self._link.xml
+        self._xml_problem = self._link.xml_problem
         self._stream_stats: dict[str, int] = {}  # the closed connections' stream counters, summed
         self._wake = threading.Event()
 
@@ -191,6 +192,7 @@ class GigESource(FrameSource):
                 "width": self.options.width, "height": self.options.height, "fps": self.options.fps,
                 "features": dict(self.options.features), "genicam": self.configs[-1],
                 "genicam_xml_bytes": len(self._first_xml),  # 0: the camera gave none (said, not hidden)
+                **({"genicam_xml_problem": self._xml_problem} if self._xml_problem else {}),
                 "time_basis": self.time_basis}
 
     def health(self) -> dict[str, Any]:
@@ -330,13 +332,15 @@ def _read_config(device: Any) -> dict[str, Any]:
     return out
 
 
-def _genicam_xml(device: Any) -> bytes:
+def _genicam_xml(device: Any) -> tuple[bytes, str]:
+    """The camera's GenICam XML, and why not where it has none to give (said in ``describe()``)."""
     try:
         xml = device.get_genicam_xml()
-    except Exception:
-        return b""
+    except Exception as exc:
+        return b"", f"{type(exc).__name__}: {_glib_message(exc)}"
     text = xml[0] if isinstance(xml, tuple) else xml
-    return text.encode() if isinstance(text, str) else bytes(text or b"")
+    data = text.encode() if isinstance(text, str) else bytes(text or b"")
+    return data, "" if data else f"the camera gave none ({type(xml).__name__})"
 
 
 def _found(aravis: Any) -> str:
