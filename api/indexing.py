@@ -162,6 +162,7 @@ def _sidecars_by_manifest(session_dir: Path, manifest: dict[str, Any], verified:
     n = len(times)
     got: dict[int, dict] = {}
     layout = SessionLayout.of(session_dir)
+    on_disk = session_segments(session_dir)
     for fmt in (f for f in ZIPPED_FORMATS if f in verified and layout.format_dir(f).is_dir()):
         try:
             from_zip = _sidecars_from_zip(session_dir, fmt, verified[fmt]["files"])
@@ -173,10 +174,10 @@ def _sidecars_by_manifest(session_dir: Path, manifest: dict[str, Any], verified:
             got = dict(enumerate(from_zip))
             break
         problems.append(f"archive/{fmt}: {len(from_zip)} sidecars for the manifest's {n} frames; passed over")
-    if len(got) < n and session_segments(session_dir):
+    if len(got) < n and on_disk:
         place = {(seg, t): i for i, (seg, t) in enumerate(zip(segs, times, strict=True))}
         log_times: list[int] = []
-        found, names = _sidecars_from_mcap(session_segments(session_dir), problems, log_times)
+        found, names = _sidecars_from_mcap(on_disk, problems, log_times)
         for sc, seg, t in zip(found, names, log_times, strict=True):
             i = place.get((seg, t))
             if i is not None:
@@ -207,7 +208,8 @@ def _sidecars_by_manifest(session_dir: Path, manifest: dict[str, Any], verified:
                         f"their summaries blank")
     sidecars = [got.get(i, {}) for i in range(n)]
     # segments the archive does not cover yet (archived while more was recorded): after its frames
-    newer = [seg for seg in session_segments(session_dir) if seg.name not in set(segs)]
+    covered = set(segs)
+    newer = [seg for seg in on_disk if seg.name not in covered]
     if newer:
         log_times = []
         found, names = _sidecars_from_mcap(newer, problems, log_times)

@@ -8,6 +8,8 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 __all__ = ["CutResult", "cut_session"]
 
 
@@ -41,8 +43,12 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
     t0, t1 = parse_instant(start, first, "start"), parse_instant(end, first, "end")
     if t0 is not None and t1 is not None and t1 <= t0:
         raise ValueError("--end must be after --start")
-    inside = [t for t in times if (t0 is None or t >= t0) and (t1 is None or t < t1)]
-    if len(times) and not inside:
+    inside = np.ones(len(times), bool)
+    if t0 is not None:
+        inside &= np.asarray(times) >= t0
+    if t1 is not None:
+        inside &= np.asarray(times) < t1
+    if len(times) and not inside.any():
         raise ValueError(f"no frame between {_when(t0, 'the start')} and {_when(t1, 'the end')}: the session's "
                          f"frames run from "
                          f"{_when(int(times[0]))} to {_when(int(times[-1]))}")
