@@ -181,7 +181,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 
 
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
-    from thermcap.api.reading.zip_index import read_zip_file
+    from thermcap.archive.reading.zip_directory import read_zip_file
 
     zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
     spans = [(z, int(off), int(n)) for z, e in ((z, read_zip_file(z)) for z in zips)

@@ -11,12 +11,6 @@ The handlers live in ``api.app``; routes raise, never build error responses them
 
 from __future__ import annotations
 
-__all__ = ["FrameNotFound", "FrameUnavailable"]
+from thermcap.archive.exceptions import FrameNotFound, FrameUnavailable
 
-
-class FrameNotFound(LookupError):
-    """The session has no such frame (or the frame no such attachment)."""
-
-
-class FrameUnavailable(LookupError):
-    """Every copy of a frame is missing or damaged (each was checked against the manifest)."""
+__all__ = ["FrameNotFound", "FrameUnavailable"]  # raised by the archive's reader of verified copies

@@ -59,13 +59,13 @@ from thermcap.api import db
 from thermcap.api.cache_policy import Kind, cache_control
 from thermcap.api.http_conventions import body_etag, etag_matches
 from thermcap.api.reading.frame_columns import FrameColumns, FrameColumnsCache
-from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
 from thermcap.api.security import given_token, scopes_for_token
 from thermcap.archive.codecs import decode_up_png, get_codec
 from thermcap.archive.formats.base import locate
 from thermcap.archive.formats.tiff_lzw import decode_strip
 from thermcap.archive.frame_summary import FrameSummary
+from thermcap.archive.reading.mcap_frames import McapFrames
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.storage.digest import new_hasher
 

@@ -5,6 +5,7 @@ scrub's re-reads of the bucket copies live here, beside the store they use."""
 
 from __future__ import annotations
 
+import io
 import os
 from collections.abc import AsyncIterator, Iterator
 from datetime import timedelta
@@ -17,7 +18,7 @@ from obstore.store import LocalStore, S3Store
 from thermcap.recorder.install_hint import install_command
 from thermcap.recorder.storage.layout import SessionLayout
 
-__all__ = ["BlobStore", "open_store", "stored_digest", "upload_archive"]
+__all__ = ["BlobFile", "BlobStore", "open_store", "stored_digest", "upload_archive"]
 
 
 class BlobStore:
@@ -221,3 +222,33 @@ def _upload_references(store: BlobStore, root: Path, session_dir: Path, h5_keys:
             Path(tmp.name).unlink(missing_ok=True)
         written[key] = {"references": key + REFS_SUFFIX}
     return written
+
+
+class BlobFile(io.RawIOBase):
+    """A stored blob as a seekable file (ranged reads), so mcap's seeking reader can fetch one
+    attachment from ``extras.mcap`` on S3 without downloading the whole file."""
+
+    def __init__(self, store: BlobStore, key: str, size: int) -> None:
+        self.store, self.key, self.size, self.pos = store, key, size, 0
+
+    def readable(self) -> bool:
+        return True
+
+    def seekable(self) -> bool:
+        return True
+
+    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
+        self.pos = {io.SEEK_SET: 0, io.SEEK_CUR: self.pos, io.SEEK_END: self.size}[whence] + offset
+        return self.pos
+
+    def tell(self) -> int:
+        return self.pos
+
+    def readinto(self, buffer: Any) -> int:
+        end = min(self.size, self.pos + len(buffer))
+        if end <= self.pos:
+            return 0
+        data = self.store.get_range(self.key, self.pos, end)
+        buffer[:len(data)] = data
+        self.pos += len(data)
+        return len(data)

@@ -5,6 +5,9 @@ ArchiveError (a ThermcapError)   root: the CLI prints it and exits 1
  +-- VerificationError           an archive does not match its source or manifest (names frames and files)
  |    +-- SourceDamagedError      the MCAP source disagrees with itself; refused before anything is written
  +-- ManifestError               the manifest is missing or unreadable
+LookupError
+ +-- FrameNotFound               no such frame (or attachment), or a copy that is not there
+ +-- FrameUnavailable            every copy of a frame is missing or damaged (each checked)
 """
 
 from __future__ import annotations
@@ -38,3 +41,12 @@ class ManifestError(ArchiveError):
 
 class SourceDamagedError(VerificationError):
     """The source's summary, channels or sidecars disagree with its data: nothing is archived."""
+
+
+class FrameNotFound(LookupError):
+    """The session has no such frame (or the frame no such attachment), or one copy of it is
+    not there: a reader passes over a missing copy without calling it damaged."""
+
+
+class FrameUnavailable(LookupError):
+    """Every copy of a frame is missing or damaged (each was checked against the manifest)."""

@@ -18,17 +18,16 @@ from urllib.parse import urlparse
 
 import numpy as np
 
+from thermcap.archive.formats.base import read_cost
+from thermcap.archive.reading.copies import DamageLog, Part
 from thermcap.recorder.radiometry.params import ModelVersion
 from thermcap.session import Session
 
 if TYPE_CHECKING:
-    from thermcap.api.reading.frame_table import FrameTable
     from thermcap.archive.blobs import BlobStore
+    from thermcap.archive.reading.frame_table import FrameTable
 
 __all__ = ["BucketSession", "open_bucket_session"]
-
-#: Cheapest random access first: a stored ZIP entry is one ranged read, an HDF5 chunk a few.
-_ORDER = ("png16", "htj2k", "jpegls", "jxl", "hdf5", "tiff-lzw", "tpred")
 
 
 def open_bucket_session(url: str, *, endpoint: str | None = None, region: str | None = None) -> BucketSession:
@@ -72,7 +71,8 @@ class BucketSession(Session):
         self._proof = frame_proof(manifest.get("frames"))  # the per-frame digests, under the hash they name
         offered = {f: e for f, e in (manifest.get("formats") or {}).items()
                    if e.get("verified") and not e.get("damaged") and e.get("files")}
-        self._copies = [(f, offered[f]) for f in sorted(offered, key=lambda f: (*_ORDER, f).index(f))]
+        self._copies = list(offered.items())  # ordered by their declared read cost when read
+        self.damage = DamageLog()  # damaged objects met while reading: logged and kept, bounded
 
     def __repr__(self) -> str:
         return f"<BucketSession {self.url!r}: {len(self)} frames, {self.width}x{self.height}>"
@@ -93,7 +93,7 @@ class BucketSession(Session):
 
     def _object(self, rel: str) -> Any:
         """A bucket object as a seekable file, read by ranges."""
-        from thermcap.api.reading.frames import BlobFile
+        from thermcap.archive.blobs import BlobFile
 
         head = self.store.head(self._key(rel))
         if head is None:
@@ -121,42 +121,28 @@ class BucketSession(Session):
 
     @cached_property
     def table(self) -> FrameTable:
-        from thermcap.api.indexing import sidecar_summary
-        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable, field_array
+        from thermcap.archive.reading.numbering import table_of
 
-        times = np.array((self.manifest.get("frames") or {}).get("timestamps_ns") or [], np.int64)
-        sidecars = self._sidecars if len(self._sidecars) == len(times) else [{}] * len(times)
-        rows = [sidecar_summary(sc) for sc in sidecars]
-        fields = {name: field_array(name, [r[col] for r in rows]) for name, (col, _, _) in FRAME_FIELDS.items()}
-        return FrameTable(self.id, np.arange(len(times), dtype=np.int64), times, fields)
+        times = [int(t) for t in (self.manifest.get("frames") or {}).get("timestamps_ns") or []]
+        return table_of(self.id, times, self._sidecars if len(self._sidecars) == len(times) else [])
 
-    def _verified(self, index: int, part: str) -> Any:
-        from thermcap.api.exceptions import FrameUnavailable
+    def _verified(self, index: int, part: Part) -> Any:
         from thermcap.archive.formats import get_format
-        proof = self._proof
-        n = len(proof.pixels)
+        from thermcap.archive.reading.copies import Copy, in_read_order, read_verified, wanted
+
+        n = len(self._proof.pixels)
         if not 0 <= index < n:
             raise IndexError(f"frame {index}: session {self.id!r} has {n} frames")
-        hashes = proof.pixels if part == "pixels" else proof.sidecars
-        want = hashes[index] if index < len(hashes) else None
-        problems = []
+        copies = []
         for fmt, entry in self._copies:
-            def open_file(rel: str, fmt: str = fmt) -> Any:
-                return self._object(f"archive/{fmt}/{rel}")
-
-            try:
-                frame = get_format(entry.get("config") or fmt).read_frame(open_file, entry["files"], index)
-            except Exception as exc:  # a missing or damaged object may fail anywhere inside a reader
-                problems.append(f"{fmt}: {type(exc).__name__}: {exc}")
-                continue
-            value: Any = frame.pixels if part == "pixels" else frame.sidecar
-            got = proof.of_pixels(value) if part == "pixels" else proof.of_sidecar(value)
-            if want and got != want:
-                problems.append(f"{fmt}: {part} {proof.name} differs from the manifest")
-                continue
-            return value
-        raise FrameUnavailable(f"frame {index} of {self.url}: no copy in the bucket matches the manifest"
-                               + (f" ({'; '.join(problems)})" if problems else " (no verified archive format)"))
+            def read(part: Part, fmt: str = fmt, entry: dict[str, Any] = entry) -> Any:
+                frame = get_format(entry.get("config") or fmt).read_frame(
+                    lambda rel: self._object(f"archive/{fmt}/{rel}"), entry["files"], index)
+                return frame.pixels if part == "pixels" else frame.sidecar
+            copies.append(Copy(fmt, read_cost(fmt), read))
+        return read_verified(in_read_order(copies), part, session_id=self.id, frame=index,
+                             want=wanted(self._proof, index, part), hash_name=self._proof.name, damage=self.damage,
+                             where=self.url)
 
     def counts(self, index: int) -> np.ndarray:
         px = np.asarray(self._verified(index, "pixels"), dtype=np.uint16)

@@ -26,7 +26,7 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
                 topics: list[str] | None) -> CutResult:
     import io
 
-    from thermcap.api.reading.mcap_slice import export_mcap
+    from thermcap.archive.reading.mcap_slice import export_mcap
     from thermcap.recorder.cli.options import parse_instant
     from thermcap.recorder.storage.layout import SessionLayout
     from thermcap.recorder.storage.reader import session_segments
@@ -60,10 +60,10 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
                              f"{', '.join(sorted(known))})")
     frames = extras = None
     if not session_segments(session_dir):
-        reader, sid = session._reader, session.id
+        reader = session.frames  # every frame through the checked reader, as `thermcap.open` reads them
         keep = [(int(i), int(t)) for i, t in zip(session.table.index, times, strict=True)
                 if (t0 is None or t >= t0) and (t1 is None or t < t1)]
-        frames = ((i, t, (lambda i=i: reader.pixels(sid, i)), (lambda i=i: reader.sidecar(sid, i))) for i, t in keep)
+        frames = ((i, t, (lambda i=i: reader.pixels(i)), (lambda i=i: reader.sidecar(i))) for i, t in keep)
         path = SessionLayout.of(session_dir).extras
         if path.is_file():
             def extras() -> io.BufferedReader:

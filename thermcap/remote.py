@@ -13,7 +13,7 @@ from thermcap.session import Frame, Session
 if TYPE_CHECKING:
     import xarray as xr
 
-    from thermcap.api.reading.frame_table import FrameTable
+    from thermcap.archive.reading.frame_table import FrameTable
 
 __all__ = ["RemoteSession"]
 
@@ -54,7 +54,7 @@ class RemoteSession(Session):
 
     @cached_property
     def table(self) -> FrameTable:
-        from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable, field_array
+        from thermcap.archive.reading.frame_table import FRAME_FIELDS, FrameTable, field_array
 
         infos = list(self.client.frames(self.id))
         fields = {name: field_array(name, [getattr(f, name) for f in infos]) for name in FRAME_FIELDS}

@@ -24,7 +24,7 @@ from thermcap.recorder.radiometry.params import ModelVersion
 if TYPE_CHECKING:
     import xarray as xr
 
-    from thermcap.api.reading.frame_table import FrameTable
+    from thermcap.archive.reading.frame_table import FrameTable
 
 __all__ = ["Frame", "LocalSession", "ModelVersion", "Session"]
 
@@ -139,7 +139,7 @@ class Session(ABC):
 
 
 def _coords(table: FrameTable) -> dict[str, Any]:
-    from thermcap.api.reading.frame_table import FRAME_FIELDS
+    from thermcap.archive.reading.frame_table import FRAME_FIELDS
 
     coords: dict[str, Any] = {"time": ("time", table.timestamp_ns.astype("datetime64[ns]")),
                               "frame": ("time", table.index)}
@@ -149,56 +149,48 @@ def _coords(table: FrameTable) -> dict[str, Any]:
 
 
 class LocalSession(Session):
-    """A session in a data root on this machine, read through the root's index (built or
-    brought up to date on open, as ``thermcap index`` would) and the verified frame readers."""
+    """A session folder on this machine, read where it lies: numbered as the index numbers it,
+    every frame from the first copy that verifies (``archive.reading.folder``). Opening and
+    reading write nothing, and need none of the server's packages."""
 
     def __init__(self, session_dir: Path, root: Path) -> None:
-        from sqlalchemy import select
-
-        from thermcap.api import db
-        from thermcap.api.db import make_engine, migrate
-        from thermcap.api.indexing import index_session
-        from thermcap.api.reading.frames import FrameReader
-        from thermcap.api.settings import Settings
-        from thermcap.api.storage import make_store
+        from thermcap.archive.reading.folder import FolderFrames
         from thermcap.recorder.storage.reader import read_session_meta
 
         self.session_dir, self.root = session_dir, root
         self.meta = read_session_meta(session_dir)
         self.id = str(self.meta.get("session_id") or session_dir.name)
-        settings = Settings(root=root)
-        self._engine = make_engine(settings.db_url)
-        migrate(self._engine)
-        self.problems: list[str] = []  # what indexing could not read (damaged chunks), as `thermcap index` says
-        store = make_store(settings)
-        index_session(self._engine, session_dir, problems=self.problems, store=store)
-        self._reader = FrameReader(self._engine, store, root)
-        with self._engine.connect() as conn:
-            row = conn.execute(select(db.sessions.c.width, db.sessions.c.height)
-                               .where(db.sessions.c.id == self.id)).first()
-        self.width, self.height = (int(row[0] or 0), int(row[1] or 0)) if row else (0, 0)
+        self.frames = FolderFrames(session_dir, self.id)
+        self.problems = self.frames.problems  # what could not be read (damaged chunks, lost segments)
+        self.width, self.height = self._size()
 
-    @cached_property
+    def _size(self) -> tuple[int, int]:
+        sidecars = self.frames.numbered.sidecars
+        res = ((sidecars[0] if sidecars else {}).get("sensor") or {}).get("resolution") or {}
+        src = (self.frames.numbered.manifest or {}).get("source") or {}
+        return int(res.get("width") or src.get("width") or 0), int(res.get("height") or src.get("height") or 0)
+
+    @property
     def table(self) -> FrameTable:
-        return self._reader.columns.get(self.id).table()
+        return self.frames.table
 
     def counts(self, index: int) -> np.ndarray:
-        return np.asarray(self._reader.pixels(self.id, index))
+        return self.frames.pixels(index)
 
     def sidecar(self, index: int) -> dict[str, Any]:
-        return self._reader.sidecar(self.id, index)
+        return self.frames.sidecar(index)
 
     @cached_property
     def events(self) -> list[dict[str, Any]]:
-        from sqlalchemy import select
+        from thermcap.recorder.storage.layout import SessionLayout
 
-        from thermcap.api import db
-
-        e = db.events.c
-        with self._engine.connect() as conn:
-            rows = conn.execute(select(e.kind, e.start_ns, e.end_ns, e.detail).where(e.session_id == self.id)
-                                .order_by(e.start_ns, e.seq)).all()
-        return [{"kind": k, "start_ns": a, "end_ns": b, "detail": json.loads(d) if d else None} for k, a, b, d in rows]
+        try:
+            doc = json.loads(SessionLayout.of(self.session_dir).events_json.read_text())
+        except (OSError, ValueError):
+            return []
+        events = [{"kind": e["kind"], "start_ns": e["start_ns"], "end_ns": e["end_ns"], "detail": e.get("detail", {})}
+                  for e in doc.get("events") or [] if isinstance(e, dict) and "kind" in e]
+        return sorted(events, key=lambda e: (e["start_ns"] or 0))
 
     @property
     def model_versions(self) -> list[ModelVersion]:

@@ -1,1 +1,2 @@
-"""Reading sessions for the API: frames from verified copies (frames), and time/topic slices as MCAP (mcap_slice)."""
+"""Reading sessions for the API: the copies a served session has, read through the archive's one
+checked reader (``archive.reading.copies``); each session's frames file; search; regions."""

@@ -27,8 +27,8 @@ from sqlalchemy.engine import Engine
 
 from thermcap.api import db
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
-from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
 from thermcap.archive.blobs import BlobStore
+from thermcap.archive.reading.frame_table import FRAME_FIELDS, FrameTable
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
 
 __all__ = ["FrameColumns", "FrameColumnsCache", "frames_key"]

@@ -1,10 +1,11 @@
-"""Getting one frame (counts and sidecar) back, from wherever the session keeps it.
+"""Getting one frame (counts and sidecar) back, from wherever a served session keeps it.
 
-Order: a stored-ZIP archive (one ranged read through the blob store, local or S3, then decode;
+This module lists the copies the server can reach (stored-ZIP entries and other formats by
+ranged reads through the blob store, local or S3; the MCAP source on local disk, by the chunk
+holding the frame's log time) where the index says they are; ``archive.reading.copies`` orders
+them by their declared cost, checks each against the manifest's hashes and reports damage.
 ``png16`` requests get the archived PNG bytes as they are, once their CRC-32 matches the ZIP
-directory), then the MCAP source on local disk (the chunk holding the frame's log time), then
-any other verified format (an HDF5 chunk or a TIFF page, by ranged reads). Every copy is checked
-against the manifest's hashes before it is used; a damaged one is reported and skipped.
+directory.
 """
 
 from __future__ import annotations
@@ -13,10 +14,8 @@ import io
 import json
 import logging
 import threading
-import time
-from collections import OrderedDict, deque
-from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from collections import OrderedDict
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -31,84 +30,18 @@ from sqlalchemy.engine import Engine
 from thermcap.api import db
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.api.reading.frame_columns import FrameColumnsCache
-from thermcap.api.reading.mcap_frames import McapFrames
 from thermcap.api.reading.zip_index import ArchiveLocations
 from thermcap.api.storage import BlobStore
+from thermcap.archive.blobs import BlobFile
 from thermcap.archive.codecs import get_codec
 from thermcap.archive.formats import get_format
-from thermcap.archive.formats.base import locate
-from thermcap.archive.manifest import bytes_digest, frame_digest
+from thermcap.archive.formats.base import MCAP_SOURCE_COST, ReadCost, locate, read_cost
+from thermcap.archive.reading.copies import Copy, Damage, DamageLog, Part, in_read_order, read_verified
+from thermcap.archive.reading.mcap_frames import McapFrames
 
-__all__ = ["BlobFile", "Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
+__all__ = ["Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 
 log = logging.getLogger("thermcap.api")
-
-
-class BlobFile(io.RawIOBase):
-    """A stored blob as a seekable file (ranged reads), so mcap's seeking reader can fetch one
-    attachment from ``extras.mcap`` on S3 without downloading the whole file."""
-
-    def __init__(self, store: BlobStore, key: str, size: int) -> None:
-        self.store, self.key, self.size, self.pos = store, key, size, 0
-
-    def readable(self) -> bool:
-        return True
-
-    def seekable(self) -> bool:
-        return True
-
-    def seek(self, offset: int, whence: int = io.SEEK_SET) -> int:
-        self.pos = {io.SEEK_SET: 0, io.SEEK_CUR: self.pos, io.SEEK_END: self.size}[whence] + offset
-        return self.pos
-
-    def tell(self) -> int:
-        return self.pos
-
-    def readinto(self, buffer: Any) -> int:
-        end = min(self.size, self.pos + len(buffer))
-        if end <= self.pos:
-            return 0
-        data = self.store.get_range(self.key, self.pos, end)
-        buffer[:len(data)] = data
-        self.pos += len(data)
-        return len(data)
-
-
-
-
-@dataclass
-class Damage:
-    session_id: str
-    frame: int
-    copy: str  # which copy: "png16:0000.zip", "mcap:0000.mcap", "hdf5:<id>.h5"
-    problem: str
-    at: float = field(default_factory=time.time)
-
-
-class DamageLog:
-    """Damaged copies met while serving: logged, counted (``thermcap_damaged_copies_total``) and
-    shown on /healthz; a bounded list of the latest, so a bad disk cannot fill memory."""
-
-    def __init__(self, keep: int = 100) -> None:
-        self.recent: deque[Damage] = deque(maxlen=keep)
-        self.total = 0
-        self.counter: Any = None  # a prometheus Counter, set by the app
-        self._lock = threading.Lock()
-
-    def report(self, damage: Damage) -> None:
-        with self._lock:
-            self.total += 1
-            self.recent.append(damage)
-        log.warning("damaged copy of frame %d of %s in %s: %s; serving another verified copy",
-                    damage.frame, damage.session_id, damage.copy, damage.problem)
-        if self.counter is not None:
-            self.counter.labels(damage.copy.split(":", 1)[0]).inc()
-
-    def summary(self) -> dict[str, Any]:
-        with self._lock:
-            return {"damaged_copies_seen": self.total,
-                    "recent": [{"session_id": d.session_id, "frame": d.frame, "copy": d.copy, "problem": d.problem}
-                               for d in list(self.recent)[-10:]]}
 
 
 class FrameReader:
@@ -135,13 +68,6 @@ class FrameReader:
     def _blobs(self, session_id: str, idx: int) -> dict[str, dict[str, Any]]:
         return self.locations.blobs(session_id, idx)
 
-    def _ordered_blobs(self, session_id: str, idx: int) -> list[dict[str, Any]]:
-        # For pixels: PNG (libpng, 4-5 ms) first; HTJ2K decodes faster but only one at a time
-        # (see archive.codecs.Htj2k), which serialises concurrent requests.
-        by_fmt = self._blobs(session_id, idx)
-        order = [f for f in ("png16", "htj2k", "jpegls", "jxl") if f in by_fmt]
-        return [by_fmt[f] for f in order + sorted(set(by_fmt) - set(order))]
-
     def _key(self, session_id: str, blob: dict[str, Any]) -> str:
         return f"sessions/{session_id}/archive/{blob['format']}/{blob['file']}"
 
@@ -149,11 +75,14 @@ class FrameReader:
         return self.columns.get(session_id).row(idx)
 
     def _other_formats(self, session_id: str, zipped: set[str],
-                       verified: bool = True) -> list[tuple[str, list[dict[str, Any]]]]:
+                       with_unverified: bool) -> list[tuple[str, list[dict[str, Any]], bool]]:
+        """(format, files, verified) of the copies not read through a ZIP directory; those not
+        verified only where the frame has a digest to check them against."""
         with self.engine.connect() as conn:
-            rows = conn.execute(select(db.archives.c.format, db.archives.c.files).where(
-                db.archives.c.session_id == session_id, db.archives.c.verified.is_(verified))).all()
-        return [(fmt, json.loads(files)) for fmt, files in rows if fmt not in zipped]
+            rows = conn.execute(select(db.archives.c.format, db.archives.c.files, db.archives.c.verified).where(
+                db.archives.c.session_id == session_id)).all()
+        return [(fmt, json.loads(files), bool(ok)) for fmt, files, ok in rows
+                if fmt not in zipped and (ok or with_unverified)]
 
     def _open(self, session_id: str, fmt: str) -> Callable[[str], Any]:
         def open_file(rel: str) -> Any:
@@ -165,59 +94,39 @@ class FrameReader:
 
         return open_file
 
-    def _copies(self, session_id: str, idx: int, row: dict[str, Any],
-                part: str) -> Iterator[tuple[str, Callable[[], Any]]]:
-        """(name, read) for every copy of the frame; read() gives its ``part`` ("pixels" or
-        "sidecar" bytes). A ZIP entry is read for that part alone: a sidecar request never decodes
-        the image."""
-        pixels = part == "pixels"
-        blobs = self._ordered_blobs(session_id, idx)
-        for blob in blobs:
-            def read_blob(blob: dict[str, Any] = blob) -> Any:
+    def _copies(self, session_id: str, idx: int, row: dict[str, Any]) -> list[Copy]:
+        """Every copy of the frame this server can reach, cheapest first. A ZIP entry is read for
+        the part asked for alone: a sidecar request never decodes the image."""
+        copies = []
+        blobs = self._blobs(session_id, idx)
+        for fmt, blob in blobs.items():
+            def read_blob(part: Part, blob: dict[str, Any] = blob) -> Any:
                 key = self._key(session_id, blob)
-                if not pixels:
+                if part == "sidecar":
                     return self.store.get_range(key, blob["sidecar_offset"],
                                                 blob["sidecar_offset"] + blob["sidecar_length"])
                 data = self.store.get_range(key, blob["offset"], blob["offset"] + blob["length"])
                 return get_codec(blob["format"]).decode(data)
-            yield f"{blob['format']}:{blob['file']}", read_blob
+            copies.append(Copy(f"{fmt}:{blob['file']}", read_cost(fmt), read_blob))
         if row["segment"]:
-            yield f"mcap:{row['segment']}", lambda: self._from_mcap(session_id, row)[0 if pixels else 1]
-        others = self._other_formats(session_id, {b["format"] for b in blobs})
-        if row.get("pixel_digest" if pixels else "sidecar_digest"):
-            # Last, the copies not offered whole (scrub marked a file of theirs damaged, or they
-            # never verified): a damaged part hides only itself, and this frame is checked
-            # against the manifest's hash like any other, so an intact file of theirs still serves.
-            others += self._other_formats(session_id, set(), verified=False)
-        for fmt, files in others:
-            def read_other(fmt: str = fmt, files: list[dict[str, Any]] = files) -> Any:
+            copies.append(Copy(f"mcap:{row['segment']}", MCAP_SOURCE_COST,
+                               lambda part: self._from_mcap(session_id, row)[0 if part == "pixels" else 1]))
+        for fmt, files, verified in self._other_formats(session_id, set(blobs), bool(row.get("pixel_digest"))):
+            def read_other(part: Part, fmt: str = fmt, files: list[dict[str, Any]] = files) -> Any:
                 frame = get_format(fmt).read_frame(self._open(session_id, fmt), files, idx)
-                return frame.pixels if pixels else frame.sidecar
-            yield f"{fmt}:{locate(files, idx)[0]}", read_other
+                return frame.pixels if part == "pixels" else frame.sidecar
+            # a copy not offered whole (scrub marked a file of its damaged, or it never verified)
+            # comes last: a damaged part hides only itself, and this frame is checked like any other
+            cost = read_cost(fmt) if verified else ReadCost(10**7 + read_cost(fmt).frame, 10**7)
+            copies.append(Copy(f"{fmt}:{locate(files, idx)[0]}", cost, read_other))
+        return in_read_order(copies)
 
-    def _verified(self, session_id: str, idx: int, part: str) -> Any:
-        """The first copy whose ``part`` ("pixels" or "sidecar") matches the manifest's hash."""
+    def _verified(self, session_id: str, idx: int, part: Part) -> Any:
+        """The first copy whose ``part`` matches the manifest's hash."""
         row = self._frame_row(session_id, idx)
         want = row.get("pixel_digest") if part == "pixels" else row.get("sidecar_digest")
-        hash_name = row["digest"]
-        missing = []
-        for name, read in self._copies(session_id, idx, row, part):
-            try:
-                value = read()
-            except (FrameNotFound, FileNotFoundError) as exc:
-                missing.append(f"{name}: {exc}")
-                continue
-            except Exception as exc:  # a damaged file may fail anywhere inside a decoder
-                self.damage.report(Damage(session_id, idx, name, f"unreadable ({type(exc).__name__}: {exc})"))
-                continue
-            if want:
-                got = frame_digest(value, hash_name) if part == "pixels" else bytes_digest(value, hash_name)
-                if got != want:
-                    self.damage.report(Damage(session_id, idx, name, f"{part} {hash_name} differs from the manifest"))
-                    continue
-            return value
-        raise FrameUnavailable(f"frame {idx} of {session_id}: no verified copy could be read"
-                               + (f" ({'; '.join(missing)})" if missing else ""))
+        return read_verified(self._copies(session_id, idx, row), part, session_id=session_id, frame=idx, want=want,
+                             hash_name=row["digest"], damage=self.damage)
 
     def encoded(self, session_id: str, idx: int, fmt: str) -> bytes | None:
         """The archived bytes of a frame in ``fmt`` (e.g. the PNG itself), if archived that way and

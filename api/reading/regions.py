@@ -32,12 +32,14 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from thermcap.api import db
-from thermcap.api.reading.frames import BlobFile, Damage, FrameReader
+from thermcap.api.reading.frames import FrameReader
 from thermcap.api.storage import BlobStore
+from thermcap.archive.blobs import BlobFile
 from thermcap.archive.formats import get_format
 from thermcap.archive.formats.base import RowBlock, locate, positions_in
 from thermcap.archive.frame_summary import FrameSummary, load_summary
 from thermcap.archive.manifest import bytes_digest, record_digest
+from thermcap.archive.reading.copies import Damage
 from thermcap.recorder.thermography.measure import Box, Tool, bounds, shifted
 from thermcap.recorder.thermography.series import STATS, series_point
 

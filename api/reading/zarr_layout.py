@@ -19,7 +19,7 @@ import json
 import re
 from typing import Any
 
-from thermcap.api.reading.frame_table import FRAME_FIELDS, FrameTable
+from thermcap.archive.reading.frame_table import FRAME_FIELDS, FrameTable
 
 __all__ = ["ChunkKey", "parse_chunk_key", "store_metadata"]
 

@@ -8,10 +8,10 @@ import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request
 from fastapi.responses import StreamingResponse
 
-from thermcap.api.reading.frames import BlobFile
-from thermcap.api.reading.mcap_slice import export_mcap
 from thermcap.api.routes.common import parse_time, session_row
 from thermcap.api.security import require
+from thermcap.archive.blobs import BlobFile
+from thermcap.archive.reading.mcap_slice import export_mcap
 from thermcap.recorder.storage.layout import EXTRAS_MCAP
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])

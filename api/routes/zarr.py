@@ -9,10 +9,10 @@ import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 
 from thermcap.api.cache_policy import Kind, cache_headers
-from thermcap.api.reading.frame_table import FrameTable
 from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
 from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
+from thermcap.archive.reading.frame_table import FrameTable
 
 __all__ = ["router"]
 

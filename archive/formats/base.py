@@ -182,8 +182,35 @@ def locate(files: list[dict[str, Any]], index: int) -> tuple[str, int]:
 format_registry: Registry[ArchiveFormat] = Registry("format", UnknownCodecError)
 
 
-def register_format(format_id: str, factory: Callable[..., ArchiveFormat]) -> None:
+@dataclass(frozen=True, order=True)
+class ReadCost:
+    """What reading a copy costs, as ranks a reader orders copies by (lower first): ``frame`` is
+    one frame alone by ranged reads (a browser's request, a Zarr chunk), ``stream`` every frame in
+    order (an export, an analysis, a repair). ``thermcap bench archive`` measures the decoders
+    behind them; a format declares its costs where it is registered, so every reader of copies
+    takes them in one order."""
+
+    frame: int
+    stream: int
+
+
+#: The MCAP source, as a copy beside the archive's: a chunk read and decompressed for a frame.
+MCAP_SOURCE_COST = ReadCost(frame=50, stream=15)
+_read_costs: dict[str, ReadCost] = {}
+
+
+_UNDECLARED = ReadCost(10**6, 10**6)
+
+
+def register_format(format_id: str, factory: Callable[..., ArchiveFormat], cost: ReadCost = _UNDECLARED) -> None:
+    """``cost``: what reading it costs beside the other formats; one that declares none is read last."""
     format_registry.register(format_id, factory)
+    _read_costs[format_id] = cost
+
+
+def read_cost(format_id: str) -> ReadCost:
+    """The declared cost of reading format ``format_id`` (an unknown id last)."""
+    return _read_costs.get(format_id, _UNDECLARED)
 
 
 def get_format(config: dict[str, Any] | str) -> ArchiveFormat:

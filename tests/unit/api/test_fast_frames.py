@@ -150,7 +150,7 @@ def test_raw_from_thermcaps_own_png_then_the_strips_then_libpng(tmp_path, monkey
 def test_a_rewritten_copy_of_the_same_size_is_read_afresh():
     """scrub --repair may rewrite a ZIP at its old size; the manifest's sha256 tells the copies
     apart, so offsets read from the old one are never used for the new one."""
-    from thermcap.api.reading.zip_index import ZipIndexCache
+    from thermcap.archive.reading.zip_directory import ZipIndexCache
 
     def reader(data):
         return lambda a, b: data[a:b]

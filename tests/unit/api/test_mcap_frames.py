@@ -10,7 +10,7 @@ import shutil
 import pytest
 
 from tests.unit.recorder.test_segment_chunks import small_chunk_session
-from thermcap.api.reading.mcap_frames import McapFrames
+from thermcap.archive.reading.mcap_frames import McapFrames
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.storage.chunks import SegmentIndex
 from thermcap.recorder.storage.reader import iter_segment_frames

@@ -14,9 +14,9 @@ from fastapi.testclient import TestClient
 from mcap.reader import make_reader
 
 from thermcap.api.app import create_app
-from thermcap.api.reading.mcap_slice import export_mcap
 from thermcap.api.settings import Settings
 from thermcap.archive.archiver import archive_session
+from thermcap.archive.reading.mcap_slice import export_mcap
 from thermcap.recorder.analysis.offline import analyze_session
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource

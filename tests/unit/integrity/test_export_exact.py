@@ -13,7 +13,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from mcap.reader import make_reader
 
-from thermcap.api.reading.mcap_slice import export_mcap
+from thermcap.archive.reading.mcap_slice import export_mcap
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.storage.segments import SegmentPolicy

@@ -12,24 +12,23 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from thermcap.archive.exceptions import ManifestError, VerificationError
-from thermcap.archive.formats import get_format
+from thermcap.archive.formats import get_format, read_cost
 from thermcap.archive.manifest import frame_proof, load_manifest
+from thermcap.archive.reading.copies import differs, wanted
 from thermcap.archive.manifest_types import Manifest
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.reader import SessionFrame
 
-__all__ = ["READ_PREFERENCE", "archived_frames", "frames_from_format", "verified_formats"]
-
-#: Fastest full-session readers first (sequential decode on one core).
-READ_PREFERENCE = ("hdf5", "png16", "tiff-lzw", "htj2k", "jpegls", "jxl")
+__all__ = ["archived_frames", "frames_from_format", "verified_formats"]
 
 
 def verified_formats(manifest: Manifest, layout: SessionLayout, *, but: str | None = None) -> list[str]:
     """Verified formats that scrub has not marked damaged and whose folder is on disk (other than
-    ``but``), in reading preference: the copies any reader, or a repair, may take frames from."""
+    ``but``), cheapest to read whole first (their declared ``ReadCost``): the copies any reader,
+    or a repair, may take every frame from."""
     fmts = [f for f, e in manifest.get("formats", {}).items() if f != but and e.get("verified") and e.get("files")
             and not e.get("damaged") and layout.format_dir(f).is_dir()]
-    return sorted(fmts, key=lambda f: READ_PREFERENCE.index(f) if f in READ_PREFERENCE else len(READ_PREFERENCE))
+    return sorted(fmts, key=lambda f: (read_cost(f).stream, f))
 
 
 def archived_frames(session_dir: Path) -> Iterator[SessionFrame] | None:
@@ -59,10 +58,9 @@ def frames_from_format(manifest: Manifest, layout: SessionLayout, fid: str) -> I
     segments = frames.get("segments") or []
     times = frames.get("timestamps_ns") or []
     proof = frame_proof(frames)
-    hashes, sidecar_hashes = proof.pixels, proof.sidecars
     for i, decoded in enumerate(fmt.read(layout.format_dir(fid), [r["path"] for r in entry["files"]])):
-        if (i < len(hashes) and proof.of_pixels(decoded.pixels) != hashes[i]) or \
-                (i < len(sidecar_hashes) and proof.of_sidecar(decoded.sidecar) != sidecar_hashes[i]):
+        if differs("pixels", decoded.pixels, wanted(proof, i, "pixels"), proof.name) or \
+                differs("sidecar", decoded.sidecar, wanted(proof, i, "sidecar"), proof.name):
             raise VerificationError(f"{layout.format_dir(fid)}: frame {i} differs from the manifest; "
                                     f"run `thermcap scrub {layout.dir.parents[1]} --repair`")
         log_time = decoded.log_time if decoded.log_time is not None else (times[i] if i < len(times) else 0)
