@@ -11,7 +11,7 @@ from typing import Any
 
 import click
 
-from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
+from thermcap.recorder.cli.options import PORT, SIZE, Number, fail, json_option, root_option
 from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["index", "jobs", "on_archived", "serve", "upload"]
@@ -295,14 +295,15 @@ def worker(root: str, formats: str, once: bool, interval: float, delete_source: 
 @root_option
 @click.option("--keep-days", type=Number(minimum=0, maximum=36_500, unit="days"), default=None,
               help="Delete sessions older than this many days (0: any age).")
-@click.option("--max-bytes", type=str, default=None, help="Keep the root under this size (e.g. 500G, 2T).")
+@click.option("--max-bytes", type=SIZE, default=None, metavar="SIZE",
+              help="Keep the root under this size (500G and 2T count in 1024s, 2TB in 1000s).")
 @click.option("--require-upload/--no-require-upload", default=None,
               help="Only delete sessions already uploaded (default: on when a store is configured).")
 @click.option("--dry-run", is_flag=True, help="Print what would be deleted and the bytes freed.")
 @click.option("--include-protected", is_flag=True,
               help="Also delete sessions whose event windows are protected (kept by default).")
 @json_option
-def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload: bool | None, dry_run: bool,
+def gc(root: str, keep_days: float | None, max_bytes: int | None, require_upload: bool | None, dry_run: bool,
        include_protected: bool, as_json: bool) -> None:
     """Retention: delete the oldest verified sessions by age and/or total size (FIFO)."""
     from thermcap.api.jobs.retention import gc_sessions
@@ -311,14 +312,7 @@ def gc(root: str, keep_days: float | None, max_bytes: str | None, require_upload
     if keep_days is None and max_bytes is None:
         fail("give --keep-days and/or --max-bytes")
     settings = Settings(root=Path(root))
-    limit = None
-    if max_bytes:
-        units = {"K": 1e3, "M": 1e6, "G": 1e9, "T": 1e12}
-        try:
-            limit = int(float(max_bytes[:-1]) * units[max_bytes[-1].upper()]) if max_bytes[-1].upper() in units \
-                else int(max_bytes)
-        except ValueError:
-            fail(f"--max-bytes: {max_bytes!r} is not a size like 500G")
+    limit = max_bytes
     req = bool(settings.s3_bucket) if require_upload is None else require_upload
     from thermcap.api.storage import make_store
 

@@ -55,6 +55,32 @@ def scopes_for_token(tokens: dict[str, frozenset[str]], given: str | None) -> fr
     return found
 
 
+#: Methods a browser may send across sites freely; anything else carried by the cookie must come
+#: from a page of this server (SameSite=Strict does not tell ports of one host apart).
+SAFE_METHODS = frozenset({"GET", "HEAD", "OPTIONS"})
+
+
+def _bearer(headers: dict[str, str]) -> bool:
+    scheme, _, given = headers.get("authorization", "").partition(" ")
+    return scheme.lower() == "bearer" and bool(given.strip())
+
+
+def same_origin(headers: dict[str, str], scope: dict) -> bool:
+    """Whether a request says it comes from a page of this server: its Origin (or, where a
+    browser sent none, its Referer) names the scheme, host and port the request was sent to
+    (the Host header, or the one a reverse proxy forwarded). A request that says nothing is not."""
+    from urllib.parse import urlsplit
+
+    claimed = headers.get("origin") or headers.get("referer") or ""
+    if not claimed or claimed == "null":
+        return False
+    parts = urlsplit(claimed)
+    if parts.scheme not in ("http", "https") or not parts.netloc:
+        return False
+    own = {h.strip().lower() for h in (headers.get("host", ""), headers.get("x-forwarded-host", "")) if h.strip()}
+    return parts.netloc.lower() in own
+
+
 def given_token(authorization: str, cookie_header: str) -> str | None:
     scheme, _, given = authorization.partition(" ")
     if scheme.lower() == "bearer" and given.strip():
@@ -95,6 +121,11 @@ class AuthGate:
         headers = {k.decode("latin-1").lower(): v.decode("latin-1") for k, v in scope.get("headers", [])}
         given = given_token(headers.get("authorization", ""), headers.get("cookie", ""))
         if scopes_for_token(self.tokens, given) is not None:
+            if scope.get("method") not in SAFE_METHODS and not _bearer(headers) and not same_origin(headers, scope):
+                await _send_error(send, 403, "a write carried by the login cookie must come from this server's own "
+                                             "origin (its Origin or Referer header); scripts send the token as "
+                                             "Authorization: Bearer")
+                return
             await self.app(scope, receive, send)
             return
         if scope.get("method") == "GET" and "text/html" in headers.get("accept", ""):

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from thermcap.archive.codecs import get_codec
-from thermcap.archive.temporal import BITSTREAM_VERSION, TemporalEncoder, decode_records
+from thermcap.archive.codecs.tpred.codec import BITSTREAM_VERSION, TemporalEncoder, decode_records
 from thermcap.recorder.capture.sources.sim import SimSource
 
 __all__ = ["bench_temporal"]
@@ -187,7 +187,7 @@ import json, sys, threading, time
 import numpy as np
 frames = np.load(sys.argv[1])
 t1 = time.perf_counter()
-from thermcap.archive.temporal import TemporalEncoder
+from thermcap.archive.codecs.tpred.codec import TemporalEncoder
 first = []
 def run(part):
     enc = TemporalEncoder()

@@ -12,10 +12,13 @@ Reading one: ``imagecodecs.numcodecs.register_codecs()``, then
 
 from __future__ import annotations
 
+import base64
 import json
 import warnings
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 __all__ = ["REFS_SUFFIX", "hdf5_references"]
 
@@ -41,7 +44,7 @@ def hdf5_references(path: Path, url: str) -> dict[str, Any]:
     with h5py.File(path, "r") as h5:
         d = h5["frames"]
         if "frames/.zarray" in table or d.compression != "szip":
-            return refs
+            return _as_served(refs, d.shape[1])
         plist = d.id.get_create_plist()
         values = next(plist.get_filter(i)[2] for i in range(plist.get_nfilters())
                       if plist.get_filter(i)[3] == b"szip")  # (flags, options, client values, name)
@@ -63,4 +66,40 @@ def hdf5_references(path: Path, url: str) -> dict[str, Any]:
                 raise ValueError(f"{path}: chunk {k} skipped a filter; not referenced")
             i = info.chunk_offset[0] // d.chunks[0]
             table[f"frames/{i}.0.0"] = [url, int(info.byte_offset), int(info.size)]
+    return _as_served(refs, h)
+
+
+def _as_served(refs: dict[str, Any], height: int) -> dict[str, Any]:
+    """The references in the one convention every array of a session has (the served Zarr store,
+    ``to_xarray()``): the counts are ``counts``, ``y`` is the row with 0 at the top, and each
+    axis says which it is. An archive written before that convention (``y`` counted from the
+    bottom) reads the same way: the file's own coordinate values are replaced here, not its
+    frames. The temperature table's dimension, ``counts`` in the file, is ``count`` here."""
+    table = refs["refs"]
+    renamed: dict[str, Any] = {}
+    for key, value in table.items():
+        var, sep, rest = key.partition("/")
+        if sep and var == "counts":
+            key = f"count/{rest}"
+        elif sep and var == "frames":
+            key = f"counts/{rest}"
+        renamed[key] = value
+    for key in [k for k in renamed if k.endswith("/.zattrs")]:
+        attrs = json.loads(renamed[key]) if isinstance(renamed[key], str) else dict(renamed[key])
+        dims = attrs.get("_ARRAY_DIMENSIONS")
+        if dims:
+            attrs["_ARRAY_DIMENSIONS"] = ["count" if d == "counts" else d for d in dims]
+        if key == "counts/.zattrs":
+            attrs["long_name"] = attrs.get("long_name") or "raw sensor counts"
+        elif key in ("time/.zattrs", "x/.zattrs"):
+            attrs["axis"] = "T" if key.startswith("time") else "X"
+        renamed[key] = json.dumps(attrs)
+    if "y/.zarray" in renamed:
+        renamed["y/.zarray"] = json.dumps({"zarr_format": 2, "shape": [height], "chunks": [height], "dtype": "<i4",
+                                           "compressor": None, "fill_value": None, "order": "C", "filters": None})
+        renamed = {k: v for k, v in renamed.items() if not (k.startswith("y/") and k[2:3].isdigit())}
+        renamed["y/0"] = "base64:" + base64.b64encode(np.arange(height, dtype="<i4").tobytes()).decode()
+        renamed["y/.zattrs"] = json.dumps({"_ARRAY_DIMENSIONS": ["y"], "long_name": "row, 0 at the top",
+                                           "units": "1", "axis": "Y"})
+    refs["refs"] = renamed
     return refs

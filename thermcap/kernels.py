@@ -29,9 +29,9 @@ from thermcap.recorder.install_hint import install_command
 
 __all__ = ["KernelReport", "compile_all", "kernel_modules", "main"]
 
-_MODULES = ("thermcap.archive.rans", "thermcap.archive.tpred_kernels", "thermcap.archive.tpred_key",
-            "thermcap.archive.tpred_filter", "thermcap.archive.lzw_kernels", "thermcap.archive.summary_kernels",
-            "thermcap.recorder.analysis.detector_jit")
+_MODULES = ("thermcap.archive.codecs.tpred.rans", "thermcap.archive.codecs.tpred.kernels",
+            "thermcap.archive.codecs.tpred.key", "thermcap.archive.codecs.tpred.filter", "thermcap.archive.lzw_kernels",
+            "thermcap.archive.summary_kernels", "thermcap.recorder.analysis.detector_jit")
 _FORMATS = ["tiff-lzw", "tpred"]  # the formats whose writers and readers run compiled loops
 
 
@@ -84,7 +84,7 @@ def compile_all() -> KernelReport:
         archive_session(rec.session_dir, _FORMATS)
     # a sequence encoded on its own (bench temporal, a library caller): tpred keeps its own watch
     # for defects, which the archive's encoder (given the session's defects) does not run
-    from thermcap.archive.temporal import TemporalEncoder
+    from thermcap.archive.codecs.tpred.codec import TemporalEncoder
 
     enc = TemporalEncoder()
     for frame in SimSource(width=96, height=64, frames=3, paced=False, seed=1).frames():

@@ -46,11 +46,13 @@ def store_metadata(table: FrameTable, width: int, height: int, session_attrs: di
     meta["temperature/.zattrs"] = {
         "_ARRAY_DIMENSIONS": ["time", "y", "x"], "long_name": "temperature", "standard_name": "temperature",
         "units": "degC", "coordinates": " ".join(COORDINATES),
+        "model_version": session_attrs.get("model_version", ""),
         "comment": "from counts by the session's radiometric model (its latest version covering each frame); "
                    "NaN: a pixel of the session's bad-pixel map"}
     meta["time/.zarray"] = _array([n], one_chunk, "<i8", None)
     meta["time/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "standard_name": "time",
-                            "units": "nanoseconds since 1970-01-01T00:00:00Z", "calendar": "proleptic_gregorian"}
+                            "units": "nanoseconds since 1970-01-01T00:00:00Z", "calendar": "proleptic_gregorian",
+                            "axis": "T"}
     meta["frame/.zarray"] = _array([n], one_chunk, "<i8", None)
     meta["frame/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "long_name": "frame number in the session"}
     for name, (_, dtype, what) in FRAME_FIELDS.items():
@@ -59,7 +61,7 @@ def store_metadata(table: FrameTable, width: int, height: int, session_attrs: di
                                    **({"units": "degC"} if name.endswith("_c") else {})}
     for axis, size in (("y", height), ("x", width)):
         meta[f"{axis}/.zarray"] = _array([size], [size], "<i4", None)
-        meta[f"{axis}/.zattrs"] = {"_ARRAY_DIMENSIONS": [axis],
+        meta[f"{axis}/.zattrs"] = {"_ARRAY_DIMENSIONS": [axis], "axis": axis.upper(),
                                    "long_name": "row, 0 at the top" if axis == "y" else "column, 0 at the left"}
     meta[".zmetadata"] = {"zarr_consolidated_format": 1, "metadata": dict(meta)}
     return meta

@@ -15,7 +15,7 @@ from thermcap.api.security import require
 from thermcap.archive.codecs import get_codec
 from thermcap.recorder.exports.colorbar import TemperatureRange
 from thermcap.recorder.exports.render import celsius, celsius_tiff, frame_range, preview_png, tiff16
-from thermcap.recorder.exports.rjpeg import SEGMENTS_BLOB, rebuild_rjpeg
+from thermcap.recorder.importers.dji_rebuild import SEGMENTS_BLOB, rebuild_rjpeg
 from thermcap.recorder.radiometry import TemperatureUnavailable, describe_model
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/frames", tags=["frames"],

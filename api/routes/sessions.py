@@ -136,7 +136,7 @@ def get_foxglove_layout(request: Request, session_id: str) -> dict:
     in Foxglove with Layouts -> Import from file."""
     import numpy as np
 
-    from thermcap.recorder.exports.foxglove_layout import layout_for, ranges_from_frames
+    from thermcap.recorder.storage.foxglove_layout import layout_for, ranges_from_frames
 
     row = session_row(request, session_id)
     reader = request.app.state.frames

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any
 
 import numpy as np
@@ -13,6 +14,7 @@ from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key
 from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
 from thermcap.archive.reading.frame_table import FrameTable
+from thermcap.recorder.radiometry.params import models_named
 
 __all__ = ["router"]
 
@@ -25,17 +27,26 @@ def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str,
     """The session's frame table and the store's metadata documents, built once per indexed
     state of the session (its fingerprint), not for every key a reader asks for."""
 
+    from thermcap.recorder.radiometry.params import read_versions
+
+    try:  # the model versions in force now: a new one is another store (its metadata names it)
+        versions = read_versions(request.app.state.settings.root / "sessions" / row["id"])
+    except ValueError as exc:
+        raise HTTPException(500, str(exc)) from None
+    named = models_named(json.loads(row.get("radiometric_model") or "null") or {"kind": "linear"}, versions)
+
     def build() -> tuple[FrameTable, dict[str, Any]]:
         table = request.app.state.frames.columns.get(row["id"]).table()  # chunk i is frame i
-        return table, _metadata(row, table)
+        return table, _metadata(row, table, named)
 
-    return kept(request, "zarr_stores", (row["id"], row.get("fingerprint")), build, keep=64)
+    return kept(request, "zarr_stores", (row["id"], row.get("fingerprint"), named["radiometric_model_versions"]),
+                build, keep=64)
 
 
-def _metadata(row: dict[str, Any], table: FrameTable) -> dict[str, Any]:
+def _metadata(row: dict[str, Any], table: FrameTable, named: dict[str, str]) -> dict[str, Any]:
     attrs = {"title": f"thermcap session {row['id']}", "source": "thermcap", "session_id": row["id"],
              "sensor": row.get("sensor"), "sensor_id": row.get("sensor_id"), "fps": row.get("fps"),
-             "radiometric_model": row.get("radiometric_model"), "frames_dropped": row.get("frames_dropped")}
+             "frames_dropped": row.get("frames_dropped"), **named}
     return store_metadata(table, int(row["width"] or 0), int(row["height"] or 0), attrs)
 
 

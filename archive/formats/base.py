@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import json
 from abc import ABC, abstractmethod
-from collections import deque
 from collections.abc import Callable, Iterable, Iterator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, ClassVar, TypeVar
@@ -21,6 +19,7 @@ from typing import Any, ClassVar, TypeVar
 import numpy as np
 
 from thermcap.archive.exceptions import UnknownCodecError
+from thermcap.archive.parallel import ordered_map
 from thermcap.recorder.icd.names import format_name
 from thermcap.recorder.radiometry import LinearModel, model_from_dict
 from thermcap.recorder.registry import Registry
@@ -215,23 +214,6 @@ def read_cost(format_id: str) -> ReadCost:
 
 def get_format(config: dict[str, Any] | str) -> ArchiveFormat:
     return format_registry.build(config)
-
-
-def ordered_map(fn: Callable[[T], R], items: Iterable[T], workers: int, window: int | None = None) -> Iterator[R]:
-    """``map`` on a thread pool, results in input order, at most ``window`` items in flight
-    (bounded memory however long the input). Encoders release the GIL, so this uses every core."""
-    if workers <= 1:
-        yield from map(fn, items)
-        return
-    window = window or workers * 4
-    with ThreadPoolExecutor(workers, thread_name_prefix="archive-encode") as pool:
-        pending: deque = deque()
-        for item in items:
-            pending.append(pool.submit(fn, item))
-            if len(pending) >= window:
-                yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
 
 
 def group_by_segment(frames: Iterable[SessionFrame]) -> Iterator[tuple[str, Iterator[SessionFrame]]]:

@@ -280,11 +280,10 @@ def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, sessi
     time = f.create_dataset("time", data=times[...], dtype="<i8")
     time.attrs.update(units="nanoseconds since 1970-01-01T00:00:00Z", calendar="standard", standard_name="time",
                       long_name="capture time (UTC)", axis="T")
-    # y counts up from the bottom row, so the first stored row (the top of the picture) has the
-    # highest y: GDAL/QGIS show it north-up without flipping, and xarray's plot() upright
-    y = f.create_dataset("y", data=np.arange(h, dtype="<i4")[::-1])
-    y.attrs.update(long_name="pixel row counted from the bottom (the first stored row is the top)", units="1",
-                   axis="Y")
+    # y is the row with 0 at the top, as in every other array of a session (the served Zarr store,
+    # to_xarray, the bucket's references): ds.sel(y=0) is the first stored row everywhere.
+    y = f.create_dataset("y", data=np.arange(h, dtype="<i4"))
+    y.attrs.update(long_name="row, 0 at the top", units="1", axis="Y")
     x = f.create_dataset("x", data=np.arange(w, dtype="<i4"))
     x.attrs.update(long_name="pixel column, from the left", units="1", axis="X")
     for scale, name in ((time, "time"), (y, "y"), (x, "x")):
@@ -302,6 +301,11 @@ def _describe_for_netcdf(f: h5py.File, frames: Any, times: Any, meta: Any, sessi
         model = model_from_dict(session_meta.get("radiometric_model") or {})
     except (ValueError, TypeError, KeyError):
         model = None
+    # An archive is written once: versions `thermcap radiometry` adds later are not in it. Say so
+    # where a reader of the file meets the temperatures, rather than let them pass for the latest.
+    frames.attrs["model_version"] = ("0: the model recorded with the session (radiometric_model); versions added "
+                                     "with `thermcap radiometry` are not applied here (thermcap.open applies "
+                                     "them); the session's bad pixels are not masked")
     if isinstance(model, LinearModel):
         # CF packing: unpacked = counts * scale_factor + add_offset, in degC
         frames.attrs.update(scale_factor=np.float64(model.scale_c_per_count), add_offset=np.float64(model.offset_c),

@@ -1,4 +1,4 @@
-"""``tpred``: the temporal codec (``archive.temporal``) in one stored ZIP per segment.
+"""``tpred``: the temporal codec (``archive.codecs.tpred.codec``) in one stored ZIP per segment.
 
 Each frame is ``thermal_<time>_<sensor>_<range>.tpf`` (one tpred record) with its ICD ``.json``
 sidecar beside it, as ``png16`` lays its frames out. Every segment starts a new sequence, so its
@@ -16,10 +16,18 @@ from typing import Any
 
 import numpy as np
 
+from thermcap.archive.codecs.tpred.codec import (
+    BITSTREAM_VERSION,
+    KEY,
+    MAGICS,
+    TpredError,
+    decode_gops,
+    encode_gops,
+    parse_header,
+)
 from thermcap.archive.exceptions import ArchiveError
 from thermcap.archive.formats.base import ArchiveContext, ArchiveFormat, DecodedFrame, FileRecord, locate
 from thermcap.archive.formats.zipped import _time_from_name, write_zip_segments
-from thermcap.archive.temporal import BITSTREAM_VERSION, KEY, MAGICS, TpredError, decode_gops, encode_gops, parse_header
 from thermcap.recorder.storage.reader import SessionFrame
 
 __all__ = ["TemporalFrames"]

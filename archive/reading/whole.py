@@ -14,8 +14,8 @@ from pathlib import Path
 from thermcap.archive.exceptions import ManifestError, VerificationError
 from thermcap.archive.formats import get_format, read_cost
 from thermcap.archive.manifest import frame_proof, load_manifest
-from thermcap.archive.reading.copies import differs, wanted
 from thermcap.archive.manifest_types import Manifest
+from thermcap.archive.reading.copies import differs, wanted
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.reader import SessionFrame
 

@@ -43,7 +43,6 @@ from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
 from thermcap.recorder.capture.sources.health import source_losses
 from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
 from thermcap.recorder.exceptions import RecordingError, ThermcapError
-from thermcap.recorder.exports.foxglove_layout import CountsRange, write_layout
 from thermcap.recorder.icd.names import FORMAT_VERSION, iso_utc
 from thermcap.recorder.icd.sidecar import SidecarEncoder
 from thermcap.recorder.icd.topics import (
@@ -56,6 +55,7 @@ from thermcap.recorder.icd.topics import (
 )
 from thermcap.recorder.radiometry import LinearModel, describe_model
 from thermcap.recorder.storage.atomic import write_json_atomic
+from thermcap.recorder.storage.foxglove_layout import CountsRange, write_layout
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window

@@ -62,6 +62,24 @@ class Number(click.ParamType):
         return int(number) if self.integer else number
 
 
+class Size(click.ParamType):
+    """A size in bytes, in the one grammar every size option takes (``recorder.sizes``)."""
+
+    name = "size"
+
+    def convert(self, value, param, ctx):
+        from thermcap.recorder.sizes import parse_size
+
+        if isinstance(value, int) and not isinstance(value, bool):
+            return value
+        try:
+            return parse_size(value)
+        except ValueError as exc:
+            self.fail(str(exc), param, ctx)
+
+
+SIZE = Size()
+
 #: The ports a user may name (0: any free one).
 PORT = Number(minimum=0, maximum=65535, integer=True)
 

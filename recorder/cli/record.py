@@ -173,7 +173,8 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
             # they were not given: the page's 200M could not keep one window or one segment
             from click.core import ParameterSource
 
-            from thermcap.recorder.storage.ring import fit_to_budget, parse_size
+            from thermcap.recorder.sizes import parse_size
+            from thermcap.recorder.storage.ring import fit_to_budget
 
             ctx = click.get_current_context()
             defaulted = {n for n in ("segment_duration", "pre_s", "post_s")

@@ -406,9 +406,9 @@ def _write_mosaic(out: Path, tiles: list[tuple[int, Any, np.ndarray]], frame_tim
 
 def _export_dji(session_dir: Path, out: Path, on_frame: Callable[[int], None] | None,
                 select: FrameSelection = ALL_FRAMES) -> dict[str, Any]:
-    """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.exports.rjpeg``)."""
-    from thermcap.recorder.exports.rjpeg import rebuild_rjpeg
+    """R-JPEGs rebuilt from the archive for DJI's own tools (see ``recorder.importers.dji_rebuild``)."""
     from thermcap.recorder.importers.dji import kept_rjpeg_segments
+    from thermcap.recorder.importers.dji_rebuild import rebuild_rjpeg
 
     kept = kept_rjpeg_segments(session_dir)
     written, refused = [], []

@@ -3,7 +3,7 @@
 DJI's curves live in DJI's SDK, so thermcap cannot move a DJI model's emissivity or distance
 itself, as it does for FLIR's Planck model. It asks the SDK again instead. Each frame of the
 session is rebuilt into the R-JPEG it came from, bit-exact: the stored counts, plus the APP
-segments the importer kept (``recorder.exports.rjpeg``). The backend measures the rebuilt
+segments the importer kept (``recorder.importers.dji_rebuild``). The backend measures the rebuilt
 file at the new object parameters. The per-count tables are merged into one, and recorded as
 a model version (who, when, why, which frames), as any other re-parameterisation. The stored
 counts never change, and version 0 stays what the camera measured.
@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from thermcap.recorder.exceptions import ThermcapError
-from thermcap.recorder.exports.rjpeg import rebuild_rjpeg
 from thermcap.recorder.importers.dji import kept_rjpeg_segments
+from thermcap.recorder.importers.dji_rebuild import rebuild_rjpeg
 from thermcap.recorder.importers.dji_sdk import DjiBackend, sdk_params_problem
 from thermcap.recorder.radiometry import LookupTableModel, model_from_dict
 from thermcap.recorder.radiometry.base import TemperatureUnavailable

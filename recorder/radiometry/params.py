@@ -18,8 +18,16 @@ from typing import Any
 
 from thermcap.recorder.radiometry.base import RadiometricModel
 
-__all__ = ["OBJECT_PARAMS", "ModelVersion", "add_version", "model_for_frame", "read_versions", "reparameterise",
-           "versions_from"]
+__all__ = [
+    "OBJECT_PARAMS",
+    "ModelVersion",
+    "add_version",
+    "model_for_frame",
+    "models_named",
+    "read_versions",
+    "reparameterise",
+    "versions_from",
+]
 
 OBJECT_PARAMS = ("emissivity", "reflected_temp_c", "object_distance_m", "atmospheric_temp_c",
                  "relative_humidity_pct", "ir_window_temp_c", "ir_window_transmission")
@@ -80,6 +88,25 @@ class ModelVersion:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+
+def models_named(recorded: dict[str, Any], versions: list[ModelVersion], version: int | None = None
+                 ) -> dict[str, str]:
+    """What every temperature product says of the model it used, as string attributes (CF, Zarr,
+    HDF5 take them alike): the model recorded (version 0), every later version with the frames
+    it covers, and which one the temperatures use (``version``; None: the latest covering each
+    frame). A new version changes these attributes, so a product that names them cannot keep
+    giving the old numbers under the same description."""
+    known = [0, *(v.version for v in versions)]
+    if version is None:
+        used = "the latest version covering each frame" + (f" (versions {', '.join(map(str, known))}; 0 is the "
+                                                             f"model recorded)" if versions else " (0, the model "
+                                                                                              "recorded)")
+    else:
+        used = str(version)
+    return {"radiometric_model": json.dumps(recorded, sort_keys=True),
+            "radiometric_model_versions": json.dumps([v.to_dict() for v in versions], sort_keys=True),
+            "model_version": used}
 
 
 def read_versions(session_dir: str | os.PathLike) -> list[ModelVersion]:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.recorder.icd.names import iso_utc
+from thermcap.recorder.sizes import parse_size
 from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
 from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
 from thermcap.recorder.storage.lock import holder
@@ -61,19 +62,6 @@ def fit_to_budget(max_disk: int, protected: int, raw_bytes_per_s: float, segment
     span = protected / 2 / rate - seg  # two windows, each up to one segment more than it spans
     half = max(0.0, min(window_s, span / 2))
     return FittedDefaults(seg, round(half, 2), round(half, 2))
-
-
-def parse_size(text: str) -> int:
-    """``500M``, ``2G``, ``1.5T``, ``123456`` (bytes): the sizes a user types."""
-    t = str(text).strip().upper().removesuffix("B").removesuffix("I")
-    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
-    try:
-        value = float(t[:-1]) * units[t[-1]] if t and t[-1] in units else float(int(t))
-    except (ValueError, OverflowError):
-        raise ValueError(f"{text!r} is not a size (for example 500M, 20G, 123456)") from None
-    if not 0 <= value < 1 << 62:  # nan fails this too
-        raise ValueError(f"{text!r} is not a size (for example 500M, 20G, 123456)")
-    return int(value)
 
 
 @dataclass(frozen=True)
@@ -426,7 +414,7 @@ class Evictor(threading.Thread):
 
     def _confirmed(self) -> dict[str, int]:
         """Segments the cloud confirmed byte for byte: key -> size, from sync's journal."""
-        from thermcap.recorder.sync.journal import Journal
+        from thermcap.recorder.storage.sync_journal import Journal
 
         try:
             journal = Journal(self.root)

@@ -28,7 +28,7 @@ from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.storage.digest import file_sha256
 from thermcap.recorder.storage.ledger import record_freed
 from thermcap.recorder.storage.ring import load_windows
-from thermcap.recorder.sync.journal import Journal, ObjectState, PartState
+from thermcap.recorder.storage.sync_journal import Journal, ObjectState, PartState
 from thermcap.recorder.sync.plan import SyncItem, plan_root
 from thermcap.recorder.sync.rate import RateLimit
 from thermcap.recorder.sync.targets import Target, receipt_key

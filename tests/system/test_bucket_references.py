@@ -41,8 +41,8 @@ def test_xarray_reads_an_uploaded_hdf5_archive_from_the_bucket(tmp_path, seaweed
         "storage_options": {"fo": f"s3://{seaweedfs['bucket']}/{prefix}/{refs_key}", "target_options": s3,
                             "remote_protocol": "s3", "remote_options": {**s3, "asynchronous": True}}})
     frames = list(iter_session_frames(root / "sessions" / "s-archived"))
-    assert ds.frames.dtype == np.uint16
-    np.testing.assert_array_equal(ds.frames.values, np.stack([f.pixels for f in frames]))
+    assert ds.counts.dtype == np.uint16 and ds.counts.dims == ("time", "y", "x")  # as the served store names them
+    np.testing.assert_array_equal(ds.counts.values, np.stack([f.pixels for f in frames]))
     np.testing.assert_array_equal(ds.time.values.astype(np.int64), [f.log_time for f in frames])
     assert ds.attrs["session_id"] == "s-archived"
 

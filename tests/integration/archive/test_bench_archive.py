@@ -7,7 +7,7 @@ import json
 
 from click.testing import CliRunner
 
-from thermcap.archive.temporal import BITSTREAM_VERSION
+from thermcap.archive.codecs.tpred.codec import BITSTREAM_VERSION
 from thermcap.cli import cli
 
 

@@ -12,7 +12,7 @@ import sys
 _TPRED_640 = """
 import json
 import numpy as np
-from thermcap.archive.temporal import TemporalEncoder, decode_records
+from thermcap.archive.codecs.tpred.codec import TemporalEncoder, decode_records
 from thermcap.kernels import _dispatchers
 from thermcap.recorder.capture.sources.sim import SimSource
 frames = [f.pixels for f in SimSource(width=640, height=512, frames=4, paced=False, seed=2, view="patrol",

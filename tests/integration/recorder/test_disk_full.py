@@ -80,7 +80,7 @@ def test_the_files_an_export_rewrites_leave_nothing_half_written_on_a_full_disk(
     now goes through one helper (``recorder.storage.atomic``): on a full disk it raises, the old
     file stays whole, and nothing else is left."""
     from thermcap.recorder.exports.files import _write_summary
-    from thermcap.recorder.exports.foxglove_layout import FOXGLOVE_LAYOUT, write_layout
+    from thermcap.recorder.storage.foxglove_layout import FOXGLOVE_LAYOUT, write_layout
 
     out = small_disk / "out"
     out.mkdir()

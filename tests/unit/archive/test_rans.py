@@ -1,4 +1,4 @@
-"""tpred v4's entropy coder (``archive.rans``) and key-frame coder (``archive.tpred_key``):
+"""tpred v4's entropy coder (``archive.codecs.tpred.rans``) and key-frame coder (``archive.codecs.tpred.key``):
 every int32 value round-trips, the coder sits at its table's entropy, and damage is refused
 with the reason instead of decoding to other numbers."""
 
@@ -49,7 +49,7 @@ def test_the_encoder_writes_the_bytes_it_always_wrote():
 @settings(max_examples=300, deadline=None)
 @given(st.integers(-2**31, 2**31 - 1))
 def test_a_values_token_follows_the_hybrid_integer_rule(v):
-    """The rule in ``archive.rans``'s docstring, from Python's own bit length: the coder finds
+    """The rule in ``archive.codecs.tpred.rans``'s docstring, from Python's own bit length: the coder finds
     ``k`` with a loop it may shorten, and a wrong ``k`` writes other bytes for the same value."""
     u = 2 * v if v >= 0 else -2 * v - 1
     if u < 32:

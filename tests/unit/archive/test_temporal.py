@@ -11,10 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from thermcap.archive.exceptions import ArchiveError
-from thermcap.archive.formats import get_format
-from thermcap.archive.manifest import frame_digest, frame_sha256
-from thermcap.archive.temporal import (
+from thermcap.archive.codecs.tpred.codec import (
     BITSTREAM_VERSION,
     HEADER,
     INTRA,
@@ -25,6 +22,9 @@ from thermcap.archive.temporal import (
     decode_records,
     parse_header,
 )
+from thermcap.archive.exceptions import ArchiveError
+from thermcap.archive.formats import get_format
+from thermcap.archive.manifest import frame_digest, frame_sha256
 from thermcap.recorder.capture.sources.sim import SimSource
 
 GOLDEN = Path(__file__).resolve().parents[2] / "fixture" / "bitstreams" / "tpred-v1"  # and v2, v3 beside it
@@ -199,7 +199,7 @@ def test_the_float_division_is_floor_division():
 def test_version_3_learns_the_sensor_pattern_under_a_pan():
     """The column pattern stays put on the sensor while the scene pans; version 3 learns it
     from the decoded frames alone, so the same frames cost less than in version 2."""
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     src = SimSource(width=640, height=512, frames=16, paced=False, seed=5, view="patrol", pixel_fpn_mk=15.0,
                     drift_mk=30.0, patrol_deg_s=10.0)
@@ -228,7 +228,7 @@ def _moving_square(n: int = 12) -> list[np.ndarray]:
 
 @pytest.mark.parametrize("version", [3, 4])
 def test_version_3_predicts_a_block_that_moves_on_its_own(version):
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     frames = _moving_square()
     enc = TemporalEncoder(bitstream=version)
@@ -248,7 +248,7 @@ def test_version_3_predicts_a_block_that_moves_on_its_own(version):
 
 def test_version_3_block_modes_on_a_frame_that_is_not_a_whole_number_of_blocks():
     """117x151: the last block row and column are partial, in the block map and in the moves."""
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     frames = [f[5:122, 3:154].copy() for f in _moving_square()]
     enc = TemporalEncoder(window=8, key_interval=64, bitstream=3)
@@ -262,7 +262,7 @@ def test_version_3_block_modes_on_a_frame_that_is_not_a_whole_number_of_blocks()
 
 @pytest.mark.parametrize("version", [3, 4])
 def test_version_3_damage_is_refused_with_the_reason(version):
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     frames = _moving_square(4)
     enc = TemporalEncoder(bitstream=version)
@@ -294,7 +294,7 @@ def test_version_4_leaves_the_sensors_defects_out_of_the_scene():
     pixels that stopped changing at the next key frame, and version 4 predicts each from its own
     last value instead of smearing it over the scene points it crosses: the listed pixels are the
     simulator's defects, and the same frames cost less than with the list emptied."""
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     src = SimSource(width=320, height=256, frames=48, paced=False, seed=5, view="patrol", patrol_deg_s=10.0,
                     pixel_fpn_mk=15.0, drift_mk=30.0, bad_pixels=6)
@@ -319,7 +319,7 @@ def test_version_4_leaves_the_sensors_defects_out_of_the_scene():
 def test_version_4_refuses_a_damaged_defect_list():
     import zlib
 
-    import thermcap.archive.temporal as tp
+    import thermcap.archive.codecs.tpred.codec as tp
 
     frames = _frames("fixed", n=2)
     key = TemporalEncoder(bitstream=4).encode(frames[0])
@@ -386,7 +386,7 @@ def test_gops_on_two_threads_write_the_sequential_encoders_bytes():
     """``encode_gops`` cuts the sequence where the encoder would start a key (every
     ``key_interval`` frames, and at a change of size) and hands each GOP its defect list: the
     records are the sequential encoder's, byte for byte, and ``decode_gops`` reads them back."""
-    from thermcap.archive.temporal import decode_gops, encode_gops
+    from thermcap.archive.codecs.tpred.codec import decode_gops, encode_gops
 
     frames = [f.pixels for f in SimSource(width=160, height=128, frames=80, paced=False, seed=5, view="patrol",
                                           patrol_deg_s=10.0, pixel_fpn_mk=15.0, bad_pixels=6).frames()]
@@ -412,7 +412,7 @@ def test_version_5_never_codes_a_frame_larger_than_alone(kind):
     Version 5's mode decision writes such a frame as an intra record (coded alone, carried on
     as a predicted frame is): no record is larger than the frame's own intra coding, and the
     sequence still decodes bit-exact, sequentially and a GOP a thread."""
-    from thermcap.archive import tpred_key
+    from thermcap.archive.codecs.tpred import key as tpred_key
 
     kw = {"shutter_every_s": 0.2} if kind == "shutter" else {"netd_mk": 2000.0}
     seq = _frames("fixed", 40, **kw)
@@ -448,7 +448,7 @@ def test_version_6_follows_a_sub_pixel_shake():
     by a share of each edge's slope (half of them were coded alone at 0.5 px). Version 6 moves
     the prediction along the scene mean's gradients by a fitted shift: the shaking sequence is
     much smaller than in version 5, and decodes bit-exact, sequentially and a GOP a thread."""
-    from thermcap.archive.temporal import _SUBPEL, PREDICTED, SHAKE_WINDOW, encode_gops
+    from thermcap.archive.codecs.tpred.codec import _SUBPEL, PREDICTED, SHAKE_WINDOW, encode_gops
 
     seq = _frames("fixed", 40, shake_px=0.5)
     enc6, enc5 = TemporalEncoder(key_interval=32, bitstream=6), TemporalEncoder(key_interval=32, bitstream=5)
@@ -478,7 +478,7 @@ def test_version_6_costs_a_still_view_at_most_its_three_bytes_a_record():
 
 
 def test_a_version_6_shift_of_a_pixel_or_more_is_refused():
-    from thermcap.archive.temporal import _SUBPEL, PREDICTED
+    from thermcap.archive.codecs.tpred.codec import _SUBPEL, PREDICTED
 
     seq = _frames("fixed", 3, shake_px=0.5)
     enc = TemporalEncoder(bitstream=6)

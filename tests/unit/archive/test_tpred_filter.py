@@ -15,7 +15,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from thermcap.archive import tpred_filter
-from thermcap.archive.temporal import (
+from thermcap.archive.codecs.tpred.codec import (
     HEADER,
     PREDICTED,
     TemporalDecoder,
@@ -46,7 +46,7 @@ def _filters_of(record: bytes) -> tuple[int, ...] | None:
 
 
 def _reference(m64, est, other, pred, coefs, precisions):
-    """The bitstream's words (``archive.temporal``, version 8) in numpy int64."""
+    """The bitstream's words (``archive.codecs.tpred.codec``, version 8) in numpy int64."""
     h, w = m64.shape
     m = m64.astype(np.int64)
     padded = np.pad(m, 2, mode="edge")
@@ -271,7 +271,7 @@ def test_the_encoders_costs_count_the_scene_on_every_other_row_and_column(h, w, 
     """``residual_costs`` (version 6's and 8's measure of a correction, without a branch): the
     sums of ``|f - pred|`` and ``|f - p|`` over the even rows' and columns' pixels not in
     ``other``, at odd sizes too, where the last row or column is counted."""
-    from thermcap.archive.tpred_kernels import residual_costs
+    from thermcap.archive.codecs.tpred.kernels import residual_costs
 
     rng = np.random.default_rng(seed)
     f, pred, p = (rng.integers(0, 65536, (h, w)).astype(np.int32) for _ in range(3))

@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from thermcap.archive import tpred_kernels
+from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
 _CLIP = 16
 
@@ -210,7 +210,7 @@ def _block_choices_reference(f, pred, prev, cand, wb, block, vectors):
 def test_block_modes_are_chosen_by_the_rule(h, w, seed, spread):
     """Blocks inside the frame take the unclamped float32 sums, blocks at its edge or moved past
     it the clamped ones; both choose as the rule does, ties included (small spreads)."""
-    from thermcap.archive.temporal import _VECTOR_ARRAY, BLOCK
+    from thermcap.archive.codecs.tpred.codec import _VECTOR_ARRAY, BLOCK
 
     rng = np.random.default_rng(seed)
     f = rng.integers(0, spread, (h, w)).astype(np.int32)
@@ -226,7 +226,7 @@ def test_the_windows_passes_read_contiguous_rows():
     frame's offset: a slice of them is compiled for any strides, and those passes then ran a
     pixel at a time (2.5x slower). A pan moves the frame across the canvas, so every call has an
     offset."""
-    from thermcap.archive.temporal import TemporalEncoder
+    from thermcap.archive.codecs.tpred.codec import TemporalEncoder
     from thermcap.recorder.capture.sources.sim import SimSource
 
     enc = TemporalEncoder(window=4)  # frames leave the window from the fifth on

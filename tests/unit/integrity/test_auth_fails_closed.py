@@ -121,3 +121,23 @@ def test_the_example_placeholder_is_not_a_token(tmp_path, monkeypatch):
     monkeypatch.setenv("THERMCAP_TOKENS", line.partition("=")[2])
     with pytest.raises(ValueError, match="placeholder"):
         Settings(root=tmp_path)
+
+
+@pytest.mark.parametrize("headers", [
+    {"Origin": "http://127.0.0.1:9999"},  # another port on the same host: same-site, not same-origin
+    {"Origin": "null"},  # a sandboxed frame or a file:// page
+    {"Referer": "http://evil.example/page"},
+    {},  # a cookie-borne write that says nowhere where it comes from
+])
+def test_a_cross_site_write_with_the_cookie_is_refused(client, headers):
+    """A page on another origin can make the browser POST (text/plain needs no preflight) and the
+    browser attaches the SameSite=Strict cookie whenever the sites match, as every 127.0.0.1 port
+    does: a write carried by the cookie must come from this origin."""
+    client.cookies.set("thermcap_token", TOKEN)
+    r = client.post("/api/v1/index", content=b"x", headers={"content-type": "text/plain", **headers})
+    assert r.status_code == 403 and "origin" in r.json()["error"].lower()
+    own = client.post("/api/v1/index", headers={"Origin": "http://testserver"})
+    assert own.status_code != 403
+    bearer = client.post("/api/v1/index", headers={"Authorization": f"Bearer {TOKEN}", **headers})
+    assert bearer.status_code != 403  # a script's bearer token is not something a page can attach
+    assert client.get("/api/v1/sessions", headers=headers).status_code == 200  # reads are not writes

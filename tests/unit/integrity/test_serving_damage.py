@@ -72,7 +72,10 @@ def test_when_every_copy_is_damaged_the_answer_is_503_not_bad_bytes(root):
     _flip_entry(session / "archive" / "png16" / "0000.zip", 2)
     with TestClient(create_app(Settings(root=root, tokens={}, rescan_interval_s=0))) as c:
         for fmt in ("png16", "raw"):
-            assert c.get("/api/v1/sessions/s/frames/2", params={"format": fmt}).status_code == 503
+            r = c.get("/api/v1/sessions/s/frames/2", params={"format": fmt})
+            assert r.status_code == 503
+            # the answer names the damaged copy and what is wrong with it, not only the deleted source
+            assert "png16:0000.zip" in r.json()["error"], r.json()
         assert c.get("/api/v1/sessions/s/frames/1", params={"format": "raw"}).status_code == 200
 
 

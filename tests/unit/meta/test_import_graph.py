@@ -1,10 +1,12 @@
-"""The architecture, checked: imports go recorder -> archive -> api -> the ``thermcap`` facade,
-never back (the facade fills the lower rooms' registries), no import cycle exists (at module level
-or inside functions), and no module of ours uses entry points but for third-party plugins."""
+"""The architecture, checked: import-linter's contracts (in pyproject.toml: imports go recorder ->
+archive -> api -> the ``thermcap`` facade, never back; the recorder's inner order; no cycle
+between siblings), the installed names, and entry points only for third-party plugins."""
 
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -65,15 +67,6 @@ def test_the_packages_are_found():
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))
-def test_no_import_from_a_later_package(module):
-    rank = ORDER.index(_room(module))
-    later = ORDER[rank + 1:]
-    bad = sorted(i for i in _imports(MODULES[module], module, top_level_only=False)
-                 if _ours(i) and _room(i) in later and i != "thermcap")
-    assert bad == [], f"{module} imports {bad}: data and imports flow recorder -> archive -> api -> thermcap"
-
-
-@pytest.mark.parametrize("module", sorted(MODULES))
 def test_no_old_top_level_names(module):
     bad = sorted(i for i in _imports(MODULES[module], module, top_level_only=False) if i.split(".")[0] in ROOMS)
     assert bad == [], f"{module} imports {bad}: the installed names are thermcap.recorder, thermcap.archive, ..."
@@ -84,29 +77,23 @@ def test_entry_points_only_for_plugins():
     assert users == ["thermcap.cli"], users
 
 
-@pytest.mark.parametrize("top_level_only", [True, False], ids=["module-level", "any-level"])
-def test_no_import_cycle(top_level_only):
-    graph = {m: {i for i in _imports(p, m, top_level_only=top_level_only) if i in MODULES and i != m}
-             for m, p in MODULES.items()}
-    # a package's __init__ importing its own submodules is how a public face is built, not a cycle
-    for m, deps in graph.items():
-        graph[m] = {d for d in deps if not d.startswith(m + ".")}
-    state: dict[str, int] = {}
-    stack: list[str] = []
-    cycles: list[list[str]] = []
+def test_the_import_contracts_hold(tmp_path):
+    """pyproject.toml's import-linter contracts: the rooms' order, the facade above them, the
+    recorder's inner order, no cycle between siblings."""
+    r = subprocess.run([sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command; "
+                        "sys.exit(lint_imports_command())", "--no-cache"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stdout[-4000:] + r.stderr[-2000:]
+    assert "0 broken" in r.stdout
 
-    def visit(m: str) -> None:
-        state[m] = 1
-        stack.append(m)
-        for d in sorted(graph[m]):
-            if state.get(d) == 1:
-                cycles.append([*stack[stack.index(d):], d])
-            elif d not in state:
-                visit(d)
-        stack.pop()
-        state[m] = 2
 
-    for m in sorted(graph):
-        if m not in state:
-            visit(m)
-    assert cycles == []
+def test_a_broken_contract_is_caught(tmp_path):
+    """The contracts are live: the same check on a config whose layers are upside down fails."""
+    config = tmp_path / "upside_down.toml"
+    config.write_text('[tool.importlinter]\nroot_package = "thermcap"\n\n[[tool.importlinter.contracts]]\n'
+                      'name = "upside down"\ntype = "layers"\n'
+                      'layers = ["thermcap.recorder", "thermcap.archive"]\n')
+    r = subprocess.run([sys.executable, "-c", "import sys; from importlinter.cli import lint_imports_command; "
+                        "sys.exit(lint_imports_command())", str(config), "--no-cache"], cwd=ROOT,
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode != 0 and "BROKEN" in r.stdout

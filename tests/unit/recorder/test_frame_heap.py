@@ -25,7 +25,7 @@ if sys.argv[1] == "keep":
     from thermcap.recorder.frame_heap import keep_frame_blocks
     set_by = keep_frame_blocks()
 elif sys.argv[1] == "encoder":
-    from thermcap.archive.temporal import TemporalEncoder
+    from thermcap.archive.codecs.tpred.codec import TemporalEncoder
     TemporalEncoder()
 def frame_work():  # what a numpy step on a 640x512 frame makes: int64 and int32 temporaries
     x = np.ones((512, 640), np.int64)

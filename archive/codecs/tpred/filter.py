@@ -12,7 +12,7 @@ two, one for each (split at ``FILTER_SPLIT``). On 120 frames of the simulator's 
 (replicated) +0.2 %, and the second filter +0.35-0.5 %; 3x3 and 7x7 filters, three classes, and a
 split at 4, 6, 11 or 16 counts were each worse (``docs/explanation/tpred.md``, v8).
 
-Specified in ``archive.temporal``'s docstring (version 8). The decoder's step
+Specified in ``archive.codecs.tpred.codec``'s docstring (version 8). The decoder's step
 (``filter_apply``) is integer arithmetic in effect; the encoder's fit (``fit``) gathers exact
 integer sums (int16 samples, their products summed in int32 blocks and the blocks in int64, so
 any order gives the same numbers) and solves a 24x24 system a filter in float64, which only
@@ -26,7 +26,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from thermcap.archive.tpred_kernels import row_costs
+from thermcap.archive.codecs.tpred.kernels import row_costs
 
 __all__ = ["FILTERS", "FILTER_LIMIT", "FILTER_SPLIT", "PRECISIONS", "TAPS", "filter_apply", "fit"]
 

@@ -2,7 +2,7 @@
 
 Versions 1-3 run the same arithmetic as a dozen numpy calls a step, each a pass over the frame
 and each holding the GIL between calls, which kept the encoder near 60 frames a second on one
-core. These loops do exactly what ``archive.temporal``'s docstring specifies for version 4 (a
+core. These loops do exactly what ``archive.codecs.tpred.codec``'s docstring specifies for version 4 (a
 first v4 written by numpy steps decoded bit-exact through them, and the block-mode passes serve
 version 3 too, whose golden records still decode); integer arithmetic throughout, except
 float64 divisions whose results are exact on every machine.
@@ -19,7 +19,7 @@ __all__ = ["apply_modes", "block_choices", "block_sads", "column_medians", "coun
            "line_shift_costs", "merge_residuals", "motion_sums", "predict", "residual_costs", "row_costs",
            "sampled_lines", "shift_costs", "split_residuals", "subpel_apply", "subpel_costs", "subpel_sums", "trim"]
 
-_CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.temporal._Pattern.CLIP)
+_CLIP = 512  # the pattern's clip, 8 counts in 1/64 counts (archive.codecs.tpred.codec._Pattern.CLIP)
 _HALF = 32
 _SCALE = 6
 

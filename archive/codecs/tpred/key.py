@@ -9,7 +9,7 @@ above and to its left, and its residual is coded with the rANS table of its cont
 
 Layout, stable (after the version 4 key record's defect list):
 
-    5 x (u32 count, u32 length, length bytes)   context k's values as one ``archive.rans`` stream
+    5 x (u32 count, u32 length, length bytes)   context k's values as one ``archive.codecs.tpred.rans`` stream
 
 Neighbours of pixel ``(r, c)``, in the frame being decoded: ``a`` left, ``b`` up, ``c`` up-left,
 ``d`` up-right; where one is outside the frame: in row 0, ``b = c = d = a``, and ``a`` of pixel
@@ -37,7 +37,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from thermcap.archive import rans
+from thermcap.archive.codecs.tpred import rans
 
 __all__ = ["KeyFrameError", "decode_key", "encode_key", "rule_costs"]
 

@@ -82,14 +82,14 @@ Bitstream, version 4 (magic ``b"TPF4"``): version 3 with three changes.
 
 - A key record's payload starts with the sensor's defect list: ``u32`` length ``L`` and ``L``
   bytes, the zlib stream of the defects' flat pixel indices (``r * width + c``) as ``u32``,
-  strictly increasing (``L = 0``: none). The frame follows, coded by ``archive.tpred_key`` (a
+  strictly increasing (``L = 0``: none). The frame follows, coded by ``archive.codecs.tpred.key`` (a
   four-neighbour spatial predictor and five rANS contexts, specified there) instead of
   pcodec's vertical differences; the header's payload type is 2 and says nothing.
 - Until the next key, each defect is predicted by its own value in the previous frame and is
   one of the "others" (second residual stream, out of the pattern's learning). The window
   holds it as 0 and counts it 0 towards ``N`` (the key frame too), so no scene point is
   predicted from a defect; where only defects saw a point, it is unseen.
-- Both residual streams are ``archive.rans`` streams (specified there) instead of pcodec
+- Both residual streams are ``archive.codecs.tpred.rans`` streams (specified there) instead of pcodec
   chunks; the payload type is the residuals' range as before.
 
 Bitstream, version 5 (magic ``b"TPF5"``): version 4 and one more record
@@ -126,7 +126,7 @@ frame miss by a share of each edge's slope, and half of them coded alone.
 
 Bitstream, version 7 (magic ``b"TPF7"``): version 6, and every frame coded
 alone (a key record's frame after its defect list, an intra record's payload) is
-``archive.tpred_key``'s version 7 layout: a rule byte, then the streams; rule 1 predicts a pixel
+``archive.codecs.tpred.key``'s version 7 layout: a rule byte, then the streams; rule 1 predicts a pixel
 that continues a run of equal values along its row by the run (specified there). Real FLIR CSQ
 sequences hold such runs in most of their pixels and code every frame alone (their temporal noise
 is above the scene's detail); version 6 lost to JPEG XL effort 2 on them (0.95x), version 7 wins
@@ -135,7 +135,7 @@ is above the scene's detail); version 6 lost to JPEG XL effort 2 on them (0.95x)
 Bitstream, version 8 (magic ``b"TPF8"``; what thermcap writes): version 7, and a predicted
 record's three terms are followed by its filters: one byte ``n``, 0 (none) or 2, and ``n``
 filters, each one byte ``q`` (4 <= q <= 9) and 24 ``int8`` coefficients ``k`` in units of
-``2**-q``, in the order of ``archive.tpred_filter.TAPS`` (the 5x5 neighbours ``(dy, dx)`` row by
+``2**-q``, in the order of ``archive.codecs.tpred.filter.TAPS`` (the 5x5 neighbours ``(dy, dx)`` row by
 row, without the centre). A record with filters has terms 0, 0, 0. The decoder computes version
 4's ``p``, ``m64`` and ``other``; then at every pixel not in ``other``, with ``d_i = m64[r + dy_i,
 c + dx_i] - m64[r, c]`` (uncorrected; rows and columns outside the frame replicate its edge) and
@@ -175,7 +175,7 @@ import numpy as np
 
 from thermcap.recorder.frame_heap import keep_frame_blocks
 
-# archive.rans, archive.tpred_kernels and archive.tpred_key are compiled by numba, which takes
+# the rans, kernels and key modules beside this one are compiled by numba, which takes
 # 0.35 s to import: they are imported inside the functions that use them, so every ``thermcap``
 # command does not pay for it at start-up.
 
@@ -537,7 +537,7 @@ class _State3:
         """Each block with mode ``k`` predicted by the previous frame moved by ``VECTORS[k - 1]``
         (edge replicated), its pixels in the second stream and out of the pattern's learning.
         Returns the pixels not predicted from the scene."""
-        from thermcap.archive import tpred_kernels
+        from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
         assert self.prev is not None
         if other is None:
@@ -563,7 +563,7 @@ class _State4(_State3):
     (about 140 polluted pixels a frame for 12 defects). Here the key frame lists the defects;
     each is predicted by its own previous value, counts 0 towards ``N`` in the scene window,
     and stays out of the pattern's learning. Each per-pixel step is one compiled pass
-    (``archive.tpred_kernels``) instead of version 3's dozen numpy calls."""
+    (``archive.codecs.tpred.kernels``) instead of version 3's dozen numpy calls."""
 
     def __init__(self) -> None:
         super().__init__()
@@ -590,7 +590,7 @@ class _State4(_State3):
         self.prev = f
 
     def predict(self, dx: int, dy: int) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-        from thermcap.archive import tpred_kernels
+        from thermcap.archive.codecs.tpred import kernels as tpred_kernels
         win, pat = self.window, self.pattern
         assert win.last is not None and pat is not None and self.prev is not None
         win.cx += dx
@@ -606,7 +606,7 @@ class _State4(_State3):
         return p, m64, other  # the mask even where it is all False: every later step takes it as it is
 
     def push(self, f: np.ndarray, m64: np.ndarray, other: np.ndarray | None) -> None:
-        from thermcap.archive import tpred_kernels
+        from thermcap.archive.codecs.tpred import kernels as tpred_kernels
         win, pat = self.window, self.pattern
         assert pat is not None
         sl = win._at(f.shape, win.cx, win.cy)  # predict fitted the canvas to this frame
@@ -622,7 +622,7 @@ class _State4(_State3):
         self.prev = f
 
     def trim(self, keep: int) -> None:
-        from thermcap.archive import tpred_kernels
+        from thermcap.archive.codecs.tpred import kernels as tpred_kernels
         win = self.window
         while len(win.frames) > keep:
             old, ox, oy = win.frames.popleft()
@@ -655,7 +655,7 @@ class _StuckPixels:
         if self.last is None or self.last.shape != f.shape or self.run is None:
             self.run = np.zeros(f.shape, np.uint8)
         else:
-            from thermcap.archive import tpred_kernels
+            from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
             tpred_kernels.count_runs(f, self.last, self.run)
         self.last = f
@@ -694,7 +694,7 @@ def _choose_modes(f: np.ndarray, pred: np.ndarray, prev: np.ndarray, most: int =
     view): blocks whose residual against the scene is well above the frame's typical block are
     tried against the previous frame moved by each of ``VECTORS``, and take the best when it
     is clearly better. None when no block does."""
-    from thermcap.archive import tpred_kernels
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
     h, w = f.shape
     hb, wb = -(-h // BLOCK), -(-w // BLOCK)
     # which blocks to try: their residual on every other row and column (a quarter of the work)
@@ -720,7 +720,7 @@ def _subpel(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
     returned (``None`` where the fit was degenerate and nothing was measured). The correction is
     measured on those pixels alone and applied by ``_corrected`` only where the record keeps it:
     version 8's filters replace it on most shaking frames."""
-    from thermcap.archive import tpred_kernels
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
     sums = tpred_kernels.subpel_sums(f, m64, est, other, SUBPEL_LIMIT, _SUBPEL_CLIP)
     a, rhs = sums[:, :3], sums[:, 3]
@@ -745,7 +745,7 @@ def _corrected(pred: np.ndarray, m64: np.ndarray, est: np.ndarray, other: np.nda
     zeros)."""
     if terms == (0, 0, 0):
         return m64
-    from thermcap.archive import tpred_kernels
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
     m64c = np.empty_like(m64)
     tpred_kernels.subpel_apply(pred, m64, est, other, pred, *terms, SUBPEL_LIMIT, False,
@@ -759,7 +759,7 @@ def _filtered(f: np.ndarray, pred: np.ndarray, m64: np.ndarray, est: np.ndarray,
     with the filters fitted to ``f`` on the uncorrected ``pred`` and ``m64``; ``None`` where they
     do not lower the residual's absolute sum below ``cost`` (version 6's terms'; the uncorrected
     prediction's where that is ``None``)."""
-    from thermcap.archive import tpred_filter
+    from thermcap.archive.codecs.tpred import filter as tpred_filter
 
     fitted = tpred_filter.fit(f, pred, m64, est, other)
     if fitted is None:
@@ -790,8 +790,9 @@ def _with_lengths(modes: np.ndarray | None, chunks: list[bytes]) -> bytes:
 
 def _pack_streams4(modes: np.ndarray | None, f: np.ndarray, pred: np.ndarray,
                    other: np.ndarray | None) -> tuple[int, bytes]:
-    """Version 4: the same two streams, split in one pass and each coded by ``archive.rans``."""
-    from thermcap.archive import rans, tpred_kernels
+    """Version 4: the same two streams, split in one pass and each coded by ``archive.codecs.tpred.rans``."""
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
+    from thermcap.archive.codecs.tpred import rans
     scene = np.empty(f.size, np.int32)
     rest = np.empty(f.size, np.int32)
     n0, n1, lo, hi = tpred_kernels.split_residuals(f, pred, np.zeros(f.shape, bool) if other is None else other,
@@ -833,8 +834,9 @@ def _stream_chunks(payload: memoryview, pos: int, counts: tuple[int, int]) -> li
 
 
 def _unpack_streams4(payload: memoryview, pos: int, pred: np.ndarray, other: np.ndarray | None) -> np.ndarray:
-    """Version 4: the frame, from the prediction and the two ``archive.rans`` streams."""
-    from thermcap.archive import rans, tpred_kernels
+    """Version 4: the frame, from the prediction and the two ``archive.codecs.tpred.rans`` streams."""
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
+    from thermcap.archive.codecs.tpred import rans
     n_other = int(np.count_nonzero(other)) if other is not None else 0
     counts = (pred.size - n_other, n_other)
     streams = []
@@ -880,7 +882,7 @@ def _best_shift(cur: np.ndarray, prev: np.ndarray, axis: int, max_shift: int, ot
     frames' profiles along the axis (the median of those lines): every shift is tried on the
     profiles, and only the best few on the lines themselves, which is 1/10 of trying every shift
     on the lines."""
-    from thermcap.archive import tpred_kernels
+    from thermcap.archive.codecs.tpred import kernels as tpred_kernels
     # for rows (axis 0), the transposes' lines; np.roll(prev, other, axis=0)[::8] for the columns
     c = tpred_kernels.sampled_lines(cur, axis, 8, 0)
     p = tpred_kernels.sampled_lines(prev, axis, 8, other)
@@ -978,7 +980,7 @@ class TemporalEncoder:
             else:
                 ptype, payload = _pack_streams(modes, f - pred, other)
             if self.bitstream >= 5 and HEADER.size + len(payload) >= INTRA_TRY * self._alone:
-                from thermcap.archive import tpred_key
+                from thermcap.archive.codecs.tpred import key as tpred_key
 
                 alone = tpred_key.encode_key(f, rule=self._rule)
                 self._alone = HEADER.size + len(alone)
@@ -1008,7 +1010,7 @@ class TemporalEncoder:
 
     def _intra(self, f: np.ndarray) -> tuple[int, bytes, np.ndarray | None]:
         """(payload type, payload, defects) of ``f`` coded alone, changing no state."""
-        from thermcap.archive import tpred_key
+        from thermcap.archive.codecs.tpred import key as tpred_key
 
         if isinstance(self._state, _State4):
             defects = self._stuck.listed() if self._stuck is not None else self._known_defects
@@ -1044,7 +1046,7 @@ class TemporalEncoder:
         dy = _best_shift(f, self._prev, 0, min(self.max_shift, 8), other=dx)
         if (dx, dy) == (0, 0):
             return 0, 0
-        from thermcap.archive import tpred_kernels
+        from thermcap.archive.codecs.tpred import kernels as tpred_kernels
 
         still, moved = tpred_kernels.motion_sums(f, self._prev, dx, dy, 4, _CLIP)  # against _shift(prev)
         return (dx, dy) if moved < still else (0, 0)
@@ -1072,7 +1074,7 @@ class TemporalDecoder:
     def _read_filter(payload: memoryview) -> tuple[tuple[np.ndarray, np.ndarray] | None, memoryview]:
         """Version 8: the record's filters, their coefficients and precisions (``None``: no
         filter), and the rest of the payload."""
-        from thermcap.archive.tpred_filter import FILTERS, PRECISIONS, TAPS
+        from thermcap.archive.codecs.tpred.filter import FILTERS, PRECISIONS, TAPS
 
         if len(payload) < 1:
             raise TpredError("a version 8 record ends before its filters")
@@ -1095,7 +1097,7 @@ class TemporalDecoder:
     def _apply_filter(self, filters: tuple[np.ndarray, np.ndarray], pred: np.ndarray, m64: np.ndarray,
                       other: np.ndarray | None) -> np.ndarray:
         """Version 8: ``pred`` filtered in place; returns the filtered scene mean."""
-        from thermcap.archive import tpred_filter
+        from thermcap.archive.codecs.tpred import filter as tpred_filter
 
         st = self._state
         assert isinstance(st, _State4) and st.pattern is not None and other is not None
@@ -1112,7 +1114,7 @@ class TemporalDecoder:
         return _corrected(pred, m64, st.pattern.est, other, terms)
 
     def decode(self, record: bytes | memoryview) -> np.ndarray:
-        from thermcap.archive import tpred_key
+        from thermcap.archive.codecs.tpred import key as tpred_key
         hdr = parse_header(record)
         payload = memoryview(record)[HEADER.size:]
         shape = (hdr.height, hdr.width)
@@ -1219,7 +1221,7 @@ def encode_gops(items: Iterable[T], pixels: Callable[[T], np.ndarray], *, worker
         enc = TemporalEncoder(window, key_interval, max_shift, bitstream, defects=defects)
         return [(item, enc.encode(pixels(item))) for item in run]
 
-    from thermcap.archive.formats.base import ordered_map
+    from thermcap.archive.parallel import ordered_map
 
     for done in ordered_map(encode, gops(), workers, window=workers):
         yield from done
@@ -1252,7 +1254,7 @@ def decode_gops(items: Iterable[T], record: Callable[[T], bytes], *, workers: in
                 raise TpredError(f"{name(item)}: {exc}") from None
         return out
 
-    from thermcap.archive.formats.base import ordered_map
+    from thermcap.archive.parallel import ordered_map
 
     for done in ordered_map(decode, gops(), workers, window=workers):
         yield from done
