@@ -12,8 +12,8 @@ import pytest
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.capture.triggers import TriggerPolicy, TriggerWatch
-from thermcap.recorder.storage.reader import iter_session_frames
 from thermcap.recorder.sizes import parse_size
+from thermcap.recorder.storage.reader import iter_session_frames
 from thermcap.recorder.storage.ring import RingPolicy
 from thermcap.recorder.storage.segments import SegmentPolicy
 
