@@ -524,6 +524,10 @@ def _print_info(d: SegmentInfo | SessionInfo) -> None:
             cams.add_row(name, c.sensor or "?", str(c.frames), str(c.frames_captured), str(c.frames_dropped),
                          str(c.effective_fps), c.error or "")
         con.print(cams)
+    if isinstance(d, SessionInfo) and d.gaps:
+        con.print(f"gaps: {len(d.gaps)} ({sum(g['seconds'] for g in d.gaps):.3f} s without frames): "
+                  + ", ".join(f"{g['start']} ({g['seconds']:.3f} s)" for g in d.gaps[:5])
+                  + (" ..." if len(d.gaps) > 5 else ""))
     if isinstance(d, SessionInfo) and d.pauses:
         con.print(f"paused {len(d.pauses)} times, {d.frames_paused} frames not recorded: "
                   + ", ".join(f"{(b - a) / 1e9:.1f} s" if a is not None and b is not None else "to the end"

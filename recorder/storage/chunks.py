@@ -38,6 +38,7 @@ __all__ = [
     "SegmentIndex",
     "StaleIndexError",
     "checked_chunk",
+    "frame_log_times",
     "iter_messages",
     "message_records",
     "messages_at",
@@ -271,3 +272,38 @@ def read_through(path: str | Path, topics: list[str] | None = None) -> Iterator[
             yield from make_reader(f, validate_crcs=True).iter_messages(topics=topics)
         except Exception as exc:
             raise McapFileError(f"{path}: cannot be read ({type(exc).__name__}: {exc})") from exc
+
+
+_MESSAGE_INDEX_HEAD = struct.Struct("<BQHI")  # opcode, record length, channel id, records' byte length
+
+
+def frame_log_times(path: str | Path, topics: Container[str]) -> list[int] | None:
+    """The log time of every message on ``topics`` in a closed segment, from the message index
+    records after each chunk (no chunk is decompressed), sorted; None where the segment has no
+    chunk index or message indexes to read them from (a caller then does without)."""
+    path = Path(path)
+    with open(path, "rb") as f:
+        try:
+            summary = make_reader(f).get_summary()
+        except Exception as exc:
+            raise McapFileError(f"{path}: no readable summary ({type(exc).__name__}: {exc})") from exc
+        if summary is None or not summary.chunk_indexes:
+            return None
+        wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+        times: list[int] = []
+        for chunk in summary.chunk_indexes:
+            for cid, offset in chunk.message_index_offsets.items():
+                if cid not in wanted:
+                    continue
+                f.seek(offset)
+                head = f.read(_MESSAGE_INDEX_HEAD.size)
+                if len(head) < _MESSAGE_INDEX_HEAD.size:
+                    return None
+                opcode, _, channel, n = _MESSAGE_INDEX_HEAD.unpack(head)
+                if opcode != 0x07 or channel != cid or n % 16:
+                    return None  # not the message index the chunk index points at
+                pairs = np.frombuffer(f.read(n), "<u8")
+                if pairs.size * 8 != n:
+                    return None
+                times.extend(int(t) for t in pairs[0::2])
+    return sorted(times)

@@ -16,7 +16,10 @@ from mcap.reader import make_reader
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
-from thermcap.recorder.icd.topics import TOPIC_STATS, camera_topics, sum_image_topics
+from thermcap.recorder.icd.topics import TOPIC_METADATA, TOPIC_STATS, camera_topics, sum_image_topics
+from thermcap.recorder.storage.chunks import frame_log_times
+from thermcap.recorder.storage.coverage import coverage
+from thermcap.recorder.storage.coverage import gaps as coverage_gaps
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.ledger import deletions, lost_segments
 from thermcap.recorder.storage.lock import session_status
@@ -116,6 +119,8 @@ class SessionInfo:
     # what it went through: gaps without frames, incomplete buffers, frames the camera sent that
     # never came, restarts or reconnections (empty for a source with nothing to tell)
     source_health: dict[str, Any] = field(default_factory=dict)
+    # times without frames, as the API and the workbench define them (recorder.storage.coverage)
+    gaps: list[dict[str, Any]] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -199,6 +204,13 @@ def session_info(path: str | Path) -> SessionInfo:
         frames = archived
     start = min((s.start_ns for s in segs if s.messages), default=None)
     end = max((s.end_ns for s in segs if s.messages), default=None)
+    times = _frame_times(segments)
+    if times:  # the frames' own times, as the index takes them: start, span and gaps agree with the API
+        start, end = times[0], times[-1]
+    fps = (meta.get("sensor") or {}).get("frame_rate_hz")
+    period = 1e9 / fps if fps else 0.0
+    found_gaps = [{"start": iso_utc(a), "end": iso_utc(b), "start_ns": a, "end_ns": b, "seconds": round(sec, 6)}
+                  for a, b, sec in coverage_gaps(coverage(times), period)] if times else []
     span = (end - start) / 1e9 if start is not None and end is not None else 0.0
     topics: dict[str, TopicUsage] = {}
     for s in segs:
@@ -250,8 +262,23 @@ def session_info(path: str | Path) -> SessionInfo:
         evicted_segments=_evicted(Path(path), meta),
         cameras=_cameras(meta, topics, span),
         lost_segments=[{"name": s.name, "frames": s.frames} for s in lost], frames_lost=sum(s.frames for s in lost),
-        source=meta.get("source") or {}, source_health=meta.get("source_health") or {},
+        source=meta.get("source") or {}, source_health=meta.get("source_health") or {}, gaps=found_gaps,
     )
+
+
+def _frame_times(segments: list[Path]) -> list[int]:
+    """Every frame's log time (its sidecar's, as the index takes them) from the segments' message
+    indexes; empty where a segment cannot say (then the span is the segments' own)."""
+    times: list[int] = []
+    for seg in segments:
+        try:
+            found = frame_log_times(seg, {TOPIC_METADATA})
+        except McapFileError:
+            return []
+        if found is None:
+            return []
+        times += found
+    return sorted(times)
 
 
 def _evicted(session_dir: Path, meta: dict[str, Any]) -> int:
