@@ -39,7 +39,8 @@ def _session_summary(row: dict[str, Any], full_model: bool = False) -> dict[str,
         "duration_s": round((row["end_ns"] - row["start_ns"]) / 1e9, 6) if row["start_ns"] is not None
         and row["end_ns"] is not None else 0.0,
         "frames": row["frames"], "frames_dropped": row["frames_dropped"], "status": row["status"],
-        "min_grade": row["min_grade"], "max_grade": row["max_grade"], "has_targets": row["has_targets"], "has_slew_to_cue": row["has_slew_to_cue"],
+        "min_grade": row["min_grade"], "max_grade": row["max_grade"], "has_targets": row["has_targets"],
+        "has_slew_to_cue": row["has_slew_to_cue"],
         "radiometric_model": _model(row["radiometric_model"], full_model),
         "source_deleted": row["source_deleted"],
     }
