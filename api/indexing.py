@@ -248,6 +248,13 @@ def convert_legacy_frames(engine: Engine, store: BlobStore) -> list[str]:
     return done
 
 
+def _id_of(session_dir: Path) -> str:
+    try:
+        return str(read_session_meta(session_dir).get("session_id") or session_dir.name)
+    except Exception:  # an unreadable session.json is reported where the session is indexed
+        return session_dir.name
+
+
 def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = None) -> IndexReport:
     """Index every session under ROOT; drop sessions whose folder is gone, unless ``store`` is an
     object store holding their uploaded manifest: ``gc`` frees local disk once a session is in the
@@ -255,8 +262,12 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
     report = IndexReport()
     store = store if store is not None else _settings_store(Path(root))
     convert_legacy_frames(engine, store)
-    present = set()
-    for d in list_sessions(root):
+    present: set[str] = set()
+    served: dict[str, str] = {}  # session id -> the folder serving it
+    # a folder named as its session id is that session; a copy beside it (`cp -a` for a backup)
+    # keeps the id, and one id cannot name two folders' frames: the copy is named, not served
+    folders = sorted(list_sessions(root), key=lambda d: (_id_of(d) != d.name, d.name))
+    for d in folders:
         layout = SessionLayout.of(d)
         if not layout.session_json.exists() and not layout.archive.exists():
             if is_ros2_bag_folder(d):  # copied in as it was recorded: said, not silently passed over
@@ -273,7 +284,13 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
             report.skipped[d.name] = (f"a session of several cameras ({', '.join(sorted(meta['cameras']))}): "
                                       f"served through its per-camera sessions (thermcap split-cameras)")
             continue
-        present.add(meta.get("session_id") or d.name)
+        sid = meta.get("session_id") or d.name
+        if sid in served:
+            report.skipped[d.name] = (f"its session_id {sid!r} is also sessions/{served[sid]}'s (a copy?): not served; "
+                                      f"move the copy out of the data root or import it under another id")
+            continue
+        served[sid] = d.name
+        present.add(sid)
         problems: list[str] = []
         try:
             (report.indexed if index_session(engine, d, force=force, problems=problems, store=store)
