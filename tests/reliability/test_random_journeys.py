@@ -6,7 +6,9 @@ closed), ring recording within a budget with and without a mark, recover (a sess
 file), archive (a random set of formats, with or without ``--delete-source``), scrub (with and
 without ``--repair``), verify, gc, sync to a folder depot with the depot's receipts and
 ``--delete-confirmed``, serve and read every frame over the API.
-Faults: flip a byte in, truncate or remove an archive file or a segment.
+Faults: flip a byte in, truncate or remove an archive file or a segment; flip a bit of a closed
+segment's summary; zero part of an HDF5 archive's global heap; put a segment the archive never
+covered back beside an archived session (from the depot).
 
 The model is what exists: for every frame ever seen, its pixels' sha256 (the truth), and after
 each step the set of frames readable bit-exact from some copy (a segment in the session or in
@@ -15,7 +17,8 @@ the depot, or any archive format's files decoded by that format's reader). The i
 - a command (anything but a fault) never makes a readable frame unreadable: no command leaves
   the root worse than it found it, whatever it exits with;
 - a recording that returned says how many frames it wrote, and exactly those are readable;
-- ``serve`` lists and serves bit-exact every readable frame of every session it indexes.
+- ``serve`` lists and serves bit-exact every readable frame of every session it indexes, and
+  serves no listed frame with other pixels; ``thermcap.open`` on each folder does the same.
 
 The default run is the fixed, derandomized journey set (the same every run, so a failure in CI
 reproduces) and one scripted journey that walks every rule (the fixed set drew neither serve
@@ -348,7 +351,38 @@ class Journeys(RuleBasedStateMachine):
                     r = c.get(f"/api/v1/sessions/{s.name}/frames/{times[t]}", params={"format": "raw"})
                     assert r.status_code == 200, (s.name, t, r.status_code, r.text[:200])
                     assert hashlib.sha256(r.content).hexdigest() == self.truth[(s.name, t)], (s.name, t)
+                # a listed frame no copy holds readable is refused, never served as other pixels
+                for t in sorted(set(times) - want):
+                    if (s.name, t) not in self.truth:
+                        continue
+                    r = c.get(f"/api/v1/sessions/{s.name}/frames/{times[t]}", params={"format": "raw"})
+                    assert r.status_code != 200 or hashlib.sha256(r.content).hexdigest() == self.truth[(s.name, t)], \
+                        f"serve: frame at {t} of {s.name} served with another frame's pixels"
+        self._open_reads_the_same()
         self.command_done("serve")
+
+    def _open_reads_the_same(self) -> None:
+        """``thermcap.open(folder)`` numbers and reads as the server does: every readable frame
+        bit-exact at its time, and no frame it gives carries another's pixels."""
+        import thermcap
+
+        for s in self.sessions():
+            want = {t for (sid, t) in self.local if sid == s.name}
+            try:
+                session = thermcap.open(s)
+            except Exception:
+                assert not want, f"open: {s.name} has {len(want)} readable frames and does not open"
+                continue
+            at = {int(t): i for i, t in enumerate(session.table.timestamp_ns)}
+            assert want <= set(at), f"open: {len(want - set(at))} readable frames of {s.name} are not numbered"
+            for t, i in at.items():
+                try:
+                    px = session.counts(i)
+                except LookupError:
+                    assert t not in want, f"open: readable frame at {t} of {s.name} refused"
+                    continue
+                if (s.name, t) in self.truth:
+                    assert _sha(px) == self.truth[(s.name, t)], f"open: frame at {t} of {s.name} has other pixels"
 
     # -- faults ----------------------------------------------------------------------------------
     def _files(self, archive: bool) -> list[Path]:
@@ -384,6 +418,63 @@ class Journeys(RuleBasedStateMachine):
     @rule(data=st.data(), kind=st.sampled_from(["flip", "truncate", "remove"]))
     def damage_segment(self, data: st.DataObject, kind: str) -> None:
         self._damage(data, self._files(False), kind)
+
+    @precondition(lambda self: self._files(False))
+    @rule(data=st.data())
+    def damage_summary(self, data: st.DataObject) -> None:
+        """One bit of a closed segment's summary section (the chunk indexes, the statistics): the
+        frames are intact, the map to them is not (issue 65, defect 1)."""
+        self.step("damage:summary")
+        path = data.draw(st.sampled_from(self._files(False)))
+        raw = bytearray(path.read_bytes())
+        footer = len(raw) - 8 - 29  # the footer record (opcode, length, two offsets, CRC) before the magic
+        if footer > 0 and raw[footer] == 0x02:
+            start = int.from_bytes(raw[footer + 9:footer + 17], "little")
+            if 8 <= start < footer:
+                at = data.draw(st.integers(start, footer - 1))
+                raw[at] ^= 1 << data.draw(st.integers(0, 7))
+                path.write_bytes(bytes(raw))
+        self.fault_done()
+
+    @precondition(lambda self: any(self._h5s()))
+    @rule(data=st.data())
+    def damage_hdf5_heap(self, data: st.DataObject) -> None:
+        """4 KiB of an HDF5 archive's global heap (the sidecar strings) zeroed: a reader must
+        fail cleanly, never hang (defect 5)."""
+        self.step("damage:hdf5-heap")
+        path = data.draw(st.sampled_from(self._h5s()))
+        raw = bytearray(path.read_bytes())
+        at = raw.find(b"GCOL")
+        if at >= 0:
+            raw[at + 16:at + 16 + 4096] = bytes(len(raw[at + 16:at + 16 + 4096]))
+            path.write_bytes(bytes(raw))
+        self.fault_done()
+
+    def _h5s(self) -> list[Path]:
+        return [p for s in self.sessions() for p in sorted((s / "archive" / "hdf5").glob("*.h5"))]
+
+    @precondition(lambda self: self._unseen_candidates())
+    @rule(data=st.data())
+    def put_back_an_unseen_segment(self, data: st.DataObject) -> None:
+        """A segment the archive never covered appears beside an archived session (restored from
+        a depot, renamed back from ``.unreadable``): archive and gc must not delete it on the
+        archive's evidence (defect 6). Here: a segment from the depot, put in under the next free
+        number."""
+        self.step("fault:unseen-segment")
+        session, segment = data.draw(st.sampled_from(self._unseen_candidates()))
+        folder = self.root / "sessions" / session
+        taken = {p.name for p in folder.glob("[0-9][0-9][0-9][0-9].mcap*")} | {
+            str(x) for x in (json.loads((folder / "archive" / "manifest.json").read_text()).get("frames") or {}
+                             ).get("segments") or []}
+        name = next(f"{k:04d}.mcap" for k in range(10_000) if f"{k:04d}.mcap" not in taken)
+        shutil.copy2(segment, folder / name)
+        self.fault_done()
+
+    def _unseen_candidates(self) -> list[tuple[str, Path]]:
+        depot = sorted((self.depot / "sessions").glob("*/[0-9][0-9][0-9][0-9].mcap")) \
+            if (self.depot / "sessions").is_dir() else []
+        return [(s.name, seg) for s in self.sessions() if (s / "archive" / "manifest.json").is_file()
+                for seg in depot]
 
     @invariant()
     def nothing_readable_is_unaccounted(self) -> None:
@@ -438,10 +529,16 @@ SCRIPT = [
     ("recover", {"data": _Scripted(1), "whole": True}),
     ("sync", {"delete": True}),
     ("archive_then_delete_source", {"data": _Scripted(1)}),
+    ("put_back_an_unseen_segment", {"data": _Scripted()}),  # sync freed it before the archive ran
+    ("serve", {}),
     ("damage_archive", {"data": _Scripted(-1), "kind": "truncate"}),
     ("scrub", {"repair": True}),
     ("verify", {}),
     ("ring_record", {"frames": 80, "mark": True, "window_s": 0.5}),
+    ("damage_summary", {"data": _Scripted(-1)}),
+    ("serve", {}),
+    ("archive", {"data": _Scripted(-1), "formats": {"hdf5", "tiff-lzw"}, "delete": False}),
+    ("damage_hdf5_heap", {"data": _Scripted()}),
     ("damage_segment", {"data": _Scripted(), "kind": "remove"}),
     ("gc", {}),
     ("serve", {}),
