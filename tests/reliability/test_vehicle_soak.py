@@ -75,10 +75,21 @@ class Vehicle:
         self.recorder: subprocess.Popen | None = None
         self.session = ""
         self.marks: list[dict] = []
+        self.logs = root.parent / "logs"  # each process's output, kept for a failure's message
+        self.logs.mkdir(exist_ok=True)
+        self.cameras_started = 0
 
     def start_camera(self) -> None:
-        self.camera = self.ns.popen([FAKE, "-i", "lo"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        self.cameras_started += 1
+        log = open(self.logs / f"camera-{self.cameras_started}.log", "wb")  # noqa: SIM115 - the process holds it
+        self.camera = self.ns.popen([FAKE, "-i", "lo"], stdout=log, stderr=subprocess.STDOUT)
         assert wait_for(lambda: self.ns.udp_port_open(GVCP_PORT) or self.camera.poll() is not None, 60)
+        assert self.camera.poll() is None, f"the fake camera exited at start: {self.tail('camera')}"
+
+    def tail(self, what: str, n: int = 3000) -> str:
+        """The end of the latest log of ``what`` ("camera", "recorder"): why a wait timed out."""
+        logs = sorted(self.logs.glob(f"{what}-*.log"), key=lambda p: p.stat().st_mtime)
+        return logs[-1].read_bytes()[-n:].decode(errors="replace") if logs else "(no log)"
 
     def kill_camera(self) -> None:
         assert self.camera is not None
@@ -93,9 +104,9 @@ class Vehicle:
              "--source", "gige:127.0.0.1", "--width", str(W), "--height", str(H), "--fps", str(FPS),
              "--no-analysis", "--compression", COMPRESSION, "--segment-duration", "0.5", "--ring", "--max-disk", "200M",
              "--max-protected", "100M", "--pre", "0.5", "--post", "0.5", "--control", "--json"],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            stdout=subprocess.PIPE, stderr=open(self.logs / f"recorder-{session}.log", "wb"), text=True)  # noqa: SIM115
         assert wait_for(lambda: self.status().get("frames_written", 0) > 0 or self.recorder.poll() is not None, 120)
-        assert self.recorder.poll() is None, self.recorder.stderr.read() if self.recorder.stderr else ""
+        assert self.recorder.poll() is None, self.tail("recorder")
 
     def ctl(self, *args: str) -> dict:
         r = self.ns.run([*self.env, sys.executable, "-m", "thermcap", "ctl", *args, "--root", str(self.root),
@@ -153,10 +164,13 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
                 next_mark = now + MARK_EVERY_S
             if now >= next_kill:  # the camera goes away mid-stream, and comes back
                 v.kill_camera()
-                assert wait_for(lambda: v.status().get("source_health", {}).get("waiting_for_frames"), 120)
+                assert wait_for(lambda: v.status().get("source_health", {}).get("waiting_for_frames"), 120), \
+                    v.tail("recorder")
                 v.start_camera()
                 written = v.status().get("frames_written", 0)
-                assert wait_for(lambda w=written: v.status().get("frames_written", 0) > w + 10, 180)
+                assert wait_for(lambda w=written: v.status().get("frames_written", 0) > w + 10, 180), (
+                    f"no frame {time.monotonic() - start:.0f} s in, after camera kill {camera_kills + 1}: "
+                    f"status {v.status()}\nrecorder: {v.tail('recorder')}\ncamera: {v.tail('camera')}")
                 camera_kills += 1
                 next_kill = time.monotonic() + CAMERA_KILL_EVERY_S
             if not killed_recorder and now - start >= SOAK_S / 2:  # the recorder dies and is started again
@@ -172,9 +186,9 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
             time.sleep(0.5)
         assert v.recorder is not None
         v.recorder.send_signal(signal.SIGINT)
-        _out, err = v.recorder.communicate(timeout=300)
+        v.recorder.communicate(timeout=300)
         # 4: the camera's gaps, said in the exit status; 3: frames dropped on a loaded machine, counted
-        assert v.recorder.returncode in (0, 3, 4), err
+        assert v.recorder.returncode in (0, 3, 4), v.tail("recorder")
         # sync ships what is left, then is asked to stop
         def shipped() -> bool:
             left = subprocess.run([sys.executable, "-m", "thermcap", "sync", "--root", str(root), "--to", str(depot),
