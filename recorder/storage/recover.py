@@ -68,19 +68,28 @@ class RecoveryResult:
         return self.__dict__.copy()
 
 
-def scan_records(stream: BinaryIO, size: int, path: str) -> Iterator[tuple[int, int, bytes]]:
+def scan_records(stream: BinaryIO, size: int, path: str,
+                 chunks: dict[int, int] | None = None) -> Iterator[tuple[int, int, bytes]]:
     """Yield (offset, opcode, body) for every complete record; stop silently at a cut record.
+
+    ``chunks`` (offset -> record length, from the summary's chunk index when it reads): a record
+    starting where the index says a chunk starts is taken as that chunk, whatever its head says.
+    A flipped bit in a chunk's opcode or length would otherwise end the walk there, losing every
+    record after it; the chunk's own CRC still decides whether its content holds.
 
     Raises McapFileError only when the file is not an MCAP at all.
     """
     if stream.read(8) != MCAP_MAGIC:
         raise McapFileError(f"{path}: not an MCAP file (bad magic)")
     pos = 8
+    chunks = chunks or {}
     while True:
         head = stream.read(9)
         if len(head) < 9:
             return
         opcode, length = struct.unpack("<BQ", head)
+        if pos in chunks and chunks[pos] - 9 <= size - pos - 9:
+            opcode, length = Opcode.CHUNK, chunks[pos] - 9
         if length > size - pos - 9:
             return
         body = stream.read(length)
@@ -96,8 +105,10 @@ def _parse(opcode: int, body: bytes) -> Any:
 
 
 def _is_complete(path: Path) -> bool:
-    """Finished and intact: closing magic, a summary, and every message readable (checksums
-    included). A finished file with a damaged chunk is not renamed as it is: it is rewritten."""
+    """Finished and intact: closing magic, a summary, every message readable (checksums
+    included), and every chunk record's head what the summary's index says (mcap's reader finds
+    chunks by the index alone; thermcap's own readers check the head, and refuse a chunk whose
+    head disagrees). A finished file with a damaged chunk is not renamed as it is: it is rewritten."""
     try:
         with open(path, "rb") as f:
             f.seek(-8, os.SEEK_END)
@@ -107,9 +118,27 @@ def _is_complete(path: Path) -> bool:
             reader = make_reader(f, validate_crcs=True)
             summary = reader.get_summary()
             n = sum(1 for _ in reader.iter_messages(log_time_order=False))
-        return summary is not None and summary.statistics is not None and n == summary.statistics.message_count
+            if summary is None or summary.statistics is None or n != summary.statistics.message_count:
+                return False
+            for c in summary.chunk_indexes:
+                f.seek(c.chunk_start_offset)
+                opcode, length = struct.unpack("<BQ", f.read(9))
+                if opcode != Opcode.CHUNK or 9 + length != c.chunk_length:
+                    return False
+        return True
     except Exception:
         return False
+
+
+def _indexed_chunks(path: Path) -> dict[int, int]:
+    """Where the summary's chunk index says each chunk record starts, and its length; empty where
+    the file has no summary that reads (cut short: the walk then trusts each record's head)."""
+    try:
+        with open(path, "rb") as f:
+            summary = make_reader(f).get_summary()
+    except Exception:
+        return {}
+    return {c.chunk_start_offset: c.chunk_length for c in summary.chunk_indexes} if summary else {}
 
 
 def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None = None,
@@ -186,9 +215,10 @@ def recover_segment(path: str | os.PathLike, *, output: str | os.PathLike | None
         result.messages += 1
         return True
 
+    chunks = _indexed_chunks(src)
     try:
         with open(src, "rb") as f:
-            for offset, opcode, body in scan_records(f, size, str(src)):
+            for offset, opcode, body in scan_records(f, size, str(src), chunks):
                 if opcode in (Opcode.DATA_END, Opcode.FOOTER):
                     result.stopped_because = "reached the end of the data section"
                     break
@@ -421,8 +451,9 @@ def _left_recording(session_dir: Path) -> bool:
 
 
 def _looks_cut(seg: Path) -> bool:
-    """A closed segment with no closing magic or no readable summary (cut short, or empty).
-    Cheap: the tail and the summary, not every chunk."""
+    """A closed segment with no closing magic, no readable summary (cut short, or empty), or a
+    chunk whose record head the summary's index contradicts. Cheap: the tail, the summary and
+    nine bytes a chunk, not every chunk's content."""
     try:
         if seg.stat().st_size < 16:
             return True
@@ -432,7 +463,14 @@ def _looks_cut(seg: Path) -> bool:
                 return True
             f.seek(0)
             summary = make_reader(f).get_summary()
-        return summary is None or summary.statistics is None
+            if summary is None or summary.statistics is None:
+                return True
+            for c in summary.chunk_indexes:  # a chunk head the index contradicts: the readers refuse it
+                f.seek(c.chunk_start_offset)
+                opcode, length = struct.unpack("<BQ", f.read(9))
+                if opcode != Opcode.CHUNK or 9 + length != c.chunk_length:
+                    return True
+        return False
     except OSError:
         return False  # unreadable here: named by the command that reads it, never moved
     except Exception:

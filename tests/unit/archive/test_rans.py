@@ -12,7 +12,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from tests.conftest import SAMPLES
-from thermcap.archive import rans, tpred_key
+from thermcap.archive.codecs.tpred import key as tpred_key
+from thermcap.archive.codecs.tpred import rans
 
 
 @pytest.mark.parametrize("values", [

@@ -14,7 +14,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from thermcap.archive import tpred_filter
+from thermcap.archive.codecs.tpred import filter as tpred_filter
 from thermcap.archive.codecs.tpred.codec import (
     HEADER,
     PREDICTED,
