@@ -68,7 +68,27 @@ class GcResult:
                 "kept_unverified": [d.session for d in self.decisions if d.action == "keep"]}
 
 
-def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str | None]:
+def _documents_uploaded(session_dir: Path, store: BlobStore, root: Path) -> str | None:
+    """Why the session's own documents in the store are not the folder's (None: they are). A
+    model version added after the upload lives in ``radiometry.json`` alone: deleting the folder
+    on the archive objects' word would lose it."""
+    from thermcap.archive.blobs import SESSION_DOCUMENTS
+
+    for name in SESSION_DOCUMENTS:
+        path = session_dir / name
+        if not path.is_file():
+            continue
+        key = path.resolve().relative_to(root.resolve()).as_posix()
+        head = store.head(key)
+        local = path.read_bytes()
+        if head is None or int(head["size"]) != len(local) or store.get_range(key, 0, len(local)) != local:
+            return (f"{name} changed since the upload (or was never sent): `thermcap upload` again before the "
+                    f"folder goes")
+    return None
+
+
+def _bucket_cover(m: Manifest, store: BlobStore | None, session_dir: Path | None = None,
+                  root: Path | None = None) -> tuple[list[str], str | None]:
     """(what deleting the local folder relies on, or why it cannot go). The upload hashed each
     object as the store gave it back and kept its ETag; now every object must still be there at
     its size and with that ETag (the same object, not rewritten since), every archive file must
@@ -107,8 +127,12 @@ def _bucket_cover(m: Manifest, store: BlobStore | None) -> tuple[list[str], str 
     missing = [rel for rel in sizes if not any(k.endswith("/archive/" + rel) for k in keys)]
     if missing:
         return [], f"{len(missing)} archived files were never uploaded ({missing[0]}, ...)"
+    if session_dir is not None and root is not None and store.kind == "s3":
+        why = _documents_uploaded(session_dir, store, root)
+        if why is not None:
+            return [], why
     return [f"{len(keys)} objects in the {store.kind} store, sizes and ETags rechecked, the {read_back} archive files "
-            f"read back and hashed"], None
+            f"read back and hashed, the session's documents compared"], None
 
 
 def gc_sessions(root: Path, *, keep_days: float | None, max_bytes: int | None, require_upload: bool,
@@ -157,7 +181,7 @@ def _decide_and_act(d: Path, started: int, size: int, require_upload: bool, dry_
         if m is None:
             decision.why_kept = "not archived"
             return decision
-        relies, why = _bucket_cover(m, store)
+        relies, why = _bucket_cover(m, store, d, d.parent.parent)
         if why is None:
             decision.action, decision.relies_on, decision.frees = "delete-local", relies, size
             if not dry_run:

@@ -49,3 +49,28 @@ def test_gc_keeps_the_local_copy_when_the_buckets_copy_rotted(tmp_path, seaweedf
     (decision,) = [d for d in out["decisions"] if str(d["session"]).endswith("s-archived")]
     assert "no longer hash" in json.dumps(decision) or "cannot be read back" in json.dumps(decision), decision
     assert zips[-1].is_file()
+
+
+def test_gc_keeps_a_session_whose_documents_changed_since_the_upload(tmp_path, seaweedfs):
+    """Issue 65, defect 13: a model version added after `upload` was lost when `gc` deleted the
+    local folder (it checked the archive's objects, not the session's own documents): the bucket
+    session had no version 1 and gave the recorded model's temperatures."""
+    from thermcap.recorder.radiometry import model_from_dict
+    from thermcap.recorder.radiometry.params import add_version
+    from thermcap.recorder.storage.reader import read_session_meta
+
+    root = make_root(tmp_path / "root")
+    session = root / "sessions" / "s-archived"
+    env = bucket_env(seaweedfs, f"docs-{uuid.uuid4().hex[:12]}")
+    assert run_cli("upload", "s-archived", "--root", str(root), "--json", env=env).returncode == 0
+    base = model_from_dict(read_session_meta(session)["radiometric_model"])
+    add_version(session, base, {}, who="test", why="a new calibration",
+                measured=model_from_dict({**base.to_dict(), "offset_c": -39.0}))
+    r = run_cli("gc", "--root", str(root), "--keep-days", "0", "--json", env=env)
+    assert session.is_dir(), (r.stdout, r.stderr)
+    (decision,) = [d for d in json.loads(r.stdout)["decisions"] if str(d["session"]).endswith("s-archived")]
+    assert "radiometry.json" in json.dumps(decision), decision
+    # once uploaded again, the bucket holds what the folder holds, and the folder may go
+    assert run_cli("upload", "s-archived", "--root", str(root), "--json", env=env).returncode == 0
+    r = run_cli("gc", "--root", str(root), "--keep-days", "0", "--json", env=env)
+    assert not session.is_dir(), (r.stdout, r.stderr)
