@@ -10,7 +10,6 @@ key (``blake3`` since 2026-12, ``sha256`` before and with ``--digest sha256``): 
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -19,7 +18,6 @@ from typing import Any, Literal, cast, overload
 
 from thermcap.archive.exceptions import ManifestError
 from thermcap.archive.manifest_types import Manifest
-from thermcap.recorder.storage.atomic import write_json_atomic
 from thermcap.recorder.storage.digest import (
     DEFAULT_DIGEST,
     DIGESTS,
@@ -34,6 +32,7 @@ from thermcap.recorder.storage.digest import (
     record_digest,
 )
 from thermcap.recorder.storage.layout import MANIFEST_JSON, SessionLayout
+from thermcap.recorder.storage.manifest_file import ManifestFileError, read_manifest_file, write_manifest_file
 
 __all__ = [
     "DEFAULT_DIGEST",
@@ -105,15 +104,17 @@ def load_manifest(session_dir: Path, *, required: Literal[True] = True) -> Manif
 @overload
 def load_manifest(session_dir: Path, *, required: bool) -> Manifest | None: ...
 def load_manifest(session_dir: Path, *, required: bool = True) -> Manifest | None:
+    """The manifest, from the first of its two copies whose checksum holds
+    (``recorder.storage.manifest_file``)."""
     path = manifest_path(session_dir)
     try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError:
+        data = read_manifest_file(session_dir)
+    except ManifestFileError as exc:
+        raise ManifestError(str(exc)) from exc
+    if data is None:
         if required:
             raise ManifestError(f"{path}: no manifest; run `thermcap archive {session_dir}` first") from None
         return None
-    except (OSError, ValueError) as exc:
-        raise ManifestError(f"{path}: unreadable manifest ({exc})") from exc
     if not isinstance(data, dict) or data.get("manifest_version") != MANIFEST_VERSION:
         raise ManifestError(f"{path}: not a thermcap manifest (version {data.get('manifest_version')!r})")
     return cast(Manifest, data)
@@ -156,4 +157,4 @@ def archived_files(manifest: Manifest) -> list[ArchivedFile]:
 
 def save_manifest(session_dir: Path, manifest: Manifest) -> None:
     manifest["updated"] = iso_now()
-    write_json_atomic(manifest_path(session_dir), manifest)
+    write_manifest_file(session_dir, cast(dict, manifest))

@@ -29,6 +29,7 @@ from thermcap.recorder.icd.topics import TOPIC_METADATA
 from thermcap.recorder.storage.digest import FrameProof, frame_proof
 from thermcap.recorder.storage.layout import SessionLayout
 from thermcap.recorder.storage.ledger import lost_segments
+from thermcap.recorder.storage.manifest_file import read_manifest_file
 from thermcap.recorder.storage.reader import session_segments
 
 __all__ = ["NumberedFrames", "frame_table", "load_manifest_quietly", "number_frames", "sidecar_summary", "table_of",
@@ -103,8 +104,8 @@ def load_manifest_quietly(session_dir: Path) -> dict[str, Any] | None:
     """The manifest, or None where there is none or it cannot be read (the ``manifest``
     module's own loader says why, for the commands that must stop on it)."""
     try:
-        return json.loads(SessionLayout.of(session_dir).manifest.read_text())
-    except (FileNotFoundError, ValueError):
+        return read_manifest_file(session_dir)
+    except McapFileError:
         return None
 
 

@@ -10,6 +10,8 @@ import click
 
 from thermcap.recorder.cli.options import fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
+from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.manifest_file import read_manifest_file
 
 __all__ = ["describe_session", "ls", "recorded_span"]
 
@@ -35,8 +37,8 @@ def describe_session(session_dir: Path) -> dict[str, Any]:
                     "problem": f"a ROS 2 bag, not a session: `thermcap import {session_dir}` makes it one"}
         return {"id": session_dir.name, "state": "unreadable", "problem": f"session.json: {exc}"}
     try:
-        manifest = json.loads(layout.manifest.read_text()) if layout.manifest.is_file() else {}
-    except (OSError, ValueError):
+        manifest = read_manifest_file(session_dir) or {}
+    except McapFileError:
         manifest = {"formats": {}, "unreadable": True}
     formats = {f: ("damaged" if e.get("damaged") else "verified" if e.get("verified") else "unverified")
                for f, e in (manifest.get("formats") or {}).items()}

@@ -37,6 +37,7 @@ EVENTS_JSON = "events.json"
 ANALYSIS_JSONL = "analysis.jsonl"
 ARCHIVE_DIR = "archive"
 MANIFEST_JSON = "manifest.json"
+MANIFEST_COPY_JSON = "manifest.copy.json"  # the manifest's second copy (recorder.storage.manifest_file)
 EXTRAS_MCAP = "extras.mcap"
 LOCK_FILE = ".lock"
 RESERVE_FILE = ".reserve"
@@ -98,6 +99,10 @@ class SessionLayout:
     @property
     def manifest(self) -> Path:
         return self.archive / MANIFEST_JSON
+
+    @property
+    def manifest_copy(self) -> Path:
+        return self.archive / MANIFEST_COPY_JSON
 
     @property
     def extras(self) -> Path:

@@ -16,7 +16,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
+from thermcap.recorder.storage.manifest_file import read_manifest_file
 
 __all__ = ["LostSegment", "deletions", "lost_segments", "record_freed"]
 
@@ -55,8 +57,8 @@ def lost_segments(session_dir: str | Path, meta: dict[str, Any] | None = None) -
 
 def _source_deleted_by_archive(d: Path) -> bool:
     try:
-        manifest = json.loads(SessionLayout.of(d).manifest.read_text())
-    except (OSError, ValueError):
+        manifest = read_manifest_file(d) or {}
+    except McapFileError:
         return False
     return bool((manifest.get("source") or {}).get("deleted"))
 

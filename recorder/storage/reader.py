@@ -62,9 +62,11 @@ def archived_frame_count(session_dir: str | Path) -> int | None:
     """How many frames the archive manifest says the session holds (its count survives
     ``--delete-source``); None where there is no readable manifest."""
     try:
-        manifest = json.loads(SessionLayout.of(session_dir).manifest.read_text())
+        from thermcap.recorder.storage.manifest_file import read_manifest_file
+
+        manifest = read_manifest_file(session_dir) or {}
         return int(manifest["source"]["frames"])
-    except (OSError, ValueError, KeyError, TypeError):
+    except (McapFileError, KeyError, TypeError, ValueError):
         return None
 
 
