@@ -26,7 +26,7 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
                 topics: list[str] | None) -> CutResult:
     import io
 
-    from thermcap.archive.reading.mcap_slice import export_mcap
+    from thermcap.archive.reading.mcap_slice import export_mcap, unreadable_segments
     from thermcap.recorder.cli.options import parse_instant
     from thermcap.recorder.storage.layout import SessionLayout
     from thermcap.recorder.storage.reader import session_segments
@@ -58,6 +58,10 @@ def cut_session(session_dir: Path, root: Path, out: Path, start: str | None, end
         if unknown:
             raise ValueError(f"no topic {', '.join(unknown)} in {session_dir.name} (its topics: "
                              f"{', '.join(sorted(known))})")
+    unreadable = unreadable_segments(session_dir)
+    if unreadable:
+        raise ValueError(f"{session_dir}: {'; '.join(unreadable[:3])}; `thermcap recover {session_dir}` repairs a "
+                         f"segment that was cut short")
     frames = extras = None
     if not session_segments(session_dir):
         reader = session.frames  # every frame through the checked reader, as `thermcap.open` reads them

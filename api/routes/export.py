@@ -11,7 +11,7 @@ from fastapi.responses import StreamingResponse
 from thermcap.api.routes.common import parse_time, session_row
 from thermcap.api.security import require
 from thermcap.archive.blobs import BlobFile
-from thermcap.archive.reading.mcap_slice import export_mcap
+from thermcap.archive.reading.mcap_slice import export_mcap, unreadable_segments
 from thermcap.recorder.storage.layout import EXTRAS_MCAP
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
@@ -26,6 +26,10 @@ def export(request: Request, session_id: str, start: str | None = None, end: str
         raise HTTPException(400, "end must be after start")
     topic_list = [t for t in (topics or "").split(",") if t] or None
     session_dir = request.app.state.settings.root / "sessions" / session_id
+    unreadable = unreadable_segments(session_dir)
+    if unreadable:  # said before the first byte: a 200 that stops half way is no answer
+        raise HTTPException(409, f"session {session_id}: {'; '.join(unreadable[:3])}; `thermcap recover` repairs "
+                                 f"a segment that was cut short")
     frames = None
     if not session_dir.is_dir() or row["source_deleted"]:
         reader = request.app.state.frames

@@ -40,7 +40,7 @@ from thermcap.recorder.storage.chunks import checked_chunk
 from thermcap.recorder.storage.reader import session_segments
 from thermcap.recorder.storage.writer import ChunkedWriter, Compression
 
-__all__ = ["export_mcap"]
+__all__ = ["export_mcap", "unreadable_segments"]
 
 _FLUSH_AT = 4 << 20
 
@@ -64,6 +64,22 @@ class _Sink(io.RawIOBase):
         self.parts.clear()
         self.size = 0
         return out
+
+
+def unreadable_segments(session_dir: Path) -> list[str]:
+    """Each segment whose summary does not read (cut short, emptied), with why: checked before a
+    byte of an export goes out, so a response is refused with its reason instead of stopping
+    half way after a 200."""
+    problems = []
+    for seg in session_segments(session_dir) if session_dir.is_dir() else []:
+        try:
+            with open(seg, "rb") as f:
+                summary = make_reader(f).get_summary()
+            if summary is None:
+                problems.append(f"{seg.name}: no summary")
+        except (McapError, ValueError, struct.error, UnicodeDecodeError, MemoryError, OSError) as exc:
+            problems.append(f"{seg.name}: its summary does not read ({type(exc).__name__}: {exc})")
+    return problems
 
 
 def export_mcap(session_dir: Path, start_ns: int | None, end_ns: int | None, topics: list[str] | None,
