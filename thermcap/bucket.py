@@ -19,7 +19,7 @@ from urllib.parse import urlparse
 import numpy as np
 
 from thermcap.archive.formats.base import read_cost
-from thermcap.archive.reading.copies import DamageLog, Part
+from thermcap.archive.reading.copies import DamageLog, Part, counts_of, sidecar_of
 from thermcap.recorder.radiometry.params import ModelVersion
 from thermcap.session import Session
 
@@ -145,12 +145,10 @@ class BucketSession(Session):
                              where=self.url)
 
     def counts(self, index: int) -> np.ndarray:
-        px = np.asarray(self._verified(index, "pixels"), dtype=np.uint16)
-        px.setflags(write=False)
-        return px
+        return counts_of(self._verified(index, "pixels"))
 
     def sidecar(self, index: int) -> dict[str, Any]:
-        return dict(json.loads(self._verified(index, "sidecar") or b"{}"))
+        return sidecar_of(self._verified(index, "sidecar"))
 
     @cached_property
     def events(self) -> list[dict[str, Any]]:

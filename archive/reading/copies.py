@@ -11,6 +11,7 @@ the check and the damage report live here once, and a new reader cannot forget t
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -19,11 +20,14 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
+import numpy as np
+
 from thermcap.archive.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.archive.formats.base import ReadCost
 from thermcap.recorder.storage.digest import FrameProof, bytes_digest, frame_digest
 
-__all__ = ["Copy", "Damage", "DamageLog", "Part", "differs", "in_read_order", "read_verified", "wanted"]
+__all__ = ["Copy", "Damage", "DamageLog", "Part", "counts_of", "differs", "in_read_order", "read_verified", "sidecar_of",
+           "wanted"]
 
 log = logging.getLogger("thermcap.archive")
 
@@ -86,6 +90,19 @@ def wanted(proof: FrameProof, frame: int, part: Part) -> str | None:
     """The manifest's digest of a frame's part, None where it has none (not archived yet)."""
     digests = proof.pixels if part == "pixels" else proof.sidecars
     return digests[frame] if 0 <= frame < len(digests) else None
+
+
+def counts_of(value: Any) -> np.ndarray:
+    """A verified frame's pixels as the readers hand them out: uint16, read-only (a recorded
+    count never changes, and a cache may share the array)."""
+    px = np.asarray(value, dtype=np.uint16)
+    px.setflags(write=False)
+    return px
+
+
+def sidecar_of(value: Any) -> dict[str, Any]:
+    """A verified sidecar's JSON bytes as a dict (an empty one where the frame had none)."""
+    return dict(json.loads(value or b"{}"))
 
 
 def differs(part: Part, value: Any, want: str | None, hash_name: str) -> bool:

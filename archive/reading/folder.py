@@ -10,7 +10,6 @@ packages (FastAPI, SQLAlchemy).
 
 from __future__ import annotations
 
-import json
 import os
 from collections.abc import Callable
 from functools import cached_property
@@ -24,7 +23,16 @@ from thermcap.archive.exceptions import FrameNotFound
 from thermcap.archive.formats import get_format
 from thermcap.archive.formats.base import MCAP_SOURCE_COST, ReadCost, locate, read_cost
 from thermcap.archive.manifest import record_digest
-from thermcap.archive.reading.copies import Copy, DamageLog, Part, in_read_order, read_verified, wanted
+from thermcap.archive.reading.copies import (
+    Copy,
+    DamageLog,
+    Part,
+    counts_of,
+    in_read_order,
+    read_verified,
+    sidecar_of,
+    wanted,
+)
 from thermcap.archive.reading.frame_table import FrameTable
 from thermcap.archive.reading.mcap_frames import McapFrames
 from thermcap.archive.reading.numbering import NumberedFrames, frame_table, number_frames, verified_copies
@@ -58,12 +66,10 @@ class FolderFrames:
         return frame_table(self.session_id, self.numbered)
 
     def pixels(self, index: int) -> np.ndarray:
-        px = np.asarray(self._read(index, "pixels"), dtype=np.uint16)
-        px.setflags(write=False)
-        return px
+        return counts_of(self._read(index, "pixels"))
 
     def sidecar(self, index: int) -> dict[str, Any]:
-        return dict(json.loads(self._read(index, "sidecar") or b"{}"))
+        return sidecar_of(self._read(index, "sidecar"))
 
     def _read(self, index: int, part: Part) -> Any:
         n = len(self.numbered)
