@@ -26,8 +26,8 @@ from thermcap.archive.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.archive.formats.base import ReadCost
 from thermcap.recorder.storage.digest import FrameProof, bytes_digest, frame_digest
 
-__all__ = ["Copy", "Damage", "DamageLog", "Part", "counts_of", "differs", "in_read_order", "read_verified", "sidecar_of",
-           "wanted"]
+__all__ = ["Copy", "Damage", "DamageLog", "Part", "counts_of", "differs", "in_read_order", "read_verified",
+           "sidecar_of", "wanted"]
 
 log = logging.getLogger("thermcap.archive")
 
