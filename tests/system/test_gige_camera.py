@@ -199,3 +199,34 @@ def test_bench_gige_measures_a_frame_beside_the_raw_pipe():
         assert res["raw_pipe"]["frames"] > 0
         assert res["gige_vs_raw_pipe"] == round(res["gige"]["capture_us_per_frame"]
                                                 / res["raw_pipe"]["capture_us_per_frame"], 2)
+
+
+_ONE_FAILED_THEN_ONE_GOOD = """
+import json, sys
+from thermcap.recorder.capture.sources.gige import GigEOptions, GigESource
+from thermcap.recorder.exceptions import ThermcapError
+try:
+    GigESource(GigEOptions("127.0.0.1", features=(("NoSuchFeature", "1"),)))
+    failed = None
+except ThermcapError as exc:
+    failed = str(exc)
+source = GigESource(GigEOptions("127.0.0.1"))
+frame = next(iter(source.frames()))
+source.stop()
+source.close()
+print(json.dumps({"failed": failed, "frame_id": frame.sidecar["capture"]["device_frame_id"]}))
+"""
+
+
+@needs_camera
+def test_a_failed_connection_lets_go_of_the_camera(tmp_path):
+    """A connection that failed after it took the camera's control (a setting refused, a camera
+    still starting) must let go of it: GigE Vision gives control to one controller, and a leaked
+    one heartbeating from inside the recorder kept every later attempt out (the vehicle soak
+    stalled after a camera restart). The connection's signal handler held it alive in a cycle."""
+    with loopback_namespace() as ns:
+        _start_camera(ns)
+        r = ns.run([sys.executable, "-c", _ONE_FAILED_THEN_ONE_GOOD], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr[-3000:]
+    out = json.loads(r.stdout)
+    assert out["failed"] and "NoSuchFeature" in out["failed"] and out["frame_id"] > 0

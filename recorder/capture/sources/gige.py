@@ -106,12 +106,27 @@ class _Link:
 
     def __init__(self, aravis: Any, options: GigEOptions) -> None:
         self.lost = threading.Event()
+        self.camera: Any = None
+        self.device: Any = None
+        self.stream: Any = None
+        self._handler: int | None = None
         try:
             self.camera = aravis.Camera.new(options.camera or None)
         except Exception as exc:  # GLib.Error: no such camera, no answer
             raise SourceError(f"gige:{options.camera}: {_glib_message(exc)}{_found(aravis)}") from None
+        try:
+            self._open(aravis, options)
+        except BaseException:
+            # A connection that took the camera's control and then failed must let go of it: GigE
+            # Vision gives control to one controller, and a device object kept alive here would
+            # go on heartbeating and keep every later connection out.
+            self.release()
+            raise
+
+    def _open(self, aravis: Any, options: GigEOptions) -> None:
         self.device = self.camera.get_device()
-        self.device.connect("control-lost", lambda *_: self.lost.set())
+        lost = self.lost  # the handler holds the event alone: a handler holding the link would keep it alive
+        self._handler = self.device.connect("control-lost", lambda *_: lost.set())
         try:
             self.camera.set_pixel_format_from_string(options.pixel_format)
             self.camera.set_region(0, 0, options.width, options.height)
@@ -149,8 +164,19 @@ class _Link:
         return out
 
     def close(self) -> None:
-        with contextlib.suppress(Exception):
-            self.camera.stop_acquisition()
+        self.release()
+
+    def release(self) -> None:
+        """Stop acquiring and drop every reference to the camera, its device and its stream, so
+        Aravis ends the control session (its heartbeat) and the camera takes another controller."""
+        if self.camera is not None:
+            with contextlib.suppress(Exception):
+                self.camera.stop_acquisition()
+        if self.device is not None and self._handler is not None:
+            with contextlib.suppress(Exception):
+                self.device.disconnect(self._handler)
+        self.stream = self.device = self.camera = None
+        self._handler = None
 
 
 class GigESource(FrameSource):
