@@ -132,9 +132,12 @@ class LivePublisher:
             return self._cameras[camera].topics
 
     def publish_frame(self, camera: str | None, timestamp_ns: int, pixels: np.ndarray, frame_index: int,
-                      sidecar: dict[str, Any] | bytes | None = None) -> None:
+                      sidecar: dict[str, Any] | bytes | None = None,
+                      model: tuple[RadiometricModel, int] | None = None) -> None:
         """One frame: its image (subsampled to the configured width), its sidecar as recorded,
-        boxes and labels for its targets, and its scene temperatures from the camera's model."""
+        boxes and labels for its targets, and its scene temperatures from the camera's model, or
+        from ``model`` (the model and its version a replay takes from the session's temperature
+        path for this frame)."""
         from foxglove.messages import RawImage, Timestamp
 
         cam = self._cameras.get(camera)
@@ -157,8 +160,13 @@ class LivePublisher:
         if blocks is not None:
             cam.annotations.log(_annotations(blocks.get("targets") or [], stamp, k), log_time=timestamp_ns)
             sent += 1
-        if cam.model is not None:
-            cam.temperature.log(_temperatures(cam.model, img, k, frame_index), log_time=timestamp_ns)
+        if model is not None:
+            temps = {**_temperatures(model[0], img, k, frame_index), "model_version": model[1]}
+            cam.temperature.log(temps, log_time=timestamp_ns)
+            sent += 1
+        elif cam.model is not None:  # capture: the model recorded is the only one (version 0)
+            cam.temperature.log({**_temperatures(cam.model, img, k, frame_index), "model_version": 0},
+                                log_time=timestamp_ns)
             sent += 1
         self.messages_sent += sent
 

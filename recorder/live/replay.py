@@ -67,6 +67,7 @@ def replay_session(session_dir: str | Path, publisher: LivePublisher, *, rate: f
     for cam in cameras:
         doc = meta["cameras"][cam].get("radiometric_model") if cam is not None else meta.get("radiometric_model")
         publisher.add_camera(cam, _model(doc))
+    temps = _session_temperatures(session_dir, meta) if not names else None
     events = _events(session_dir)
     stop = stop or threading.Event()
     if wait_for_viewer_s > 0:
@@ -99,7 +100,8 @@ def replay_session(session_dir: str | Path, publisher: LivePublisher, *, rate: f
             if duration_s is not None and time.monotonic() - t_wall0 > duration_s:
                 stop.set()
                 break
-            publisher.publish_frame(cam, t, frame.pixels, frame.index, frame.sidecar)
+            publisher.publish_frame(cam, t, frame.pixels, frame.index, frame.sidecar,
+                                    model=temps.model_for(frame.index) if temps is not None else None)
             result.frames += 1
         result.loops += 1
         if first is None:
@@ -109,6 +111,17 @@ def replay_session(session_dir: str | Path, publisher: LivePublisher, *, rate: f
     result.stopped = stop.is_set()
     result.wall_s = round(time.monotonic() - t_wall0, 3)
     return result
+
+
+def _session_temperatures(session_dir: Path, meta: dict[str, Any]) -> Any:
+    """The session's one temperature path (the model version in force for each frame), or None
+    where its model cannot be read (the live view then gives counts alone, as before)."""
+    from thermcap.recorder.radiometry.session import SessionTemperatures
+
+    try:
+        return SessionTemperatures.of(session_dir, meta, bad_pixels="keep")
+    except (ValueError, TypeError, KeyError):
+        return None
 
 
 def _events(session_dir: Path) -> list[tuple[int, dict[str, Any]]]:

@@ -120,3 +120,32 @@ def test_play_of_a_missing_session_is_a_clear_error(tmp_path):
     r = subprocess.run([sys.executable, "-m", "thermcap", "play", "nope", "--root", str(tmp_path)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 1 and "nope: no such session" in r.stderr
+
+
+def test_play_gives_the_temperatures_of_the_version_in_force(tmp_path):
+    """After `thermcap radiometry`, `play` gave the recorded model's temperatures: the live view
+    took its model once, from session.json. It now takes each frame's from the session's one
+    temperature path, and names the version it used."""
+    from thermcap.recorder.radiometry import model_from_dict
+    from thermcap.recorder.radiometry.params import add_version
+    from thermcap.recorder.storage.reader import read_session_meta
+
+    session_dir, _ = _record(tmp_path)
+    base = model_from_dict(read_session_meta(session_dir)["radiometric_model"])
+    warmer = model_from_dict({**base.to_dict(), "offset_c": base.to_dict()["offset_c"] + 1.0})
+    add_version(session_dir, base, {}, who="test", why="a new calibration", measured=warmer)
+    expected = _frames_by_time(session_dir)
+    port = free_port()
+    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "play", str(session_dir), "--port", str(port),
+                             "--wait-for-viewer", "30", "--rate", "2", "--json"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    client = _connect(f"ws://127.0.0.1:{port}", proc)
+    client.subscribe(["/thermal/temperature"])
+    msgs = client.receive(5, timeout=30, topic="/thermal/temperature")
+    client.close()
+    proc.communicate(timeout=60)
+    assert msgs
+    for m in msgs:
+        t = m.json()
+        assert t["model_version"] == 1
+        assert t["max_c"] == pytest.approx(float(warmer.to_celsius(expected[m.log_time].max())), abs=1e-3)

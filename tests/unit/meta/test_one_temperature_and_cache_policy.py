@@ -24,8 +24,8 @@ TEMPERATURE_CALLS = {
     "recorder/exports/files.py": "a probe: can this model give °C at all (one zero pixel)",
     "api/routes/sessions.py": "a probe: can this server give °C for the session (one zero pixel)",
     "recorder/importers/run.py": "import-time statistics of the vendor's own model, before any version",
-    # known gap: `thermcap play` replays through it and does not apply later versions (issue 65, left open)
-    "recorder/live/publisher.py": "the live view during capture, when the model recorded is the only one",
+    "recorder/live/publisher.py": "the live view: during capture the model recorded (version 0), in `play` the "
+                                  "model and version replay takes from SessionTemperatures.model_for",
     "recorder/reports/quality.py": "the report's slope per count, in the version it measured (model_for)",
 }
 
