@@ -16,7 +16,7 @@ import obstore
 from obstore.store import LocalStore, S3Store
 
 from thermcap.recorder.install_hint import install_command
-from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import EVENTS_JSON, RADIOMETRY_JSON, SESSION_JSON, SessionLayout
 
 __all__ = ["BlobFile", "BlobStore", "open_store", "stored_digest", "upload_archive"]
 
@@ -177,7 +177,7 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 #: The session's own small documents, sent beside the archive so a reader of the bucket alone
 #: (``thermcap.open("s3://...")``) has its metadata, events and model versions. They change (a
 #: new ``thermcap radiometry`` version), so each upload overwrites them; the archive files never.
-SESSION_DOCUMENTS = ("session.json", "events.json", "radiometry.json")
+SESSION_DOCUMENTS = (SESSION_JSON, EVENTS_JSON, RADIOMETRY_JSON)
 
 
 def _upload_documents(store: BlobStore, root: Path, session_dir: Path) -> list[str]:

@@ -24,9 +24,10 @@ from typing import cast
 import imagecodecs
 import numpy as np
 
+from thermcap.recorder.storage.layout import SUMMARY_NAME
+
 __all__ = ["BAND_ROWS", "SUMMARY_NAME", "FrameSummary", "SummaryBuilder", "band_crc32", "load_summary"]
 
-SUMMARY_NAME = "summary.npz"
 #: Rows per checksum band: the tiff-lzw format's strip height, so a strip is checked alone.
 BAND_ROWS = 64
 

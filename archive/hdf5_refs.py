@@ -20,9 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from thermcap.recorder.storage.layout import REFS_SUFFIX
+
 __all__ = ["REFS_SUFFIX", "hdf5_references"]
 
-REFS_SUFFIX = ".refs.json"
 
 _SZIP_OPTIONS = {"nn": 4 | 32 | 128 | 1, "ec": 4 | 128 | 1}  # H5_SZIP_NN/EC | MSB | RAW, as HDF5 passes them
 

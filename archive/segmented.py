@@ -67,14 +67,14 @@ from thermcap.archive.manifest_types import ExtrasEntry, FramesBlock, Manifest, 
 from thermcap.archive.read_back import ReadBack
 from thermcap.archive.source_pass import SourcePass
 from thermcap.recorder.storage.atomic import fsync_dir
-from thermcap.recorder.storage.layout import PARTIAL_SUFFIX
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, PARTS_DIR
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import SessionFrame, read_session_meta, segment_span, session_segments
 from thermcap.recorder.storage.segments import ACTIVE_SUFFIX
 
 __all__ = ["PARTS", "SegmentPart", "archive_segment", "finalize_session", "plan_segments"]
 
-PARTS = ".parts"
+PARTS = PARTS_DIR  # the layout's name, kept under the name callers use
 PART_JSON = "part.json"
 
 

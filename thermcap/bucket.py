@@ -21,6 +21,7 @@ import numpy as np
 from thermcap.archive.formats.base import read_cost
 from thermcap.archive.reading.copies import DamageLog, Part, counts_of, sidecar_of
 from thermcap.recorder.radiometry.params import ModelVersion
+from thermcap.recorder.storage.layout import RADIOMETRY_JSON
 from thermcap.session import Session
 
 if TYPE_CHECKING:
@@ -159,7 +160,7 @@ class BucketSession(Session):
     def model_versions(self) -> list[ModelVersion]:
         from thermcap.recorder.radiometry.params import versions_from
 
-        return versions_from(self._document("radiometry.json") or {})
+        return versions_from(self._document(RADIOMETRY_JSON) or {})
 
     @cached_property
     def bad_pixel_map(self) -> np.ndarray | None:

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.recorder.radiometry.base import RadiometricModel
+from thermcap.recorder.storage.layout import RADIOMETRY_JSON
 
 __all__ = [
     "OBJECT_PARAMS",
@@ -31,7 +32,6 @@ __all__ = [
 
 OBJECT_PARAMS = ("emissivity", "reflected_temp_c", "object_distance_m", "atmospheric_temp_c",
                  "relative_humidity_pct", "ir_window_temp_c", "ir_window_transmission")
-RADIOMETRY_JSON = "radiometry.json"
 
 # our names -> (model field, scale into the field's units)
 _FIELDS: dict[str, dict[str, tuple[str, float]]] = {

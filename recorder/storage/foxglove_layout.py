@@ -19,10 +19,10 @@ import numpy as np
 
 from thermcap.recorder.icd.topics import camera_topics
 from thermcap.recorder.storage.atomic import write_json_atomic
+from thermcap.recorder.storage.layout import FOXGLOVE_LAYOUT
 
 __all__ = ["FOXGLOVE_LAYOUT", "CountsRange", "layout_for", "write_layout"]
 
-FOXGLOVE_LAYOUT = "foxglove_layout.json"
 
 
 @dataclass

@@ -16,16 +16,23 @@ __all__ = [
     "ACTIVE_SUFFIX",
     "ANALYSIS_JSONL",
     "ARCHIVE_DIR",
+    "BAG_METADATA",
     "EVENTS_JSON",
     "EVICTION_LOG",
     "EXTRAS_MCAP",
+    "FOXGLOVE_LAYOUT",
     "LOCK_FILE",
+    "MANIFEST_COPY_JSON",
     "MANIFEST_JSON",
     "PARTIAL_SUFFIX",
+    "PARTS_DIR",
     "PROTECTED_JSON",
+    "RADIOMETRY_JSON",
+    "REFS_SUFFIX",
     "RESERVE_FILE",
     "SESSION_JSON",
     "SESSION_NAME_RE",
+    "SUMMARY_NAME",
     "SessionLayout",
     "check_session_name",
 ]
@@ -43,6 +50,12 @@ LOCK_FILE = ".lock"
 RESERVE_FILE = ".reserve"
 PROTECTED_JSON = "protected.json"  # event windows eviction, gc and the archiver keep
 EVICTION_LOG = "eviction.log"  # ROOT/eviction.log: one JSON line per deleted segment, with why
+RADIOMETRY_JSON = "radiometry.json"  # the model's versions after capture (recorder.radiometry.params)
+BAG_METADATA = "metadata.yaml"  # rosbag2's description of the segments (recorder.storage.rosbag2)
+FOXGLOVE_LAYOUT = "foxglove_layout.json"  # a Foxglove layout for the session (recorder.storage.foxglove_layout)
+SUMMARY_NAME = "summary.npz"  # archive/summary.npz: per frame and band, CRC-32s bound to the manifest
+PARTS_DIR = ".parts"  # archive/.parts/: per-segment parts of an archive being built (archive.segmented)
+REFS_SUFFIX = ".refs.json"  # beside an HDF5 archive in a bucket: its kerchunk references
 
 #: A session id is one folder name under ROOT/sessions: no separator, no "..", nothing hidden.
 SESSION_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,127}$")
@@ -81,6 +94,26 @@ class SessionLayout:
     @property
     def protected_json(self) -> Path:
         return self.dir / PROTECTED_JSON
+
+    @property
+    def radiometry_json(self) -> Path:
+        return self.dir / RADIOMETRY_JSON
+
+    @property
+    def bag_metadata(self) -> Path:
+        return self.dir / BAG_METADATA
+
+    @property
+    def foxglove_layout(self) -> Path:
+        return self.dir / FOXGLOVE_LAYOUT
+
+    @property
+    def frame_summary(self) -> Path:
+        return self.archive / SUMMARY_NAME
+
+    @property
+    def parts(self) -> Path:
+        return self.archive / PARTS_DIR
 
     @property
     def reserve(self) -> Path:

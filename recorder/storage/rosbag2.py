@@ -17,11 +17,10 @@ from typing import Any
 from mcap.reader import make_reader
 
 from thermcap.recorder.storage.atomic import write_text_atomic
-from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import BAG_METADATA, SessionLayout
 
 __all__ = ["BAG_METADATA", "bag_metadata_text", "write_bag_metadata"]
 
-BAG_METADATA = "metadata.yaml"
 VERSION = 5
 
 _cache: dict[tuple[str, int, int], dict[str, Any]] = {}

@@ -12,11 +12,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from thermcap.recorder.storage.layout import EVENTS_JSON, PROTECTED_JSON, SESSION_JSON, SessionLayout
+from thermcap.recorder.storage.layout import (
+    BAG_METADATA,
+    EVENTS_JSON,
+    FOXGLOVE_LAYOUT,
+    PROTECTED_JSON,
+    SESSION_JSON,
+    SessionLayout,
+)
 
 __all__ = ["SyncItem", "plan_root"]
 
-_METADATA = (EVENTS_JSON, SESSION_JSON, PROTECTED_JSON, "metadata.yaml", "foxglove_layout.json")
+_METADATA = (EVENTS_JSON, SESSION_JSON, PROTECTED_JSON, BAG_METADATA, FOXGLOVE_LAYOUT)
 
 
 @dataclass(frozen=True)
