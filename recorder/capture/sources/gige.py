@@ -359,14 +359,41 @@ def _read_config(device: Any) -> dict[str, Any]:
 
 
 def _genicam_xml(device: Any) -> tuple[bytes, str]:
-    """The camera's GenICam XML, and why not where it has none to give (said in ``describe()``)."""
+    """The camera's GenICam XML, exactly its ``size`` bytes, and why not where it has none to
+    give (said in ``describe()``). PyGObject reads ``arv_device_get_genicam_xml``'s result as a
+    NUL-terminated string, but a GigE device's downloaded XML is not terminated: the string ran
+    on into whatever followed it in memory (a decode error, or garbage after the XML). The bytes
+    are taken by the size Aravis gives, through its C function."""
     try:
-        xml = device.get_genicam_xml()
+        return _xml_by_size(device), ""
+    except Exception as exc:  # no libaravis to load by name: PyGObject's string, checked below
+        why = f"{type(exc).__name__}: {exc}"
+    try:
+        text, size = device.get_genicam_xml()
     except Exception as exc:
-        return b"", f"{type(exc).__name__}: {_glib_message(exc)}"
-    text = xml[0] if isinstance(xml, tuple) else xml
-    data = text.encode() if isinstance(text, str) else bytes(text or b"")
-    return data, "" if data else f"the camera gave none ({type(xml).__name__})"
+        return b"", f"{why}; {type(exc).__name__}: {_glib_message(exc)}"
+    data = (text or "").encode()
+    if len(data) != size:
+        return b"", f"{why}; PyGObject gave {len(data)} bytes of the {size} the camera's XML holds"
+    return data, "" if data else "the camera gave none"
+
+
+def _xml_by_size(device: Any) -> bytes:
+    import ctypes
+    import ctypes.util
+
+    lib = ctypes.CDLL(ctypes.util.find_library("aravis-0.8") or "libaravis-0.8.so.0")
+    get_xml = lib.arv_device_get_genicam_xml
+    get_xml.restype = ctypes.c_void_p
+    get_xml.argtypes = [ctypes.c_void_p, ctypes.POINTER(ctypes.c_size_t)]
+    pointer_of = ctypes.pythonapi.PyCapsule_GetPointer
+    pointer_of.restype = ctypes.c_void_p
+    pointer_of.argtypes = [ctypes.py_object, ctypes.c_char_p]
+    size = ctypes.c_size_t(0)
+    at = get_xml(pointer_of(device.__gpointer__, None), ctypes.byref(size))
+    if not at:
+        raise SourceError("the camera gave no GenICam XML")
+    return ctypes.string_at(at, size.value)
 
 
 def _found(aravis: Any) -> str:
