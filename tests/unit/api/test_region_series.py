@@ -134,6 +134,9 @@ def test_sessions_archived_before_the_summary_are_read_frame_by_frame(tmp_path):
     adir = tmp_path / "sessions" / "s-old" / "archive"
     manifest = json.loads((adir / "manifest.json").read_text())
     del manifest["summary"]
+    # as an archive of that release: one manifest, no checksum, no second copy
+    manifest.pop("checksum", None)
+    (adir / "manifest.copy.json").unlink()
     (adir / "manifest.json").write_text(json.dumps(manifest))
     (adir / "summary.npz").unlink()
     shutil.rmtree(adir / "png16")  # tiff-lzw alone still serves whole frames
