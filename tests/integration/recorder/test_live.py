@@ -86,16 +86,17 @@ def _record(root, frames: int = 30, session: str = "p") -> tuple:
     return rec.session_dir, res
 
 
-def _play(session_dir, *extra: str) -> tuple[list, FoxgloveClient, subprocess.Popen]:
+def _play(session_dir, *extra: str, topic: str = "/thermal/image",
+          count: int = 1000) -> tuple[list, FoxgloveClient, subprocess.Popen]:
     port = free_port()
     proc = subprocess.Popen([sys.executable, "-m", "thermcap", "play", str(session_dir), "--port", str(port),
                              "--wait-for-viewer", "30", "--rate", "2", "--json", *extra],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     client = _connect(f"ws://127.0.0.1:{port}", proc)
-    client.subscribe(["/thermal/image"])
-    msgs = client.receive(1000, timeout=30, topic="/thermal/image")
+    client.subscribe([topic])
+    msgs = client.receive(count, timeout=30, topic=topic)
     client.close()
-    proc.communicate(timeout=30)
+    proc.communicate(timeout=60)
     return msgs, client, proc
 
 
@@ -135,15 +136,7 @@ def test_play_gives_the_temperatures_of_the_version_in_force(tmp_path):
     warmer = model_from_dict({**base.to_dict(), "offset_c": base.to_dict()["offset_c"] + 1.0})
     add_version(session_dir, base, {}, who="test", why="a new calibration", measured=warmer)
     expected = _frames_by_time(session_dir)
-    port = free_port()
-    proc = subprocess.Popen([sys.executable, "-m", "thermcap", "play", str(session_dir), "--port", str(port),
-                             "--wait-for-viewer", "30", "--rate", "2", "--json"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    client = _connect(f"ws://127.0.0.1:{port}", proc)
-    client.subscribe(["/thermal/temperature"])
-    msgs = client.receive(5, timeout=30, topic="/thermal/temperature")
-    client.close()
-    proc.communicate(timeout=60)
+    msgs, _, _ = _play(session_dir, topic="/thermal/temperature", count=5)
     assert msgs
     for m in msgs:
         t = m.json()
