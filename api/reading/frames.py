@@ -35,8 +35,16 @@ from thermcap.api.storage import BlobStore
 from thermcap.archive.blobs import BlobFile
 from thermcap.archive.codecs import get_codec
 from thermcap.archive.formats import get_format
-from thermcap.archive.formats.base import MCAP_SOURCE_COST, ReadCost, locate, read_cost
-from thermcap.archive.reading.copies import Copy, Damage, DamageLog, Part, in_read_order, read_verified
+from thermcap.archive.formats.base import MCAP_SOURCE_COST, locate, read_cost
+from thermcap.archive.reading.copies import (
+    Copy,
+    Damage,
+    DamageLog,
+    Part,
+    in_read_order,
+    read_verified,
+    unoffered,
+)
 from thermcap.archive.reading.mcap_frames import McapFrames
 
 __all__ = ["Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
@@ -115,9 +123,7 @@ class FrameReader:
             def read_other(part: Part, fmt: str = fmt, files: list[dict[str, Any]] = files) -> Any:
                 frame = get_format(fmt).read_frame(self._open(session_id, fmt), files, idx)
                 return frame.pixels if part == "pixels" else frame.sidecar
-            # a copy not offered whole (scrub marked a file of its damaged, or it never verified)
-            # comes last: a damaged part hides only itself, and this frame is checked like any other
-            cost = read_cost(fmt) if verified else ReadCost(10**7 + read_cost(fmt).frame, 10**7)
+            cost = read_cost(fmt) if verified else unoffered(read_cost(fmt))
             copies.append(Copy(f"{fmt}:{locate(files, idx)[0]}", cost, read_other))
         return in_read_order(copies)
 

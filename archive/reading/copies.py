@@ -26,8 +26,19 @@ from thermcap.archive.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.archive.formats.base import ReadCost
 from thermcap.recorder.storage.digest import FrameProof, bytes_digest, frame_digest
 
-__all__ = ["Copy", "Damage", "DamageLog", "Part", "counts_of", "differs", "in_read_order", "read_verified",
-           "sidecar_of", "wanted"]
+__all__ = [
+    "Copy",
+    "Damage",
+    "DamageLog",
+    "Part",
+    "counts_of",
+    "differs",
+    "in_read_order",
+    "read_verified",
+    "sidecar_of",
+    "unoffered",
+    "wanted",
+]
 
 log = logging.getLogger("thermcap.archive")
 
@@ -43,6 +54,17 @@ class Copy:
     name: str  # "png16:0000.zip", "mcap:0001.mcap", "hdf5:session.h5"
     cost: ReadCost
     read: Callable[[Part], Any]
+
+
+#: Where a copy not offered whole ranks: scrub marked a file of it damaged, or it never verified.
+#: It is read after every offered copy; a damaged file hides only the frames it holds, and each
+#: frame read from it is checked like any other.
+_UNOFFERED = 10**7
+
+
+def unoffered(cost: ReadCost) -> ReadCost:
+    """``cost`` moved behind every copy that is offered whole, keeping its order among the rest."""
+    return ReadCost(_UNOFFERED + cost.frame, _UNOFFERED + cost.stream)
 
 
 def in_read_order(copies: Iterable[Copy], *, stream: bool = False) -> list[Copy]:

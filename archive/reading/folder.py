@@ -21,7 +21,7 @@ import numpy as np
 from thermcap.archive.codecs import get_codec
 from thermcap.archive.exceptions import FrameNotFound
 from thermcap.archive.formats import get_format
-from thermcap.archive.formats.base import MCAP_SOURCE_COST, ReadCost, locate, read_cost
+from thermcap.archive.formats.base import MCAP_SOURCE_COST, locate, read_cost
 from thermcap.archive.manifest import record_digest
 from thermcap.archive.reading.copies import (
     Copy,
@@ -31,6 +31,7 @@ from thermcap.archive.reading.copies import (
     in_read_order,
     read_verified,
     sidecar_of,
+    unoffered,
     wanted,
 )
 from thermcap.archive.reading.frame_table import FrameTable
@@ -40,11 +41,6 @@ from thermcap.archive.reading.zip_directory import ZIPPED_FORMATS, ZipIndexCache
 from thermcap.recorder.storage.layout import SessionLayout
 
 __all__ = ["FolderFrames"]
-
-#: A copy scrub marked damaged, or that never verified, is read last: a damaged file hides only
-#: the frames it holds, and each frame read from it is checked like any other.
-_UNOFFERED = 10**7
-
 
 class FolderFrames:
     """Frame ``i``'s counts and sidecar, from the first copy in the folder that verifies."""
@@ -98,7 +94,7 @@ class FolderFrames:
                 continue
             if fmt not in offered and not has_digest:
                 continue  # an unverified copy with nothing to check it against
-            cost = read_cost(fmt) if fmt in offered else ReadCost(_UNOFFERED + read_cost(fmt).frame, _UNOFFERED)
+            cost = read_cost(fmt) if fmt in offered else unoffered(read_cost(fmt))
             rel, _ = locate(files, index)
             copies.append(Copy(f"{fmt}:{rel}", cost, self._archive_reader(fmt, entry, index)))
         return in_read_order(copies)
