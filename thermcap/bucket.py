@@ -70,9 +70,10 @@ class BucketSession(Session):
         from thermcap.recorder.storage.digest import frame_proof
 
         self._proof = frame_proof(manifest.get("frames"))  # the per-frame digests, under the hash they name
-        offered = {f: e for f, e in (manifest.get("formats") or {}).items()
-                   if e.get("verified") and not e.get("damaged") and e.get("files")}
-        self._copies = list(offered.items())  # ordered by their declared read cost when read
+        from thermcap.archive.reading.numbering import verified_copies
+
+        # the copies offered whole, ordered by their declared read cost when a frame is read
+        self._copies = [(f, e) for f, e in verified_copies(manifest).items() if e.get("files")]
         self.damage = DamageLog()  # damaged objects met while reading: logged and kept, bounded
 
     def __repr__(self) -> str:
