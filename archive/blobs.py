@@ -18,7 +18,7 @@ from obstore.store import LocalStore, S3Store
 from thermcap.recorder.install_hint import install_command
 from thermcap.recorder.storage.layout import EVENTS_JSON, RADIOMETRY_JSON, SESSION_JSON, SessionLayout
 
-__all__ = ["BlobFile", "BlobStore", "open_store", "stored_digest", "upload_archive"]
+__all__ = ["BlobFile", "BlobStore", "open_store", "session_documents", "stored_digest", "upload_archive"]
 
 
 class BlobStore:
@@ -180,16 +180,20 @@ def upload_archive(store: BlobStore, root: Path, session_dir: Path) -> list[str]
 SESSION_DOCUMENTS = (SESSION_JSON, EVENTS_JSON, RADIOMETRY_JSON)
 
 
+def session_documents(root: Path, session_dir: Path) -> list[tuple[Path, str]]:
+    """(file, object key) of each of the session's documents on disk: what `upload` sends and
+    `gc` compares before the folder goes."""
+    return [(session_dir / name, (session_dir / name).resolve().relative_to(root.resolve()).as_posix())
+            for name in SESSION_DOCUMENTS if (session_dir / name).is_file()]
+
+
 def _upload_documents(store: BlobStore, root: Path, session_dir: Path) -> list[str]:
     if store.kind != "s3":
         return []  # a local store is the root itself: they are already there
     sent = []
-    for name in SESSION_DOCUMENTS:
-        path = session_dir / name
-        if path.is_file():
-            key = path.resolve().relative_to(root.resolve()).as_posix()
-            store.put_file(key, path)
-            sent.append(key)
+    for path, key in session_documents(root, session_dir):
+        store.put_file(key, path)
+        sent.append(key)
     return sent
 
 

@@ -72,18 +72,14 @@ def _documents_uploaded(session_dir: Path, store: BlobStore, root: Path) -> str 
     """Why the session's own documents in the store are not the folder's (None: they are). A
     model version added after the upload lives in ``radiometry.json`` alone: deleting the folder
     on the archive objects' word would lose it."""
-    from thermcap.archive.blobs import SESSION_DOCUMENTS
+    from thermcap.archive.blobs import session_documents
 
-    for name in SESSION_DOCUMENTS:
-        path = session_dir / name
-        if not path.is_file():
-            continue
-        key = path.resolve().relative_to(root.resolve()).as_posix()
+    for path, key in session_documents(root, session_dir):
         head = store.head(key)
         local = path.read_bytes()
         if head is None or int(head["size"]) != len(local) or store.get_range(key, 0, len(local)) != local:
-            return (f"{name} changed since the upload (or was never sent): `thermcap upload` again before the "
-                    f"folder goes")
+            return (f"{path.name} changed since the upload (or was never sent): `thermcap upload` again before "
+                    f"the folder goes")
     return None
 
 
