@@ -417,7 +417,7 @@ class Evictor(threading.Thread):
         from thermcap.recorder.storage.sync_journal import Journal
 
         try:
-            journal = Journal(self.root)
+            journal = Journal(self.root, read_only=True)
         except Exception:  # an unreadable journal confirms nothing
             return {}
         return {k: o.size for k, o in journal.objects.items() if o.state == "confirmed"}

@@ -1,18 +1,33 @@
 """Every upload's state, on the vehicle's disk, so a dropped link or a reboot costs at most the
 part that was in flight.
 
-One JSON file per data root (``ROOT/.sync/journal.json``), rewritten atomically (temporary file,
-fsync, rename) after every part. An object is *pending* until it is first sent, *in flight*
-while its multipart upload runs (the upload id, part size and each confirmed part's number,
-size, ETag and sha256 are kept), *uploaded* once the store assembled it, and *confirmed* once the
-cloud's receipt for exactly these bytes came back.
+An object is *pending* until it is first sent, *in flight* while its multipart upload runs (the
+upload id, part size and each confirmed part's number, size, ETag and sha256 are kept),
+*uploaded* once the store assembled it, and *confirmed* once the cloud's receipt for exactly these
+bytes came back.
+
+A vehicle ships thousands of objects an hour, so journaling one part must not cost a rewrite of
+every object ever shipped. The journal is a snapshot plus a log, in ``ROOT/.sync/``:
+
+- ``journal.json`` holds the objects still live at the last compaction and its *generation*;
+- ``journal-<generation>.log`` gets one fsynced JSON line per change since (the object's whole
+  state, or its removal), so a change costs the size of one object;
+- ``done.jsonl`` keeps, appended once, the objects that are finished and gone from the vehicle
+  (confirmed, or a small file sent): they leave memory and the snapshot, not the record.
+
+Compaction writes the next generation's snapshot atomically (temporary file, fsync, rename) and
+only then deletes the old log, so a crash at any point leaves one consistent state. A torn last
+line (the power went mid-append) costs that one change; damage anywhere else is named, not
+guessed past.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import threading
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -22,6 +37,9 @@ from thermcap.recorder.exceptions import ThermcapError
 __all__ = ["Journal", "ObjectState", "PartState"]
 
 JOURNAL_DIR = ".sync"
+_SNAPSHOT = "journal.json"
+_DONE = "done.jsonl"
+_MIN_LOG_LINES = 512  # below this a compaction costs more than replaying the log does
 
 
 @dataclass
@@ -52,45 +70,166 @@ class ObjectState:
     def bytes_done(self) -> int:
         return self.size if self.state in ("uploaded", "confirmed") else sum(p.size for p in self.parts)
 
+    @property
+    def finished(self) -> bool:
+        """Nothing more will happen to it: a segment the cloud confirmed, or a small file sent
+        (small files get no receipt)."""
+        return self.state == "confirmed" or (self.state == "uploaded" and not self.key.endswith(".mcap"))
+
+    @classmethod
+    def from_json(cls, o: dict[str, Any]) -> ObjectState:
+        o = dict(o)
+        parts = [PartState(**p) for p in o.pop("parts", [])]
+        return cls(**o, parts=parts)
+
 
 class Journal:
-    def __init__(self, root: Path) -> None:
-        self.path = root / JOURNAL_DIR / "journal.json"
+    """The journal of one data root. ``read_only`` opens it for a reader beside a running sync
+    (the ring asking what the cloud confirmed): it replays, and writes, cuts or deletes nothing."""
+
+    def __init__(self, root: Path, *, read_only: bool = False) -> None:
+        self.root = root
+        self.dir = root / JOURNAL_DIR
+        self.path = self.dir / _SNAPSHOT
+        self.read_only = read_only
         self.objects: dict[str, ObjectState] = {}
+        self.generation = 0
+        self._log_lines = 0
         self._lock = threading.Lock()
+        self._log: Any = None
+        self._load()
+
+    @property
+    def log_path(self) -> Path:
+        return self.dir / f"journal-{self.generation}.log"
+
+    # -- reading -------------------------------------------------------------------------------
+    def _load(self) -> None:
         if self.path.is_file():
             try:
                 raw = json.loads(self.path.read_text())
+                self.generation = int(raw.get("generation", 0))
                 for key, o in raw.get("objects", {}).items():
-                    parts = [PartState(**p) for p in o.pop("parts", [])]
-                    self.objects[key] = ObjectState(**o, parts=parts)
+                    self.objects[key] = ObjectState.from_json(o)
             except (ValueError, TypeError) as exc:
-                raise ThermcapError(f"{self.path}: the sync journal is unreadable ({exc}); move it aside to start "
-                                    f"over (objects already in the store are found again, not sent twice)") from None
+                raise self._unreadable(self.path, exc) from None
+        self._replay()
+
+    def _replay(self) -> None:
+        try:
+            data = self.log_path.read_bytes()
+        except FileNotFoundError:
+            return
+        lines = data.split(b"\n")
+        good = len(data)
+        for i, line in enumerate(lines):
+            if not line:
+                continue
+            last = i == len(lines) - 1  # no newline after it: the append did not finish
+            try:
+                rec = json.loads(line)
+                if "put" in rec:
+                    self.objects[rec["put"]["key"]] = ObjectState.from_json(rec["put"])
+                elif "forget" in rec:
+                    self.objects.pop(rec["forget"], None)
+                else:
+                    raise ValueError(f"neither put nor forget: {sorted(rec)}")
+            except (ValueError, TypeError, KeyError) as exc:
+                if last:
+                    good = len(data) - len(line)
+                    break
+                raise self._unreadable(self.log_path, exc) from None
+            self._log_lines += 1
+        if good < len(data) and not self.read_only:
+            with open(self.log_path, "r+b") as f:  # cut the torn line so the next append starts clean
+                f.truncate(good)
+                os.fsync(f.fileno())
+
+    def _unreadable(self, path: Path, exc: Exception) -> ThermcapError:
+        return ThermcapError(f"{path}: the sync journal is unreadable ({exc}); move {self.dir} aside to start "
+                             f"over (objects already in the store are found again, not sent twice)")
 
     def get(self, key: str) -> ObjectState | None:
         return self.objects.get(key)
 
+    def finished_keys(self) -> Iterator[str]:
+        """Keys of objects finished and gone from the vehicle since the journal began (a key
+        may repeat if a compaction was cut short)."""
+        with contextlib.suppress(FileNotFoundError), open(self.dir / _DONE, "rb") as f:
+            for line in f:
+                with contextlib.suppress(ValueError, KeyError, TypeError):
+                    yield json.loads(line)["key"]
+
+    # -- writing -------------------------------------------------------------------------------
     def put(self, obj: ObjectState) -> None:
+        """Journal ``obj``'s whole state now (durable when this returns)."""
         with self._lock:
             self.objects[obj.key] = obj
-            self._save()
+            self._append({"put": asdict(obj)})
 
     def forget(self, key: str) -> None:
         """Drop ``key`` (a segment evicted before it was sent: nothing of it is left to resume)."""
-        if self.objects.pop(key, None) is not None:
-            self.save()
-
-    def save(self) -> None:
         with self._lock:
-            self._save()
+            if self.objects.pop(key, None) is not None:
+                self._append({"forget": key})
 
-    def _save(self) -> None:
-        self.path.parent.mkdir(parents=True, exist_ok=True)
+    def _append(self, rec: dict[str, Any]) -> None:
+        if self.read_only:
+            raise ThermcapError(f"{self.dir}: this journal was opened to read")
+        if self._log is None:
+            self.dir.mkdir(parents=True, exist_ok=True)
+            self._log = open(self.log_path, "ab")  # noqa: SIM115 (held open across appends; closed at compaction)
+        self._log.write(json.dumps(rec, separators=(",", ":")).encode() + b"\n")
+        self._log.flush()
+        os.fsync(self._log.fileno())
+        self._log_lines += 1
+        if self._log_lines > max(_MIN_LOG_LINES, 2 * len(self.objects)):
+            self._compact()
+
+    def compact(self) -> None:
+        """Fold the log into the next snapshot and move finished objects gone from the vehicle
+        to ``done.jsonl``. Whether a file is gone is looked at now, not remembered."""
+        with self._lock:
+            self._compact()
+
+    def _compact(self) -> None:
+        if self.read_only:
+            raise ThermcapError(f"{self.dir}: this journal was opened to read")
+        self.dir.mkdir(parents=True, exist_ok=True)
+        gone = [st for st in self.objects.values() if st.finished and not (self.root / st.key).exists()]
+        if gone:
+            with open(self.dir / _DONE, "ab") as f:
+                for st in gone:
+                    f.write(json.dumps({"key": st.key, "size": st.size, "sha256": st.sha256, "state": st.state},
+                                       separators=(",", ":")).encode() + b"\n")
+                f.flush()
+                os.fsync(f.fileno())
+            for st in gone:
+                del self.objects[st.key]
+        old_log = self.log_path
+        if self._log is not None:
+            self._log.close()
+            self._log = None
         tmp = self.path.with_suffix(".tmp")
-        data: dict[str, Any] = {"version": 1, "objects": {k: asdict(v) for k, v in self.objects.items()}}
+        data = {"version": 2, "generation": self.generation + 1,
+                "objects": {k: asdict(v) for k, v in self.objects.items()}}
         with open(tmp, "w") as f:
-            json.dump(data, f)
+            json.dump(data, f, separators=(",", ":"))
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, self.path)
+        self.generation += 1
+        self._log_lines = 0
+        with contextlib.suppress(FileNotFoundError):
+            old_log.unlink()
+        fd = os.open(self.dir, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._log is not None:
+                self._log.close()
+                self._log = None

@@ -176,7 +176,7 @@ class Syncer:
             sha = file_sha256(item.path)
             if sha == st.sha256:  # touched, not changed
                 st.mtime_ns = item.mtime_ns
-                self.journal.save()
+                self.journal.put(st)
                 return False
             log.warning("sync: %s changed on the vehicle after the cloud confirmed it; the confirmed copy is "
                         "kept and not overwritten (the local file may be damaged: `thermcap info` it)", item.key)
@@ -229,7 +229,7 @@ class Syncer:
                 report.sent_bytes += len(data) * tries[0]
                 st.attempts += tries[0]
                 st.parts.append(PartState(number, len(data), etag, hashlib.sha256(data).hexdigest()))
-                self.journal.save()
+                self.journal.put(st)
                 if on_progress:
                     on_progress(item.key, st.bytes_done, item.size)
         if file_sha256(item.path) != st.sha256:  # a closed segment never changes; if this one did, say so
@@ -238,7 +238,7 @@ class Syncer:
         upload_id = st.upload_id
         self._retry(item.key, lambda: self.target.complete(item.key, upload_id, parts, st.sha256), report)
         st.state, st.upload_id, st.error = "uploaded", None, None
-        self.journal.save()
+        self.journal.put(st)
         return True
 
     def _retry(self, what: str, fn: Callable[[], Any], report: SyncReport) -> Any:
@@ -277,6 +277,7 @@ class Syncer:
                 continue
             if r.get("ok") and r.get("sha256") == st.sha256 and r.get("bytes") == st.size:
                 st.state = "confirmed"
+                self.journal.put(st)
                 n += 1
             elif r.get("sha256") and r.get("sha256") != st.sha256:
                 if r["sha256"] == st.stale_receipt:
@@ -284,7 +285,7 @@ class Syncer:
                 st.state, st.error = "pending", f"the cloud's copy differs (receipt: {r.get('problem') or r['sha256']})"
                 st.stale_receipt = r["sha256"]
                 st.mtime_ns = -1  # sent again on the next pass
-        self.journal.save()
+                self.journal.put(st)
         return n
 
     def status(self, sessions: list[str] | None = None) -> SyncStatus:
@@ -306,8 +307,15 @@ class Syncer:
             else:
                 conf.append(item.key)
         for st in self.journal.objects.values():  # confirmed and freed on the vehicle
+            if sessions is not None and _session_of(st.key) not in sessions:
+                continue
             if st.state == "confirmed" and st.key not in conf and not (self.root / st.key).exists():
                 conf.append(st.key)
+        seen = set(conf)
+        for key in self.journal.finished_keys():  # finished long ago: out of memory, still on record
+            if key.endswith(".mcap") and key not in seen and (sessions is None or _session_of(key) in sessions):
+                seen.add(key)
+                conf.append(key)
         return SyncStatus(pending, flight, up, conf, pending_bytes, flight_done, flight_bytes)
 
     def delete_confirmed(self) -> list[str]:
@@ -315,7 +323,7 @@ class Syncer:
         from thermcap.recorder.storage.reader import segment_span
 
         freed = []
-        for st in self.journal.objects.values():
+        for st in list(self.journal.objects.values()):
             path = self.root / st.key
             if st.state != "confirmed" or not st.key.endswith(".mcap") or not path.is_file():
                 continue
@@ -324,6 +332,7 @@ class Syncer:
             if not self._receipt_still_good(st.key, st.sha256, st.size):
                 st.state, st.error = "pending", "the cloud's receipt no longer names these bytes; sent again"
                 st.mtime_ns = -1
+                self.journal.put(st)
                 continue
             windows = load_windows(path.parent)
             if windows:
@@ -334,7 +343,6 @@ class Syncer:
             record_freed(self.root, path.parent.name, path.name, st.size, "sync",
                          "the cloud confirmed its bytes (sha256 and size in its receipt)")
             freed.append(st.key)
-        self.journal.save()
         return freed
 
     def _receipt_still_good(self, key: str, sha256: str, size: int) -> bool:
@@ -346,6 +354,12 @@ class Syncer:
             log.warning("sync: %s kept, its receipt cannot be read now (%s)", key, exc)
             return False
         return bool(r and r.get("ok") and r.get("sha256") == sha256 and r.get("bytes") == size)
+
+
+def _session_of(key: str) -> str:
+    """The session a journal key (``sessions/<name>/...``, as ``plan_root`` names it) is in."""
+    parts = key.split("/")
+    return parts[1] if len(parts) > 2 else ""
 
 
 class _LinkDown(Exception):

@@ -19,6 +19,7 @@ from thermcap.archive.receipts import confirm_synced
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.sync_journal import Journal
 
 pytestmark = pytest.mark.slow
 pytest.importorskip("boto3", reason="boto3 is in the sync extra")
@@ -39,14 +40,11 @@ def test_kill_sync_mid_upload_resends_at_most_the_part_in_flight(seaweedfs, tmp_
            "AWS_SECRET_ACCESS_KEY": seaweedfs["AWS_SECRET_ACCESS_KEY"]}
     cmd = [sys.executable, "-m", "thermcap", "sync", "--root", str(root), "--bucket", seaweedfs["bucket"],
            "--endpoint", seaweedfs["endpoint"], "--prefix", prefix, "--part-size", "5", "--max-rate", "8MB/s", "--json"]
-    journal = root / ".sync" / "journal.json"
 
     def journaled() -> int:
-        if not journal.is_file():
-            return 0
-        objs = json.loads(journal.read_text())["objects"].values()
-        return sum(len(o["parts"]) if o["state"] == "in_flight" else
-                   (-(-o["size"] // (5 * MiB)) if o["key"].endswith(".mcap") and o["state"] != "pending" else 0)
+        objs = Journal(root, read_only=True).objects.values()
+        return sum(len(o.parts) if o.state == "in_flight" else
+                   (-(-o.size // (5 * MiB)) if o.key.endswith(".mcap") and o.state != "pending" else 0)
                    for o in objs)
 
     for _ in range(3):

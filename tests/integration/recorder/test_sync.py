@@ -18,6 +18,7 @@ from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.storage.segments import SegmentPolicy
+from thermcap.recorder.storage.sync_journal import Journal
 from thermcap.recorder.sync.engine import Syncer, _Throttled
 from thermcap.recorder.sync.rate import RateLimit, parse_rate
 from thermcap.recorder.sync.targets import DirTarget, receipt_key
@@ -80,8 +81,8 @@ def test_a_crash_mid_segment_costs_at_most_the_part_in_flight(vehicle, tmp_path)
     # metadata first (events before session.json), then the segments oldest first
     assert crashing.keys[0].endswith("session.json") or crashing.keys[0].endswith("events.json")
     assert crashing.keys[-1].endswith(segs[0].name)
-    journal = json.loads((root / ".sync" / "journal.json").read_text())["objects"]
-    assert [len(o["parts"]) for k, o in journal.items() if k.endswith(".mcap")] == [1]
+    journal = Journal(root, read_only=True).objects
+    assert [len(o.parts) for k, o in journal.items() if k.endswith(".mcap")] == [1]
 
     again = Syncer(root, DirTarget(dest), part_size=5 * MiB)  # the vehicle reboots: a new process, the same journal
     report = again.run_once()
