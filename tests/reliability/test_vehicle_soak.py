@@ -144,6 +144,7 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
     root.mkdir()
     depot.mkdir()
     rss: list[int] = []
+    sync_rss: list[int] = []  # sync's too: its journal is the part of it that grows with the hour
     with loopback_namespace() as ns:
         v = Vehicle(ns, root, depot)
         v.start_camera()
@@ -159,6 +160,7 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
             assert sync.poll() is None, f"sync exited: {sync.stderr.read() if sync.stderr else ''}"
             assert v.recorder is not None and v.recorder.poll() is None
             rss.append(_rss_kib(v.recorder.pid))
+            sync_rss.append(_rss_kib(sync.pid))
             if now >= next_mark:
                 v.mark(f"mark {len(v.marks)}")
                 next_mark = now + MARK_EVERY_S
@@ -254,10 +256,14 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
     if len(rss) > 20:  # memory flat: the last third's peak within 64 MiB of the first third's
         third = len(rss) // 3
         assert max(rss[-third:]) < max(rss[:third]) + 64 * 1024, rss
+    if len(sync_rss) > 20:
+        third = len(sync_rss) // 3
+        assert max(sync_rss[-third:]) < max(sync_rss[:third]) + 64 * 1024, sync_rss
     out_dir = os.environ.get("THERMCAP_RELIABILITY_OUT")
     if out_dir:
         Path(out_dir, "vehicle_soak.json").write_text(json.dumps({"soak_s": SOAK_S, "compression": COMPRESSION,
                                                                   "camera_kills": camera_kills, "figures": figures,
                                                                   "marks_checked": checked_marks,
-                                                                  "marks": v.marks, "rss_kib": rss}, indent=2))
+                                                                  "marks": v.marks, "rss_kib": rss,
+                                                                  "sync_rss_kib": sync_rss}, indent=2))
 
