@@ -21,6 +21,8 @@ from typing import Any
 
 import httpx
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_api"]
 
 
@@ -44,11 +46,11 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
     rows = []
     try:
         Recorder(SimSource(frames=frames, paced=False, seed=5), base, session_id="bench", recover_leftovers=False).run()
-        archive_session(base / "sessions" / "bench", ["png16", "tiff-lzw", "hdf5"])  # the default formats
+        archive_session(DataRoot.of(base).session_dir("bench"), ["png16", "tiff-lzw", "hdf5"])  # the default formats
         # and one left as recorded: frames straight from its MCAP segment, as right after recording
         Recorder(SimSource(frames=frames, paced=False, seed=6), base, session_id=UNARCHIVED,
                  recover_leftovers=False).run()
-        engine = make_engine(f"sqlite:///{base / 'index.sqlite'}")
+        engine = make_engine(f"sqlite:///{DataRoot.of(base).index_db}")
         from thermcap.api.db import migrate
 
         migrate(engine)
@@ -183,7 +185,7 @@ def _frames_over_http(url: str, fmt: str, frames: int, requests: int, clients: i
 def _disk_frames(base: Path, frames: int, requests: int) -> dict[str, Any]:
     from thermcap.archive.reading.zip_directory import read_zip_file
 
-    zips = sorted((base / "sessions" / "bench" / "archive" / "png16").glob("*.zip"))
+    zips = sorted((DataRoot.of(base).session_dir("bench") / "archive" / "png16").glob("*.zip"))
     spans = [(z, int(off), int(n)) for z, e in ((z, read_zip_file(z)) for z in zips)
              for off, n in zip(e.offset, e.length, strict=True)]
     rng = random.Random(1)
@@ -215,7 +217,7 @@ def _stream_mb_s(url: str, path: str, repeat: int = 3) -> tuple[float, int]:
 
 
 def _export(url: str, base: Path, nginx: Any) -> list[dict[str, Any]]:
-    segs = sorted((base / "sessions" / "bench").glob("*.mcap"))
+    segs = sorted(DataRoot.of(base).session_dir("bench").glob("*.mcap"))
     t = time.perf_counter()
     n = 0
     for s in segs:

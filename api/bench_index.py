@@ -27,6 +27,8 @@ import uuid
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_index", "print_table"]
 
 HOUR_FRAMES = 3600 * 60
@@ -49,10 +51,10 @@ def _index_bytes(tmp: Path) -> dict[str, Any]:
     n = 600
     Recorder(SimSource(width=64, height=48, frames=n, paced=False, seed=3, first_cue_s=0.1), root,
              session_id="real").run()
-    archive_session(root / "sessions" / "real", ["png16", "jxl"])
+    archive_session(DataRoot.of(root).session_dir("real"), ["png16", "jxl"])
     # The worst case for the database: a target in every frame (every second has its row, full).
-    shutil.copytree(root / "sessions" / "real", root / "sessions" / "hot")
-    hot = SessionLayout.of(root / "sessions" / "hot")
+    shutil.copytree(DataRoot.of(root).session_dir("real"), DataRoot.of(root).session_dir("hot"))
+    hot = SessionLayout.of(DataRoot.of(root).session_dir("hot"))
     meta = json.loads(hot.session_json.read_text())
     hot.session_json.write_text(json.dumps({**meta, "session_id": "hot"}))
     with open(hot.analysis_jsonl, "w") as f:

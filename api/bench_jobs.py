@@ -15,6 +15,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_jobs"]
 
 
@@ -45,7 +47,7 @@ def bench_jobs(sessions: int = 1, seconds: float = 10.0, formats: tuple[str, ...
                      analysis=False, recover_leftovers=False, policy=SegmentPolicy(max_duration_s=segment_s)).run()
         from thermcap.recorder.storage.reader import session_segments
 
-        out["segments_each"] = len(session_segments(pristine / "sessions" / "b0"))
+        out["segments_each"] = len(session_segments(DataRoot.of(pristine).session_dir("b0")))
         for workers in (1, 2):
             root = Path(tmp) / f"root{workers}"
             shutil.copytree(pristine, root)

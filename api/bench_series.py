@@ -23,6 +23,8 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_series"]
 
 HOUR_FRAMES = 3600 * 60
@@ -51,9 +53,9 @@ def bench_series(seconds: float = 60.0, tool: str = "box:300,200,339,239", *, th
                        session_id="s", analysis=False, recover_leftovers=False)
         if not rec.run().ok:
             raise RuntimeError("the benchmark session did not record cleanly")
-        d = root / "sessions" / "s"
+        d = DataRoot.of(root).session_dir("s")
         archive_session(d, list(DEFAULT_FORMATS), delete_source=True)  # served from its archive, as in the field
-        engine = make_engine(f"sqlite:///{root / 'index.sqlite'}")
+        engine = make_engine(f"sqlite:///{DataRoot.of(root).index_db}")
         migrate(engine)
         index_session(engine, d)
         with engine.connect() as conn:

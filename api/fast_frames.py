@@ -68,6 +68,7 @@ from thermcap.archive.frame_summary import FrameSummary
 from thermcap.archive.reading.mcap_frames import McapFrames
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.storage.digest import new_hasher
+from thermcap.recorder.storage.layout import DataRoot, archive_key
 
 __all__ = ["FrameFastPath"]
 
@@ -203,13 +204,13 @@ class FrameFastPath:
             mcap, segment = self._mcap, s.columns.segment(n)
             if mcap is None or not segment:
                 return None
-            path, log_time = self.root / "sessions" / sid / segment, int(s.columns.timestamp_ns[n])
+            path, log_time = DataRoot.of(self.root).session_dir(sid) / segment, int(s.columns.timestamp_ns[n])
             if not path.is_file():  # e.g. deleted once archived
                 return None
             read = functools.partial(self._from_segment, mcap, path, log_time, s.columns.digest,
                                      s.columns.pixel_digest_raw(n))
             return read() if mcap.is_kept(path, log_time) else read
-        data = self._read(f"sessions/{sid}/archive/png16/{blob['file']}", blob["offset"], blob["length"])
+        data = self._read(archive_key(sid, "png16", blob["file"]), blob["offset"], blob["length"])
         if data is None or imagecodecs.deflate_crc32(data) != blob["crc32"]:
             return None  # missing or damaged: the full path reports it and serves another copy
         if fmt == "png16":
@@ -370,7 +371,7 @@ class FrameFastPath:
         except LookupError:  # no frame table yet: the application answers (and says why)
             return None
         frames = min(int(row[1]), len(cols))
-        tiff = [{"path": f"sessions/{sid}/archive/tiff-lzw/{r['path']}", "frames": int(r["frames"])}
+        tiff = [{"path": archive_key(sid, "tiff-lzw", r["path"]), "frames": int(r["frames"])}
                 for r in json.loads(tiff_files)] if tiff_files else []
         s = _Session(int(row[0]), frames, cols, now, tiff, row[2])
         with self._lock:

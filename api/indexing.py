@@ -32,7 +32,7 @@ from thermcap.archive.blobs import BlobStore
 from thermcap.archive.reading.numbering import number_frames, sidecar_summary
 from thermcap.recorder.importers.ros2_bag import is_ros2_bag_folder
 from thermcap.recorder.storage.coverage import coverage
-from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import MANIFEST_JSON, SessionLayout, archive_key
 from thermcap.recorder.storage.lock import holder, session_status
 from thermcap.recorder.storage.reader import list_sessions, read_session_meta, session_segments
 
@@ -304,7 +304,7 @@ def index_root(engine: Engine, root: Path, *, force: bool = False, store: Any = 
         known = {r[0] for r in conn.execute(select(db.sessions.c.id))}
         gone = sorted(known - present)
         if store.kind != "local":
-            in_store = {sid for sid in gone if store.head(f"sessions/{sid}/archive/manifest.json") is not None}
+            in_store = {sid for sid in gone if store.head(archive_key(sid, MANIFEST_JSON)) is not None}
             gone = [sid for sid in gone if sid not in in_store]
         keys = [k for sid in gone for k in conn.execute(select(db.sessions.c.frames_key)
                                                         .where(db.sessions.c.id == sid)).scalars() if k]

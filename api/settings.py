@@ -16,6 +16,8 @@ import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["Settings"]
 
 
@@ -84,7 +86,7 @@ class Settings:
 
     @property
     def db_url(self) -> str:
-        return self.database_url or f"sqlite:///{(self.root / 'index.sqlite').resolve()}"
+        return self.database_url or f"sqlite:///{DataRoot.of(self.root).index_db.resolve()}"
 
     def __repr__(self) -> str:  # never print tokens or credentials
         return (f"Settings(root={str(self.root)!r}, db={_redact(self.db_url)!r}, s3={self.s3_bucket!r}, "

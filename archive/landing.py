@@ -25,7 +25,7 @@ from pathlib import Path
 from thermcap.archive.blobs import BlobStore
 from thermcap.recorder.exceptions import SessionBusyError
 from thermcap.recorder.storage.atomic import fsync_dir
-from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SESSION_JSON, SESSIONS_PREFIX, DataRoot
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.sync.targets import receipt_key
 
@@ -52,7 +52,7 @@ def _read_json(store: BlobStore, key: str) -> dict | None:
         return None
 
 
-def land_synced(store: BlobStore, root: Path, prefix: str = "sessions/") -> LandReport:
+def land_synced(store: BlobStore, root: Path, prefix: str = SESSIONS_PREFIX) -> LandReport:
     """Land every whole, receipted session in ``root/sessions``, one landing at a time: two at
     once would download the same session into the same ``.partial`` folder, and one could give
     the other's half-written folder the session's name. Raises SessionBusyError naming the
@@ -76,7 +76,7 @@ def _land(store: BlobStore, root: Path, prefix: str) -> LandReport:
         if len(parts) == 2 and parts[1]:  # sessions/<id>/<file>: not the archive, not the receipts
             by_session.setdefault(parts[0], {})[parts[1]] = size
     for sid, files in sorted(by_session.items()):
-        final = root / "sessions" / sid
+        final = DataRoot.of(root).session_dir(sid)
         if final.exists():
             report.already += 1
             continue

@@ -20,6 +20,7 @@ from typing import Any
 from thermcap.archive.blobs import BlobStore
 from thermcap.archive.manifest import file_sha256, frame_sha256, iso_now
 from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.layout import SESSIONS_PREFIX
 from thermcap.recorder.storage.reader import iter_segment_frames, segment_span
 from thermcap.recorder.sync.targets import RECEIPTS_PREFIX, receipt_key
 
@@ -67,7 +68,7 @@ def _still_holds(store: BlobStore, rkey: str, head: dict[str, Any]) -> bool:
     return not etag or etag == str(head.get("e_tag") or "")
 
 
-def confirm_synced(store: BlobStore, prefix: str = "sessions/") -> ConfirmReport:
+def confirm_synced(store: BlobStore, prefix: str = SESSIONS_PREFIX) -> ConfirmReport:
     report = ConfirmReport()
     for key in sorted(k for k, _ in store.list(prefix)):
         if not key.endswith(".mcap") or "/archive/" in key or key.startswith(RECEIPTS_PREFIX + "/"):

@@ -23,6 +23,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_one_hour_open", "bench_python"]
 
 
@@ -132,7 +134,7 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
         root = Path(tmp)
         Recorder(SimSource(width=width, height=height, frames=frames, paced=False, seed=1), root,
                  session_id="bench", analysis=False).run()
-        session_dir = root / "sessions" / "bench"
+        session_dir = DataRoot.of(root).session_dir("bench")
         archive_session(session_dir, ["hdf5"])
         (h5,) = sorted((session_dir / "archive" / "hdf5").glob("*.h5"))
         port = _free_port()

@@ -21,7 +21,7 @@ import numpy as np
 from thermcap.archive.formats.base import read_cost
 from thermcap.archive.reading.copies import DamageLog, Part, counts_of, sidecar_of
 from thermcap.recorder.radiometry.params import ModelVersion
-from thermcap.recorder.storage.layout import RADIOMETRY_JSON
+from thermcap.recorder.storage.layout import RADIOMETRY_JSON, session_key
 from thermcap.session import Session
 
 if TYPE_CHECKING:
@@ -57,7 +57,7 @@ class BucketSession(Session):
 
     def __init__(self, store: BlobStore, session_id: str, url: str = "") -> None:
         self.store, self.id, self.url = store, session_id, url or f"{store.url}/sessions/{session_id}"
-        self._base = f"sessions/{session_id}"
+        self._base = session_key(session_id)
         manifest = self._document("archive/manifest.json")
         if manifest is None:
             raise FileNotFoundError(f"{self.url}: no session here (no archive/manifest.json; `thermcap upload` "

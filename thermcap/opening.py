@@ -38,21 +38,22 @@ def open(where: str | os.PathLike[str], token: str | None = None, *, root: str |
     if "://" in text:
         raise ValueError(f"{text}: thermcap.open reads folders, ids under a root, http(s) session URLs and "
                          f"s3://BUCKET/sessions/ID")
+    from thermcap.recorder.storage.layout import SESSIONS_DIR, DataRoot, SessionLayout
+
     path = Path(text)
-    if (path / "session.json").is_file():
+    if SessionLayout.of(path).session_json.is_file():
         session_dir = path.resolve()
-        if session_dir.parent.name != "sessions":
+        if session_dir.parent.name != SESSIONS_DIR:
             raise ValueError(f"{path}: not inside a data root (ROOT/sessions/ID); move it there or import it")
         return LocalSession(session_dir, session_dir.parent.parent)
     from thermcap.recorder.cli.options import default_root
-    from thermcap.recorder.storage.layout import check_session_name
 
     base = Path(root) if root is not None else Path(default_root())
     if os.sep in text or (os.altsep and os.altsep in text):
         raise FileNotFoundError(f"{path}: no session here (no session.json)")
-    check_session_name(text)
-    session_dir = (base / "sessions" / text).resolve()
-    if not (session_dir / "session.json").is_file():
-        raise FileNotFoundError(f"no session {text!r} under {base} (looked for {session_dir / 'session.json'})")
+    layout = SessionLayout.of(DataRoot.of(base).session(text).dir.resolve())
+    session_dir = layout.dir
+    if not layout.session_json.is_file():
+        raise FileNotFoundError(f"no session {text!r} under {base} (looked for {layout.session_json})")
     return LocalSession(session_dir, session_dir.parent.parent)
 

@@ -32,6 +32,7 @@ from typing import Any
 
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.storage.digest import file_sha256
+from thermcap.recorder.storage.layout import DataRoot
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.reader import read_session_meta
 
@@ -115,7 +116,7 @@ def _earlier_sessions(root: Path, name: str) -> list[Path]:
     """The sessions an earlier run imported from the same content, if it finished importing;
     a session it left half-made (it died mid-import) is removed, for the file is still here to
     import again, and the others of that file with it, so it is imported whole, once."""
-    base = root / "sessions"
+    base = DataRoot.of(root).sessions
     found = sorted(p for p in base.glob(f"{name}*") if p.is_dir() and (p.name == name or
                                                                         p.name.startswith(name + "-")))
     if not found:

@@ -46,6 +46,7 @@ from thermcap.archive.reading.copies import (
     unoffered,
 )
 from thermcap.archive.reading.mcap_frames import McapFrames
+from thermcap.recorder.storage.layout import EXTRAS_MCAP, DataRoot, archive_key
 
 __all__ = ["Damage", "DamageLog", "FrameNotFound", "FrameReader", "FrameUnavailable"]
 
@@ -77,7 +78,7 @@ class FrameReader:
         return self.locations.blobs(session_id, idx)
 
     def _key(self, session_id: str, blob: dict[str, Any]) -> str:
-        return f"sessions/{session_id}/archive/{blob['format']}/{blob['file']}"
+        return archive_key(session_id, blob["format"], blob["file"])
 
     def _frame_row(self, session_id: str, idx: int) -> dict[str, Any]:
         return self.columns.get(session_id).row(idx)
@@ -94,7 +95,7 @@ class FrameReader:
 
     def _open(self, session_id: str, fmt: str) -> Callable[[str], Any]:
         def open_file(rel: str) -> Any:
-            key = f"sessions/{session_id}/archive/{fmt}/{rel}"
+            key = archive_key(session_id, fmt, rel)
             head = self.store.head(key)
             if head is None:
                 raise FrameNotFound(f"{key} is missing from the store")
@@ -171,8 +172,8 @@ class FrameReader:
         """The attachment recorded with frame ``idx`` whose name ends in ``/suffix`` (an importer's
         kept blob), from the MCAP source or, once that is deleted, the archive's extras.mcap."""
         row = self._frame_row(session_id, idx)
-        seg = self.root / "sessions" / session_id / (row["segment"] or "")
-        extras = f"sessions/{session_id}/archive/extras.mcap"
+        seg = DataRoot.of(self.root).session_dir(session_id) / (row["segment"] or "")
+        extras = archive_key(session_id, EXTRAS_MCAP)
         if row["segment"] and seg.is_file():
             f: Any = open(seg, "rb")  # noqa: SIM115 - one of two kinds of file, closed by the `with f` below
         elif (head := self.store.head(extras)) is not None:
@@ -190,7 +191,7 @@ class FrameReader:
         raise FrameNotFound(f"frame {idx} of {session_id} has no {suffix} (not imported from such a file)")
 
     def _from_mcap(self, session_id: str, row: dict[str, Any]) -> tuple[Any, bytes]:
-        seg = self.root / "sessions" / session_id / (row["segment"] or "")
+        seg = DataRoot.of(self.root).session_dir(session_id) / (row["segment"] or "")
         if not row["segment"] or not seg.is_file():
             raise FrameNotFound(f"{seg.name or 'segment'} is not on disk")
         pixels, sidecar = self.mcap.frame(seg, row["timestamp_ns"])

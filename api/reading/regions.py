@@ -40,6 +40,7 @@ from thermcap.archive.formats.base import RowBlock, locate, positions_in
 from thermcap.archive.frame_summary import FrameSummary, load_summary
 from thermcap.archive.manifest import bytes_digest, record_digest
 from thermcap.archive.reading.copies import Damage
+from thermcap.recorder.storage.layout import archive_key
 from thermcap.recorder.thermography.measure import Box, Tool, bounds, shifted
 from thermcap.recorder.thermography.series import STATS, series_point
 
@@ -95,7 +96,7 @@ class RegionReader:
         if not entry_json:
             return None
         entry = json.loads(entry_json)
-        key = f"sessions/{session_id}/archive/{entry['path']}"
+        key = archive_key(session_id, entry["path"])
         try:
             data = self.store.get_range(key, 0, int(entry["bytes"]))
         except FileNotFoundError:
@@ -181,7 +182,7 @@ class RegionReader:
 
     def _open(self, session_id: str) -> Callable[[str], Any]:
         def open_file(rel: str) -> Any:
-            key = f"sessions/{session_id}/archive/{_ROW_FORMAT}/{rel}"
+            key = archive_key(session_id, _ROW_FORMAT, rel)
             if self.store.kind == "local":  # the store's keys are paths under the data root
                 return open(self.frames.root / key, "rb")
             head = self.store.head(key)

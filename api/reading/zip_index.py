@@ -11,6 +11,7 @@ from typing import Any
 from thermcap.archive.formats.base import locate
 from thermcap.archive.manifest import record_digest
 from thermcap.archive.reading.zip_directory import ZIPPED_FORMATS, ReadRange, ZipIndexCache
+from thermcap.recorder.storage.layout import archive_key
 
 __all__ = ["ZIPPED_FORMATS", "ArchiveLocations"]
 
@@ -90,7 +91,7 @@ class ArchiveLocations:
             rel, k = locate(s.files[fmt], idx)
         except IndexError:
             return None
-        key = f"sessions/{session_id}/archive/{fmt}/{rel}"
+        key = archive_key(session_id, fmt, rel)
         try:
             size, sha = s.sizes.get((fmt, rel), (0, ""))
             if not size:

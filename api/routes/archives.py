@@ -17,6 +17,7 @@ from thermcap.api.routes.common import session_row
 from thermcap.api.security import check_file_name, require
 from thermcap.api.verified_files import verified_stream
 from thermcap.archive.manifest import record_digest
+from thermcap.recorder.storage.layout import archive_key
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
@@ -77,7 +78,7 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
     if entry is None:  # only files the manifest lists are served: nothing else under the root is reachable
         raise HTTPException(404, f"{fmt} archive of {session_id} has no file {name!r}")
     store = request.app.state.store
-    key = f"sessions/{session_id}/archive/{fmt}/{name}"
+    key = archive_key(session_id, fmt, name)
     named = record_digest(entry)
     if named is None:  # not one the archiver wrote: it never verified
         raise HTTPException(404, f"{fmt} archive of {session_id} names no digest for {name!r}")

@@ -13,6 +13,7 @@ from sqlalchemy import bindparam, select
 from thermcap.api import db
 from thermcap.api.security import check_session_id
 from thermcap.recorder.icd.names import iso_utc, parse_rfc3339
+from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["CelsiusQuery", "FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size",
            "parse_time", "session_row"]
@@ -57,7 +58,7 @@ class FrameModel:
                     raise HTTPException(400, f"{name} must be a number") from None
         from thermcap.recorder.radiometry.session import SessionTemperatures
 
-        session_dir = request.app.state.settings.root / "sessions" / row["id"]
+        session_dir = DataRoot.of(request.app.state.settings.root).session_dir(row["id"])
         try:
             self.versions = read_versions(session_dir)
         except ValueError as exc:

@@ -12,7 +12,7 @@ from thermcap.api.routes.common import parse_time, session_row
 from thermcap.api.security import require
 from thermcap.archive.blobs import BlobFile
 from thermcap.archive.reading.mcap_slice import export_mcap, unreadable_segments
-from thermcap.recorder.storage.layout import EXTRAS_MCAP
+from thermcap.recorder.storage.layout import EXTRAS_MCAP, DataRoot, archive_key
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}", tags=["export"], dependencies=[Depends(require("read"))])
 
@@ -25,7 +25,7 @@ def export(request: Request, session_id: str, start: str | None = None, end: str
     if t0 is not None and t1 is not None and t1 <= t0:
         raise HTTPException(400, "end must be after start")
     topic_list = [t for t in (topics or "").split(",") if t] or None
-    session_dir = request.app.state.settings.root / "sessions" / session_id
+    session_dir = DataRoot.of(request.app.state.settings.root).session_dir(session_id)
     unreadable = unreadable_segments(session_dir)
     if unreadable:  # said before the first byte: a 200 that stops half way is no answer
         raise HTTPException(409, f"session {session_id}: {'; '.join(unreadable[:3])}; `thermcap recover` repairs "
@@ -45,7 +45,7 @@ def export(request: Request, session_id: str, start: str | None = None, end: str
     extras = None
     if frames is not None:
         store = request.app.state.store
-        key = f"sessions/{session_id}/archive/{EXTRAS_MCAP}"
+        key = archive_key(session_id, EXTRAS_MCAP)
         head = store.head(key)
         if head is not None:
             def extras():

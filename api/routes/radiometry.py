@@ -12,6 +12,7 @@ from thermcap.recorder.exports.render import session_model
 from thermcap.recorder.importers.dji_reparam import DJI_KINDS, add_sdk_version
 from thermcap.recorder.importers.dji_sdk import find_backend
 from thermcap.recorder.radiometry.params import ModelVersion, add_version, read_versions
+from thermcap.recorder.storage.layout import DataRoot
 
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/radiometry", tags=["thermography"])
 
@@ -27,7 +28,7 @@ class NewVersion(BaseModel):
 def list_versions(request: Request, session_id: str) -> dict:
     row = session_row(request, session_id)
     try:
-        versions = read_versions(request.app.state.settings.root / "sessions" / row["id"])
+        versions = read_versions(DataRoot.of(request.app.state.settings.root).session_dir(row["id"]))
     except ValueError as exc:
         raise HTTPException(500, str(exc)) from None
     return {"session": row["id"], "recorded_model": session_model(row["radiometric_model"]).to_dict(),
@@ -37,7 +38,7 @@ def list_versions(request: Request, session_id: str) -> dict:
 @router.post("", status_code=201, dependencies=[Depends(require("write"))])
 def new_version(request: Request, session_id: str, body: NewVersion) -> dict:
     row = session_row(request, session_id)
-    session_dir = request.app.state.settings.root / "sessions" / row["id"]
+    session_dir = DataRoot.of(request.app.state.settings.root).session_dir(row["id"])
     if not session_dir.is_dir():
         raise HTTPException(409, f"session {row['id']} has no local folder here (served from the object store)")
     if body.frames is not None and not 0 <= body.frames[0] < body.frames[1] <= row["frames"]:

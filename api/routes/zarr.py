@@ -15,6 +15,7 @@ from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
 from thermcap.archive.reading.frame_table import FrameTable
 from thermcap.recorder.radiometry.params import models_named
+from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["router"]
 
@@ -30,7 +31,7 @@ def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str,
     from thermcap.recorder.radiometry.params import read_versions
 
     try:  # the model versions in force now: a new one is another store (its metadata names it)
-        versions = read_versions(request.app.state.settings.root / "sessions" / row["id"])
+        versions = read_versions(DataRoot.of(request.app.state.settings.root).session_dir(row["id"]))
     except ValueError as exc:
         raise HTTPException(500, str(exc)) from None
     named = models_named(json.loads(row.get("radiometric_model") or "null") or {"kind": "linear"}, versions)

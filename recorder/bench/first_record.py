@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 from typing import Any
 
+from thermcap.recorder.storage.layout import DataRoot
+
 __all__ = ["bench_first_record", "print_lines"]
 
 
@@ -37,7 +39,7 @@ def _record(root: Path, name: str, duration: float, size: tuple[int, int], env: 
         raise RuntimeError(f"thermcap record failed: {r.stderr[-500:]}")
     res = json.loads(r.stdout)
     listed = {s["id"]: s for s in json.loads(_run("ls", "--root", str(root), "--json", env=env).stdout)["sessions"]}
-    info = json.loads(_run("info", str(root / "sessions" / name), "--json", env=env).stdout)
+    info = json.loads(_run("info", str(DataRoot.of(root).session_dir(name)), "--json", env=env).stdout)
     frames = int(res["frames_written"])
     return {"wall_s": round(wall, 3), "frames": frames,
             "analysed": round((frames - int(res["analysis_skipped"])) / frames, 4) if frames else 0.0,

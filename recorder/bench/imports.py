@@ -18,6 +18,7 @@ from typing import Any
 
 from thermcap.recorder.importers import ImportFileError, read_file
 from thermcap.recorder.importers.dji_sdk import DjiBackend
+from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["bench_import", "print_table"]
 
@@ -30,7 +31,7 @@ def _simulated_icd(folder: Path, frames: int) -> list[Path]:
     rec = Recorder(SimSource(frames=frames, paced=False, seed=7), folder / "rec", session_id="bench",
                    analysis=False)
     rec.run()
-    export_session(folder / "rec" / "sessions" / "bench", "icd", folder / "icd")
+    export_session(DataRoot.of(folder / "rec").session_dir("bench"), "icd", folder / "icd")
     return sorted((folder / "icd").glob("*.tif*"))
 
 

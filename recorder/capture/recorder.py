@@ -56,7 +56,7 @@ from thermcap.recorder.icd.topics import (
 from thermcap.recorder.radiometry import LinearModel, describe_model
 from thermcap.recorder.storage.atomic import write_json_atomic
 from thermcap.recorder.storage.foxglove_layout import CountsRange, write_layout
-from thermcap.recorder.storage.layout import SessionLayout
+from thermcap.recorder.storage.layout import DataRoot, SessionLayout
 from thermcap.recorder.storage.lock import lock_session
 from thermcap.recorder.storage.ring import Evictor, ProtectionBook, RingPolicy, Window
 from thermcap.recorder.storage.segments import DiskStalled, SegmentPolicy, SessionWriter
@@ -79,7 +79,7 @@ EXPIRY_ALERT_S = 60.0
 
 
 def sessions_dir(root: str | os.PathLike) -> Path:
-    return Path(root) / "sessions"
+    return DataRoot.of(root).sessions
 
 
 def new_session_id(sensor_id: str, when_ns: int | None = None) -> str:

@@ -11,6 +11,7 @@ import click
 from thermcap.recorder.cli.options import fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import McapFileError
+from thermcap.recorder.storage.layout import DataRoot
 from thermcap.recorder.storage.manifest_file import read_manifest_file
 
 __all__ = ["describe_session", "ls", "recorded_span"]
@@ -74,7 +75,7 @@ def ls(root: str, as_json: bool) -> None:
     """List the sessions under ROOT: id, start, duration, frames, state, archived formats, size."""
     from thermcap.recorder.storage.reader import list_sessions
 
-    if not (Path(root) / "sessions").is_dir():
+    if not DataRoot.of(root).sessions.is_dir():
         fail(f"{root}: not a thermcap data root (no sessions/ folder); pass --root or set THERMCAP_ROOT")
     rows = [describe_session(s) for s in list_sessions(root)]
     if as_json:

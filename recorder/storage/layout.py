@@ -1,8 +1,11 @@
-"""The session folder contract: every file a session holds, named once.
+"""The data root's address book: every file a root and a session hold, named once.
 
-``ROOT/sessions/<id>/`` holds the recording and everything derived from it. The recorder, the
-archiver and the API all find files through ``SessionLayout``, never by spelling names, so the
-layout is changed (and documented, in docs/architecture.md) in one place.
+``ROOT/sessions/<id>/`` holds the recording and everything derived from it; the root holds the
+sessions, the index, the lock, the eviction log and sync's journal. A bucket holds the same
+files under the same relative keys (``sessions/<id>/archive/...``). The recorder, the archiver
+and the API find them through ``DataRoot``, ``SessionLayout`` and the key helpers here, never by
+spelling names, so the layout is changed (and documented, in docs/architecture.md) in one place;
+``tests/unit/meta/test_one_address_book.py`` fails for a module that spells them itself.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ __all__ = [
     "EVICTION_LOG",
     "EXTRAS_MCAP",
     "FOXGLOVE_LAYOUT",
+    "INDEX_DB",
     "LOCK_FILE",
     "MANIFEST_COPY_JSON",
     "MANIFEST_JSON",
@@ -30,13 +34,24 @@ __all__ = [
     "RADIOMETRY_JSON",
     "REFS_SUFFIX",
     "RESERVE_FILE",
+    "SESSIONS_DIR",
+    "SESSIONS_PREFIX",
     "SESSION_JSON",
     "SESSION_NAME_RE",
     "SUMMARY_NAME",
+    "SYNC_DIR",
+    "DataRoot",
     "SessionLayout",
+    "archive_key",
     "check_session_name",
+    "session_key",
+    "session_of_key",
 ]
 
+SESSIONS_DIR = "sessions"  # ROOT/sessions/<id>/: one folder per session
+SESSIONS_PREFIX = f"{SESSIONS_DIR}/"  # the same, as the start of an object key in a bucket
+INDEX_DB = "index.sqlite"  # ROOT/index.sqlite: the API's embedded index (a rebuildable cache)
+SYNC_DIR = ".sync"  # ROOT/.sync/: sync's journal (recorder.storage.sync_journal)
 ACTIVE_SUFFIX = ".active"  # a segment being written, or left by a crash for `recover`
 PARTIAL_SUFFIX = ".partial"  # an archive format (or extras) not verified yet
 SESSION_JSON = "session.json"
@@ -67,6 +82,70 @@ def check_session_name(name: str) -> str:
         raise ValueError(f"session id {name!r}: use 1-128 letters, digits, '_', '-' or '.', starting with a letter "
                          f"or digit, without '..' (it names one folder under ROOT/sessions)")
     return name
+
+
+def session_key(session_id: str, *parts: str) -> str:
+    """The object key of a session's file in a bucket: its path relative to the data root."""
+    return "/".join((SESSIONS_DIR, session_id, *parts))
+
+
+def archive_key(session_id: str, *parts: str) -> str:
+    """The object key of a file of a session's archive (``archive_key(sid, "png16", "0000.zip")``)."""
+    return session_key(session_id, ARCHIVE_DIR, *parts)
+
+
+def session_of_key(key: str) -> str | None:
+    """The session a key relative to the data root belongs to, or None for a key outside one."""
+    parts = key.split("/")
+    return parts[1] if len(parts) > 2 and parts[0] == SESSIONS_DIR and parts[1] else None
+
+
+@dataclass(frozen=True)
+class DataRoot:
+    """Paths of one data root."""
+
+    path: Path
+
+    @classmethod
+    def of(cls, root: str | os.PathLike) -> DataRoot:
+        return cls(Path(root))
+
+    @property
+    def sessions(self) -> Path:
+        return self.path / SESSIONS_DIR
+
+    def session_dir(self, session_id: str) -> Path:
+        """The folder of a session known by id (from the index, a manifest): not checked, so use
+        ``session`` for a name that came from a flag or a request."""
+        return self.sessions / session_id
+
+    def session(self, name: str) -> SessionLayout:
+        """The layout of the session a flag or a request named, refused unless it is one folder
+        inside the root."""
+        return SessionLayout(self.sessions / check_session_name(name))
+
+    def session_dirs(self) -> list[Path]:
+        """Every session folder, by name (including ones no reader takes, like ``.partial``)."""
+        try:
+            return sorted(d for d in self.sessions.iterdir() if d.is_dir())
+        except FileNotFoundError:
+            return []
+
+    @property
+    def index_db(self) -> Path:
+        return self.path / INDEX_DB
+
+    @property
+    def eviction_log(self) -> Path:
+        return self.path / EVICTION_LOG
+
+    @property
+    def sync_dir(self) -> Path:
+        return self.path / SYNC_DIR
+
+    def key_of(self, path: Path) -> str:
+        """The object key of a file under the root (the same relative path in every bucket)."""
+        return path.relative_to(self.path).as_posix()
 
 
 @dataclass(frozen=True)

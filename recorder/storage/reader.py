@@ -20,7 +20,7 @@ from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import camera_topics, decode_image, is_image_topic
 from thermcap.recorder.storage.archive_readers import ARCHIVE_READERS
 from thermcap.recorder.storage.chunks import SegmentIndex, iter_messages, read_through
-from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, SessionLayout
+from thermcap.recorder.storage.layout import PARTIAL_SUFFIX, DataRoot, SessionLayout
 
 __all__ = [
     "SessionFrame",
@@ -215,10 +215,10 @@ def resolve_session(arg: str | Path, root: str | Path) -> Path:
     (its ``session.json``, segments or archive), checked before any command writes in it (a lock,
     an ``archive/`` folder), so a path given by mistake (``/etc``) is refused as it is."""
     p = Path(arg)
-    candidate = Path(root) / "sessions" / str(arg)
+    candidate = DataRoot.of(root).session_dir(str(arg))
     found = p if p.is_dir() else candidate if "/" not in str(arg) and candidate.is_dir() else None
     if found is None:
-        raise McapFileError(f"{arg}: no such session (not a folder, and not an id under {Path(root) / 'sessions'})")
+        raise McapFileError(f"{arg}: no such session (not a folder, and not an id under {DataRoot.of(root).sessions})")
     layout = SessionLayout.of(found)
     if not (layout.session_json.is_file() or layout.manifest.is_file() or session_segments(found)
             or layout.active_segments()):
@@ -228,6 +228,4 @@ def resolve_session(arg: str | Path, root: str | Path) -> Path:
 
 def list_sessions(root: str | Path) -> list[Path]:
     """Session folders under ROOT/sessions; a ``.partial`` one (being made) is not a session yet."""
-    base = Path(root) / "sessions"
-    return sorted(p for p in base.iterdir() if p.is_dir() and not p.name.endswith(PARTIAL_SUFFIX)) \
-        if base.is_dir() else []
+    return [p for p in DataRoot.of(root).session_dirs() if not p.name.endswith(PARTIAL_SUFFIX)]

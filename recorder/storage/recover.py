@@ -30,7 +30,7 @@ from mcap.stream_reader import breakup_chunk
 from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.topics import is_image_topic
 from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
-from thermcap.recorder.storage.layout import SESSION_JSON, SessionLayout
+from thermcap.recorder.storage.layout import SESSION_JSON, DataRoot, SessionLayout
 from thermcap.recorder.storage.ledger import deletions
 from thermcap.recorder.storage.lock import holder, lock_session
 from thermcap.recorder.storage.reader import count_frames
@@ -509,12 +509,9 @@ def _mark_session(session_dir: Path, results: list[RecoveryResult] | None = None
 def recover_leftovers(root: str | os.PathLike) -> list[Path]:
     """At recorder start: recover ``.active`` segments of sessions no live recorder holds."""
     done: list[Path] = []
-    base = Path(root) / "sessions"
-    if not base.is_dir():
-        return done
-    for session in sorted(base.iterdir()):
-        actives = sorted(session.glob(f"*.mcap{ACTIVE_SUFFIX}")) if session.is_dir() else []
-        if not actives and not (session.is_dir() and _left_recording(session)):
+    for session in DataRoot.of(root).session_dirs():
+        actives = sorted(session.glob(f"*.mcap{ACTIVE_SUFFIX}"))
+        if not actives and not _left_recording(session):
             continue
         lock = lock_session(session, "recover")
         if lock is None:

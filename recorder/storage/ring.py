@@ -27,7 +27,7 @@ from typing import Any
 from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.sizes import parse_size
 from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
-from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, SessionLayout
+from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, DataRoot, SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import segment_span
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
@@ -276,15 +276,13 @@ class Evictor(threading.Thread):
 
     def _ring_sessions(self) -> list[Path]:
         found = set(self.books)
-        base = self.root / "sessions"
-        if base.is_dir():
-            for d in base.iterdir():
-                sj = SessionLayout.of(d).session_json
-                try:
-                    if json.loads(sj.read_text()).get("ring"):
-                        found.add(d)
-                except (OSError, ValueError):
-                    continue
+        for d in DataRoot.of(self.root).session_dirs():
+            sj = SessionLayout.of(d).session_json
+            try:
+                if json.loads(sj.read_text()).get("ring"):
+                    found.add(d)
+            except (OSError, ValueError):
+                continue
         return sorted(found)
 
     def _book(self, session_dir: Path) -> ProtectionBook:
@@ -390,7 +388,7 @@ class Evictor(threading.Thread):
         self._book(d).expire(window, why)
         entry = {"at": iso_utc(time.time_ns()), "session": d.name, "expired_window": asdict(window),
                  "reason": why}
-        with open(self.root / EVICTION_LOG, "a") as f:
+        with open(DataRoot.of(self.root).eviction_log, "a") as f:
             f.write(json.dumps(entry) + "\n")
         self.state.windows_expired += 1
         self.state.last_expired_mono = time.monotonic()
@@ -428,7 +426,7 @@ class Evictor(threading.Thread):
         ev = Eviction(at=iso_utc(time.time_ns()), session=victim.session_dir.name, segment=victim.path.name,
                       bytes=size, frames=victim.frames, start=iso_utc(victim.start_ns),
                       end=iso_utc(victim.end_ns), reason=reason)
-        with open(self.root / EVICTION_LOG, "a") as f:
+        with open(DataRoot.of(self.root).eviction_log, "a") as f:
             f.write(json.dumps(asdict(ev)) + "\n")
         self.state.evicted_bytes += size
         self.state.evicted_segments += 1

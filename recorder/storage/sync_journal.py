@@ -33,10 +33,10 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.recorder.exceptions import ThermcapError
+from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["Journal", "ObjectState", "PartState"]
 
-JOURNAL_DIR = ".sync"
 _SNAPSHOT = "journal.json"
 _DONE = "done.jsonl"
 _MIN_LOG_LINES = 512  # below this a compaction costs more than replaying the log does
@@ -89,7 +89,7 @@ class Journal:
 
     def __init__(self, root: Path, *, read_only: bool = False) -> None:
         self.root = root
-        self.dir = root / JOURNAL_DIR
+        self.dir = DataRoot.of(root).sync_dir
         self.path = self.dir / _SNAPSHOT
         self.read_only = read_only
         self.objects: dict[str, ObjectState] = {}

@@ -26,6 +26,7 @@ from typing import Any
 
 from thermcap.recorder.exceptions import ThermcapError
 from thermcap.recorder.storage.digest import file_sha256
+from thermcap.recorder.storage.layout import session_of_key
 from thermcap.recorder.storage.ledger import record_freed
 from thermcap.recorder.storage.ring import load_windows
 from thermcap.recorder.storage.sync_journal import Journal, ObjectState, PartState
@@ -307,13 +308,13 @@ class Syncer:
             else:
                 conf.append(item.key)
         for st in self.journal.objects.values():  # confirmed and freed on the vehicle
-            if sessions is not None and _session_of(st.key) not in sessions:
+            if sessions is not None and session_of_key(st.key) not in sessions:
                 continue
             if st.state == "confirmed" and st.key not in conf and not (self.root / st.key).exists():
                 conf.append(st.key)
         seen = set(conf)
         for key in self.journal.finished_keys():  # finished long ago: out of memory, still on record
-            if key.endswith(".mcap") and key not in seen and (sessions is None or _session_of(key) in sessions):
+            if key.endswith(".mcap") and key not in seen and (sessions is None or session_of_key(key) in sessions):
                 seen.add(key)
                 conf.append(key)
         return SyncStatus(pending, flight, up, conf, pending_bytes, flight_done, flight_bytes)
@@ -354,12 +355,6 @@ class Syncer:
             log.warning("sync: %s kept, its receipt cannot be read now (%s)", key, exc)
             return False
         return bool(r and r.get("ok") and r.get("sha256") == sha256 and r.get("bytes") == size)
-
-
-def _session_of(key: str) -> str:
-    """The session a journal key (``sessions/<name>/...``, as ``plan_root`` names it) is in."""
-    parts = key.split("/")
-    return parts[1] if len(parts) > 2 else ""
 
 
 class _LinkDown(Exception):

@@ -18,6 +18,7 @@ from thermcap.recorder.storage.layout import (
     FOXGLOVE_LAYOUT,
     PROTECTED_JSON,
     SESSION_JSON,
+    DataRoot,
     SessionLayout,
 )
 
@@ -37,10 +38,7 @@ class SyncItem:
 
 
 def plan_root(root: Path, sessions: list[str] | None = None) -> list[SyncItem]:
-    base = root / "sessions"
-    if not base.is_dir():
-        return []
-    dirs = [d for d in base.iterdir() if d.is_dir() and (sessions is None or d.name in sessions)]
+    dirs = [d for d in DataRoot.of(root).session_dirs() if sessions is None or d.name in sessions]
     meta: list[SyncItem] = []
     segs: list[tuple[int, str, SyncItem]] = []
     for d in dirs:
@@ -57,4 +55,4 @@ def plan_root(root: Path, sessions: list[str] | None = None) -> list[SyncItem]:
 
 def _item(root: Path, path: Path, session: str, *, segment: bool) -> SyncItem:
     st = path.stat()
-    return SyncItem(path.relative_to(root).as_posix(), path, st.st_size, st.st_mtime_ns, session, segment)
+    return SyncItem(DataRoot.of(root).key_of(path), path, st.st_size, st.st_mtime_ns, session, segment)
