@@ -77,7 +77,7 @@ def _index_bytes(tmp: Path) -> dict[str, Any]:
         after = _table_bytes(path)
         grown = {k: v - before.get(k, 0) for k, v in after.items() if v - before.get(k, 0) > 0}
         per_frame = sum(grown.values()) / n
-        files = sum(p.stat().st_size for p in (root / "index" / "frames" / name).glob("*.parquet"))
+        files = sum(p.stat().st_size for p in DataRoot.of(root).frames_index(name).glob("*.parquet"))
         out["every_frame_a_target" if name == "hot" else "recorded"] = {
             "bytes_by_table": grown, "bytes_per_frame": round(per_frame, 1),
             "bytes_per_camera_hour": round(per_frame * HOUR_FRAMES),

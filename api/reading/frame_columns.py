@@ -30,6 +30,7 @@ from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
 from thermcap.archive.blobs import BlobStore
 from thermcap.archive.reading.frame_table import FRAME_FIELDS, FrameTable
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
+from thermcap.recorder.storage.layout import frames_index_key
 
 __all__ = ["FrameColumns", "FrameColumnsCache", "frames_key"]
 
@@ -41,7 +42,7 @@ def frames_key(session_id: str, fingerprint: str) -> str:
     """Where a session's frames file lives for one indexed state: a new state is a new key, so a
     reader never sees a file half replaced."""
     state = hashlib.sha256(fingerprint.encode()).hexdigest()[:16]
-    return f"index/frames/{session_id}/{state}.parquet"
+    return frames_index_key(session_id, state)
 
 
 def _digests(values: list[str | None], n: int) -> tuple[np.ndarray, np.ndarray]:

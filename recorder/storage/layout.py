@@ -24,6 +24,7 @@ __all__ = [
     "EVICTION_LOG",
     "EXTRAS_MCAP",
     "FOXGLOVE_LAYOUT",
+    "FRAMES_INDEX_DIR",
     "INDEX_DB",
     "LOCK_FILE",
     "MANIFEST_COPY_JSON",
@@ -44,6 +45,7 @@ __all__ = [
     "SessionLayout",
     "archive_key",
     "check_session_name",
+    "frames_index_key",
     "session_key",
     "session_of_key",
 ]
@@ -52,6 +54,7 @@ SESSIONS_DIR = "sessions"  # ROOT/sessions/<id>/: one folder per session
 SESSIONS_PREFIX = f"{SESSIONS_DIR}/"  # the same, as the start of an object key in a bucket
 INDEX_DB = "index.sqlite"  # ROOT/index.sqlite: the API's embedded index (a rebuildable cache)
 SYNC_DIR = ".sync"  # ROOT/.sync/: sync's journal (recorder.storage.sync_journal)
+FRAMES_INDEX_DIR = "index/frames"  # ROOT/index/frames/<id>/<state>.parquet: the indexer's frame columns
 ACTIVE_SUFFIX = ".active"  # a segment being written, or left by a crash for `recover`
 PARTIAL_SUFFIX = ".partial"  # an archive format (or extras) not verified yet
 SESSION_JSON = "session.json"
@@ -94,6 +97,11 @@ def archive_key(session_id: str, *parts: str) -> str:
     return session_key(session_id, ARCHIVE_DIR, *parts)
 
 
+def frames_index_key(session_id: str, state: str) -> str:
+    """The key (in the root or the bucket) of the indexer's frame columns for one indexed state."""
+    return f"{FRAMES_INDEX_DIR}/{session_id}/{state}.parquet"
+
+
 def session_of_key(key: str) -> str | None:
     """The session a key relative to the data root belongs to, or None for a key outside one."""
     parts = key.split("/")
@@ -134,6 +142,9 @@ class DataRoot:
     @property
     def index_db(self) -> Path:
         return self.path / INDEX_DB
+
+    def frames_index(self, session_id: str) -> Path:
+        return self.path / FRAMES_INDEX_DIR / session_id
 
     @property
     def eviction_log(self) -> Path:

@@ -18,6 +18,7 @@ SPELLINGS = {
     "a session's object key by hand": re.compile(r"""(?<![\w/])f?["']sessions/"""),
     "the index's file": re.compile(r"""["']index\.sqlite["']|/index\.sqlite"""),
     "sync's folder": re.compile(r"""["']\.sync["']"""),
+    "the indexer's frame files": re.compile(r"""["']index/frames|/\s*["']index["']\s*/\s*["']frames["']"""),
 }
 
 
@@ -58,6 +59,6 @@ def test_the_data_root_is_spelt_in_its_address_book_only():
 def test_the_check_sees_a_spelling():
     """The patterns catch what they are for (a check that cannot fail proves nothing)."""
     lines = ['d = root / "sessions" / sid', 'key = f"sessions/{sid}/archive/x"', 'url = "sqlite:///r/index.sqlite"',
-             'j = root / ".sync"']
+             'j = root / ".sync"', 'k = f"index/frames/{sid}/{s}.parquet"', 'root / "index" / "frames" / name']
     assert all(any(p.search(line) for p in SPELLINGS.values()) for line in lines)
     assert not any(p.search('"/api/v1/sessions/{sid}"') for p in SPELLINGS.values())
