@@ -11,6 +11,7 @@ from typing import Any
 
 import click
 
+from thermcap.recorder import settings as env
 from thermcap.recorder.cli.options import PORT, SIZE, Number, fail, json_option, root_option
 from thermcap.recorder.exceptions import ThermcapError
 
@@ -36,7 +37,7 @@ def serve(root: str, host: str, port: int, workers: int, get_path: str | None, a
 
     if not Path(root).is_dir():  # a typo would otherwise serve an empty catalog, and look fine
         fail(f"{root}: no such data root; record or import into it first, or pass the right --root")
-    os.environ["THERMCAP_ROOT"] = root  # the workers build their own app from the environment
+    os.environ[env.ROOT.name] = root  # the workers build their own app from the environment
     try:
         settings = Settings(root=Path(root))
     except ValueError as exc:
@@ -234,7 +235,7 @@ def bench_series_cmd(seconds: float, tool: str, as_json: bool) -> None:
 @click.option("--interval", type=float, default=5.0, show_default=True, help="Seconds between passes.")
 @click.option("--delete-source", is_flag=True,
               help="Delete the MCAP source once every format verified (and uploaded, with a bucket).")
-@click.option("--scheduler", envvar="THERMCAP_DASK_SCHEDULER", default=None, metavar="tcp://HOST:8786",
+@click.option("--scheduler", envvar=env.DASK_SCHEDULER.name, default=None, metavar="tcp://HOST:8786",
               help="A Dask cluster's scheduler (dask-jobqueue, dask-kubernetes or `dask scheduler`); without "
                    "it, an in-process LocalCluster runs the same tasks.")
 @click.option("--local-workers", type=int, default=None, metavar="N",
@@ -346,11 +347,11 @@ def gc(root: str, keep_days: float | None, max_bytes: int | None, require_upload
               help="A file is taken once it has not changed for this many seconds.")
 @click.option("--archive/--no-archive", default=True, show_default=True, help="Archive and verify each session.")
 @click.option("--formats", default="png16,hdf5", show_default=True)
-@click.option("--endpoint", envvar="THERMCAP_S3_ENDPOINT", default=None,
+@click.option("--endpoint", envvar=env.S3_ENDPOINT.name, default=None,
               help="s3:// inboxes: the S3-compatible endpoint (credentials from AWS_ACCESS_KEY_ID / "
                    "AWS_SECRET_ACCESS_KEY).")
-@click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
-@click.option("--scheduler", envvar="THERMCAP_DASK_SCHEDULER", default=None, metavar="tcp://HOST:8786",
+@click.option("--region", envvar=env.S3_REGION.name, default=env.S3_REGION.default, show_default=True)
+@click.option("--scheduler", envvar=env.DASK_SCHEDULER.name, default=None, metavar="tcp://HOST:8786",
               help="Take the files as tasks on this Dask cluster (its workers must see INBOX and ROOT); "
                    "without it, one after another here.")
 @json_option

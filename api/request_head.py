@@ -13,15 +13,16 @@ hold connections open either. nginx's defaults are of the same order (32 KiB of 
 from __future__ import annotations
 
 import asyncio
-import os
 from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
+from thermcap.recorder import settings
+
 __all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "BoundedHead"]
 
 MAX_HEAD_BYTES = 64 * 1024
-HEAD_TIMEOUT_S = float(os.environ.get("THERMCAP_HEAD_TIMEOUT_S", "30"))
+HEAD_TIMEOUT_S = float(settings.HEAD_TIMEOUT_S.get() or "30")
 _END = b"\r\n\r\n"
 
 

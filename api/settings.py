@@ -12,10 +12,10 @@ THERMCAP_CORS_ORIGINS    comma-separated origins allowed by CORS (default: * for
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from thermcap.recorder import settings as env
 from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["Settings"]
@@ -51,31 +51,31 @@ def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
 
 @dataclass
 class Settings:
-    root: Path = field(default_factory=lambda: Path(os.environ.get("THERMCAP_ROOT", "thermcap-data")))
-    database_url: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_DATABASE_URL"))
+    root: Path = field(default_factory=lambda: Path(env.ROOT.get() or "thermcap-data"))
+    database_url: str | None = field(default_factory=env.DATABASE_URL.get)
     tokens: dict[str, frozenset[str]] = field(default_factory=dict)
-    s3_bucket: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_S3_BUCKET"))
-    s3_endpoint: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_S3_ENDPOINT"))
-    s3_region: str = field(default_factory=lambda: os.environ.get("THERMCAP_S3_REGION", "us-east-1"))
-    s3_prefix: str = field(default_factory=lambda: os.environ.get("THERMCAP_S3_PREFIX", ""))
-    cors_origins: list[str] = field(default_factory=lambda: [o for o in os.environ.get(
-        "THERMCAP_CORS_ORIGINS", "*").split(",") if o])
+    s3_bucket: str | None = field(default_factory=lambda: env.BucketSettings.from_env().bucket)
+    s3_endpoint: str | None = field(default_factory=lambda: env.BucketSettings.from_env().endpoint)
+    s3_region: str = field(default_factory=lambda: env.BucketSettings.from_env().region)
+    s3_prefix: str = field(default_factory=lambda: env.BucketSettings.from_env().prefix)
+    cors_origins: list[str] = field(default_factory=lambda: [o for o in (env.CORS_ORIGINS.get() or "").split(",")
+                                                             if o])
     # Series jobs on a Dask cluster (the workers reach the same root, index and bucket); none: the
     # API's own threads.
-    dask_scheduler: str | None = field(default_factory=lambda: os.environ.get("THERMCAP_DASK_SCHEDULER"))
+    dask_scheduler: str | None = field(default_factory=env.DASK_SCHEDULER.get)
     max_page_size: int = 1000
     rescan_interval_s: float = 30.0
 
     def __post_init__(self) -> None:
         self.root = Path(self.root)
         if not self.tokens:
-            text = os.environ.get("THERMCAP_TOKENS", "")
+            text = env.TOKENS.get() or ""
             # set means meant, even empty (compose gives '' for a variable the .env lacks): fail closed
-            if "THERMCAP_TOKENS" in os.environ and not _parse_tokens(text):
+            if env.TOKENS.is_set() and not _parse_tokens(text):
                 raise ValueError("THERMCAP_TOKENS is set but holds no token (empty, or only comments or "
                                  "separators); refusing to serve without authentication (unset it to serve "
                                  "without tokens on 127.0.0.1)")
-            path = os.environ.get("THERMCAP_TOKENS_FILE")
+            path = env.TOKENS_FILE.get()
             if path:
                 from_file = _parse_tokens(Path(path).read_text())
                 if not from_file:  # fail closed: a file meant to guard the service never opens it

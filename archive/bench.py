@@ -28,6 +28,7 @@ import numpy as np
 import tifffile
 
 from thermcap.archive.codecs import get_codec
+from thermcap.recorder import settings
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST
 
@@ -38,7 +39,7 @@ __all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
 #: The real camera files the benchmarks measure on: THERMCAP_SAMPLES, as the tests take it, or the
 #: shared/samples folder beside a checkout.
-SAMPLES = Path(os.environ.get("THERMCAP_SAMPLES") or Path(__file__).resolve().parents[2] / "shared" / "samples")
+SAMPLES = Path(settings.SAMPLES.get() or Path(__file__).resolve().parents[2] / "shared" / "samples")
 
 
 def noise_entropy_bound(sigma_counts: float, bits: int = 16) -> float:

@@ -10,6 +10,7 @@ from typing import Any
 import click
 
 from thermcap.archive.defaults import DEFAULT_FORMATS
+from thermcap.recorder import settings
 from thermcap.recorder.cli.options import Number, fail, json_option, root_option
 from thermcap.recorder.exceptions import SessionBusyError, ThermcapError
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
@@ -170,7 +171,6 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
 
     Damaged copies are marked in the manifest, so the API stops offering them and gc no longer
     counts them; --repair rebuilds them from a verified copy. Exit 1 if damage remains."""
-    import os
 
     from thermcap.archive.blobs import open_store
     from thermcap.archive.scrub import ScrubReport, scrub_session
@@ -178,10 +178,9 @@ def scrub(root_arg: str | None, root: str, sessions: tuple[str, ...], repair: bo
     from thermcap.recorder.storage.reader import list_sessions, resolve_session
 
     base = Path(root_arg or root)
-    bucket = os.environ.get("THERMCAP_S3_BUCKET")
-    store = open_store(base, bucket=bucket, endpoint=os.environ.get("THERMCAP_S3_ENDPOINT"),
-                       region=os.environ.get("THERMCAP_S3_REGION", "us-east-1"),
-                       prefix=os.environ.get("THERMCAP_S3_PREFIX", "")) if bucket else None
+    where = settings.BucketSettings.from_env()
+    store = open_store(base, bucket=where.bucket, endpoint=where.endpoint, region=where.region,
+                       prefix=where.prefix) if where.bucket else None
     try:
         dirs = [resolve_session(s, base) for s in sessions] if sessions else \
             [d for d in list_sessions(base) if SessionLayout.of(d).manifest.is_file()]
@@ -327,10 +326,11 @@ def bench_archive(n_frames: int, session_s: float | None, formats: str | None, r
 
 
 @click.command("sync-confirm")
-@click.option("--bucket", envvar="THERMCAP_S3_BUCKET", default=None, help="The bucket vehicles sync to.")
-@click.option("--endpoint", envvar="THERMCAP_S3_ENDPOINT", default=None, help="S3-compatible endpoint.")
-@click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
-@click.option("--prefix", envvar="THERMCAP_S3_PREFIX", default="", help="Key prefix in the bucket.")
+@click.option("--bucket", envvar=settings.S3_BUCKET.name, default=None, help="The bucket vehicles sync to.")
+@click.option("--endpoint", envvar=settings.S3_ENDPOINT.name, default=None, help="S3-compatible endpoint.")
+@click.option("--region", envvar=settings.S3_REGION.name, default=settings.S3_REGION.default, show_default=True)
+@click.option("--prefix", envvar=settings.S3_PREFIX.name, default=settings.S3_PREFIX.default,
+              help="Key prefix in the bucket.")
 @click.option("--from", "from_dir", type=click.Path(file_okay=False, exists=True), default=None,
               help="Instead of a bucket: the folder vehicles sync to (`thermcap sync --to`).")
 @click.option("--into", "into", type=click.Path(file_okay=False), default=None, metavar="ROOT",

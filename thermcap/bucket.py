@@ -21,6 +21,7 @@ import numpy as np
 from thermcap.archive.formats.base import read_cost
 from thermcap.archive.reading.copies import DamageLog, Part, counts_of, sidecar_of
 from thermcap.recorder.radiometry.params import ModelVersion
+from thermcap.recorder.settings import BucketSettings
 from thermcap.recorder.storage.layout import RADIOMETRY_JSON, session_key
 from thermcap.session import Session
 
@@ -34,7 +35,6 @@ __all__ = ["BucketSession", "open_bucket_session"]
 def open_bucket_session(url: str, *, endpoint: str | None = None, region: str | None = None) -> BucketSession:
     """``s3://BUCKET[/PREFIX]/sessions/ID``: the bucket's endpoint from ``endpoint`` or
     ``THERMCAP_S3_ENDPOINT``, credentials from ``AWS_ACCESS_KEY_ID`` / ``AWS_SECRET_ACCESS_KEY``."""
-    import os
     from pathlib import Path
 
     from thermcap.archive.blobs import open_store
@@ -46,8 +46,9 @@ def open_bucket_session(url: str, *, endpoint: str | None = None, region: str | 
         raise ValueError(f"{url}: a session in a bucket looks like s3://BUCKET/sessions/ID "
                          f"(or s3://BUCKET/PREFIX/sessions/ID, as THERMCAP_S3_PREFIX uploaded it)")
     session_id = check_session_name(path[-1])
-    store = open_store(Path("."), bucket=parts.netloc, endpoint=endpoint or os.environ.get("THERMCAP_S3_ENDPOINT"),
-                       region=region or os.environ.get("THERMCAP_S3_REGION", "us-east-1"),
+    where = BucketSettings.from_env()
+    store = open_store(Path("."), bucket=parts.netloc, endpoint=endpoint or where.endpoint,
+                       region=region or where.region,
                        prefix="/".join(path[:-2]))
     return BucketSession(store, session_id, url)
 

@@ -14,6 +14,7 @@ import click
 
 from thermcap.api import cli as api_cli
 from thermcap.archive import cli as archive_cli
+from thermcap.recorder import settings
 from thermcap.recorder.cli import cli as recorder_commands
 from thermcap.recorder.cli.options import fail, root_option
 from thermcap.recorder.cli.root import bench as recorder_bench
@@ -56,7 +57,7 @@ class _Group(click.Group):
 
 @click.group(cls=_Group, entry_point_group="thermcap.commands", context_settings=HELP)
 @click.version_option(package_name="thermcap", prog_name="thermcap")
-@click.option("--config", "config", envvar="THERMCAP_CONFIG", show_envvar=True, default=None, metavar="FILE",
+@click.option("--config", "config", envvar=settings.CONFIG.name, show_envvar=True, default=None, metavar="FILE",
               type=click.Path(dir_okay=False),
               help="A TOML file of defaults, a table per command ([record], [serve], ...); flags still win.")
 @click.option("-q", "--quiet", is_flag=True, help="Only errors and the results a script reads; no progress.")

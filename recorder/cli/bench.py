@@ -7,6 +7,7 @@ import sys
 
 import click
 
+from thermcap.recorder import settings
 from thermcap.recorder.cli.options import Number, fail, json_option
 from thermcap.recorder.cli.root import bench
 
@@ -48,7 +49,8 @@ def bench_record(n_frames: int, sizes: str, soak: float | None, workdir: str | N
 @click.option("--samples", type=click.Path(file_okay=False, exists=True), default=None,
               help="Also real files here (e.g. ../shared/samples), each copied --copies times, one row per format.")
 @click.option("--copies", type=Number(minimum=1, maximum=10_000, integer=True), default=8, show_default=True)
-@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+@click.option("--dji-sdk", default=settings.DJI_SDK.default, show_default=True, envvar=settings.DJI_SDK.name,
+              metavar="auto|off|PATH",
               help="Also time DJI files with this SDK backend.")
 @json_option
 def bench_import_cmd(n_frames: int, samples: str | None, copies: int, dji_sdk: str, as_json: bool) -> None:

@@ -9,6 +9,7 @@ from typing import Any
 
 import click
 
+from thermcap.recorder import settings
 from thermcap.recorder.cli.options import Number, fail, json_option, parse_instant, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import ThermcapError
@@ -22,7 +23,8 @@ from thermcap.recorder.exceptions import ThermcapError
 @click.option("--session-per-file", is_flag=True, help="One session per file.")
 @click.option("--analysis/--no-analysis", default=True, show_default=True,
               help="Run the hot-spot detector on the frames.")
-@click.option("--dji-sdk", default="auto", show_default=True, envvar="THERMCAP_DJI_SDK", metavar="auto|off|PATH",
+@click.option("--dji-sdk", default=settings.DJI_SDK.default, show_default=True, envvar=settings.DJI_SDK.name,
+              metavar="auto|off|PATH",
               help="DJI temperatures by DJI's own code: auto = dji-thermal-cli if on PATH; off; or the path to "
                    "libdirp (.so/.dll) or a dji-thermal-cli executable. Without one, DJI dirp/girp/hirp frames "
                    "import with no temperature and iirp with an approximate one.")

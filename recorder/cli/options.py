@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from collections.abc import Callable
 from typing import Any, NoReturn, TypeVar
 
 import click
+
+from thermcap.recorder import settings
 
 __all__ = ["PORT", "Number", "default_root", "fail", "json_option", "port_option", "root_option"]
 
@@ -15,7 +16,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def default_root() -> str:
-    return os.environ.get("THERMCAP_ROOT", "thermcap-data")
+    return settings.ROOT.get() or "thermcap-data"
 
 
 def fail(message: str, code: int = 1) -> NoReturn:

@@ -10,6 +10,7 @@ from typing import TYPE_CHECKING, Any
 
 import click
 
+from thermcap.recorder import settings
 from thermcap.recorder.cli.listing import recorded_span
 from thermcap.recorder.cli.options import PORT, Number, fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
@@ -96,7 +97,7 @@ EXIT_SOURCE_LOSS = 4
 @click.option("--control", "control", is_flag=True,
               help="Serve the control endpoint (thermcap ctl; /status, /metrics, /healthz) on 127.0.0.1.")
 @click.option("--control-port", type=PORT, default=0, show_default=True, help="Its port (0: any free port).")
-@click.option("--control-token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
+@click.option("--control-token", envvar=settings.CONTROL_TOKEN.name, default=None, show_envvar=True,
               help="Bearer token every control route but /healthz requires (set it in the environment).")
 @click.option("--control-insecure", is_flag=True,
               help="Run the control endpoint without a token (any local user could pause the recording).")
@@ -329,7 +330,7 @@ def record(sources: tuple[str, ...], duration: float | None, fps: float, width: 
 @root_option
 @click.option("--session", "session_id", default=None, help="Which recorder, when several run under ROOT.")
 @click.option("--url", default=None, help="The control endpoint (default: found under ROOT/run/).")
-@click.option("--token", envvar="THERMCAP_CONTROL_TOKEN", default=None, show_envvar=True,
+@click.option("--token", envvar=settings.CONTROL_TOKEN.name, default=None, show_envvar=True,
               help="The recorder's control token.")
 @json_option
 def ctl(action: str, note: str, root: str, session_id: str | None, url: str | None, token: str | None,

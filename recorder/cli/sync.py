@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING
 
 import click
 
+from thermcap.recorder import settings
 from thermcap.recorder.cli.options import Number, fail, json_option, root_option
 from thermcap.recorder.cli.root import cli
 from thermcap.recorder.exceptions import ThermcapError
@@ -29,12 +30,14 @@ def _target(bucket: str | None, endpoint: str | None, region: str, prefix: str, 
 
 @cli.command("sync")
 @root_option
-@click.option("--bucket", envvar="THERMCAP_S3_BUCKET", default=None, help="Destination bucket ($THERMCAP_S3_BUCKET).")
-@click.option("--endpoint", envvar="THERMCAP_S3_ENDPOINT", default=None,
+@click.option("--bucket", envvar=settings.S3_BUCKET.name, default=None,
+              help="Destination bucket ($THERMCAP_S3_BUCKET).")
+@click.option("--endpoint", envvar=settings.S3_ENDPOINT.name, default=None,
               help="S3-compatible endpoint ($THERMCAP_S3_ENDPOINT); credentials from AWS_ACCESS_KEY_ID / "
                    "AWS_SECRET_ACCESS_KEY.")
-@click.option("--region", envvar="THERMCAP_S3_REGION", default="us-east-1", show_default=True)
-@click.option("--prefix", envvar="THERMCAP_S3_PREFIX", default="", help="Key prefix in the bucket.")
+@click.option("--region", envvar=settings.S3_REGION.name, default=settings.S3_REGION.default, show_default=True)
+@click.option("--prefix", envvar=settings.S3_PREFIX.name, default=settings.S3_PREFIX.default,
+              help="Key prefix in the bucket.")
 @click.option("--to", "to_dir", type=click.Path(file_okay=False), default=None,
               help="Instead of a bucket: a folder (a depot share), written part by part.")
 @click.option("--session", "sessions", multiple=True, help="Only these sessions (repeat); default: the whole root.")

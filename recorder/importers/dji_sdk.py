@@ -23,12 +23,13 @@ from typing import Protocol
 
 import numpy as np
 
+from thermcap.recorder import settings
 from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["CLI_PARAMS", "ENV_VAR", "DjiBackend", "DjiSdkError", "DjiThermalCli", "LibDirp", "find_backend",
            "sdk_params_problem"]
 
-ENV_VAR = "THERMCAP_DJI_SDK"
+ENV_VAR = settings.DJI_SDK.name
 
 
 class DjiSdkError(ThermcapError):
@@ -193,7 +194,7 @@ def find_backend(spec: str | None = "auto") -> DjiBackend | None:
     ``off``: none; anything else is a path to libdirp (``.so``/``.dll``/``.dylib``) or to a
     ``dji-thermal-cli`` executable. A path that does not work is an error, never a silent fallback."""
     if spec in (None, "", "auto"):
-        spec = os.environ.get(ENV_VAR) or "auto"
+        spec = settings.DJI_SDK.get() or "auto"
         if spec == "auto":
             found = shutil.which("dji-thermal-cli")
             return DjiThermalCli(found) if found else None
