@@ -12,8 +12,9 @@ every object ever shipped. The journal is a snapshot plus a log, in ``ROOT/.sync
 - ``journal.json`` holds the objects still live at the last compaction and its *generation*;
 - ``journal-<generation>.log`` gets one fsynced JSON line per change since (the object's whole
   state, or its removal), so a change costs the size of one object;
-- ``done.jsonl`` keeps, appended once, the objects that are finished and gone from the vehicle
-  (confirmed, or a small file sent): they leave memory and the snapshot, not the record.
+- ``done.jsonl`` keeps, appended once, the objects sent and gone from the vehicle (evicted or
+  freed after the store had them): nothing is left to resend or free, so they leave memory and
+  the snapshot, not the record, and a recording of a week costs sync no more memory than an hour.
 
 Compaction writes the next generation's snapshot atomically (temporary file, fsync, rename) and
 only then deletes the old log, so a crash at any point leaves one consistent state. A torn last
@@ -69,12 +70,6 @@ class ObjectState:
     @property
     def bytes_done(self) -> int:
         return self.size if self.state in ("uploaded", "confirmed") else sum(p.size for p in self.parts)
-
-    @property
-    def finished(self) -> bool:
-        """Nothing more will happen to it: a segment the cloud confirmed, or a small file sent
-        (small files get no receipt)."""
-        return self.state == "confirmed" or (self.state == "uploaded" and not self.key.endswith(".mcap"))
 
     @classmethod
     def from_json(cls, o: dict[str, Any]) -> ObjectState:
@@ -152,13 +147,14 @@ class Journal:
     def get(self, key: str) -> ObjectState | None:
         return self.objects.get(key)
 
-    def finished_keys(self) -> Iterator[str]:
-        """Keys of objects finished and gone from the vehicle since the journal began (a key
-        may repeat if a compaction was cut short)."""
+    def finished(self) -> Iterator[tuple[str, str]]:
+        """(key, state) of the objects sent and gone from the vehicle since the journal began
+        (a key may repeat if a compaction was cut short)."""
         with contextlib.suppress(FileNotFoundError), open(self.dir / _DONE, "rb") as f:
             for line in f:
                 with contextlib.suppress(ValueError, KeyError, TypeError):
-                    yield json.loads(line)["key"]
+                    rec = json.loads(line)
+                    yield rec["key"], rec["state"]
 
     # -- writing -------------------------------------------------------------------------------
     def put(self, obj: ObjectState) -> None:
@@ -187,7 +183,7 @@ class Journal:
             self._compact()
 
     def compact(self) -> None:
-        """Fold the log into the next snapshot and move finished objects gone from the vehicle
+        """Fold the log into the next snapshot and move objects sent and gone from the vehicle
         to ``done.jsonl``. Whether a file is gone is looked at now, not remembered."""
         with self._lock:
             self._compact()
@@ -196,7 +192,8 @@ class Journal:
         if self.read_only:
             raise ThermcapError(f"{self.dir}: this journal was opened to read")
         self.dir.mkdir(parents=True, exist_ok=True)
-        gone = [st for st in self.objects.values() if st.finished and not (self.root / st.key).exists()]
+        gone = [st for st in self.objects.values()
+                if st.state in ("uploaded", "confirmed") and not (self.root / st.key).exists()]
         if gone:
             with open(self.dir / _DONE, "ab") as f:
                 for st in gone:

@@ -312,11 +312,11 @@ class Syncer:
                 continue
             if st.state == "confirmed" and st.key not in conf and not (self.root / st.key).exists():
                 conf.append(st.key)
-        seen = set(conf)
-        for key in self.journal.finished_keys():  # finished long ago: out of memory, still on record
+        seen = set(conf) | set(up)
+        for key, state in self.journal.finished():  # sent and gone long ago: out of memory, on record
             if key.endswith(".mcap") and key not in seen and (sessions is None or session_of_key(key) in sessions):
                 seen.add(key)
-                conf.append(key)
+                (conf if state == "confirmed" else up).append(key)
         return SyncStatus(pending, flight, up, conf, pending_bytes, flight_done, flight_bytes)
 
     def delete_confirmed(self) -> list[str]:

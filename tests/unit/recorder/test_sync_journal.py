@@ -65,7 +65,7 @@ def test_objects_shipped_and_gone_from_the_vehicle_leave_memory_but_not_the_reco
     j = Journal(root)
     j.compact()
     assert list(j.objects) == ["sessions/s/000007.mcap"]  # the one still on the vehicle
-    assert len(set(j.finished_keys())) == 2999
+    assert len({k for k, _ in j.finished()}) == 2999
     assert len(Journal(root).objects) == 1
 
 
@@ -105,3 +105,21 @@ def test_reading_the_journal_changes_nothing(tmp_path):
     before = sorted((p.name, p.read_bytes()) for p in (root / ".sync").iterdir())
     assert len(Journal(root, read_only=True).objects) == 3
     assert sorted((p.name, p.read_bytes()) for p in (root / ".sync").iterdir()) == before
+
+
+def test_status_still_names_what_left_memory(tmp_path):
+    """A segment the ring evicted after it was sent, and one freed after the cloud confirmed it,
+    stay in ``sync --status`` once the journal has moved them out of memory."""
+    from thermcap.recorder.sync.engine import Syncer
+    from thermcap.recorder.sync.targets import DirTarget
+
+    root = tmp_path / "vehicle"
+    objects = _shipped(2)
+    objects["sessions/s/000001.mcap"]["state"] = "uploaded"  # evicted before its receipt came
+    _journal_of(root, objects)
+    (root / "sessions" / "s").mkdir(parents=True)
+    j = Journal(root)
+    j.compact()
+    assert not j.objects
+    st = Syncer(root, DirTarget(tmp_path / "depot")).status()
+    assert st.confirmed == ["sessions/s/000000.mcap"] and st.uploaded == ["sessions/s/000001.mcap"]
