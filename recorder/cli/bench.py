@@ -113,6 +113,20 @@ def bench_analysis_cmd(n_frames: int, samples: str | None, overlays: str | None,
 
 
 
+@bench.command("cdr")
+@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=100_000, integer=True), default=120,
+              show_default=True, help="Simulated frames whose documents are encoded.")
+@click.option("--repeat", type=Number(minimum=1, maximum=10_000, integer=True), default=20, show_default=True)
+@json_option
+def bench_cdr_cmd(n_frames: int, repeat: int, as_json: bool) -> None:
+    """The sidecar and the targets' marks, laid out by hand, against mcap_ros2's and rosbags'
+    CDR encoders (rosbags the anchor), after checking all three give the same bytes."""
+    from thermcap.recorder.bench.cdr import bench_cdr, print_table
+
+    res = bench_cdr(n_frames, repeat)
+    click.echo(json.dumps(res, indent=2) if as_json else print_table(res))
+
+
 @bench.command("cameras")
 @click.option("--seconds", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=10.0,
               show_default=True, help="Seconds per recording.")

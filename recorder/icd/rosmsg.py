@@ -18,10 +18,9 @@ import math
 import struct
 from collections.abc import Callable
 from dataclasses import dataclass
-from functools import cache
 from typing import Any, NamedTuple
 
-from thermcap.recorder.icd.cdr import compile_encoder, pad, phase_layouts, write_string
+from thermcap.recorder.icd.cdr import library_encoder, pad, phase_layouts, write_string
 from thermcap.recorder.icd.topics import sum_image_topics
 
 __all__ = [
@@ -56,12 +55,7 @@ class RosMessage:
         data = raw if raw is not None else json.dumps(doc, separators=(",", ":")).encode()
         if self.layout is not None:
             return self.layout(doc, data)
-        return _encoder(self.name, self.text)({"json": data.decode(), **self.fields(doc)})
-
-
-@cache
-def _encoder(name: str, text: str) -> Callable[[Any], bytes]:
-    return compile_encoder(name, text)
+        return library_encoder(self.name, self.text)({"json": data.decode(), **self.fields(doc)})
 
 
 def _f(v: Any) -> float:
@@ -122,16 +116,14 @@ _BOX_TARGET = phase_layouts(["I", "i", "i", "i", "i", "I", "d", "d", "d", "d"])
 
 
 def _sidecar_layout(doc: dict[str, Any], raw: bytes) -> bytes:
-    """``ThermalSidecar`` laid out by hand: the bytes of the compiled plan (and of mcap_ros2)
-    for ``_sidecar_fields(doc)``, whose values it packs, tested on every shape of document the
-    plan is.
+    """``ThermalSidecar`` laid out by hand: mcap_ros2's bytes for ``_sidecar_fields(doc)``,
+    whose values it packs, tested on every shape of document.
 
-    Why: the recorder writes one with every frame, and the plan's general machinery (a writer
-    per field) cost 0.033 ms a frame in isolation, twice that inside a recording; laid out here,
-    about 0.02 ms, and the writer thread went from 0.45 to 0.40 ms a frame. A target with the
-    usual four-number box and two-number centroid is one pack (0.018 -> 0.015 ms a frame with
-    three targets)."""
-    raw.decode("utf-8")  # the plan takes text: bytes that are not UTF-8 fail here as they did there
+    Why by hand: the recorder writes one with every frame, on its writer thread; a generic
+    encoder's machinery (a lookup and a coercion per field) is what ``thermcap bench cdr``
+    weighs this against. A target with the usual four-number box and two-number centroid is one
+    pack."""
+    raw.decode("utf-8")  # the library takes text: bytes that are not UTF-8 fail here as they would there
     f = _sidecar_fields(doc)
     out = bytearray(b"\x00\x01\x00\x00")  # CDR_LE; alignment counts from after these four bytes
     out += _U32.pack(len(raw) + 1)  # json: at offset 0, aligned
@@ -407,10 +399,10 @@ _LINE_LOOP, _THICKNESS, _FONT_SIZE = 2, 2.0, 12.0
 def annotations_message(stamp_ns: int, targets: list[dict[str, Any]]) -> bytes:
     """The targets' marks as CDR ``foxglove_msgs/msg/ImageAnnotations``, for Foxglove's Image panel.
 
-    Why not the compiled plan every other message uses: this one is written with every frame and
-    its shape is fixed but for the labels, so its layout is laid out here once. That took the
-    recorder's CPU for it from about 0.05 to 0.01 ms a frame. The bytes are the plan's (and
-    mcap_ros2's) for ``annotations_doc``: tested on random targets and labels of every length.
+    Laid out by hand, not by the library's encoder the low-rate messages use: it is written with
+    every frame and its shape is fixed but for the labels (``thermcap bench cdr`` weighs it
+    against mcap_ros2 and rosbags). The bytes are mcap_ros2's for ``annotations_doc``: tested on
+    random targets and labels of every length.
     """
     sec, nsec = divmod(int(stamp_ns), 1_000_000_000)
     marks = target_marks(targets)
