@@ -16,7 +16,7 @@ from thermcap.recorder.exceptions import SessionBusyError, ThermcapError
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST, DIGESTS
 from thermcap.recorder.storage.layout import SessionLayout
 
-__all__ = ["archive", "audit", "bench_archive", "scrub", "verify"]
+__all__ = ["archive", "audit", "scrub", "verify"]
 
 
 def _formats(value: str) -> list[str]:
@@ -279,52 +279,6 @@ def audit(sessions: tuple[str, ...], root: str, prices: str | None, project_came
                        f"{c['storage_total'] + c['put_total']:>34,.2f}")
 
 
-@click.command("archive")
-@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=60,
-              show_default=True, help="Simulated frames per run.")
-@click.option("--session", "session_s", type=Number(minimum=0, above=True, maximum=86400, unit="s"), default=None,
-              metavar="SECONDS",
-              help="Instead: archive a whole 640x512@60 session of this length end to end and report x real time, "
-                   "beside the formats' own encode time (the floor) and each format alone.")
-@click.option("--formats", default=None, metavar="ID,ID",
-              help="--session: the formats to archive (default: the archiver's defaults).")
-@click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
-              help="--session: time the whole archive this many times and report the median run (each run listed).")
-@click.option("--digest", type=click.Choice(list(DIGESTS)), default=DEFAULT_DIGEST, show_default=True,
-              help="--session: the hash of the manifest's proofs, as `thermcap archive --digest`.")
-@json_option
-def bench_archive(n_frames: int, session_s: float | None, formats: str | None, repeat: int, digest: str,
-                  as_json: bool) -> None:
-    """Per codec: ratio, encode and decode fps, against Pillow PNG, tifffile LZW and h5py gzip-4."""
-    from thermcap.archive.bench import bench_archive as run
-    from thermcap.archive.bench import bench_session, print_table
-
-    if session_s:
-        res = bench_session(session_s, tuple(formats.split(",")) if formats else None, repeat=repeat, digest=digest)
-        click.echo(json.dumps(res, indent=2) if as_json else
-                   f"{res['seconds_of_recording']} s of 640x512@60 ({res['frames']} frames), formats "
-                   f"{', '.join(res['formats'])}: archived in {res['archive_wall_s']} s = "
-                   f"{res['x_real_time']}x real time"
-                   + (f" (the median of {repeat} runs: {res['x_real_time_runs']})" if repeat > 1 else "")
-                   + f", {res['cpu_ms_per_frame']} CPU ms per frame (at best "
-                   f"{res['cpu_bound_x_real_time']}x on {res['cores']} cores); the formats' own encoders alone: "
-                   f"{res['floor_x_real_time']}x; one format at a time: {res['x_real_time_one_format']}; "
-                   f"writing and reading back alone, {res['formats_cpu_ms_per_frame']} CPU ms per frame "
-                   f"{res['format_cpu_ms_per_frame']}: at best {res['formats_bound_x_real_time']}x. The "
-                   f"archive's CPU against theirs: {res['cpu_vs_formats']}x (goal <= 1.10x; each run against "
-                   f"the floor measured right after it: {res['cpu_vs_formats_rounds']}, median "
-                   f"{res['cpu_vs_formats_rounds_median']}x); against the same formats side by side, as the "
-                   f"archive runs them: median {res['cpu_vs_formats_together_rounds_median']}x; against theirs plus "
-                   f"the one read of the source ({res['source_read_cpu_ms_per_frame']} ms a frame): "
-                   f"{res['cpu_vs_formats_and_source_read']}x. Not in these "
-                   f"figures: the process's first archive (1 s of frames, imports and compiled kernels loaded), "
-                   f"{res['first_archive_of_1_s_wall_s']} s")
-        return
-
-    rows = run(n_frames)
-    click.echo(json.dumps(rows, indent=2) if as_json else print_table(rows))
-
-
 @click.command("sync-confirm")
 @click.option("--bucket", envvar=settings.S3_BUCKET.name, default=None, help="The bucket vehicles sync to.")
 @click.option("--endpoint", envvar=settings.S3_ENDPOINT.name, default=None, help="S3-compatible endpoint.")
@@ -368,44 +322,3 @@ def sync_confirm(bucket: str | None, endpoint: str | None, region: str, prefix: 
     if report.damaged or (landed and landed.damaged):
         sys.exit(1)
 
-
-@click.command("temporal")
-@click.option("--frames", "n_frames", type=Number(minimum=1, maximum=1_000_000, integer=True), default=240,
-              show_default=True, help="Frames per sequence.")
-@click.option("--file", "files", multiple=True, type=click.Path(exists=True, dir_okay=False),
-              help="A multi-frame file of your own (FLIR SEQ/CSQ, anything `thermcap import` reads): a row "
-                   "with the goal of JPEG-XL e2's ratio. Repeat for more.")
-@json_option
-def bench_temporal_cmd(n_frames: int, files: tuple[str, ...], as_json: bool) -> None:
-    """tpred (temporal prediction) against JPEG-XL e2, JPEG-LS, PNG16 and FFV1 on still, sweeping, cued,
-    shaking and gain-stepping views, the samples' and your own real sequences, and its rate in a fresh
-    process."""
-    from thermcap.archive.bench_temporal import bench_temporal
-    from thermcap.recorder.importers import ImportFileError
-
-    try:
-        rows = bench_temporal(n_frames, files)
-    except ImportFileError as exc:
-        raise click.ClickException(str(exc)) from None
-    if as_json:
-        click.echo(json.dumps(rows, indent=2))
-        return
-    seqs = [r for r in rows if r["kind"] == "sequence"]
-    prev = f"v{seqs[0]['previous_bitstream']}" if seqs else "prev"
-    click.echo(f"{'sequence':42} {'tpred':>6} {'jxl e2':>6} {'x jxl':>6} {'jpegls':>6} {'ffv1':>6} {'png16':>6} "
-               f"{'fps 1c':>7} {'fps 2c':>7} {prev + ' x jxl':>8} {prev + ' 2c':>6}")
-    for r in seqs:
-        click.echo(f"{r['sequence']:42} {r['tpred_ratio']:>6} {r['jxl_e2_ratio']:>6} {r['x_jxl_e2']:>6} "
-                   f"{r['jpegls_ratio']:>6} {r.get('ffv1_ratio', '-')!s:>6} {r['png16_ratio']:>6} "
-                   f"{r['tpred_fps_1_core']:>7} {r['tpred_fps_2_cores']:>7} {r['tpred_previous_x_jxl_e2']:>8} "
-                   f"{r['tpred_previous_fps_2_cores']:>6}")
-    for r in rows:
-        if r["kind"] == "unreadable":
-            click.echo(f"left out, a sample that does not import: {r['error']}", err=True)
-        if r["kind"] == "fresh_process":
-            click.echo(f"{r['sequence']} ({r['frames']} frames {r['size']}, two threads, from the codec's import): "
-                       f"{r['fps_2_cores_cached']} fps with the compiled kernels cached "
-                       f"(first frame {r['first_frame_s_cached']} s, "
-                       f"{r['fps_2_cores_cached_after_start']} fps after it), "
-                       f"{r['fps_2_cores_cold_cache']} fps compiling them "
-                       f"(first frame {r['first_frame_s_cold_cache']} s); goal {r['goal_fps_2_cores']}")

@@ -3,7 +3,8 @@
 Each room keeps its commands beside its code (``recorder.cli``, ``archive.cli``, ``api.cli``);
 this module, above all three, imports them directly, so the import graph shows who depends on
 whom. Entry points remain for third-party plugins only: a command of yours in the group
-``thermcap.commands``, a benchmark in ``thermcap.bench``.
+``thermcap.commands``, a benchmark in ``thermcap.bench``; thermcap's own benchmarks are in
+``thermcap.benches``.
 """
 
 from __future__ import annotations
@@ -14,10 +15,10 @@ import click
 
 from thermcap.api import cli as api_cli
 from thermcap.archive import cli as archive_cli
+from thermcap.benches.cli import bench as bench_commands
 from thermcap.recorder import settings
 from thermcap.recorder.cli import cli as recorder_commands
 from thermcap.recorder.cli.options import fail, root_option
-from thermcap.recorder.cli.root import bench as recorder_bench
 from thermcap.recorder.exceptions import ThermcapError
 
 __all__ = ["bench", "cli", "main"]
@@ -89,11 +90,8 @@ for _command in (archive_cli.archive, archive_cli.verify, archive_cli.audit, arc
                  archive_cli.sync_confirm, api_cli.serve, api_cli.index, api_cli.upload, api_cli.worker,
                  api_cli.gc, api_cli.watch, api_cli.jobs):
     cli.add_command(_command)
-for _name, _command in recorder_bench.commands.items():
+for _name, _command in bench_commands.commands.items():
     bench.add_command(_command, _name)
-for _command in (archive_cli.bench_archive, archive_cli.bench_temporal_cmd, api_cli.bench_jobs_cmd,
-                 api_cli.bench_series_cmd, api_cli.bench_index_cmd, api_cli.bench_api_cmd):
-    bench.add_command(_command)
 
 
 @cli.command("cut")
@@ -129,54 +127,6 @@ def cut(session: str, root: str, start: str | None, end: str | None, topics: str
                                "end_ns": res.end_ns, "topics": res.topics}, indent=2))
     else:
         click.echo(f"{res.out}: {res.bytes:,} bytes")
-
-
-@bench.command("python")
-@click.option("--frames", type=click.IntRange(10, 100_000), default=600, show_default=True)
-@click.option("--rounds", type=click.IntRange(1, 21), default=5, show_default=True)
-@click.option("--hour", is_flag=True,
-              help="Also open a real one-hour session (216,000 frames, recorded first: minutes).")
-@click.option("--json", "as_json", is_flag=True, help="One JSON document.")
-def bench_python_cmd(frames: int, rounds: int, hour: bool, as_json: bool) -> None:
-    """The Python API: Zarr endpoint vs h5py, thermcap.open(url) vs a raw GET, to_xarray's open."""
-    import json
-
-    from thermcap.bench import bench_python
-
-    res = bench_python(frames=frames, rounds=rounds, hour=hour)
-    if as_json:
-        click.echo(json.dumps(res, indent=2))
-        return
-    click.echo(f"{res['frames']} frames {res['size']}, median of {res['rounds']} alternating rounds")
-    for name in ("zarr_whole_session_vs_h5py", "first_frame_open_vs_raw_get"):
-        r = res[name]
-        click.echo(f"  {name:30} ours {r['ours_s']:.4f} s  anchor {r['anchor_s']:.4f} s  ratio {r['ratio']:.2f}x"
-                   f"  (goal {r['goal']})")
-    o = res["to_xarray_open"]
-    click.echo(f"  {'to_xarray_open':30} {o['seconds']:.4f} s, {o['frames_read']} frames read  (goal {o['goal']})")
-    if "to_xarray_open_one_hour" in res:
-        h = res["to_xarray_open_one_hour"]
-        click.echo(f"  {'to_xarray_open_one_hour':30} {h['seconds']:.4f} s for {h['frames']:,} frames "
-                   f"({h['chunks']:,} chunks), {h['frames_read']} frames read, {h['peak_python_mb']} MB peak; "
-                   f"imports {h['imports_s']} s apart  (goal {h['goal']})")
-
-
-@bench.command("startup")
-@click.option("--rounds", type=click.IntRange(1, 51), default=7, show_default=True)
-@click.option("--json", "as_json", is_flag=True, help="One JSON document.")
-def bench_startup_cmd(rounds: int, as_json: bool) -> None:
-    """How fast the command starts: --help against `python -c "import click"`."""
-    import json
-
-    from thermcap.bench import bench_startup
-
-    res = bench_startup(rounds)
-    if as_json:
-        click.echo(json.dumps(res, indent=2))
-        return
-    for name, r in res.items():
-        click.echo(f"  {name:24} {r['ours_s'] * 1000:7.1f} ms  import click {r['anchor_s'] * 1000:6.1f} ms  "
-                   f"ratio {r['ratio']:.2f}x  (goal {r['goal']})")
 
 
 def _command_named(args: list[str]) -> str | None:

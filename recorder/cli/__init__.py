@@ -1,9 +1,8 @@
 """The recorder's subcommands, one module per group (importing them registers them on
-``root.cli`` and ``root.bench``), and the options every room's commands share (``options``)."""
+``root.cli``), and the options every room's commands share (``options``)."""
 
 from thermcap.recorder.cli import (  # noqa: F401  (registers the commands)
     analyze,
-    bench,
     files,
     listing,
     live,

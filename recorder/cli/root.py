@@ -1,4 +1,4 @@
-"""The recorder's subcommands gather on these two groups; the ``thermcap`` command itself (its
+"""The recorder's subcommands gather on this group; the ``thermcap`` command itself (its
 root options, the other rooms' subcommands, ``main``) is composed in ``thermcap.cli``, above all
 three packages, so the recorder never imports the archive or the API."""
 
@@ -6,14 +6,10 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["bench", "cli"]
+__all__ = ["cli"]
 
 
 @click.group()
 def cli() -> None:
     """The recorder's commands (record, ctl, info, export, ...); ``thermcap.cli`` adds them to the root."""
 
-
-@click.group()
-def bench() -> None:
-    """The recorder's benchmarks; ``thermcap.cli`` merges them into ``thermcap bench``."""

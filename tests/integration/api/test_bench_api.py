@@ -9,7 +9,7 @@ import json
 import pytest
 
 from tests.conftest import run_cli
-from thermcap.api.bench_nginx import find_nginx
+from thermcap.benches.nginx import find_nginx
 
 
 @pytest.mark.skipif(find_nginx() is None, reason="nginx is not installed (.ci/run installs nginx-light)")

@@ -107,8 +107,8 @@ def test_bench_archive_codecs_sets_the_archive_s_lzw_beside_tifffile_s():
 
 def test_the_samples_sequences_are_found_at_any_depth_and_a_damaged_one_is_left_out_with_its_reason(
         samples, tmp_path, monkeypatch):
-    import thermcap.archive.bench as bench
-    from thermcap.archive.bench_temporal import real_sequences
+    import thermcap.benches.archive as bench
+    from thermcap.benches.temporal import real_sequences
 
     one = (samples / "flir" / "frame_000000.fff").read_bytes()
     (tmp_path / "flir" / "seq").mkdir(parents=True)
@@ -131,8 +131,8 @@ def test_the_formats_floor_compares_every_frame_it_reads_back(tmp_path):
     import numpy as np
     import pytest
 
-    from thermcap.archive.bench import format_cpu, formats_together_cpu, verify_read
     from thermcap.archive.formats import ArchiveContext, get_format
+    from thermcap.benches.archive import format_cpu, formats_together_cpu, verify_read
     from thermcap.recorder.storage.reader import SessionFrame
 
     rng = np.random.default_rng(5)

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import statistics
 
-from thermcap.recorder.bench.analysis_recording import SCENES, SIZES, print_lines, record_vs_no_analysis
+from thermcap.benches.analysis_recording import SCENES, SIZES, print_lines, record_vs_no_analysis
 
 
 def test_each_scene_is_recorded_with_and_without_analysis_and_each_round_compared(tmp_path):
@@ -24,7 +24,7 @@ def test_each_scene_is_recorded_with_and_without_analysis_and_each_round_compare
 def test_the_hand_off_line_measures_batched_answers_against_one_message_a_frame():
     """Its short form: real child processes, the recording's CPU a frame both ways, and the
     batched child sending fewer messages than frames (it is behind through a burst)."""
-    from thermcap.recorder.bench.analysis_handoff import handoff_cpu
+    from thermcap.benches.analysis_handoff import handoff_cpu
 
     res = handoff_cpu(frames=200, rounds=1, size=(160, 128))
     assert res["size"] == "160x128" and res["frames"] == 200 and res["rounds"] == 1

@@ -43,7 +43,7 @@ def test_bench_record_takes_more_rounds():
 def test_each_writer_runs_in_a_process_of_its_own_and_a_failure_says_why(tmp_path):
     import pytest
 
-    from thermcap.recorder.bench.writer_run import run_isolated
+    from thermcap.benches.writer_run import run_isolated
 
     run = run_isolated("recorder", 96, 64, 30, 1, tmp_path)
     assert run.cpu_s_per_frame > 0 and run.bytes > 0

@@ -515,12 +515,12 @@ def test_every_real_multi_frame_sample_beats_jpeg_xl_e2(monkeypatch):
     """Goal 1 of issue 40: >= 1.0x JPEG XL effort 2 on every real sequence a user brings. Each
     FLIR SEQ/CSQ/FFF with two frames or more in THERMCAP_SAMPLES, as ``bench temporal`` finds them."""
     from tests.conftest import SAMPLES, SAMPLES_HOW
-    from thermcap.archive.bench_temporal import SEQUENCE_SUFFIXES, real_sequences
     from thermcap.archive.codecs import get_codec
+    from thermcap.benches.temporal import SEQUENCE_SUFFIXES, real_sequences
 
     if not SAMPLES.is_dir():
         pytest.skip(SAMPLES_HOW)
-    import thermcap.archive.bench as bench
+    import thermcap.benches.archive as bench
 
     monkeypatch.setattr(bench, "SAMPLES", SAMPLES)
     sequences = real_sequences(limit=32)

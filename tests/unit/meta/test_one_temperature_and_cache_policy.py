@@ -19,7 +19,7 @@ TEMPERATURE_CALLS = {
     "api/reading/regions.py": "model_at(i): FrameModel's SessionTemperatures.model_for, per frame",
     "recorder/analysis/detector.py": "the detector's float32 path, the named exception, held by its own tests",
     "recorder/capture/sources/sim.py": "the simulator's own model, making counts, not a product",
-    "recorder/bench/analysis.py": "a benchmark's anchor",
+    "thermcap/benches/analysis.py": "a benchmark's anchor",
     "archive/formats/hdf5.py": "the LUT of the model recorded, which the file names as version 0",
     "recorder/exports/files.py": "a probe: can this model give °C at all (one zero pixel)",
     "api/routes/sessions.py": "a probe: can this server give °C for the session (one zero pixel)",

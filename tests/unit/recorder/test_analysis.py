@@ -7,9 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from thermcap.benches.analysis import score
 from thermcap.recorder.analysis.detector import EventBuilder, HotSpotDetector, iou
 from thermcap.recorder.analysis.offline import analyze_session
-from thermcap.recorder.bench.analysis import score
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource, SimTarget
 from thermcap.recorder.radiometry import LinearModel
@@ -137,7 +137,7 @@ def test_recorder_fills_sidecars_from_the_detector_and_writes_events(tmp_path):
 
 
 def test_analysis_falling_behind_skips_and_says_so(tmp_path):
-    from thermcap.recorder.bench.record import MemorySource
+    from thermcap.benches.record import MemorySource
     from thermcap.recorder.storage.reader import iter_session_frames
 
     sim = SimSource(width=320, height=256, frames=30, paced=False, seed=6, start_time_ns=0)

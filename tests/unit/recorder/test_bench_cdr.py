@@ -8,7 +8,7 @@ import json
 import pytest
 from click.testing import CliRunner
 
-from thermcap.recorder.bench import cdr
+from thermcap.benches import cdr
 from thermcap.recorder.icd import rosmsg
 
 pytest.importorskip("rosbags", reason="rosbags (the ros2 extra) is the bench's anchor")

@@ -14,7 +14,7 @@ import zstandard
 from mcap.records import Chunk
 from mcap.stream_reader import StreamReader
 
-from thermcap.recorder.bench.record import MemorySource
+from thermcap.benches.record import MemorySource
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.exceptions import McapFileError

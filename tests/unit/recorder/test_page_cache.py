@@ -6,7 +6,7 @@ import os
 
 import pytest
 
-from thermcap.recorder.bench.page_cache import prime
+from thermcap.benches.page_cache import prime
 
 
 @pytest.mark.parametrize("nbytes", [0, 1, (4 << 20) + 3, 9 << 20])

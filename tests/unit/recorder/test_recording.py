@@ -10,7 +10,7 @@ import pytest
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 
-from thermcap.recorder.bench.record import MemorySource
+from thermcap.benches.record import MemorySource
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.icd.rosmsg import json_payload

@@ -13,7 +13,6 @@ Each pair alternates over rounds and reports the median ratio: the machine is sh
 
 from __future__ import annotations
 
-import socket
 import statistics
 import subprocess
 import sys
@@ -23,47 +22,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from thermcap.benches.harness import alternating, served, timed
 from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["bench_one_hour_open", "bench_python"]
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
-def _wait(url: str, proc: subprocess.Popen, timeout: float = 120) -> None:
-    import httpx
-
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if proc.poll() is not None:
-            raise RuntimeError(f"thermcap serve exited ({proc.returncode}) before {url} answered")
-        try:
-            if httpx.get(url, timeout=2).status_code == 200:
-                return
-        except httpx.HTTPError:
-            time.sleep(0.05)
-    raise RuntimeError(f"{url} did not answer in {timeout} s")
-
-
-def _timed(fn: Callable[[], Any]) -> float:
-    t = time.perf_counter()
-    fn()
-    return time.perf_counter() - t
-
-
-def _pair(ours: Callable[[], Any], anchor: Callable[[], Any], rounds: int) -> dict[str, float]:
-    ours(), anchor()  # warm both (imports, caches, connections)
-    pairs = []
-    for _ in range(rounds):
-        o, a = _timed(ours), _timed(anchor)
-        pairs.append((o, a))
-    ratio = statistics.median(o / a for o, a in pairs)
-    return {"ours_s": round(statistics.median(o for o, _ in pairs), 4),
-            "anchor_s": round(statistics.median(a for _, a in pairs), 4), "ratio": round(ratio, 2)}
 
 
 def _count_reads(session: Any) -> dict[str, int]:
@@ -137,12 +99,7 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
         session_dir = DataRoot.of(root).session_dir("bench")
         archive_session(session_dir, ["hdf5"])
         (h5,) = sorted((session_dir / "archive" / "hdf5").glob("*.h5"))
-        port = _free_port()
-        url = f"http://127.0.0.1:{port}"
-        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(root), "--port", str(port),
-                                 "--no-access-log"], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-        try:
-            _wait(url + "/healthz", proc)
+        with served(root) as url:
             session_url = f"{url}/api/v1/sessions/bench"
 
             def h5py_all() -> Any:
@@ -155,7 +112,7 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
             got = zarr_all()
             if not np.array_equal(got, h5py_all()):
                 raise RuntimeError("the Zarr endpoint's counts differ from the HDF5 archive's")
-            whole = _pair(zarr_all, h5py_all, rounds)
+            whole = alternating(zarr_all, h5py_all, rounds).to_dict()
 
             with httpx.Client() as http:
                 def raw_get() -> Any:
@@ -164,21 +121,15 @@ def bench_python(frames: int = 600, width: int = 640, height: int = 512, rounds:
                 def open_first() -> Any:
                     return thermcap.open(session_url).frame(0).counts
 
-                first = _pair(open_first, raw_get, rounds)
+                first = alternating(open_first, raw_get, rounds).to_dict()
 
             local = thermcap.open("bench", root=root)
             reads = _count_reads(local)
-            opened = _timed(lambda: local.to_xarray())
+            opened = timed(lambda: local.to_xarray())
             out = {"frames": frames, "size": f"{width}x{height}", "rounds": rounds,
                    "zarr_whole_session_vs_h5py": {**whole, "goal": "<= 2"},
                    "first_frame_open_vs_raw_get": {**first, "goal": "<= 2"},
                    "to_xarray_open": {"seconds": round(opened, 4), "frames_read": reads["n"], "goal": "< 1 s, 0 read"}}
-        finally:
-            proc.terminate()
-            try:
-                proc.wait(10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
     if hour:
         out["to_xarray_open_one_hour"] = bench_one_hour_open()
     return out
@@ -194,4 +145,5 @@ def bench_startup(rounds: int = 7) -> dict[str, Any]:
     def run(cmd: list[str]) -> Callable[[], Any]:
         return lambda: subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
-    return {name: {**_pair(run(cmd), run(anchor), rounds), "goal": "<= 3"} for name, cmd in cases.items()}
+    return {name: {**alternating(run(cmd), run(anchor), rounds).to_dict(), "goal": "<= 3"}
+            for name, cmd in cases.items()}

@@ -21,6 +21,7 @@ from typing import Any
 
 import httpx
 
+from thermcap.benches.harness import served
 from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["bench_api"]
@@ -55,25 +56,8 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
 
         migrate(engine)
         index_root(engine, base)
-        import socket
-        import subprocess
-        import sys
-
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
         # no access log, as nginx here (access_log off): the same work on both sides
-        proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(base), "--port", str(port),
-                                 "--no-access-log"],
-                                stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        url = f"http://127.0.0.1:{port}"
-        for _ in range(300):
-            try:
-                if httpx.get(url + "/healthz", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                time.sleep(0.1)
-        try:
+        with served(base) as url:
             docroot = _static_copies(url, base, frames)
             nginx = _start_nginx(docroot, base)
             ratios: dict[str, Any] = {}
@@ -114,9 +98,6 @@ def bench_api(frames: int = 300, requests: int = 400, clients: int = 4) -> list[
                     nginx.stop()
             rows.append({"what": "ratios (same run, same client)", "ratios": ratios,
                          "nginx": "missing: apt-get install nginx-light" if nginx is None else "1 worker, sendfile"})
-        finally:
-            proc.terminate()
-            proc.wait(10)
     finally:
         shutil.rmtree(base, ignore_errors=True)
     return rows
@@ -140,7 +121,7 @@ def _static_copies(url: str, base: Path, frames: int) -> Path:
 
 
 def _start_nginx(docroot: Path, base: Path) -> Any:
-    from thermcap.api.bench_nginx import Nginx, find_nginx
+    from thermcap.benches.nginx import Nginx, find_nginx
 
     if find_nginx() is None:
         return None

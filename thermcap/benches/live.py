@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from thermcap.recorder.bench.cameras import measure_recording
+from thermcap.benches.cameras import measure_recording
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.install_hint import install_command
 

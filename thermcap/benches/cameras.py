@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from thermcap.recorder.bench.cpu import ThreadCpu, process_cpu_s
+from thermcap.benches.cpu import ThreadCpu, process_cpu_s
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.base import FrameSource
 from thermcap.recorder.capture.sources.sim import SimSource

@@ -65,7 +65,7 @@ def _sequences(n: int) -> dict[str, list[np.ndarray]]:
 def _real_frames() -> dict[str, list[np.ndarray]]:
     """The real frames in ``../shared/samples``: single stills (no sample is a sequence yet), so
     tpred codes each as a key frame; its goal there is JPEG-XL e2's ratio."""
-    from thermcap.archive.bench import real_frames
+    from thermcap.benches.archive import real_frames
 
     return {f"{name} (one frame)": [frame] for name, frame in real_frames().items()}
 
@@ -80,7 +80,7 @@ def real_sequences(files: Sequence[str | Path] = (), limit: int = 240,
     named file that does not import raises ``ImportFileError`` naming it; a sample that does not
     is left out and its reason put in ``unreadable`` (one damaged sample does not stop the
     bench); a sample with one frame is a still, measured among the stills."""
-    from thermcap.archive.bench import SAMPLES
+    from thermcap.benches.archive import SAMPLES
     from thermcap.recorder.importers import ImportFileError
 
     found = sorted(p for p in SAMPLES.rglob("*") if p.suffix.lower() in SEQUENCE_SUFFIXES and p.is_file()) \

@@ -9,12 +9,12 @@ recorder and appear here only so the gap a hand layout buys is seen beside what 
 from __future__ import annotations
 
 import json
-import time
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from thermcap.benches.harness import best_of
 from thermcap.recorder.icd import rosmsg
 from thermcap.recorder.icd.cdr import library_encoder
 
@@ -69,17 +69,6 @@ def _rosbags_encoder(name: str, text: str) -> Callable[[dict[str, Any]], bytes] 
     return lambda doc: store.serialize_cdr(build(name, doc), name).tobytes()
 
 
-def _timed(fn: Callable[[], Any], n: int) -> float:
-    """Microseconds a call, the best of five rounds of ``n`` (the least disturbed)."""
-    best = float("inf")
-    for _ in range(5):
-        t0 = time.perf_counter()
-        for _ in range(n):
-            fn()
-        best = min(best, (time.perf_counter() - t0) / n)
-    return best * 1e6
-
-
 def _documents(n_frames: int) -> tuple[list[dict[str, Any]], list[tuple[int, list[dict[str, Any]]]]]:
     from thermcap.recorder.capture.sources.sim import SimSource
 
@@ -103,11 +92,14 @@ def bench_cdr(n_frames: int = 120, repeat: int = 20) -> dict[str, Any]:
             assert rb is None or rb(fields(i)) == ref, f"{message} {i}: rosbags differs from mcap_ros2"
         # each from the recorded document, as the recorder pays it (the fields made from it included)
         out: dict[str, Any] = {"message": message, "frames": n_frames}
+        def us(encode: Callable[[int], bytes]) -> float:
+            return round(best_of(lambda: [encode(i) for i in range(n_frames)], repeat) * 1e6 / n_frames, 2)
+
         if hand is not None:
-            out["hand_us"] = round(_timed(lambda: [hand(i) for i in range(n_frames)], repeat) / n_frames, 2)
-        out["mcap_ros2_us"] = round(_timed(lambda: [lib(fields(i)) for i in range(n_frames)], repeat) / n_frames, 2)
+            out["hand_us"] = us(hand)
+        out["mcap_ros2_us"] = us(lambda i: lib(fields(i)))
         if rb is not None:
-            out["rosbags_us"] = round(_timed(lambda: [rb(fields(i)) for i in range(n_frames)], repeat) / n_frames, 2)
+            out["rosbags_us"] = us(lambda i: rb(fields(i)))
             best = out.get("hand_us", out["mcap_ros2_us"])
             out["x_rosbags"] = round(out["rosbags_us"] / best, 2)
         rows.append(out)

@@ -18,7 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-from thermcap.recorder.bench.cameras import measure_recording
+from thermcap.benches.cameras import measure_recording
 
 __all__ = ["INSIDE_ENV", "bench_gige", "print_lines"]
 

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from thermcap.recorder.bench.cpu import process_cpu_split
-from thermcap.recorder.bench.page_cache import prime
+from thermcap.benches.cpu import process_cpu_split
+from thermcap.benches.page_cache import prime
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.base import CapturedFrame, FrameSource
 from thermcap.recorder.capture.sources.sim import SimSource
@@ -132,7 +132,7 @@ def run_isolated(writer: str, width: int, height: int, frames: int, level: int, 
     """Run ``writer`` once in a fresh interpreter; its files are removed before it returns."""
     if writer not in WRITERS:
         raise ValueError(f"writer must be one of {WRITERS}, got {writer!r}")
-    cmd = [sys.executable, "-m", "thermcap.recorder.bench.writer_run", writer, f"{width}x{height}", str(frames),
+    cmd = [sys.executable, "-m", "thermcap.benches.writer_run", writer, f"{width}x{height}", str(frames),
            str(level), str(workdir)]
     done = subprocess.run(cmd, capture_output=True, text=True, check=False)
     if done.returncode != 0:

@@ -19,7 +19,7 @@ from typing import Any
 
 import zstandard
 
-from thermcap.recorder.bench.writer_run import MemorySource, WriterRun, record_once, run_isolated
+from thermcap.benches.writer_run import MemorySource, WriterRun, record_once, run_isolated
 from thermcap.recorder.capture.recorder import Recorder
 from thermcap.recorder.capture.sources.base import CapturedFrame
 from thermcap.recorder.capture.sources.sim import SimSource

@@ -28,6 +28,7 @@ import numpy as np
 import tifffile
 
 from thermcap.archive.codecs import get_codec
+from thermcap.benches.harness import timed
 from thermcap.recorder import settings
 from thermcap.recorder.capture.sources.sim import SimSource
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST
@@ -39,7 +40,7 @@ __all__ = ["bench_archive", "noise_entropy_bound", "print_table", "real_frames"]
 
 #: The real camera files the benchmarks measure on: THERMCAP_SAMPLES, as the tests take it, or the
 #: shared/samples folder beside a checkout.
-SAMPLES = Path(settings.SAMPLES.get() or Path(__file__).resolve().parents[2] / "shared" / "samples")
+SAMPLES = Path(settings.SAMPLES.get() or Path(__file__).resolve().parents[3] / "shared" / "samples")
 
 
 def noise_entropy_bound(sigma_counts: float, bits: int = 16) -> float:
@@ -66,17 +67,16 @@ def _frame_sets(n: int) -> dict[str, list[np.ndarray]]:
     return sets
 
 
-def _pair(encode: Callable[[np.ndarray], bytes], decode: Callable[[bytes], np.ndarray], frames: list[np.ndarray],
-          reps: int) -> tuple[float, float, float]:
+def _codec_round_trip(encode: Callable[[np.ndarray], bytes], decode: Callable[[bytes], np.ndarray],
+                      frames: list[np.ndarray], reps: int) -> tuple[float, float, float]:
+    """(compression ratio, frames a second encoded, decoded) on two threads, lossless checked."""
     work = frames * max(1, reps)
     decode(encode(frames[0]))  # one-time costs (loading a compiled kernel) are not per frame
+    blobs: list[bytes] = []
+    outs: list[np.ndarray] = []
     with ThreadPoolExecutor(2) as pool:
-        t = time.perf_counter()
-        blobs = list(pool.map(encode, work))
-        enc = len(work) / (time.perf_counter() - t)
-        t = time.perf_counter()
-        outs = list(pool.map(decode, blobs))
-        dec = len(work) / (time.perf_counter() - t)
+        enc = len(work) / timed(lambda: blobs.extend(pool.map(encode, work)))
+        dec = len(work) / timed(lambda: outs.extend(pool.map(decode, blobs)))
     for a, b in zip(work, outs, strict=True):
         if not np.array_equal(a, b):
             raise AssertionError("a codec in the benchmark is not lossless")
@@ -153,15 +153,16 @@ def bench_archive(n_frames: int = 60) -> list[dict[str, Any]]:
         ]
         results = {}
         for name, kind, codec in cands:
-            results[name] = (kind, *_pair(codec.encode, codec.decode, frames, reps))
-        results["tiff-lzw + predictor (archive.lzw)"] = ("thermcap", *_pair(*_tiff(True, "archive.lzw"), frames, reps))
-        results["tifffile LZW + predictor (baseline)"] = ("baseline", *_pair(*_tiff(True), frames, reps))
+            results[name] = (kind, *_codec_round_trip(codec.encode, codec.decode, frames, reps))
+        results["tiff-lzw + predictor (archive.lzw)"] = ("thermcap",
+                                                         *_codec_round_trip(*_tiff(True, "archive.lzw"), frames, reps))
+        results["tifffile LZW + predictor (baseline)"] = ("baseline", *_codec_round_trip(*_tiff(True), frames, reps))
         results["hdf5 szip nn32 (1 thread)"] = ("thermcap", *_hdf5(frames, reps, compression="szip",
                                                                     compression_opts=("nn", 32)))
         pil = _pillow_png()
         if pil:
-            results["Pillow PNG save (baseline)"] = ("baseline", *_pair(*pil, frames, reps))
-        results["tifffile LZW default (baseline)"] = ("baseline", *_pair(*_tiff(False), frames, reps))
+            results["Pillow PNG save (baseline)"] = ("baseline", *_codec_round_trip(*pil, frames, reps))
+        results["tifffile LZW default (baseline)"] = ("baseline", *_codec_round_trip(*_tiff(False), frames, reps))
         results["h5py gzip 4 (baseline, 1 thread)"] = ("baseline", *_hdf5(frames, reps, compression="gzip",
                                                                           compression_opts=4))
         png_ratio = results["png16 (Up + libdeflate L4)"][1]
@@ -190,7 +191,7 @@ def format_cpu(fid: str, frames: list[Any], workdir: Path, workers: int = 2) -> 
     each with the frame written (``verify_read``), alone, in memory: the part of archiving no
     scheduling can remove."""
     from thermcap.archive.formats import get_format
-    from thermcap.recorder.bench.cpu import process_cpu_s
+    from thermcap.benches.cpu import process_cpu_s
 
     fmt = get_format(fid)
     out = Path(tempfile.mkdtemp(prefix=f"floor-{fid}-", dir=workdir))
@@ -239,7 +240,7 @@ def formats_together_cpu(fids: tuple[str, ...], frames: list[Any], workdir: Path
     ``archive.lzw``); this floor still runs 1-3% above the formats one at a time."""
     from thermcap.archive.fanout import fan_out
     from thermcap.archive.formats import get_format
-    from thermcap.recorder.bench.cpu import process_cpu_s
+    from thermcap.benches.cpu import process_cpu_s
 
     contexts = {fid: _floor_context(frames, workers) for fid in fids}  # made before the clock starts
 
@@ -281,8 +282,8 @@ def bench_session(seconds: float = 10.0, formats: tuple[str, ...] | None = None,
     so the archive's cost with sha256 can be measured beside BLAKE3's in the same sitting."""
     from thermcap.archive.archiver import DEFAULT_FORMATS, archive_session, encoder_threads, usable_cores
     from thermcap.archive.manifest import archive_dir
-    from thermcap.recorder.bench.cpu import process_cpu_s as cpu_s
-    from thermcap.recorder.bench.page_cache import prime
+    from thermcap.benches.cpu import process_cpu_s as cpu_s
+    from thermcap.benches.page_cache import prime
     from thermcap.recorder.capture.recorder import Recorder
     from thermcap.recorder.storage.reader import iter_session_frames
 
