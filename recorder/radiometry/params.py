@@ -109,15 +109,35 @@ def models_named(recorded: dict[str, Any], versions: list[ModelVersion], version
             "model_version": used}
 
 
+#: parsed radiometry.json by path, with the identity of the file they were parsed from
+_PARSED: dict[Path, tuple[tuple[int, int, int, int], list[ModelVersion]]] = {}
+_PARSED_MAX = 256
+
+
 def read_versions(session_dir: str | os.PathLike) -> list[ModelVersion]:
+    """The session's model versions, oldest first. A server asks for every Zarr key and frame,
+    so the file is parsed again only when it is another file (``add_version`` replaces it
+    whole: a new inode, size or time), and a stat is all an unchanged one costs."""
     path = Path(session_dir) / RADIOMETRY_JSON
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return []
+    ident = (st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
+    hit = _PARSED.get(path)
+    if hit is not None and hit[0] == ident:
+        return list(hit[1])
     try:
         doc = json.loads(path.read_text())
     except FileNotFoundError:
         return []
     except ValueError as exc:
         raise ValueError(f"{path}: not valid JSON ({exc})") from None
-    return versions_from(doc)
+    versions = versions_from(doc)
+    if len(_PARSED) >= _PARSED_MAX:
+        _PARSED.pop(next(iter(_PARSED)))
+    _PARSED[path] = (ident, versions)
+    return list(versions)
 
 
 def versions_from(doc: dict[str, Any]) -> list[ModelVersion]:
