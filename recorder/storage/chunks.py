@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from operator import itemgetter
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, BinaryIO, NamedTuple
 
 import imagecodecs
 import numpy as np
@@ -40,6 +40,7 @@ __all__ = [
     "checked_chunk",
     "frame_log_times",
     "iter_messages",
+    "log_times_in",
     "message_records",
     "messages_at",
     "read_chunk",
@@ -287,23 +288,28 @@ def frame_log_times(path: str | Path, topics: Container[str]) -> list[int] | Non
             summary = make_reader(f).get_summary()
         except Exception as exc:
             raise McapFileError(f"{path}: no readable summary ({type(exc).__name__}: {exc})") from exc
-        if summary is None or not summary.chunk_indexes:
-            return None
-        wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
-        times: list[int] = []
-        for chunk in summary.chunk_indexes:
-            for cid, offset in chunk.message_index_offsets.items():
-                if cid not in wanted:
-                    continue
-                f.seek(offset)
-                head = f.read(_MESSAGE_INDEX_HEAD.size)
-                if len(head) < _MESSAGE_INDEX_HEAD.size:
-                    return None
-                opcode, _, channel, n = _MESSAGE_INDEX_HEAD.unpack(head)
-                if opcode != 0x07 or channel != cid or n % 16:
-                    return None  # not the message index the chunk index points at
-                pairs = np.frombuffer(f.read(n), "<u8")
-                if pairs.size * 8 != n:
-                    return None
-                times.extend(int(t) for t in pairs[0::2])
+        return log_times_in(f, summary, topics)
+
+
+def log_times_in(f: BinaryIO, summary: Any, topics: Container[str]) -> list[int] | None:
+    """``frame_log_times`` for a segment already open, whose summary its caller has read."""
+    if summary is None or not summary.chunk_indexes:
+        return None
+    wanted = {cid for cid, ch in summary.channels.items() if ch.topic in topics}
+    times: list[int] = []
+    for chunk in summary.chunk_indexes:
+        for cid, offset in chunk.message_index_offsets.items():
+            if cid not in wanted:
+                continue
+            f.seek(offset)
+            head = f.read(_MESSAGE_INDEX_HEAD.size)
+            if len(head) < _MESSAGE_INDEX_HEAD.size:
+                return None
+            opcode, _, channel, n = _MESSAGE_INDEX_HEAD.unpack(head)
+            if opcode != 0x07 or channel != cid or n % 16:
+                return None  # not the message index the chunk index points at
+            pairs = np.frombuffer(f.read(n), "<u8")
+            if pairs.size * 8 != n:
+                return None
+            times.extend(int(t) for t in pairs[0::2])
     return sorted(times)

@@ -17,7 +17,7 @@ from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.icd.rosmsg import json_payload
 from thermcap.recorder.icd.topics import TOPIC_METADATA, TOPIC_STATS, camera_topics, sum_image_topics
-from thermcap.recorder.storage.chunks import frame_log_times
+from thermcap.recorder.storage.chunks import log_times_in
 from thermcap.recorder.storage.coverage import coverage
 from thermcap.recorder.storage.coverage import gaps as coverage_gaps
 from thermcap.recorder.storage.layout import SessionLayout
@@ -127,7 +127,13 @@ class SessionInfo:
 
 
 def segment_info(path: str | Path) -> SegmentInfo:
-    path = Path(path)
+    return _segment_info(Path(path))[0]
+
+
+def _segment_info(path: Path) -> tuple[SegmentInfo, list[int] | None]:
+    """A segment's info and its frames' log times (from its message indexes; None where it has
+    none), from one opening and one read of its summary."""
+    frame_times: list[int] | None = None
     try:
         with open(path, "rb") as f:
             reader = make_reader(f, validate_crcs=True)
@@ -149,6 +155,7 @@ def segment_info(path: str | Path) -> SegmentInfo:
             else:
                 for _, channel, msg in reader.iter_messages():
                     topic_bytes[channel.topic] = topic_bytes.get(channel.topic, 0) + len(msg.data)
+            frame_times = log_times_in(f, summary, {TOPIC_METADATA})
     except McapFileError:
         raise
     except Exception as exc:
@@ -182,7 +189,7 @@ def segment_info(path: str | Path) -> SegmentInfo:
         dropped=last.get("dropped", {}),
         write_latency_ms=last.get("write_latency_ms", {}).get("session"),
         session_id=meta[SESSION_METADATA].get("session_id") if SESSION_METADATA in meta else None,
-    )
+    ), frame_times
 
 
 def session_info(path: str | Path) -> SessionInfo:
@@ -197,14 +204,16 @@ def session_info(path: str | Path) -> SessionInfo:
             raise McapFileError(f"{path / 'session.json'}: not valid JSON ({exc})") from exc
     if not segments and not meta:
         raise McapFileError(f"{path}: not a thermcap session (no NNNN.mcap segments, no session.json)")
-    segs = [segment_info(p) for p in segments]
+    read = [_segment_info(p) for p in segments]
+    segs = [info for info, _ in read]
     frames = sum(s.frames for s in segs)
     archived = archived_frame_count(path) if not segments else None
     if archived is not None:  # the source was deleted after archiving: the archive holds the frames
         frames = archived
     start = min((s.start_ns for s in segs if s.messages), default=None)
     end = max((s.end_ns for s in segs if s.messages), default=None)
-    times = _frame_times(segments)
+    # the frames' own times, as the index takes them; none unless every segment can say
+    times = [] if any(t is None for _, t in read) else sorted(t for _, ts in read for t in ts or [])
     if times:  # the frames' own times, as the index takes them: start, span and gaps agree with the API
         start, end = times[0], times[-1]
     fps = (meta.get("sensor") or {}).get("frame_rate_hz")
@@ -264,21 +273,6 @@ def session_info(path: str | Path) -> SessionInfo:
         lost_segments=[{"name": s.name, "frames": s.frames} for s in lost], frames_lost=sum(s.frames for s in lost),
         source=meta.get("source") or {}, source_health=meta.get("source_health") or {}, gaps=found_gaps,
     )
-
-
-def _frame_times(segments: list[Path]) -> list[int]:
-    """Every frame's log time (its sidecar's, as the index takes them) from the segments' message
-    indexes; empty where a segment cannot say (then the span is the segments' own)."""
-    times: list[int] = []
-    for seg in segments:
-        try:
-            found = frame_log_times(seg, {TOPIC_METADATA})
-        except McapFileError:
-            return []
-        if found is None:
-            return []
-        times += found
-    return sorted(times)
 
 
 def _evicted(session_dir: Path, meta: dict[str, Any]) -> int:
