@@ -95,6 +95,8 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
 
                 try:
                     report = syncer.run_once(only, on_progress=shown)
+                    freed = syncer.delete_confirmed() if delete_confirmed else []
+                    status = syncer.status(only).to_dict()
                 except (ThermcapError, OSError) as exc:
                     if not watch:
                         raise
@@ -103,8 +105,7 @@ def sync_cmd(root: str, bucket: str | None, endpoint: str | None, region: str, p
                     if stop.wait(interval):
                         break
                     continue
-            freed = syncer.delete_confirmed() if delete_confirmed else []
-            out = {**report.__dict__, "freed": freed, "status": syncer.status(only).to_dict()}
+            out = {**report.__dict__, "freed": freed, "status": status}
             out["status"].pop("objects")
             click.echo(json.dumps(out) if as_json else
                        f"sent {report.sent_bytes:,} B in {report.parts_sent} parts ({report.parts_resent} sent again), "

@@ -321,30 +321,39 @@ class Syncer:
 
     def delete_confirmed(self) -> list[str]:
         """Delete local segments the cloud confirmed, byte for byte, outside protected windows."""
-        from thermcap.recorder.storage.reader import segment_span
-
         freed = []
         for st in list(self.journal.objects.values()):
-            path = self.root / st.key
-            if st.state != "confirmed" or not st.key.endswith(".mcap") or not path.is_file():
+            if st.state != "confirmed" or not st.key.endswith(".mcap"):
                 continue
-            if path.stat().st_size != st.size or file_sha256(path) != st.sha256:
-                continue  # changed since: not the bytes the cloud confirmed, and not freed on their word
-            if not self._receipt_still_good(st.key, st.sha256, st.size):
-                st.state, st.error = "pending", "the cloud's receipt no longer names these bytes; sent again"
-                st.mtime_ns = -1
-                self.journal.put(st)
-                continue
-            windows = load_windows(path.parent)
-            if windows:
-                start, end, _ = segment_span(path)
-                if any(w.overlaps(start, end) for w in windows):
-                    continue
-            path.unlink()
-            record_freed(self.root, path.parent.name, path.name, st.size, "sync",
-                         "the cloud confirmed its bytes (sha256 and size in its receipt)")
-            freed.append(st.key)
+            try:
+                if self._free(st):
+                    freed.append(st.key)
+            except FileNotFoundError:
+                continue  # the ring evicted it meanwhile (on record in eviction.log): nothing left to free
         return freed
+
+    def _free(self, st: ObjectState) -> bool:
+        from thermcap.recorder.storage.reader import segment_span
+
+        path = self.root / st.key
+        if not path.is_file():
+            return False
+        if path.stat().st_size != st.size or file_sha256(path) != st.sha256:
+            return False  # changed since: not the bytes the cloud confirmed, and not freed on their word
+        if not self._receipt_still_good(st.key, st.sha256, st.size):
+            st.state, st.error = "pending", "the cloud's receipt no longer names these bytes; sent again"
+            st.mtime_ns = -1
+            self.journal.put(st)
+            return False
+        windows = load_windows(path.parent)
+        if windows:
+            start, end, _ = segment_span(path)
+            if any(w.overlaps(start, end) for w in windows):
+                return False
+        path.unlink()
+        record_freed(self.root, path.parent.name, path.name, st.size, "sync",
+                     "the cloud confirmed its bytes (sha256 and size in its receipt)")
+        return True
 
     def _receipt_still_good(self, key: str, sha256: str, size: int) -> bool:
         """The receipt read again at the moment of deleting: the last local copy goes only on

@@ -9,6 +9,7 @@ one would.
 
 from __future__ import annotations
 
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,16 +44,22 @@ def plan_root(root: Path, sessions: list[str] | None = None) -> list[SyncItem]:
     segs: list[tuple[int, str, SyncItem]] = []
     for d in dirs:
         for name in _METADATA:
-            p = d / name
-            if p.is_file():
-                meta.append(_item(root, p, d.name, segment=False))
+            if (meta_item := _item(root, d / name, d.name, segment=False)) is not None:
+                meta.append(meta_item)
         for seg in SessionLayout.of(d).segments():
-            item = _item(root, seg, d.name, segment=True)
-            segs.append((item.mtime_ns, item.key, item))
+            if (item := _item(root, seg, d.name, segment=True)) is not None:
+                segs.append((item.mtime_ns, item.key, item))
     meta.sort(key=lambda i: (_METADATA.index(i.path.name), i.key))
     return meta + [i for _, _, i in sorted(segs)]
 
 
-def _item(root: Path, path: Path, session: str, *, segment: bool) -> SyncItem:
-    st = path.stat()
+def _item(root: Path, path: Path, session: str, *, segment: bool) -> SyncItem | None:
+    """The file as it is now, or None if it is gone: a ring evicts segments (and a whole
+    session's files) at any moment, so a listing is never trusted to still hold."""
+    try:
+        st = path.stat()
+    except FileNotFoundError:
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
     return SyncItem(DataRoot.of(root).key_of(path), path, st.st_size, st.st_mtime_ns, session, segment)
