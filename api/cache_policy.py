@@ -26,13 +26,14 @@ _YEAR = 31_536_000
 class Kind(Enum):
     FIXED = "fixed"  # counts, archive files: the same bytes forever
     MODEL = "model"  # temperatures and what names the model: revalidated
+    LAYOUT = "layout"  # a Zarr 3 shard: its frames depend on the server's shard size and the session's length
 
 
 def cache_control(kind: Kind, *, guarded: bool) -> str:
     scope = "private" if guarded else "public"
     if kind is Kind.FIXED:
         return f"{scope}, max-age={_YEAR}, immutable"
-    return f"{scope}, no-cache"
+    return f"{scope}, no-cache"  # MODEL and LAYOUT alike: what the URL holds may change
 
 
 def cache_headers(request: Request, kind: Kind) -> dict[str, str]:

@@ -63,6 +63,7 @@ class Settings:
     # Series jobs on a Dask cluster (the workers reach the same root, index and bucket); none: the
     # API's own threads.
     dask_scheduler: str | None = field(default_factory=env.DASK_SCHEDULER.get)
+    zarr_shard_bytes: int = field(default_factory=lambda: int(env.ZARR_SHARD_BYTES.get() or 16 << 20))
     max_page_size: int = 1000
     rescan_interval_s: float = 30.0
 

@@ -40,12 +40,14 @@ S3_PREFIX = Variable("THERMCAP_S3_PREFIX", "", "a key prefix inside the bucket")
 CORS_ORIGINS = Variable("THERMCAP_CORS_ORIGINS", "*", "comma-separated origins CORS allows to read")
 DASK_SCHEDULER = Variable("THERMCAP_DASK_SCHEDULER", None, "a Dask scheduler for the fleet's jobs (tcp://HOST:8786)")
 HEAD_TIMEOUT_S = Variable("THERMCAP_HEAD_TIMEOUT_S", "30", "seconds a client has to send a request's head")
+ZARR_SHARD_BYTES = Variable("THERMCAP_ZARR_SHARD_BYTES", str(16 << 20),
+                            "the most bytes a served Zarr 3 shard holds (frames are one inner chunk each)")
 SAMPLES = Variable("THERMCAP_SAMPLES", None, "the sample files `thermcap bench` reads (default: ../shared/samples)")
 DJI_SDK = Variable("THERMCAP_DJI_SDK", "auto", "DJI's Thermal SDK for R-JPEG imports: auto, off or its path")
 
 VARIABLES: tuple[Variable, ...] = (ROOT, CONFIG, DATABASE_URL, TOKENS, TOKENS_FILE, CONTROL_TOKEN, S3_BUCKET,
                                    S3_ENDPOINT, S3_REGION, S3_PREFIX, CORS_ORIGINS, DASK_SCHEDULER,
-                                   HEAD_TIMEOUT_S, DJI_SDK, SAMPLES)
+                                   HEAD_TIMEOUT_S, DJI_SDK, SAMPLES, ZARR_SHARD_BYTES)
 
 
 @dataclass(frozen=True)

@@ -191,7 +191,8 @@ class BucketSession(Session):
         """Frame ``index`` in °C (float32), bad pixels NaN."""
         return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
 
-    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> Any:
-        from thermcap.session import lazy_dataset
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> Any:
+        from thermcap.session import LOCAL_CHUNK_FRAMES, lazy_dataset
 
-        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)
+        return lazy_dataset(self, self.temperatures(model_version), model_version,
+                            LOCAL_CHUNK_FRAMES if chunk_frames is None else chunk_frames)

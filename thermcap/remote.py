@@ -75,7 +75,9 @@ class RemoteSession(Session):
     def model_versions(self) -> list[ModelVersion]:
         return self.client.model_versions(self.id)
 
-    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> xr.Dataset:
+        """The server's Zarr store (format 3), in dask chunks of one served shard each (or of
+        ``chunk_frames`` frames): the task graph grows with shards, and each task is one request."""
         import xarray as xr
 
         if model_version is not None:
@@ -88,7 +90,11 @@ class RemoteSession(Session):
                 raise ValueError(f"model version {model_version}: the server's Zarr store gives each frame the "
                                  f"latest version covering it (pass model_version=None for that); compute other "
                                  f"versions from `counts` with thermcap.open on the data root")
-        # the store's own chunks (a frame each): dask fetches them concurrently, chunk_frames unused
-        return xr.open_zarr(self.client.zarr_url(self.id), storage_options={"headers": self.client.headers})
+        if chunk_frames is not None and chunk_frames < 1:
+            raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
+        ds = xr.open_zarr(self.client.zarr_url(self.id), zarr_format=3, chunks=None,
+                          storage_options={"headers": self.client.headers})
+        frames = chunk_frames or (ds.counts.encoding.get("shards") or ds.counts.encoding.get("chunks") or (1,))[0]
+        return ds.chunk({"time": frames})
 
 

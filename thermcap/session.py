@@ -86,8 +86,10 @@ class Session(ABC):
         recorded, is ``radiometric_model``."""
 
     @abstractmethod
-    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
-        """A lazy Dataset: ``counts`` and ``temperature`` (time, y, x), read only when asked."""
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> xr.Dataset:
+        """A lazy Dataset: ``counts`` and ``temperature`` (time, y, x), read only when asked, in
+        dask chunks of ``chunk_frames`` frames (None: the session's own, 16 frames read here,
+        a served shard over HTTP)."""
 
     # -- shared by every kind of session ------------------------------------------------------
 
@@ -210,8 +212,13 @@ class LocalSession(Session):
         """Frame ``index`` in °C (float32), bad pixels NaN."""
         return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
 
-    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int = 16) -> xr.Dataset:
-        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)
+    def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> xr.Dataset:
+        return lazy_dataset(self, self.temperatures(model_version), model_version,
+                            LOCAL_CHUNK_FRAMES if chunk_frames is None else chunk_frames)
+
+
+#: frames a dask chunk holds when a session read here is opened as a Dataset
+LOCAL_CHUNK_FRAMES = 16
 
 
 def lazy_dataset(session: Session, temps: Any, model_version: int | None, chunk_frames: int) -> xr.Dataset:

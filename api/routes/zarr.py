@@ -1,5 +1,6 @@
-"""``/api/v1/sessions/{id}/zarr``: every served session as a Zarr store (see
-``api.reading.zarr_layout``), read with stock ``xr.open_zarr(url)`` over fsspec."""
+"""``/api/v1/sessions/{id}/zarr``: every served session as a Zarr store, format 2
+(``api.reading.zarr_layout``) and format 3 with shards over time (``api.reading.zarr_v3``) under
+one URL, read with stock ``xr.open_zarr(url)``, zarr-python and tensorstore."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ from typing import Any
 
 import numpy as np
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
+from fastapi.responses import StreamingResponse
 
 from thermcap.api.cache_policy import Kind, cache_headers
-from thermcap.api.reading.zarr_layout import COORDINATES, dumps, parse_chunk_key, store_metadata
+from thermcap.api.reading.zarr_layout import COORDINATES, IMAGE_VARIABLES, dumps, parse_chunk_key, store_metadata
+from thermcap.api.reading.zarr_v3 import ShardLayout, parse_v3_key, shard_index, store_metadata_v3
 from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
 from thermcap.archive.reading.frame_table import FrameTable
@@ -38,17 +41,20 @@ def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str,
 
     def build() -> tuple[FrameTable, dict[str, Any]]:
         table = request.app.state.frames.columns.get(row["id"]).table()  # chunk i is frame i
-        return table, _metadata(row, table, named)
+        return table, _metadata(row, table, named, request.app.state.settings.zarr_shard_bytes)
 
     return kept(request, "zarr_stores", (row["id"], row.get("fingerprint"), named["radiometric_model_versions"]),
                 build, keep=64)
 
 
-def _metadata(row: dict[str, Any], table: FrameTable, named: dict[str, str]) -> dict[str, Any]:
+def _metadata(row: dict[str, Any], table: FrameTable, named: dict[str, str], shard_bytes: int) -> dict[str, Any]:
     attrs = {"title": f"thermcap session {row['id']}", "source": "thermcap", "session_id": row["id"],
              "sensor": row.get("sensor"), "sensor_id": row.get("sensor_id"), "fps": row.get("fps"),
              "frames_dropped": row.get("frames_dropped"), **named}
-    return store_metadata(table, int(row["width"] or 0), int(row["height"] or 0), attrs)
+    width, height = int(row["width"] or 0), int(row["height"] or 0)
+    v2 = store_metadata(table, width, height, attrs)
+    layout = ShardLayout.of(len(table), height, width, shard_bytes)
+    return {**v2, **store_metadata_v3(v2, layout, height, width)}
 
 
 _KEY_RESPONSES: dict[int | str, dict] = {200: {"content": {"application/json": {}, "application/octet-stream": {}}}}
@@ -62,8 +68,11 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     table, meta = _store(request, row)
     if key in meta:  # it names the model in force
         return Response(dumps(meta[key]), media_type="application/json", headers=cache_headers(request, Kind.MODEL))
-    chunk = parse_chunk_key(key)
-    if chunk is None:  # zarr.json and the like: a reader probing for format 3 must see "not here"
+    v3 = parse_v3_key(key)
+    if v3 is not None and v3.variable in IMAGE_VARIABLES:
+        return _shard(request, row, table, v3.variable, v3.index)
+    chunk = parse_chunk_key(key) if v3 is None else v3
+    if chunk is None:
         raise HTTPException(404, f"no key {key!r} in this Zarr store")
     var, i = chunk.variable, chunk.index
     n = len(table)
@@ -91,6 +100,72 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
         values = values.astype(values.dtype.newbyteorder("<"), copy=False)
     # coordinates come from the index, which a reindex may change: revalidated
     return Response(values.tobytes(), media_type="application/octet-stream", headers=cache_headers(request, Kind.MODEL))
+
+
+def _frame_bytes(request: Request, row: dict[str, Any], table: FrameTable, var: str, i: int) -> bytes:
+    """Frame ``i``'s chunk of ``var``, read (and checked) through the frames reader."""
+    frame = int(table.index[i])
+    counts = np.asarray(request.app.state.frames.pixels(row["id"], frame))
+    if var == "counts":
+        return counts.astype("<u2", copy=False).tobytes()
+    return FrameModel(request, row).temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
+
+
+def _byte_range(header: str | None, size: int) -> tuple[int, int] | None:
+    """``Range: bytes=a-b | a- | -n`` as [start, end) within ``size``; None for the whole."""
+    if not header:
+        return None
+    unsatisfiable = {"Content-Range": f"bytes */{size}"}
+    unit, _, spec = header.partition("=")
+    if unit.strip() != "bytes" or "," in spec:
+        raise HTTPException(416, f"Range {header!r}: one range of bytes, please", headers=unsatisfiable)
+    first, _, last = spec.strip().partition("-")
+    try:
+        if first == "":
+            start, end = max(0, size - int(last)), size
+        else:
+            start, end = int(first), (min(size, int(last) + 1) if last else size)
+    except ValueError:
+        raise HTTPException(416, f"Range {header!r} is not a byte range", headers=unsatisfiable) from None
+    if start >= end or start >= size:
+        raise HTTPException(416, f"Range {header!r} is outside the {size} bytes", headers=unsatisfiable)
+    return start, end
+
+
+def _shard(request: Request, row: dict[str, Any], table: FrameTable, var: str, shard: int) -> Response:
+    """A shard of ``var``, whole or the byte range asked for; only the frames the range touches
+    are read, one at a time as the response goes out."""
+    height, width = int(row["height"] or 0), int(row["width"] or 0)
+    layout = ShardLayout.of(len(table), height, width, request.app.state.settings.zarr_shard_bytes)
+    itemsize = 2 if var == "counts" else 4
+    held, fb = layout.held(shard, itemsize)
+    if not held:
+        raise HTTPException(404, f"no shard {shard} of {var}: the session has {layout.frames} frames, "
+                                 f"{layout.frames_per_shard} a shard")
+    size = layout.shard_size(shard, itemsize)
+    wanted = _byte_range(request.headers.get("range"), size)
+    start, end = wanted or (0, size)
+    data_end = len(held) * fb
+
+    def pieces():
+        at = start
+        while at < min(end, data_end):
+            k = at // fb
+            frame = _frame_bytes(request, row, table, var, held[k])
+            yield frame[at - k * fb: min(end, (k + 1) * fb) - k * fb]
+            at = (k + 1) * fb
+        if end > data_end:
+            yield shard_index(layout, shard, itemsize)[max(start, data_end) - data_end: end - data_end]
+
+    # counts under a shard's URL are not forever: the server's shard size or a longer session moves them
+    headers = {**cache_headers(request, Kind.LAYOUT if var == "counts" else Kind.MODEL), "Accept-Ranges": "bytes",
+               "Content-Length": str(end - start)}
+    status = 200
+    if wanted is not None:
+        status, headers["Content-Range"] = 206, f"bytes {start}-{end - 1}/{size}"
+    if request.method == "HEAD":
+        return Response(status_code=status, headers=headers, media_type="application/octet-stream")
+    return StreamingResponse(pieces(), status_code=status, headers=headers, media_type="application/octet-stream")
 
 
 def zarr_url(base: str, session_id: str) -> str:

@@ -33,8 +33,9 @@ def test_every_product_names_the_version_it_holds(root):
     server = ApiServer(root)
     try:
         zmeta = f"{server.url}/api/v1/sessions/s-archived/zarr/.zmetadata"
-        before = httpx.get(zmeta, timeout=60)
-        assert before.status_code == 200
+        zjson = f"{server.url}/api/v1/sessions/s-archived/zarr/zarr.json"  # format 3's, the same store
+        before, before3 = httpx.get(zmeta, timeout=60), httpx.get(zjson, timeout=60)
+        assert before.status_code == 200 and before3.status_code == 200
         base = model_from_dict(read_session_meta(session)["radiometric_model"])
         add_version(session, base, {}, who="test", why="a new calibration",  # measured again 1 °C warmer
                     measured=model_from_dict({**base.to_dict(), "offset_c": -39.0}))
@@ -44,6 +45,10 @@ def test_every_product_names_the_version_it_holds(root):
         assert [v["version"] for v in json.loads(attrs["radiometric_model_versions"])] == [1]
         assert "latest version covering each frame" in attrs["model_version"]
         assert after.json()["metadata"]["temperature/.zattrs"]["model_version"] == attrs["model_version"]
+        after3 = httpx.get(zjson, timeout=60).json()
+        assert after3["attributes"] == attrs and after3 != before3.json()
+        assert after3["consolidated_metadata"]["metadata"]["temperature"]["attributes"]["model_version"] == \
+            attrs["model_version"]
 
         remote = thermcap.open(f"{server.url}/api/v1/sessions/s-archived").to_xarray()
         assert [v["version"] for v in json.loads(remote.attrs["radiometric_model_versions"])] == [1]

@@ -53,5 +53,9 @@ def test_zarr_counts_and_temperatures(served):
     meta = _cache(c, "/api/v1/sessions/s-archived/zarr/.zmetadata")
     assert all(p in counts for p in FOREVER), counts
     assert "no-cache" in temps and "no-cache" in meta, (temps, meta)
-    for got in (counts, temps, meta):
+    # format 3: a shard's frames move with the server's shard size and the session's length
+    shard = _cache(c, "/api/v1/sessions/s-archived/zarr/counts/c/0/0/0")
+    meta3 = _cache(c, "/api/v1/sessions/s-archived/zarr/zarr.json")
+    assert "no-cache" in shard and "no-cache" in meta3 and not any(p in shard for p in FOREVER), shard
+    for got in (counts, temps, meta, shard, meta3):
         assert ("private" in got) == (mode == "tokens") and ("public" in got) != (mode == "tokens"), got
