@@ -398,7 +398,7 @@ def bench_python_cmd(frames: int, rounds: int, hour: bool, as_json: bool) -> Non
         click.echo(json.dumps(res, indent=2))
         return
     click.echo(f"{res['frames']} frames {res['size']}, median of {res['rounds']} alternating rounds")
-    for name in ("zarr_whole_session_vs_h5py", "first_frame_open_vs_raw_get"):
+    for name in ("zarr_whole_session_vs_h5py", "zarr2_whole_session_vs_h5py", "first_frame_open_vs_raw_get"):
         r = res[name]
         click.echo(f"  {name:30} ours {r['ours_s']:.4f} s  anchor {r['anchor_s']:.4f} s  ratio {r['ratio']:.2f}x"
                    f"  (goal {r['goal']})")
