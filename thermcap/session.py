@@ -140,14 +140,16 @@ class Session(ABC):
         return self.frame(i)
 
 
-def _coords(table: FrameTable) -> dict[str, Any]:
+def _coords(table: FrameTable, height: int, width: int) -> dict[str, Any]:
+    from thermcap.archive.reading.dataset_description import PIXEL_AXIS_DTYPE, coordinate_attrs
     from thermcap.archive.reading.frame_table import FRAME_FIELDS
 
-    coords: dict[str, Any] = {"time": ("time", table.timestamp_ns.astype("datetime64[ns]"),
-                                       {"standard_name": "time", "axis": "T"}),
-                              "frame": ("time", table.index)}
-    for name, (_, _, what) in FRAME_FIELDS.items():
-        coords[name] = ("time", table.fields[name], {"long_name": what})
+    coords: dict[str, Any] = {"time": ("time", table.timestamp_ns.astype("datetime64[ns]"), coordinate_attrs("time")),
+                              "frame": ("time", table.index, coordinate_attrs("frame"))}
+    for name in FRAME_FIELDS:
+        coords[name] = ("time", table.fields[name], coordinate_attrs(name))
+    for axis, size in (("y", height), ("x", width)):
+        coords[axis] = (axis, np.arange(size, dtype=PIXEL_AXIS_DTYPE), coordinate_attrs(axis))
     return coords
 
 
@@ -253,17 +255,12 @@ def lazy_dataset(session: Session, temps: Any, model_version: int | None, chunk_
         return out
 
     celsius = da.map_blocks(to_celsius, counts, dtype=np.float32, meta=np.empty((0, 0, 0), np.float32))
+    from thermcap.archive.reading.dataset_description import session_attrs, variable_attrs
     from thermcap.recorder.radiometry.params import models_named
 
     named = models_named(session.radiometric_model, list(getattr(temps, "versions", None) or []), model_version)
     return xr.Dataset(
-        {"counts": (("time", "y", "x"), counts, {"long_name": "raw sensor counts", "units": "1"}),
-         "temperature": (("time", "y", "x"), celsius,
-                         {"long_name": "temperature", "standard_name": "temperature", "units": "degC",
-                          "model_version": named["model_version"],
-                          "comment": "NaN: a pixel of the session's bad-pixel map"})},
-        coords={**_coords(table), "y": ("y", np.arange(h), {"long_name": "row, 0 at the top", "axis": "Y"}),
-                "x": ("x", np.arange(w), {"long_name": "column, 0 at the left", "axis": "X"})},
-        attrs={"Conventions": "CF-1.10", "title": f"thermcap session {session.id}", "source": "thermcap",
-               "session_id": session.id, "sensor": session.meta.get("sensor") or "",
-               "fps": session.meta.get("fps") or 0, **named})
+        {"counts": (("time", "y", "x"), counts, variable_attrs("counts")),
+         "temperature": (("time", "y", "x"), celsius, variable_attrs("temperature", named["model_version"]))},
+        coords=_coords(table, h, w),
+        attrs=session_attrs(session.id, session.meta.get("sensor"), session.meta.get("frames_dropped"), named))

@@ -19,6 +19,11 @@ import json
 import re
 from typing import Any
 
+from thermcap.archive.reading.dataset_description import (
+    PIXEL_AXIS_DTYPE,
+    coordinate_attrs,
+    variable_attrs,
+)
 from thermcap.archive.reading.frame_table import FRAME_FIELDS, FrameTable
 
 __all__ = ["ChunkKey", "parse_chunk_key", "store_metadata"]
@@ -38,31 +43,25 @@ def store_metadata(table: FrameTable, width: int, height: int, session_attrs: di
     """Every metadata document of the store, by key (what ``.zmetadata`` consolidates)."""
     n = len(table)
     one_chunk = [max(n, 1)]
-    meta: dict[str, Any] = {".zgroup": {"zarr_format": 2}, ".zattrs": {"Conventions": "CF-1.10", **session_attrs}}
+    meta: dict[str, Any] = {".zgroup": {"zarr_format": 2}, ".zattrs": dict(session_attrs)}
+    both = " ".join(COORDINATES)
     meta["counts/.zarray"] = _array([n, height, width], [1, height, width], "<u2", None)
-    meta["counts/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time", "y", "x"], "long_name": "raw sensor counts",
-                              "units": "1", "coordinates": " ".join(COORDINATES)}
+    meta["counts/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time", "y", "x"], **variable_attrs("counts"), "coordinates": both}
     meta["temperature/.zarray"] = _array([n, height, width], [1, height, width], "<f4", "NaN")
-    meta["temperature/.zattrs"] = {
-        "_ARRAY_DIMENSIONS": ["time", "y", "x"], "long_name": "temperature", "standard_name": "temperature",
-        "units": "degC", "coordinates": " ".join(COORDINATES),
-        "model_version": session_attrs.get("model_version", ""),
-        "comment": "from counts by the session's radiometric model (its latest version covering each frame); "
-                   "NaN: a pixel of the session's bad-pixel map"}
+    meta["temperature/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time", "y", "x"],
+                                   **variable_attrs("temperature", session_attrs.get("model_version", "")),
+                                   "coordinates": both}
     meta["time/.zarray"] = _array([n], one_chunk, "<i8", None)
-    meta["time/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "standard_name": "time",
-                            "units": "nanoseconds since 1970-01-01T00:00:00Z", "calendar": "proleptic_gregorian",
-                            "axis": "T"}
+    meta["time/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "units": "nanoseconds since 1970-01-01T00:00:00Z",
+                            "calendar": "proleptic_gregorian", **coordinate_attrs("time")}
     meta["frame/.zarray"] = _array([n], one_chunk, "<i8", None)
-    meta["frame/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "long_name": "frame number in the session"}
-    for name, (_, dtype, what) in FRAME_FIELDS.items():
+    meta["frame/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], **coordinate_attrs("frame")}
+    for name, (_, dtype, _what) in FRAME_FIELDS.items():
         meta[f"{name}/.zarray"] = _array([n], one_chunk, dtype, "NaN" if dtype == "<f8" else None)
-        meta[f"{name}/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], "long_name": what,
-                                   **({"units": "degC"} if name.endswith("_c") else {})}
+        meta[f"{name}/.zattrs"] = {"_ARRAY_DIMENSIONS": ["time"], **coordinate_attrs(name)}
     for axis, size in (("y", height), ("x", width)):
-        meta[f"{axis}/.zarray"] = _array([size], [size], "<i4", None)
-        meta[f"{axis}/.zattrs"] = {"_ARRAY_DIMENSIONS": [axis], "axis": axis.upper(),
-                                   "long_name": "row, 0 at the top" if axis == "y" else "column, 0 at the left"}
+        meta[f"{axis}/.zarray"] = _array([size], [size], PIXEL_AXIS_DTYPE, None)
+        meta[f"{axis}/.zattrs"] = {"_ARRAY_DIMENSIONS": [axis], **coordinate_attrs(axis)}
     meta[".zmetadata"] = {"zarr_consolidated_format": 1, "metadata": dict(meta)}
     return meta
 

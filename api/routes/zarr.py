@@ -16,6 +16,7 @@ from thermcap.api.reading.zarr_layout import COORDINATES, IMAGE_VARIABLES, dumps
 from thermcap.api.reading.zarr_v3 import ShardLayout, parse_v3_key, shard_index, store_metadata_v3
 from thermcap.api.routes.common import FrameModel, kept, session_row
 from thermcap.api.security import require
+from thermcap.archive.reading.dataset_description import session_attrs
 from thermcap.archive.reading.frame_table import FrameTable
 from thermcap.recorder.radiometry.params import models_named
 from thermcap.recorder.storage.layout import DataRoot
@@ -48,9 +49,8 @@ def _store(request: Request, row: dict[str, Any]) -> tuple[FrameTable, dict[str,
 
 
 def _metadata(row: dict[str, Any], table: FrameTable, named: dict[str, str], shard_bytes: int) -> dict[str, Any]:
-    attrs = {"title": f"thermcap session {row['id']}", "source": "thermcap", "session_id": row["id"],
-             "sensor": row.get("sensor"), "sensor_id": row.get("sensor_id"), "fps": row.get("fps"),
-             "frames_dropped": row.get("frames_dropped"), **named}
+    sensor = {"model": row.get("sensor"), "sensor_id": row.get("sensor_id"), "frame_rate_hz": row.get("fps")}
+    attrs = session_attrs(row["id"], sensor, row.get("frames_dropped"), named)
     width, height = int(row["width"] or 0), int(row["height"] or 0)
     v2 = store_metadata(table, width, height, attrs)
     layout = ShardLayout.of(len(table), height, width, shard_bytes)

@@ -128,3 +128,28 @@ def test_the_client_follows_the_served_shards(root, server):
     assert set(s.to_xarray(chunk_frames=12).counts.chunks[0][:-1]) == {12}
     with pytest.raises(ValueError, match="chunk_frames"):
         s.to_xarray(chunk_frames=0)
+
+
+def test_the_local_and_the_remote_dataset_are_one(root, server, tmp_path):
+    """The same variables, coordinates, dtypes and attributes, attribute by attribute, whether the
+    session is read here or through the server, and both write to netCDF."""
+    import thermcap
+
+    local = thermcap.open("s-archived", root=root).to_xarray()
+    remote = thermcap.open(f"{server.url}/api/v1/sessions/s-archived", token=TOKEN).to_xarray()
+    assert local.attrs == remote.attrs
+    assert sorted(local.variables) == sorted(remote.variables)
+    for name in local.variables:
+        a, b = local[name], remote[name]
+        assert (a.dims, a.dtype) == (b.dims, b.dtype), name
+        assert a.attrs == b.attrs, name
+    assert local.attrs["Conventions"] == "CF-1.11" and local.attrs["fps"] > 0
+    t = local.temperature.attrs
+    assert t["standard_name"] == "surface_temperature" and t["units_metadata"] == "temperature: on_scale"
+    assert all(local[c].attrs.get("axis") == c.upper() for c in ("y", "x")) and local.time.attrs["axis"] == "T"
+    for ds, name in ((local, "local"), (remote, "remote")):
+        out = tmp_path / f"{name}.nc"
+        ds.isel(time=slice(0, 4)).to_netcdf(out, engine="h5netcdf")
+        back = xr.open_dataset(out, engine="h5netcdf")
+        np.testing.assert_array_equal(back.counts.values, local.counts.isel(time=slice(0, 4)).values)
+        back.close()
