@@ -7,12 +7,13 @@ import threading
 import time
 from contextlib import asynccontextmanager
 
-from fastapi import FastAPI, HTTPException, Request
+from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.middleware.cors import CORSMiddleware
 from fastapi.responses import JSONResponse
 from fastapi.routing import APIRoute
 from prometheus_client import CollectorRegistry, Counter, Gauge, Histogram
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from thermcap.api.db import make_engine, migrate
 from thermcap.api.exceptions import FrameNotFound, FrameUnavailable
@@ -20,6 +21,7 @@ from thermcap.api.fast_frames import FrameFastPath
 from thermcap.api.http_conventions import HeadAsGet, JsonConventions
 from thermcap.api.indexing import index_root
 from thermcap.api.jobs.runner import JobRunner
+from thermcap.api.problems import problem
 from thermcap.api.reading.frames import FrameReader
 from thermcap.api.reading.regions import RegionReader
 from thermcap.api.security import AuthGate, BodyLimit
@@ -122,42 +124,43 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
     latency = Histogram("thermcap_http_request_seconds", "HTTP request latency", ["route"], registry=registry,
                         buckets=(0.001, 0.0025, 0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1, 2.5, 10))
 
-    app.add_middleware(HeadAsGet, router=app.router)  # innermost: HEAD as the GET, where no route has HEAD
-    app.add_middleware(JsonConventions)  # it sees the routes' own JSON answers
-    app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
-                       allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
-
+    app.add_middleware(JsonConventions)  # innermost: it sees the routes' own JSON answers, a HEAD's as its GET's
+    app.add_middleware(HeadAsGet, router=app.router)  # HEAD as the GET where no route has HEAD, body dropped last
     app.add_middleware(AuthGate, tokens=settings.tokens)
     # inside the metrics, outside everything else: it checks tokens itself, and hands the rest on
     app.add_middleware(FrameFastPath, engine=app.state.engine, root=settings.root, store_kind=app.state.store.kind,
                        tokens=settings.tokens, locations=app.state.frames.locations, state=app.state)
+    # outside the token check and the fast path: a 401 and a fast frame carry CORS headers too, so
+    # a browser client can read why it was refused
+    app.add_middleware(CORSMiddleware, allow_origins=settings.cors_origins, allow_methods=["GET", "HEAD", "OPTIONS"],
+                       allow_headers=["Authorization", "Range", "If-None-Match"], expose_headers=EXPOSED)
     app.add_middleware(_Metrics, requests_total=requests_total, latency=latency)
     app.add_middleware(BodyLimit)  # outermost: no body is read past the limit, token or not
 
-    @app.exception_handler(HTTPException)
-    async def http_error(_request: Request, exc: HTTPException) -> JSONResponse:
-        return JSONResponse({"error": exc.detail, "status": exc.status_code}, status_code=exc.status_code,
-                            headers=getattr(exc, "headers", None))
+    @app.exception_handler(StarletteHTTPException)  # a route's, and the router's own 404 and 405
+    async def http_error(_request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        return problem(exc.status_code, exc.detail, headers=getattr(exc, "headers", None))
 
     @app.exception_handler(FrameNotFound)
     async def frame_not_found(_request: Request, exc: FrameNotFound) -> JSONResponse:
-        return JSONResponse({"error": str(exc), "status": 404}, status_code=404)
+        return problem(404, exc)
 
     @app.exception_handler(FrameUnavailable)
     async def frame_unavailable(_request: Request, exc: FrameUnavailable) -> JSONResponse:
         # Every copy is missing or damaged: say so rather than serve bytes that are not the recording
-        return JSONResponse({"error": str(exc), "status": 503}, status_code=503)
+        return problem(503, exc)
 
     @app.exception_handler(TemperatureUnavailable)
     async def no_temperature(_request: Request, exc: TemperatureUnavailable) -> JSONResponse:
         # The counts are served; temperatures for this model need a vendor SDK (a conflict, not an error)
-        return JSONResponse({"error": str(exc), "status": 409}, status_code=409)
+        return problem(409, exc)
 
     @app.exception_handler(RequestValidationError)
     async def bad_request(_request: Request, exc: RequestValidationError) -> JSONResponse:
         problems = [{"where": ".".join(str(x) for x in e.get("loc", ())),
                      "problem": e.get("msg")} for e in exc.errors()]
-        return JSONResponse({"error": "invalid request", "status": 422, "problems": problems}, status_code=422)
+        said = "; ".join(f"{p['where']}: {p['problem']}" for p in problems)
+        return problem(422, f"invalid request: {said}", problems=problems)
 
     from thermcap.api.routes import archives, docs, export, frames, jobs, measure, meta, radiometry, sessions, ui, zarr
 

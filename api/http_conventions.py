@@ -129,8 +129,11 @@ class HeadAsGet:
         return any(route.matches(scope)[0] == Match.FULL for route in self.router.routes)
 
     async def __call__(self, scope: dict, receive: Any, send: Any) -> None:
-        if scope["type"] != "http" or scope["method"] != "HEAD" or self._answers_head(scope):
+        if scope["type"] != "http":
             await self.app(scope, receive, send)
+            return
+        if scope["method"] != "HEAD" or self._answers_head(scope):
+            await self.app(scope, receive, self._allow_head(send))
             return
 
         async def without_body(message: dict) -> None:
@@ -139,3 +142,22 @@ class HeadAsGet:
             await send(message)
 
         await self.app({**scope, "method": "GET"}, receive, without_body)
+
+    @staticmethod
+    def _allow_head(send: Any) -> Any:
+        """A 405's ``Allow`` names HEAD wherever it names GET: this middleware answers it there."""
+
+        async def sending(message: dict) -> None:
+            if message["type"] == "http.response.start" and message["status"] == 405:
+                headers = []
+                for k, v in message.get("headers", []):
+                    if k.lower() == b"allow":
+                        methods = [m.strip() for m in v.decode("latin-1").split(",") if m.strip()]
+                        if "GET" in methods and "HEAD" not in methods:
+                            methods.append("HEAD")
+                        v = ", ".join(methods).encode("latin-1")
+                    headers.append((k, v))
+                message = {**message, "headers": headers}
+            await send(message)
+
+        return sending

@@ -17,6 +17,7 @@ from typing import Any
 
 from uvicorn.protocols.http.httptools_impl import HttpToolsProtocol
 
+from thermcap.api.problems import problem_body
 from thermcap.recorder import settings
 
 __all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "BoundedHead"]
@@ -87,7 +88,7 @@ class BoundedHead(HttpToolsProtocol):
         self._stop_timer()
         if self.transport.is_closing():
             return
-        body = f'{{"error":"{why}","status":{status}}}'.encode()
-        self.transport.write(b"HTTP/1.1 %d %s\r\ncontent-type: application/json\r\ncontent-length: %d\r\n"
+        body = problem_body(status, why)
+        self.transport.write(b"HTTP/1.1 %d %s\r\ncontent-type: application/problem+json\r\ncontent-length: %d\r\n"
                              b"connection: close\r\n\r\n" % (status, reason.encode(), len(body)) + body)
         self.transport.close()

@@ -15,12 +15,13 @@ cookie, which the pages' own requests then carry.
 from __future__ import annotations
 
 import hmac
-import json
 import re
 from http.cookies import SimpleCookie
 from typing import Any
 
 from fastapi import HTTPException, Request
+
+from thermcap.api.problems import PROBLEM_JSON, problem_body
 
 __all__ = [
     "FILE_NAME_RE",
@@ -131,8 +132,8 @@ class AuthGate:
         if scope.get("method") == "GET" and "text/html" in headers.get("accept", ""):
             await _send(send, 303, b"", [(b"location", b"/login")])
             return
-        body = json.dumps({"error": "a valid bearer token is required", "status": 401}).encode()
-        await _send(send, 401, body, [(b"content-type", b"application/json"), (b"www-authenticate", b"Bearer")])
+        body = problem_body(401, "a valid bearer token is required")
+        await _send(send, 401, body, [(b"content-type", PROBLEM_JSON.encode()), (b"www-authenticate", b"Bearer")])
 
 
 #: Request bodies are small (a login form, a radiometry change, a job): nothing larger is read.
@@ -189,8 +190,7 @@ class _TooLarge(Exception):
 
 
 async def _send_error(send: Any, status: int, message: str) -> None:
-    body = json.dumps({"error": message, "status": status}).encode()
-    await _send(send, status, body, [(b"content-type", b"application/json")])
+    await _send(send, status, problem_body(status, message), [(b"content-type", PROBLEM_JSON.encode())])
 
 
 async def _send(send: Any, status: int, body: bytes, headers: list[tuple[bytes, bytes]]) -> None:

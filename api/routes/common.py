@@ -7,7 +7,7 @@ import json
 from collections.abc import Callable, Hashable
 from typing import Annotated, Any, TypeVar
 
-from fastapi import HTTPException, Query, Request
+from fastapi import HTTPException, Query, Request, Response
 from sqlalchemy import bindparam, select
 
 from thermcap.api import db
@@ -143,8 +143,12 @@ def iso(ns: int | None) -> str | None:
     return None if ns is None else iso_utc(ns)
 
 
-def page_size(request: Request, limit: int) -> int:
+def page_size(request: Request, limit: int, response: Response) -> int:
+    """The page's size: ``limit``, or the server's most, said in ``X-Limit-Clamped`` when less
+    than asked (a client paging by count must know its pages are smaller)."""
     cap = request.app.state.settings.max_page_size
     if limit < 1:
         raise HTTPException(400, "limit must be at least 1")
+    if limit > cap:
+        response.headers["X-Limit-Clamped"] = str(cap)
     return min(limit, cap)

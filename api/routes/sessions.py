@@ -6,7 +6,7 @@ import json
 from typing import Any, Literal
 
 import numpy as np
-from fastapi import APIRouter, Depends, Query, Request
+from fastapi import APIRouter, Depends, Query, Request, Response
 from sqlalchemy import func, literal, literal_column, or_, select, tuple_
 
 from thermcap.api import db
@@ -52,13 +52,14 @@ _START = func.coalesce(db.sessions.c.start_ns, literal_column("0"))
 
 
 @router.get("/sessions")
-def list_sessions(request: Request, sensor: str | None = None, start: str | None = None, end: str | None = None,
+def list_sessions(request: Request, response: Response, sensor: str | None = None, start: str | None = None,
+                  end: str | None = None,
                   min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),
                   has_targets: bool | None = None, slew_to_cue: bool | None = None,
                   sort: Literal["start", "-start"] = "-start", limit: int = 100, cursor: str | None = None) -> dict:
     """Sessions overlapping [start, end); ``min_grade``: some frame at least this good;
     ``max_grade``: some frame at most this good (``max_grade=0.3`` finds thermal crossover)."""
-    n = page_size(request, limit)
+    n = page_size(request, limit, response)
     t0, t1 = parse_time(start, "start"), parse_time(end, "end")
     s = db.sessions.c
     where = []
@@ -152,12 +153,12 @@ def get_foxglove_layout(request: Request, session_id: str) -> dict:
 
 
 @router.get("/sessions/{session_id}/frames")
-def list_frames(request: Request, session_id: str, start: str | None = None, end: str | None = None,
+def list_frames(request: Request, response: Response, session_id: str, start: str | None = None, end: str | None = None,
                 min_grade: float | None = Query(None, ge=0, le=1), max_grade: float | None = Query(None, ge=0, le=1),
                 slew_to_cue: bool | None = None, has_targets: bool | None = None, limit: int = 500,
                 cursor: str | None = None) -> dict:
     session_row(request, session_id)
-    n = page_size(request, limit)
+    n = page_size(request, limit, response)
     cols = request.app.state.frames.columns.get(session_id)
     keep = np.ones(len(cols), bool)
     t0, t1 = parse_time(start, "start"), parse_time(end, "end")
@@ -188,7 +189,7 @@ def list_frames(request: Request, session_id: str, start: str | None = None, end
 
 
 @router.get("/frames")
-def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, le=1),
+def search_frames(request: Request, response: Response, max_grade: float | None = Query(None, ge=0, le=1),
                   min_target_c: float | None = Query(None, description="frames whose hottest target is at least this",
                                                      ge=-273.15, le=5000, allow_inf_nan=False),
                   sensor: str | None = None, limit: int = 100, cursor: str | None = None) -> dict:
@@ -196,7 +197,7 @@ def search_frames(request: Request, max_grade: float | None = Query(None, ge=0, 
     crossover with a target above 40 °C. Hottest first; page with ``next_cursor``. Answered from
     partial indexes (graded frames, frames with a target), so the frames without either cost
     nothing however many there are."""
-    n = page_size(request, limit)
+    n = page_size(request, limit, response)
     after = decode_cursor(cursor, (float, str, int))
     with request.app.state.engine.connect() as conn:
         found = search_targets(conn, limit=n + 1, min_target_c=min_target_c, max_grade=max_grade, sensor=sensor,

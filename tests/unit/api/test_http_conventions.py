@@ -86,3 +86,62 @@ def test_gzip_is_undone_exactly(client):
     with raw as resp:
         body = b"".join(resp.iter_raw())
     assert gzip.decompress(body) == r.content
+
+
+@pytest.fixture(scope="module")
+def guarded(client):
+    """The same data root served with a token, for what an unauthenticated client meets."""
+    root = client.app.state.settings.root
+    with TestClient(create_app(Settings(root=root, tokens={"conv-token-0123456789": frozenset({"read"})}))) as c:
+        yield c
+
+
+PROBLEM_KEYS = {"type", "title", "status", "detail"}
+
+
+def _is_problem(r, status):
+    assert r.status_code == status, (r.status_code, r.text)
+    assert r.headers["content-type"].startswith("application/problem+json"), r.headers["content-type"]
+    body = r.json()
+    assert set(body) >= PROBLEM_KEYS and body["status"] == status and isinstance(body["detail"], str), body
+    return body
+
+
+def test_every_error_is_one_problem_shape(client, guarded):
+    """RFC 9457 problem+json for every error, whoever raised it: a route, FastAPI's validation,
+    Starlette's router, a middleware (there were two shapes, ``{"error"}`` and ``{"detail"}``)."""
+    _is_problem(client.get("/no/such/route"), 404)
+    assert "zz" in _is_problem(client.get("/api/v1/sessions/zz"), 404)["detail"]
+    body = _is_problem(client.get("/api/v1/sessions?limit=abc"), 422)
+    assert body["problems"][0]["where"] == "query.limit"
+    _is_problem(client.post("/api/v1/sessions"), 405)
+    _is_problem(client.get("/api/v1/sessions/s-archived/frames/9999"), 404)
+    _is_problem(guarded.get("/api/v1/sessions"), 401)
+    _is_problem(client.post("/api/v1/index", content=b"x" * (2 << 20), headers={"content-type": "text/plain"}), 413)
+
+
+def test_allow_says_head_where_get_is(client):
+    r = client.post("/api/v1/sessions")
+    assert r.status_code == 405
+    assert {m.strip() for m in r.headers["allow"].split(",")} == {"GET", "HEAD"}
+
+
+def test_head_answers_as_the_get_would(client):
+    for path in ("/api/v1/sessions", "/api/v1/sessions/s-archived"):
+        get, head = client.get(path, headers={"Accept-Encoding": "identity"}), \
+            client.head(path, headers={"Accept-Encoding": "identity"})
+        assert head.content == b""
+        assert head.headers["content-length"] == get.headers["content-length"] == str(len(get.content)), path
+        assert head.headers["etag"] == get.headers["etag"], path
+
+
+def test_an_unauthenticated_browser_can_read_why(guarded):
+    r = guarded.get("/api/v1/sessions", headers={"Origin": "http://analysis.example"})
+    assert r.status_code == 401 and r.headers.get("access-control-allow-origin") in ("*", "http://analysis.example")
+
+
+def test_a_clamped_page_says_so(client):
+    r = client.get("/api/v1/sessions", params={"limit": 5000})
+    assert r.status_code == 200
+    assert r.headers["x-limit-clamped"] == "1000"
+    assert "x-limit-clamped" not in client.get("/api/v1/sessions", params={"limit": 10}).headers
