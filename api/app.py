@@ -21,6 +21,7 @@ from thermcap.api.fast_frames import FrameFastPath
 from thermcap.api.http_conventions import HeadAsGet, JsonConventions
 from thermcap.api.indexing import index_root
 from thermcap.api.jobs.runner import JobRunner
+from thermcap.api.openapi_contract import describe
 from thermcap.api.problems import problem
 from thermcap.api.reading.frames import FrameReader
 from thermcap.api.reading.regions import RegionReader
@@ -166,6 +167,7 @@ def create_app(settings: Settings | None = None, *, index_on_start: bool = True)
 
     for module in (meta, sessions, frames, measure, radiometry, archives, export, jobs, zarr, docs, ui):
         app.include_router(module.router)
+    describe(app)
     return app
 
 
