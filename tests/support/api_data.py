@@ -30,6 +30,13 @@ def make_root(root: Path) -> Path:
     return root
 
 
+def token_server(root: Path, tokens_dir: Path, token: str, **env: str) -> ApiServer:
+    """``thermcap serve`` on ``root`` that takes ``token`` (read scope) and nothing else."""
+    tokens = tokens_dir / "tokens"
+    tokens.write_text(f"{token}=read\n")
+    return ApiServer(root, env={"THERMCAP_TOKENS_FILE": str(tokens), **env})
+
+
 @pytest.fixture(scope="session")
 def data_root(tmp_path_factory) -> Path:
     return make_root(tmp_path_factory.mktemp("apiroot"))

@@ -15,8 +15,7 @@ import httpx
 import numpy as np
 import pytest
 
-from tests.conftest import ApiServer
-from tests.support.api_data import H, W, make_root
+from tests.support.api_data import H, W, make_root, token_server
 from thermcap.recorder.storage.reader import iter_session_frames
 
 pytestmark = pytest.mark.integration
@@ -28,9 +27,7 @@ GENERATOR = shutil.which("openapi-python-client")
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
     root = make_root(tmp_path_factory.mktemp("gen"))
-    tokens = tmp_path_factory.mktemp("tok") / "tokens"
-    tokens.write_text(f"{TOKEN}=read\n")
-    s = ApiServer(root, env={"THERMCAP_TOKENS_FILE": str(tokens)})
+    s = token_server(root, tmp_path_factory.mktemp("tok"), TOKEN)
     yield root, s
     s.stop()
 

@@ -8,8 +8,7 @@ import pytest
 import xarray as xr
 
 import thermcap
-from tests.conftest import ApiServer
-from tests.support.api_data import H, W, make_root
+from tests.support.api_data import H, W, make_root, token_server
 from thermcap.recorder.radiometry.session import SessionTemperatures
 from thermcap.recorder.storage.reader import iter_session_frames
 
@@ -25,9 +24,7 @@ def root(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def server(root, tmp_path_factory):
-    tokens = tmp_path_factory.mktemp("tok") / "tokens"
-    tokens.write_text(f"{TOKEN}=read\n")
-    s = ApiServer(root, env={"THERMCAP_TOKENS_FILE": str(tokens)})
+    s = token_server(root, tmp_path_factory.mktemp("tok"), TOKEN)
     yield s
     s.stop()
 
