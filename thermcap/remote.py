@@ -20,7 +20,7 @@ __all__ = ["RemoteSession"]
 
 class RemoteSession(Session):
     """A session a thermcap server serves: frames over its HTTP API, the Dataset through its
-    Zarr endpoint (read lazily, a frame a request)."""
+    Zarr endpoint (format 3, read lazily, a shard a request)."""
 
     def __init__(self, client: Any, session_id: str) -> None:  # a thermcap.Client
         self.client, self.id = client, session_id
