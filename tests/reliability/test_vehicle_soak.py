@@ -148,16 +148,19 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
     with loopback_namespace() as ns:
         v = Vehicle(ns, root, depot)
         v.start_camera()
+        # its output to a file: a pipe nobody reads until the end fills in minutes and blocks sync
+        # in its next write (the first hour-long run stalled so, 20 minutes in)
+        sync_log = v.logs / "sync.log"
         sync = subprocess.Popen([sys.executable, "-m", "thermcap", "sync", "--root", str(root), "--to", str(depot),
-                                 "--watch", "--interval", "1"], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                text=True)
+                                 "--watch", "--interval", "1"], stdout=open(sync_log, "wb"),  # noqa: SIM115
+                                stderr=subprocess.STDOUT)
         v.start_recorder("first")
         start = time.monotonic()
         next_mark, next_kill, killed_recorder = start + 3.0, start + CAMERA_KILL_EVERY_S, False
         camera_kills = 0
         while time.monotonic() - start < SOAK_S:
             now = time.monotonic()
-            assert sync.poll() is None, f"sync exited: {sync.stderr.read() if sync.stderr else ''}"
+            assert sync.poll() is None, f"sync exited: {sync_log.read_bytes()[-3000:].decode(errors='replace')}"
             assert v.recorder is not None and v.recorder.poll() is None
             rss.append(_rss_kib(v.recorder.pid))
             sync_rss.append(_rss_kib(sync.pid))
@@ -197,11 +200,12 @@ def test_a_vehicle_ships_every_frame_or_names_why(tmp_path):
                                    "--status", "--json"], capture_output=True, text=True, timeout=120)
             st = json.loads(left.stdout) if left.returncode == 0 else {}
             return bool(st) and not st.get("pending") and not st.get("in_flight")
-        assert wait_for(shipped, 600, step=1.0)
+        assert wait_for(shipped, 600, step=1.0), f"sync did not catch up: {sync_log.read_bytes()[-3000:]!r}"
         assert sync.poll() is None, "sync --watch exited on its own"
         sync.send_signal(signal.SIGINT)
-        sync.communicate(timeout=120)
-        assert sync.returncode == 0, sync.stderr  # Ctrl-C ends --watch after its pass, cleanly
+        sync.wait(timeout=120)
+        # Ctrl-C ends --watch after its pass, cleanly
+        assert sync.returncode == 0, sync_log.read_bytes()[-3000:].decode(errors="replace")
 
     confirm = subprocess.run([sys.executable, "-m", "thermcap", "sync-confirm", "--from", str(depot), "--json"],
                              capture_output=True, text=True, timeout=600)
