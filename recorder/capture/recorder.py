@@ -415,7 +415,9 @@ class Recorder:
             out["ring"] = {"evicted_segments": st.evicted_segments, "evicted_bytes": st.evicted_bytes,
                            "blocked": st.blocked, "blocked_reason": st.blocked_reason,
                            "windows_expired": st.windows_expired, "last_expired": st.last_expired,
-                           "protected_windows": len(self._book.windows) if self._book else 0}
+                           "protected_windows": len(self._book.windows) if self._book else 0,
+                           # what a mark made now would keep: a dashboard sees it before anyone marks
+                           "mark_would_keep": self.mark_outlook()}
         if self.live is not None:
             out["live"] = {"url": self.live.url, **self.live.snapshot()}
         healthy, reasons = self.health(settling=settling)  # the same snapshot the status shows

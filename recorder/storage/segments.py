@@ -306,14 +306,15 @@ class SessionWriter:
 
     def bytes_per_s(self) -> float | None:
         """What the session has cost on disk a second of frames so far: its closed segments', or
-        the open one's while none is closed (its bytes so far, compressed); None before half a
-        second of frames has been written."""
+        the open one's while none is closed (its bytes written and those still in the chunk being
+        built, uncompressed: a little high while compressing, never low, so an early mark is
+        not promised a window that will not fit); None before half a second of frames."""
         closed = [(i.bytes, i.end_ns - i.start_ns) for i in self.segments
                   if i.bytes and i.start_ns is not None and i.end_ns is not None and i.end_ns > i.start_ns]
         if not closed and self._writer is not None and self.segments:
             info = self.segments[-1]
             if info.start_ns is not None and info.end_ns is not None and info.end_ns > info.start_ns:
-                closed = [(self._writer.position, info.end_ns - info.start_ns)]
+                closed = [(self._writer.position + self._writer.pending_bytes, info.end_ns - info.start_ns)]
         span = sum(ns for _, ns in closed)
         return sum(b for b, _ in closed) / (span / 1e9) if span >= 5e8 else None
 

@@ -34,8 +34,10 @@ def _ring(root, session: str, *args: str) -> Iterator[httpx.Client]:
         assert wait_for(address.is_file, 60), proc.stderr.read() if proc.poll() is not None else "no control file"
         url = json.loads(address.read_text())["url"]
         with httpx.Client(base_url=url, timeout=10, headers={"Authorization": f"Bearer {TOKEN}"}) as c:
-            # a rate is measured once a segment is closed
-            assert wait_for(lambda: c.get("/status").json()["segments"] >= 2, 60)
+            # what a mark keeps is reckoned at the rate the session is written: wait until it is
+            # measured (half a second of frames; later on a loaded disk, where segments settle late)
+            assert wait_for(lambda: "bytes_per_s" in c.get("/status").json()["ring"]["mark_would_keep"], 120), \
+                c.get("/status").json()
             yield c
     finally:
         proc.send_signal(signal.SIGINT)
