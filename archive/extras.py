@@ -16,10 +16,12 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any, cast
 
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 
 from thermcap.archive.manifest_types import ExtrasEntry
+from thermcap.recorder.exceptions import McapFileError
 from thermcap.recorder.icd.topics import TOPIC_IMAGE
 from thermcap.recorder.storage.digest import DEFAULT_DIGEST, bytes_digest
 from thermcap.recorder.storage.layout import EXTRAS_MCAP, PARTIAL_SUFFIX
@@ -37,14 +39,20 @@ def _extra_records(path: Path, messages: bool = True) -> Iterator[tuple[str, Any
     (no chunk is decompressed)."""
     with open(path, "rb") as f:
         reader = make_reader(f, validate_crcs=True)
-        if messages:
-            for schema, channel, msg in reader.iter_messages():
-                if channel.topic != TOPIC_IMAGE:
-                    yield "message", (schema, channel, msg)
-        for att in reader.iter_attachments():
-            yield "attachment", att
-        for rec in reader.iter_metadata():
-            yield "metadata", rec
+        try:
+            if messages:
+                for schema, channel, msg in reader.iter_messages():
+                    if channel.topic != TOPIC_IMAGE:
+                        yield "message", (schema, channel, msg)
+            for att in reader.iter_attachments():
+                yield "attachment", att
+            for rec in reader.iter_metadata():
+                yield "metadata", rec
+        except McapError as exc:  # a damaged record the extras would have to carry: not carried as good
+            raise McapFileError(f"{path}: a record the archive keeps beside the frames (an attachment, metadata "
+                                f"or another topic's message) is damaged ({type(exc).__name__}: {exc or 'cut short'}); "
+                                f"the archive stops rather than leave it behind unsaid, and nothing was archived or "
+                                f"deleted (the frames themselves: `thermcap info`)") from None
 
 
 class _Summary:
