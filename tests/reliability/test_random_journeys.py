@@ -29,6 +29,7 @@ figures (sequences and steps) are printed at the end.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import functools
 import hashlib
 import json
@@ -496,10 +497,10 @@ FIRST_FAILURE: list[str] = []
 
 
 def _recorded(step: Any) -> Any:
-    @functools.wraps(step)  # keeps hypothesis's rule, invariant and precondition marks
-    def run(self: Journeys, *args: Any, **kwargs: Any) -> Any:
+    @functools.wraps(step)
+    def run(*args: Any, **kwargs: Any) -> Any:
         try:
-            return step(self, *args, **kwargs)
+            return step(*args, **kwargs)
         except BaseException:
             if not FIRST_FAILURE:
                 FIRST_FAILURE.append(f"{step.__name__}{kwargs or ''}:\n{traceback.format_exc()}")
@@ -508,10 +509,12 @@ def _recorded(step: Any) -> Any:
     return run
 
 
-for _name, _step in list(vars(Journeys).items()):
-    if callable(_step) and any(hasattr(_step, mark) for mark in ("hypothesis_stateful_rule",
-                                                               "hypothesis_stateful_invariant")):
-        setattr(Journeys, _name, _recorded(_step))
+# hypothesis calls the function its rule and invariant marks hold: those are what is wrapped
+for _step in list(vars(Journeys).values()):
+    if (_rule := getattr(_step, "hypothesis_stateful_rule", None)) is not None:
+        _rule.function = _recorded(_rule.function)
+    if (_inv := getattr(_step, "hypothesis_stateful_invariant", None)) is not None:
+        _step.hypothesis_stateful_invariant = dataclasses.replace(_inv, function=_recorded(_inv.function))
 
 
 @pytest.mark.parametrize("which", ["fixed", *[f"random-{k}" for k in range(RANDOM)]])
