@@ -77,11 +77,26 @@ class GigEOptions:
     sensor_id: str = "GIGE"
 
 
+def _ahead(previous: int, current: int, wrap: int) -> int | None:
+    """Steps forward from ``previous`` to ``current`` on the ring of ids 1..``wrap`` (0 is never
+    used), or None for an id behind ``previous``: a buffer handed over after a newer one (an
+    incomplete frame's, completed late), not a wrap. Half the ring tells one from the other; a
+    gap of half the ring (9 minutes at 60 fps) is a ``source_gap``, counted by time."""
+    step = (current - previous) % wrap
+    return step if 0 < step <= wrap // 2 else None
+
+
 def block_ids_missed(previous: int, current: int, wrap: int = 65535) -> int:
-    """Frames between two block ids that never came; ids run 1..``wrap`` (0 is never used)."""
-    if current > previous:
-        return current - previous - 1
-    return (wrap - previous) + (current - 1)  # wrapped
+    """Frames between two block ids that never came: none for a late buffer."""
+    step = _ahead(previous, current, wrap)
+    return step - 1 if step is not None else 0
+
+
+def newest_block_id(previous: int | None, current: int, wrap: int = 65535) -> int:
+    """The id the stream has reached: a late buffer does not take it back."""
+    if previous is None or current == previous:
+        return current
+    return current if _ahead(previous, current, wrap) is not None else previous
 
 
 def _aravis() -> Any:
@@ -273,20 +288,22 @@ class GigESource(FrameSource):
                 self.incomplete[status.value_nick] += 1
                 link.stream.push_buffer(buf)
                 if self.gaps.open_gap is None:
-                    last_id = frame_id
+                    last_id = newest_block_id(last_id, frame_id)
                 continue
             data = buf.get_data()
             device_ns, host_ns = buf.get_timestamp(), buf.get_system_timestamp()
             link.stream.push_buffer(buf)
             if len(data) != expected:
                 self.incomplete["size-mismatch"] += 1
-                last_id = frame_id if self.gaps.open_gap is None else last_id
+                last_id = newest_block_id(last_id, frame_id) if self.gaps.open_gap is None else last_id
                 continue
             now = last_frame_ns = time.time_ns()
             last_frame_mono = time.monotonic()
             if self.gaps.open_gap is not None:
                 self._close_gap(now, gap_ids_from, frame_id)
-            last_id = frame_id
+                last_id = frame_id  # a camera that restarted numbers afresh: its ids from here on
+            else:
+                last_id = newest_block_id(last_id, frame_id)
             pixels = np.frombuffer(data, dtype="<u2").reshape(opts.height, opts.width)
             frame = CapturedFrame(index=index, timestamp_ns=host_ns or now, pixels=pixels,
                                   capture_mono_ns=time.monotonic_ns(),
@@ -331,7 +348,8 @@ class GigESource(FrameSource):
         gap = self.gaps.open_gap
         assert gap is not None
         by_time = max(0, round((now - gap["start_ns"]) / 1e9 * self.options.fps) - 1)
-        by_id = block_ids_missed(ids_from, frame_id) if ids_from is not None else None
+        ahead = _ahead(ids_from, frame_id, 65535) if ids_from is not None else None
+        by_id = ahead - 1 if ahead is not None else None  # ids behind: a camera that began again
         # a camera that ran on keeps counting; one that restarted begins again: trust its ids only
         # where they agree with the time that passed
         trusted = by_id is not None and by_id <= 2 * by_time + 2 * self.options.fps

@@ -178,3 +178,15 @@ def test_a_source_that_lost_frames_says_so_in_words():
     line = source_line({"source": "gige", "camera": "10.0.0.5", "genicam": {"DeviceVendorName": "FLIR",
                         "DeviceModelName": "A70", "DeviceSerialNumber": "77"}}, {"gaps": 1, "gap_s": 4.5})
     assert line.startswith("source: gige 10.0.0.5 (FLIR A70, serial 77)") and "gaps: 1 (4.5 s)" in line
+
+
+def test_a_late_buffer_is_not_a_wrap():
+    """The hour-long soak's health said 67,112 frames missed where its six gaps held 1,512: a
+    buffer the stream handed over after a newer one (an incomplete frame's, completed late) read
+    as a step back, and a step back was taken for a wrap of the 16-bit ids (65,533 "missed")."""
+    from thermcap.recorder.capture.sources.gige import block_ids_missed, newest_block_id
+
+    assert block_ids_missed(100, 99) == 0 and block_ids_missed(5000, 4990) == 0
+    assert newest_block_id(100, 99) == 100 and newest_block_id(100, 101) == 101
+    assert newest_block_id(65535, 1) == 1 and newest_block_id(2, 65530) == 2  # across the wrap, both ways
+    assert block_ids_missed(65535, 1) == 0 and block_ids_missed(65533, 2) == 3  # a real wrap still counts
