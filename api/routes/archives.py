@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import re
 
 from fastapi import APIRouter, Depends, HTTPException, Request, Response
 from fastapi.responses import RedirectResponse, StreamingResponse
@@ -13,7 +12,7 @@ from thermcap.api import db
 from thermcap.api.cache_policy import Kind, cache_headers
 from thermcap.api.http_conventions import etag_matches
 from thermcap.api.reading.frames import Damage
-from thermcap.api.routes.common import session_row
+from thermcap.api.routes.common import parse_range, session_row
 from thermcap.api.security import check_file_name, require
 from thermcap.api.verified_files import verified_stream
 from thermcap.archive.manifest import record_digest
@@ -22,7 +21,6 @@ from thermcap.recorder.storage.layout import archive_key
 router = APIRouter(prefix="/api/v1/sessions/{session_id}/archives", tags=["archives"],
                    dependencies=[Depends(require("read"))])
 
-_RANGE = re.compile(r"^bytes=(\d{0,18})-(\d{0,18})$")  # longer numbers: no file is that big (416)
 
 
 def _archive(request: Request, session_id: str, fmt: str) -> dict:
@@ -46,26 +44,6 @@ def list_archive(request: Request, session_id: str, fmt: str) -> dict:
     files = json.loads(row["files"])
     return {"format": fmt, "bytes": row["bytes"], "objects": row["objects"], "ratio": row["ratio"],
             "files": [{**f, "url": f"/api/v1/sessions/{session_id}/archives/{fmt}/{f['path']}"} for f in files]}
-
-
-def _parse_range(header: str, size: int) -> tuple[int, int] | None:
-    """[start, end) for a single satisfiable range; None to serve it all; raises 416."""
-    m = _RANGE.match(header.strip())
-    if not m or (not m[1] and not m[2]):
-        if "," in header:
-            return None  # several ranges: RFC 9110 lets us answer with the whole file
-        raise HTTPException(416, f"unsupported Range {header!r}", headers={"Content-Range": f"bytes */{size}"})
-    if m[1]:
-        start = int(m[1])
-        end = min(int(m[2]) + 1, size) if m[2] else size
-        if m[2] and int(m[2]) < start:
-            raise HTTPException(416, "range end before start", headers={"Content-Range": f"bytes */{size}"})
-    else:
-        start, end = max(0, size - int(m[2])), size
-    if start >= size or end <= start:
-        raise HTTPException(416, f"range not satisfiable for {size} bytes",
-                            headers={"Content-Range": f"bytes */{size}"})
-    return start, end
 
 
 # GET and HEAD as two routes of one function, so each operation has an OpenAPI ID of its own
@@ -101,7 +79,7 @@ def download(request: Request, session_id: str, fmt: str, name: str, redirect: b
                                  "its frames, and `thermcap scrub --repair` rebuilds it from a verified copy")
     rng = request.headers.get("range")
     if_range = request.headers.get("if-range")
-    span = _parse_range(rng, size) if rng and (not if_range or if_range.strip() == etag) else None
+    span = parse_range(rng, size) if rng and (not if_range or if_range.strip() == etag) else None
     start, end = span if span else (0, size)
     headers = {**base, "Content-Length": str(end - start)}
     status = 200

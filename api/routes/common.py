@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 from collections.abc import Callable, Hashable
 from typing import Annotated, Any, TypeVar
 
@@ -16,7 +17,7 @@ from thermcap.recorder.icd.names import iso_utc, parse_rfc3339
 from thermcap.recorder.storage.layout import DataRoot
 
 __all__ = ["CelsiusQuery", "FrameModel", "decode_cursor", "encode_cursor", "frame_model", "iso", "page_size",
-           "parse_time", "session_row"]
+           "parse_range", "parse_time", "session_row"]
 
 
 #: Built once: building ``select(...).where(...)`` costs more than running it (SQLAlchemy coerces
@@ -152,3 +153,27 @@ def page_size(request: Request, limit: int, response: Response) -> int:
     if limit > cap:
         response.headers["X-Limit-Clamped"] = str(cap)
     return min(limit, cap)
+
+
+_RANGE = re.compile(r"^bytes=(\d{0,18})-(\d{0,18})$")  # longer numbers: nothing served is that big (416)
+
+
+def parse_range(header: str, size: int) -> tuple[int, int] | None:
+    """``Range: bytes=a-b | a- | -n`` as [start, end) for a single satisfiable range; None to serve it
+    all (several ranges: RFC 9110 lets a server answer with the whole); raises 416."""
+    m = _RANGE.match(header.strip())
+    if not m or (not m[1] and not m[2]):
+        if "," in header:
+            return None  # several ranges: RFC 9110 lets us answer with the whole file
+        raise HTTPException(416, f"unsupported Range {header!r}", headers={"Content-Range": f"bytes */{size}"})
+    if m[1]:
+        start = int(m[1])
+        end = min(int(m[2]) + 1, size) if m[2] else size
+        if m[2] and int(m[2]) < start:
+            raise HTTPException(416, "range end before start", headers={"Content-Range": f"bytes */{size}"})
+    else:
+        start, end = max(0, size - int(m[2])), size
+    if start >= size or end <= start:
+        raise HTTPException(416, f"range not satisfiable for {size} bytes",
+                            headers={"Content-Range": f"bytes */{size}"})
+    return start, end

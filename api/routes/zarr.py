@@ -5,6 +5,7 @@ one URL, read with stock ``xr.open_zarr(url)``, zarr-python and tensorstore."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,7 @@ from fastapi.responses import StreamingResponse
 from thermcap.api.cache_policy import Kind, cache_headers
 from thermcap.api.reading.zarr_layout import COORDINATES, IMAGE_VARIABLES, dumps, parse_chunk_key, store_metadata
 from thermcap.api.reading.zarr_v3 import ShardLayout, parse_v3_key, shard_index, store_metadata_v3
-from thermcap.api.routes.common import FrameModel, kept, session_row
+from thermcap.api.routes.common import FrameModel, kept, parse_range, session_row
 from thermcap.api.security import require
 from thermcap.archive.reading.dataset_description import session_attrs
 from thermcap.archive.reading.frame_table import FrameTable
@@ -79,12 +80,7 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     if var in ("counts", "temperature"):
         if i >= n:
             raise HTTPException(404, f"no frame {i}: the session has {n}")
-        frame = int(table.index[i])
-        counts = np.asarray(request.app.state.frames.pixels(session_id, frame))
-        if var == "counts":
-            body = counts.astype("<u2", copy=False).tobytes()
-        else:
-            body = FrameModel(request, row).temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
+        body = _frame_chunks(request, row, table, var)(i)
         kind = Kind.FIXED if var == "counts" else Kind.MODEL
         return Response(body, media_type="application/octet-stream", headers=cache_headers(request, kind))
     if i != 0 or var not in (*COORDINATES, "time", "y", "x"):
@@ -102,34 +98,21 @@ def get_zarr_key(request: Request, session_id: str, key: str) -> Response:
     return Response(values.tobytes(), media_type="application/octet-stream", headers=cache_headers(request, Kind.MODEL))
 
 
-def _frame_bytes(request: Request, row: dict[str, Any], table: FrameTable, var: str, i: int) -> bytes:
-    """Frame ``i``'s chunk of ``var``, read (and checked) through the frames reader."""
-    frame = int(table.index[i])
-    counts = np.asarray(request.app.state.frames.pixels(row["id"], frame))
-    if var == "counts":
-        return counts.astype("<u2", copy=False).tobytes()
-    return FrameModel(request, row).temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
+def _frame_chunks(request: Request, row: dict[str, Any], table: FrameTable, var: str) -> Callable[[int], bytes]:
+    """Frame ``i``'s chunk of ``var`` (format 2's chunk, format 3's inner chunk), read and
+    checked through the frames reader; the model for temperatures is built once, on first use."""
+    model: list[FrameModel] = []
 
+    def chunk(i: int) -> bytes:
+        frame = int(table.index[i])
+        counts = np.asarray(request.app.state.frames.pixels(row["id"], frame))
+        if var == "counts":
+            return counts.astype("<u2", copy=False).tobytes()
+        if not model:
+            model.append(FrameModel(request, row))
+        return model[0].temperatures(frame, counts).celsius.astype("<f4", copy=False).tobytes()
 
-def _byte_range(header: str | None, size: int) -> tuple[int, int] | None:
-    """``Range: bytes=a-b | a- | -n`` as [start, end) within ``size``; None for the whole."""
-    if not header:
-        return None
-    unsatisfiable = {"Content-Range": f"bytes */{size}"}
-    unit, _, spec = header.partition("=")
-    if unit.strip() != "bytes" or "," in spec:
-        raise HTTPException(416, f"Range {header!r}: one range of bytes, please", headers=unsatisfiable)
-    first, _, last = spec.strip().partition("-")
-    try:
-        if first == "":
-            start, end = max(0, size - int(last)), size
-        else:
-            start, end = int(first), (min(size, int(last) + 1) if last else size)
-    except ValueError:
-        raise HTTPException(416, f"Range {header!r} is not a byte range", headers=unsatisfiable) from None
-    if start >= end or start >= size:
-        raise HTTPException(416, f"Range {header!r} is outside the {size} bytes", headers=unsatisfiable)
-    return start, end
+    return chunk
 
 
 def _shard(request: Request, row: dict[str, Any], table: FrameTable, var: str, shard: int) -> Response:
@@ -143,15 +126,17 @@ def _shard(request: Request, row: dict[str, Any], table: FrameTable, var: str, s
         raise HTTPException(404, f"no shard {shard} of {var}: the session has {layout.frames} frames, "
                                  f"{layout.frames_per_shard} a shard")
     size = layout.shard_size(shard, itemsize)
-    wanted = _byte_range(request.headers.get("range"), size)
+    asked = request.headers.get("range")
+    wanted = parse_range(asked, size) if asked else None
     start, end = wanted or (0, size)
     data_end = len(held) * fb
+    frame_chunk = _frame_chunks(request, row, table, var)
 
-    def pieces():
+    def pieces() -> Iterator[bytes]:
         at = start
         while at < min(end, data_end):
             k = at // fb
-            frame = _frame_bytes(request, row, table, var, held[k])
+            frame = frame_chunk(held[k])
             yield frame[at - k * fb: min(end, (k + 1) * fb) - k * fb]
             at = (k + 1) * fb
         if end > data_end:
