@@ -1,7 +1,7 @@
 """The data root's address book: every file a root and a session hold, named once.
 
 ``ROOT/sessions/<id>/`` holds the recording and everything derived from it; the root holds the
-sessions, the index, the lock, the eviction log and sync's journal. A bucket holds the same
+sessions, the index and its frame files, the eviction log and sync's journal. A bucket holds the same
 files under the same relative keys (``sessions/<id>/archive/...``). The recorder, the archiver
 and the API find them through ``DataRoot``, ``SessionLayout`` and the key helpers here, never by
 spelling names, so the layout is changed (and documented, in docs/architecture.md) in one place;

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from thermcap.recorder.exceptions import McapFileError
-from thermcap.recorder.storage.layout import EVICTION_LOG, SessionLayout
+from thermcap.recorder.storage.layout import DataRoot, SessionLayout
 from thermcap.recorder.storage.manifest_file import read_manifest_file
 
 __all__ = ["LostSegment", "deletions", "lost_segments", "record_freed"]
@@ -74,7 +74,7 @@ def deletions(session_dir: str | Path) -> list[dict[str, Any]]:
     d = Path(session_dir).resolve()
     out: list[dict[str, Any]] = []
     try:
-        with open(d.parent.parent / EVICTION_LOG) as f:
+        with open(DataRoot.of(d.parent.parent).eviction_log) as f:
             for line in f:
                 try:
                     entry = json.loads(line)
@@ -96,5 +96,5 @@ def record_freed(root: str | Path, session: str, segment: str, size: int, by: st
 
     entry = {"at": iso_utc(time.time_ns()), "session": session, "segment": segment, "bytes": size,
              "freed_by": by, "reason": why}
-    with open(Path(root) / EVICTION_LOG, "a") as f:
+    with open(DataRoot.of(root).eviction_log, "a") as f:
         f.write(json.dumps(entry) + "\n")

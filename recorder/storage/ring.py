@@ -27,7 +27,7 @@ from typing import Any
 from thermcap.recorder.icd.names import iso_utc
 from thermcap.recorder.sizes import parse_size
 from thermcap.recorder.storage.atomic import fsync_dir, write_json_atomic
-from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, EVICTION_LOG, RESERVE_FILE, DataRoot, SessionLayout
+from thermcap.recorder.storage.layout import ACTIVE_SUFFIX, RESERVE_FILE, DataRoot, SessionLayout
 from thermcap.recorder.storage.lock import holder
 from thermcap.recorder.storage.reader import segment_span
 from thermcap.recorder.storage.rosbag2 import write_bag_metadata
@@ -435,7 +435,7 @@ class Evictor(threading.Thread):
 
 
 def read_eviction_log(root: Path) -> list[dict[str, Any]]:
-    path = Path(root) / EVICTION_LOG
+    path = DataRoot.of(root).eviction_log
     if not path.is_file():
         return []
     return [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
