@@ -391,6 +391,7 @@ def bench_python_cmd(frames: int, rounds: int, hour: bool, as_json: bool) -> Non
     """The Python API: Zarr endpoint vs h5py, thermcap.open(url) vs a raw GET, to_xarray's open."""
     import json
 
+    from thermcap.benches.harness import ratio_line
     from thermcap.benches.python import bench_python
 
     res = bench_python(frames=frames, rounds=rounds, hour=hour)
@@ -399,9 +400,7 @@ def bench_python_cmd(frames: int, rounds: int, hour: bool, as_json: bool) -> Non
         return
     click.echo(f"{res['frames']} frames {res['size']}, median of {res['rounds']} alternating rounds")
     for name in ("zarr_whole_session_vs_h5py", "zarr2_whole_session_vs_h5py", "first_frame_open_vs_raw_get"):
-        r = res[name]
-        click.echo(f"  {name:30} ours {r['ours_s']:.4f} s  anchor {r['anchor_s']:.4f} s  ratio {r['ratio']:.2f}x"
-                   f"  (goal {r['goal']})")
+        click.echo(ratio_line(name, res[name]))
     o = res["to_xarray_open"]
     click.echo(f"  {'to_xarray_open':30} {o['seconds']:.4f} s, {o['frames_read']} frames read  (goal {o['goal']})")
     if "to_xarray_open_one_hour" in res:

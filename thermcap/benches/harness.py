@@ -18,8 +18,9 @@ import socket
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -59,9 +60,11 @@ def alternating(ours: Callable[[], Any], anchor: Callable[[], Any], rounds: int,
                 round(statistics.median(o / a for o, a in pairs), 2))
 
 
-def ratio_line(name: str, pair: Pair, goal: str | None = None) -> str:
-    line = f"  {name:30} ours {pair.ours_s:.4f} s  anchor {pair.anchor_s:.4f} s  ratio {pair.ratio:.2f}x"
-    return line + (f"  (goal {goal})" if goal else "")
+def ratio_line(name: str, figures: Mapping[str, Any]) -> str:
+    """One pair as a bench prints it: a ``Pair.to_dict()``, with its ``goal`` if it has one."""
+    line = f"  {name:30} ours {figures['ours_s']:.4f} s  anchor {figures['anchor_s']:.4f} s  " \
+           f"ratio {figures['ratio']:.2f}x"
+    return line + (f"  (goal {figures['goal']})" if figures.get("goal") else "")
 
 
 def free_port() -> int:
@@ -78,13 +81,16 @@ def served(root: Path, *args: str, timeout_s: float = 120.0) -> Iterator[str]:
 
     port = free_port()
     url = f"http://127.0.0.1:{port}"
+    # its log to a file: a pipe nobody reads while the bench runs fills and stops the server
+    log = tempfile.TemporaryFile()  # noqa: SIM115 - closed below, after the server
     proc = subprocess.Popen([sys.executable, "-m", "thermcap", "serve", "--root", str(root), "--port", str(port),
-                             "--no-access-log", *args], stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+                             "--no-access-log", *args], stdout=subprocess.DEVNULL, stderr=log)
     try:
         deadline = time.monotonic() + timeout_s
         while True:
             if proc.poll() is not None:
-                err = proc.stderr.read().decode(errors="replace")[-2000:] if proc.stderr else ""
+                log.seek(0)
+                err = log.read().decode(errors="replace")[-2000:]
                 raise RuntimeError(f"thermcap serve exited ({proc.returncode}) before it answered: {err}")
             try:
                 if httpx.get(url + "/healthz", timeout=2).status_code == 200:
@@ -102,3 +108,4 @@ def served(root: Path, *args: str, timeout_s: float = 120.0) -> Iterator[str]:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()
+        log.close()
