@@ -1,14 +1,5 @@
-"""Service settings, from arguments or the environment (never logged with their secrets).
-
-THERMCAP_ROOT            data root (default ./thermcap-data)
-THERMCAP_DATABASE_URL    SQLAlchemy URL; default sqlite:///<root>/index.sqlite
-THERMCAP_TOKENS          "token=read,write;other=read" (or THERMCAP_TOKENS_FILE: one "token=scopes" a line)
-THERMCAP_S3_BUCKET       serve archive blobs from this bucket instead of the local root
-THERMCAP_S3_ENDPOINT     S3-compatible endpoint (SeaweedFS, MinIO, R2); AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY
-THERMCAP_S3_REGION       default us-east-1
-THERMCAP_S3_PREFIX       key prefix inside the bucket (default: none)
-THERMCAP_CORS_ORIGINS    comma-separated origins allowed by CORS (default: * for reads, e.g. Foxglove)
-"""
+"""Service settings, from arguments or the environment (never logged with their secrets). The
+variables, their defaults and meanings are declared once, in ``thermcap.recorder.settings``."""
 
 from __future__ import annotations
 

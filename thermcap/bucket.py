@@ -192,7 +192,6 @@ class BucketSession(Session):
         return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
 
     def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> Any:
-        from thermcap.session import LOCAL_CHUNK_FRAMES, lazy_dataset
+        from thermcap.session import lazy_dataset
 
-        return lazy_dataset(self, self.temperatures(model_version), model_version,
-                            LOCAL_CHUNK_FRAMES if chunk_frames is None else chunk_frames)
+        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)

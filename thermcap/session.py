@@ -215,21 +215,22 @@ class LocalSession(Session):
         return self.temperatures(model_version).celsius(index, self.counts(index)).celsius
 
     def to_xarray(self, model_version: int | None = None, *, chunk_frames: int | None = None) -> xr.Dataset:
-        return lazy_dataset(self, self.temperatures(model_version), model_version,
-                            LOCAL_CHUNK_FRAMES if chunk_frames is None else chunk_frames)
+        return lazy_dataset(self, self.temperatures(model_version), model_version, chunk_frames)
 
 
 #: frames a dask chunk holds when a session read here is opened as a Dataset
 LOCAL_CHUNK_FRAMES = 16
 
 
-def lazy_dataset(session: Session, temps: Any, model_version: int | None, chunk_frames: int) -> xr.Dataset:
+def lazy_dataset(session: Session, temps: Any, model_version: int | None, chunk_frames: int | None) -> xr.Dataset:
     """The Dataset of a session whose frames this process reads itself (a folder, a bucket):
     dask chunks of ``chunk_frames`` frames through ``session.counts``, temperatures through
     ``temps`` (a ``SessionTemperatures``, checked before anything is read)."""
     import dask.array as da
     import xarray as xr
 
+    if chunk_frames is None:
+        chunk_frames = LOCAL_CHUNK_FRAMES
     if chunk_frames < 1:
         raise ValueError(f"chunk_frames must be at least 1, not {chunk_frames}")
     table, h, w = session.table, session.height, session.width
