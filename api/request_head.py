@@ -23,7 +23,7 @@ from thermcap.recorder import settings
 __all__ = ["HEAD_TIMEOUT_S", "MAX_HEAD_BYTES", "BoundedHead"]
 
 MAX_HEAD_BYTES = 64 * 1024
-HEAD_TIMEOUT_S = float(settings.HEAD_TIMEOUT_S.get() or "30")
+HEAD_TIMEOUT_S = float(settings.HEAD_TIMEOUT_S.text())
 _END = b"\r\n\r\n"
 
 

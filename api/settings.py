@@ -42,7 +42,7 @@ def _parse_tokens(text: str) -> dict[str, frozenset[str]]:
 
 @dataclass
 class Settings:
-    root: Path = field(default_factory=lambda: Path(env.ROOT.get() or "thermcap-data"))
+    root: Path = field(default_factory=lambda: Path(env.ROOT.text()))
     database_url: str | None = field(default_factory=env.DATABASE_URL.get)
     tokens: dict[str, frozenset[str]] = field(default_factory=dict)
     s3_bucket: str | None = field(default_factory=lambda: env.BucketSettings.from_env().bucket)
@@ -54,14 +54,14 @@ class Settings:
     # Series jobs on a Dask cluster (the workers reach the same root, index and bucket); none: the
     # API's own threads.
     dask_scheduler: str | None = field(default_factory=env.DASK_SCHEDULER.get)
-    zarr_shard_bytes: int = field(default_factory=lambda: int(env.ZARR_SHARD_BYTES.get() or 16 << 20))
+    zarr_shard_bytes: int = field(default_factory=lambda: int(env.ZARR_SHARD_BYTES.text()))
     max_page_size: int = 1000
     rescan_interval_s: float = 30.0
 
     def __post_init__(self) -> None:
         self.root = Path(self.root)
         if not self.tokens:
-            text = env.TOKENS.get() or ""
+            text = env.TOKENS.text()
             # set means meant, even empty (compose gives '' for a variable the .env lacks): fail closed
             if env.TOKENS.is_set() and not _parse_tokens(text):
                 raise ValueError("THERMCAP_TOKENS is set but holds no token (empty, or only comments or "

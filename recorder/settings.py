@@ -21,6 +21,10 @@ class Variable:
     def get(self) -> str | None:
         return os.environ.get(self.name, self.default)
 
+    def text(self) -> str:
+        """Its value where set and not empty, else its default ("" where it has none)."""
+        return os.environ.get(self.name) or self.default or ""
+
     def is_set(self) -> bool:
         """Set, even to an empty string (compose gives '' for a variable its .env lacks)."""
         return self.name in os.environ
@@ -61,4 +65,4 @@ class BucketSettings:
 
     @classmethod
     def from_env(cls) -> BucketSettings:
-        return cls(S3_BUCKET.get(), S3_ENDPOINT.get(), S3_REGION.get() or "us-east-1", S3_PREFIX.get() or "")
+        return cls(S3_BUCKET.get(), S3_ENDPOINT.get(), S3_REGION.text(), S3_PREFIX.text())

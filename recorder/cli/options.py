@@ -16,7 +16,7 @@ F = TypeVar("F", bound=Callable[..., Any])
 
 
 def default_root() -> str:
-    return settings.ROOT.get() or "thermcap-data"
+    return settings.ROOT.text()
 
 
 def fail(message: str, code: int = 1) -> NoReturn:

@@ -194,7 +194,7 @@ def find_backend(spec: str | None = "auto") -> DjiBackend | None:
     ``off``: none; anything else is a path to libdirp (``.so``/``.dll``/``.dylib``) or to a
     ``dji-thermal-cli`` executable. A path that does not work is an error, never a silent fallback."""
     if spec in (None, "", "auto"):
-        spec = settings.DJI_SDK.get() or "auto"
+        spec = settings.DJI_SDK.text()
         if spec == "auto":
             found = shutil.which("dji-thermal-cli")
             return DjiThermalCli(found) if found else None
